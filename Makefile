@@ -1,0 +1,61 @@
+# rrv build. `make` builds ./rrv; `make test` builds and runs every test;
+# `make test SAN=1` does the same under AddressSanitizer + UBSan;
+# `make THREADS=0` builds without POSIX threads; `make fuzz` builds the
+# libFuzzer harnesses (clang); `make bench` runs the benchmarks.
+CC      ?= cc
+OPT     ?= -O2 -g
+WARN    := -std=c99 -Wall -Wextra -pedantic
+THREADS ?= 1
+SAN     ?= 0
+
+ifeq ($(THREADS),0)
+THREAD_FLAGS := -DRRV_THREADS=0
+else
+THREAD_FLAGS := -DRRV_THREADS=1 -pthread
+endif
+
+ifeq ($(SAN),1)
+BUILD   := build-san
+SANFLAGS := -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer
+else
+BUILD   := build
+SANFLAGS :=
+endif
+
+CFLAGS_ALL = $(WARN) $(OPT) $(SANFLAGS) $(CFLAGS)
+TEST_SRCS  := $(wildcard test/test_*.c)
+TEST_BINS  := $(patsubst test/%.c,$(BUILD)/%,$(TEST_SRCS))
+
+.PHONY: all test fuzz bench clean
+all: rrv
+
+rrv: $(BUILD)/rrv
+	cp $(BUILD)/rrv rrv
+
+$(BUILD)/rrv: main.c rrv_impl.c rrv.h $(wildcard parts/*.h) | $(BUILD)
+	$(CC) $(CFLAGS_ALL) $(THREAD_FLAGS) -o $@ main.c rrv_impl.c -lm
+
+$(BUILD)/test_%: test/test_%.c test/check.h rrv.h $(wildcard parts/*.h) $(wildcard test/*.h) | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -o $@ $< -lm $(TEST_LIBS_$*)
+
+# Only the tests that compare against EXR references link OpenEXR.
+TEST_LIBS_exr := $(shell pkg-config --libs OpenEXR 2>/dev/null)
+
+$(BUILD):
+	mkdir -p $(BUILD)
+
+test: $(BUILD)/rrv $(TEST_BINS)
+	sh test/run_tests.sh $(BUILD) $(TEST_BINS)
+
+FUZZ_CC    ?= clang
+FUZZ_FLAGS := -std=c99 -g -O1 -fsanitize=fuzzer,address,undefined
+fuzz: build-fuzz/fuzz_scene build-fuzz/fuzz_grid
+build-fuzz/fuzz_%: test/fuzz_%.c rrv.h
+	mkdir -p build-fuzz
+	$(FUZZ_CC) $(FUZZ_FLAGS) -o $@ $< -lm
+
+bench: $(BUILD)/rrv
+	sh test/bench.sh $(BUILD)/rrv
+
+clean:
+	rm -rf build build-san build-fuzz rrv

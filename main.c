@@ -1,0 +1,1065 @@
+/* rrv: the command-line tool and the reference client of rrv.h.
+
+   The library never prints and never starts threads; this file is the only
+   place that does either, so it also shows how a client is meant to split a
+   render across threads (tiles through rrv_render_rect, all samples of a
+   pixel in one call, so the image does not depend on the split). */
+#define _POSIX_C_SOURCE 200809L
+#include "rrv.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <inttypes.h>
+#include <limits.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#ifndef RRV_THREADS
+#define RRV_THREADS 0
+#endif
+#if RRV_THREADS
+#include <pthread.h>
+#endif
+
+enum { EXIT_OK = 0, EXIT_USAGE = 1, EXIT_INPUT = 2, EXIT_IO = 3 };
+
+/* Returned by option parsers when --help was asked for and printed. */
+#define HELP_SHOWN (-1)
+
+#define TILE_SIZE 16
+#define MAX_THREADS 1024
+
+/* ---- messages -------------------------------------------------------------- */
+
+static const char usage_text[] =
+    "usage: rrv COMMAND [ARGS]\n"
+    "\n"
+    "rrv renders participating media with a spatially varying index of\n"
+    "refraction (heat haze, shock fronts, hot-air caustics).\n"
+    "\n"
+    "commands:\n"
+    "  render SCENE -o OUT.pfm [options]   render a scene to a PFM (and PNG)\n"
+    "  diff A.pfm B.pfm                    compare an image with a reference\n"
+    "  info SCENE                          describe a scene and its memory use\n"
+    "  trace SCENE --ray OX OY OZ DX DY DZ trace rays through the refractive media\n"
+    "  help [COMMAND]                      show this or a command's help\n"
+    "\n"
+    "options:\n"
+    "  -h, --help      show help (also after a command: rrv render --help)\n"
+    "  --version       print the version\n"
+    "\n"
+    "exit status: 0 ok, 1 usage error, 2 bad input (scene, grid or image),\n"
+    "3 cannot write the output.\n";
+
+static const char render_help[] =
+    "usage: rrv render SCENE -o OUT.pfm [options]\n"
+    "\n"
+    "Renders SCENE into a float RGB PFM. Every output is written to a temporary\n"
+    "file and renamed into place, so a failed run never clobbers an image.\n"
+    "\n"
+    "options:\n"
+    "  -o, --output OUT.pfm   the PFM to write (required)\n"
+    "  --png OUT.png          also write an 8-bit sRGB preview\n"
+    "  --exposure E           scale the preview by 2^E (default 0)\n"
+    "  --spp N                samples per pixel (default: the scene's)\n"
+    "  --seed S               random seed, an integer >= 0 (default: the scene's)\n"
+    "  --integrator NAME      classic, refractive or eikonal (default: the scene's)\n"
+    "  --threads T            worker threads (default: the number of online CPUs)\n"
+    "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
+    "                         top; the output is the size of the crop\n"
+    "  --max-grid-mb N        refuse grid files larger than N MiB (default 2048)\n"
+    "  -q, --quiet            no progress bar and no summary\n"
+    "\n"
+    "The image is bit-identical for any thread count, and crops of a render\n"
+    "match the same pixels of the full image.\n";
+
+static const char diff_help[] =
+    "usage: rrv diff A.pfm B.pfm\n"
+    "\n"
+    "Compares image A with the reference B (same size) and prints one\n"
+    "`key: value` per line:\n"
+    "  rmse             sqrt(mean((a-b)^2)) over pixels and channels\n"
+    "  relmse           mean((a-b)^2 / (b^2 + 0.01)), B being the reference\n"
+    "  mae              mean(|a-b|)\n"
+    "  max_abs_error    the largest |a-b|\n"
+    "  max_abs_pixel    its pixel as X Y (row 0 at the top)\n"
+    "  max_abs_channel  its channel: r, g or b\n"
+    "  nonfinite        values that are NaN or infinite in A or B\n"
+    "Exits 2 if an image cannot be read or the sizes differ.\n";
+
+static const char info_help[] =
+    "usage: rrv info SCENE [--max-grid-mb N]\n"
+    "\n"
+    "Loads SCENE and prints its resolution, render settings, the counts of\n"
+    "materials, shapes, lights and media (with each medium's box, fields and\n"
+    "whether it refracts), the BVH size, and the memory the scene holds plus\n"
+    "what a full-frame render buffer would need.\n"
+    "\n"
+    "options:\n"
+    "  --max-grid-mb N   refuse grid files larger than N MiB (default 2048)\n";
+
+static const char trace_help[] =
+    "usage: rrv trace SCENE --ray OX OY OZ DX DY DZ [options]\n"
+    "\n"
+    "Walks a ray through the scene's refractive media (absorption and\n"
+    "scattering ignored) and prints CSV on stdout: the header\n"
+    "x,y,z,dx,dy,dz,events and one row per walk with where and in which\n"
+    "direction the ray left the last medium.\n"
+    "\n"
+    "options:\n"
+    "  --ray OX OY OZ DX DY DZ   origin and direction (required; the direction\n"
+    "                            is normalised)\n"
+    "  --integrator NAME         refractive or eikonal (default: the scene's,\n"
+    "                            or refractive if that is classic)\n"
+    "  --n N                     number of walks, numbered 0..N-1 (default 1)\n"
+    "  --seed S                  random seed (default: the scene's)\n"
+    "  --path                    print every vertex instead, as rows\n"
+    "                            walk,x,y,z,dx,dy,dz\n"
+    "  --max-grid-mb N           refuse grid files larger than N MiB\n";
+
+static void print_library_error(const rrv_error *err)
+{
+    const char *message = err->message[0] ? err->message : rrv_result_string(err->code);
+    if (err->line > 0)
+        fprintf(stderr, "%s:%d: %s\n", err->file, err->line, message);
+    else if (err->file[0])
+        fprintf(stderr, "%s: %s\n", err->file, message);
+    else
+        fprintf(stderr, "rrv: %s\n", message);
+}
+
+/* Walks a command's arguments; remembers the command for the --help hint. */
+typedef struct arg_cursor {
+    int argc;
+    char **argv;
+    int index;
+    const char *command;
+} arg_cursor;
+
+#if defined(__GNUC__) || defined(__clang__)
+__attribute__((format(printf, 2, 3)))
+#endif
+static int usage_error(const arg_cursor *args, const char *fmt, ...)
+{
+    va_list ap;
+    fputs("rrv: ", stderr);
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    if (args && args->command)
+        fprintf(stderr, "\nrun \"rrv %s --help\" for usage\n", args->command);
+    else
+        fputs("\nrun \"rrv --help\" for usage\n", stderr);
+    return EXIT_USAGE;
+}
+
+/* ---- strict number parsing ----------------------------------------------------
+   strtol and friends accept leading spaces, trailing junk and (for unsigned)
+   a minus sign; a typo in a flag must not silently become a number. */
+
+static int parse_long(const char *text, long lo, long hi, long *out)
+{
+    char *end;
+    long value;
+    if (!isdigit((unsigned char)text[0]) && !(text[0] == '-' || text[0] == '+')) return 0;
+    errno = 0;
+    value = strtol(text, &end, 10);
+    if (end == text || *end || errno == ERANGE || value < lo || value > hi) return 0;
+    *out = value;
+    return 1;
+}
+
+static int parse_u64(const char *text, uint64_t *out)
+{
+    char *end;
+    unsigned long long value;
+    if (!isdigit((unsigned char)text[0])) return 0;
+    errno = 0;
+    value = strtoull(text, &end, 10);
+    if (*end || errno == ERANGE) return 0;
+#if ULLONG_MAX > UINT64_MAX
+    if (value > UINT64_MAX) return 0;
+#endif
+    *out = (uint64_t)value;
+    return 1;
+}
+
+static int parse_double(const char *text, double *out)
+{
+    char *end;
+    double value;
+    if (!text[0] || isspace((unsigned char)text[0])) return 0;
+    errno = 0;
+    value = strtod(text, &end);
+    if (end == text || *end || errno == ERANGE || !isfinite(value)) return 0;
+    *out = value;
+    return 1;
+}
+
+/* The next argument as the value of `flag`; `what` says what was expected. */
+static int take_value(arg_cursor *args, const char *flag, const char *what, const char **text)
+{
+    if (args->index + 1 >= args->argc) {
+        usage_error(args, "%s needs %s", flag, what);
+        return 0;
+    }
+    *text = args->argv[++args->index];
+    return 1;
+}
+
+static int take_int(arg_cursor *args, const char *flag, long lo, long hi, const char *what,
+                    int *out)
+{
+    const char *text;
+    long value;
+    if (!take_value(args, flag, what, &text)) return 0;
+    if (parse_long(text, lo, LONG_MAX, &value) && value > hi) {
+        usage_error(args, "%s must be at most %ld, got \"%s\"", flag, hi, text);
+        return 0;
+    }
+    if (!parse_long(text, lo, hi, &value)) {
+        usage_error(args, "%s needs %s, got \"%s\"", flag, what, text);
+        return 0;
+    }
+    *out = (int)value;
+    return 1;
+}
+
+static int take_u64(arg_cursor *args, const char *flag, const char *what, uint64_t *out)
+{
+    const char *text;
+    if (!take_value(args, flag, what, &text)) return 0;
+    if (!parse_u64(text, out)) {
+        usage_error(args, "%s needs %s, got \"%s\"", flag, what, text);
+        return 0;
+    }
+    return 1;
+}
+
+static int take_double(arg_cursor *args, const char *flag, const char *what, double *out)
+{
+    const char *text;
+    if (!take_value(args, flag, what, &text)) return 0;
+    if (!parse_double(text, out)) {
+        usage_error(args, "%s needs %s, got \"%s\"", flag, what, text);
+        return 0;
+    }
+    return 1;
+}
+
+static int take_grid_limit(arg_cursor *args, size_t *max_grid_bytes)
+{
+    const char *what = "a positive number of MiB";
+    uint64_t mib;
+    if (!take_u64(args, "--max-grid-mb", what, &mib)) return 0;
+    if (mib == 0 || mib > SIZE_MAX / ((size_t)1 << 20)) {
+        usage_error(args, "--max-grid-mb needs %s, got \"%s\"", what, args->argv[args->index]);
+        return 0;
+    }
+    *max_grid_bytes = (size_t)mib << 20;
+    return 1;
+}
+
+static const char *const integrator_names[] = {"classic", "refractive", "eikonal"};
+
+static int take_integrator(arg_cursor *args, int allow_classic, rrv_integrator *out)
+{
+    const char *what = allow_classic ? "classic, refractive or eikonal" : "refractive or eikonal";
+    const char *text;
+    int i;
+    if (!take_value(args, "--integrator", what, &text)) return 0;
+    for (i = allow_classic ? 0 : 1; i < 3; ++i) {
+        if (strcmp(text, integrator_names[i]) == 0) {
+            *out = (rrv_integrator)i;
+            return 1;
+        }
+    }
+    usage_error(args, "--integrator needs %s, got \"%s\"", what, text);
+    return 0;
+}
+
+static const char *integrator_name(rrv_integrator integrator)
+{
+    return (unsigned)integrator < 3 ? integrator_names[integrator] : "unknown";
+}
+
+static int is_flag(const char *arg) { return arg[0] == '-' && arg[1] != '\0'; }
+static int is_help_flag(const char *arg)
+{
+    return strcmp(arg, "--help") == 0 || strcmp(arg, "-h") == 0;
+}
+
+/* ---- time and human-readable numbers ------------------------------------------ */
+
+static double seconds_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static void format_duration(double seconds, char *buf, size_t size)
+{
+    if (!(seconds >= 0)) seconds = 0;
+    if (seconds < 60)
+        snprintf(buf, size, "%.1fs", seconds);
+    else if (seconds < 3600)
+        snprintf(buf, size, "%dm%02ds", (int)(seconds / 60), (int)fmod(seconds, 60));
+    else
+        snprintf(buf, size, "%dh%02dm", (int)(seconds / 3600), (int)fmod(seconds / 60, 60));
+}
+
+static void format_count(double value, char *buf, size_t size)
+{
+    if (value >= 1e9)
+        snprintf(buf, size, "%.3gG", value / 1e9);
+    else if (value >= 1e6)
+        snprintf(buf, size, "%.3gM", value / 1e6);
+    else if (value >= 1e3)
+        snprintf(buf, size, "%.3gk", value / 1e3);
+    else
+        snprintf(buf, size, "%.3g", value);
+}
+
+static void format_bytes(double bytes, char *buf, size_t size)
+{
+    static const char *const units[] = {"bytes", "KiB", "MiB", "GiB", "TiB"};
+    int unit = 0;
+    while (bytes >= 1024 && unit < 4) {
+        bytes /= 1024;
+        ++unit;
+    }
+    if (unit == 0)
+        snprintf(buf, size, "%.0f bytes", bytes);
+    else
+        snprintf(buf, size, "%.2f %s", bytes, units[unit]);
+}
+
+/* ---- output files -------------------------------------------------------------- */
+
+/* Catches a mistyped output folder before the render rather than after it;
+   the library's writers still make the final write atomic. */
+static int output_folder_writable(const char *path)
+{
+    const char *slash = strrchr(path, '/');
+    char folder[4096];
+    size_t length;
+    if (!slash) return access(".", W_OK | X_OK) == 0;
+    length = slash == path ? 1 : (size_t)(slash - path);
+    if (length >= sizeof folder) return 1; /* let the writer decide */
+    memcpy(folder, path, length);
+    folder[length] = '\0';
+    return access(folder, W_OK | X_OK) == 0;
+}
+
+static int check_output(const char *path)
+{
+    if (output_folder_writable(path)) return 1;
+    fprintf(stderr, "rrv: cannot write \"%s\": %s\n", path, strerror(errno));
+    return 0;
+}
+
+static int finish_stdout(int code)
+{
+    if (fflush(stdout) != 0 || ferror(stdout)) {
+        fprintf(stderr, "rrv: cannot write to standard output: %s\n", strerror(errno));
+        return code == EXIT_OK ? EXIT_IO : code;
+    }
+    return code;
+}
+
+static int load_scene(const char *path, size_t max_grid_bytes, rrv_scene **scene)
+{
+    rrv_load_options options;
+    rrv_error err;
+    memset(&options, 0, sizeof options);
+    memset(&err, 0, sizeof err);
+    options.max_grid_bytes = max_grid_bytes;
+    *scene = NULL;
+    if (rrv_scene_load(path, &options, scene, &err) != RRV_OK) {
+        print_library_error(&err);
+        return 0;
+    }
+    return 1;
+}
+
+/* ---- the tiled render ---------------------------------------------------------- */
+
+typedef struct render_job {
+    const rrv_scene *scene;
+    int x0, y0, x1, y1; /* the rectangle to render */
+    int spp;
+    float *sum;         /* the rectangle's sums, row 0 = its top row */
+    int stride;
+    int tiles_x, tile_count;
+    int show_progress;
+    double start_time;
+
+    /* Shared between workers; guarded by `lock` when threads run. */
+    int next_tile, tiles_done;
+    rrv_result failure;
+    rrv_render_stats stats;
+    double last_progress_time;
+#if RRV_THREADS
+    int use_lock;
+    pthread_mutex_t lock;
+#endif
+} render_job;
+
+static void job_lock(render_job *job)
+{
+#if RRV_THREADS
+    if (job->use_lock) pthread_mutex_lock(&job->lock);
+#else
+    (void)job;
+#endif
+}
+
+static void job_unlock(render_job *job)
+{
+#if RRV_THREADS
+    if (job->use_lock) pthread_mutex_unlock(&job->lock);
+#else
+    (void)job;
+#endif
+}
+
+#define PROGRESS_BAR_WIDTH 30
+
+/* Called with the lock held. Redraws at most ten times a second because
+   a terminal that scrolls slower than the render would slow it down. */
+static void draw_progress(render_job *job, int force)
+{
+    char bar[PROGRESS_BAR_WIDTH + 1], elapsed_text[32], eta_text[32];
+    double now, elapsed, fraction;
+    int filled, i;
+    if (!job->show_progress) return;
+    now = seconds_now();
+    if (!force && now - job->last_progress_time < 0.1) return;
+    elapsed = now - job->start_time;
+    fraction = job->tile_count ? (double)job->tiles_done / job->tile_count : 1;
+    filled = (int)(fraction * PROGRESS_BAR_WIDTH);
+    job->last_progress_time = now;
+    for (i = 0; i < PROGRESS_BAR_WIDTH; ++i) bar[i] = i < filled ? '#' : '.';
+    bar[PROGRESS_BAR_WIDTH] = '\0';
+    format_duration(elapsed, elapsed_text, sizeof elapsed_text);
+    if (job->tiles_done > 0)
+        format_duration(elapsed * (1 - fraction) / fraction, eta_text, sizeof eta_text);
+    else
+        snprintf(eta_text, sizeof eta_text, "?");
+    fprintf(stderr, "\r[%s] %5.1f%%  elapsed %s  eta %s   ", bar, 100 * fraction,
+            elapsed_text, eta_text);
+    fflush(stderr);
+}
+
+static void add_stats(rrv_render_stats *into, const rrv_render_stats *from)
+{
+    into->samples += from->samples;
+    into->paths += from->paths;
+    into->events += from->events;
+    into->nonfinite += from->nonfinite;
+}
+
+static void *render_worker(void *arg)
+{
+    render_job *job = (render_job *)arg;
+    rrv_render_stats stats;
+    memset(&stats, 0, sizeof stats);
+    for (;;) {
+        int tile, tx0, ty0, tx1, ty1;
+        rrv_result result;
+        job_lock(job);
+        tile = job->failure == RRV_OK ? job->next_tile++ : job->tile_count;
+        job_unlock(job);
+        if (tile >= job->tile_count) break;
+
+        tx0 = job->x0 + (tile % job->tiles_x) * TILE_SIZE;
+        ty0 = job->y0 + (tile / job->tiles_x) * TILE_SIZE;
+        tx1 = tx0 + TILE_SIZE < job->x1 ? tx0 + TILE_SIZE : job->x1;
+        ty1 = ty0 + TILE_SIZE < job->y1 ? ty0 + TILE_SIZE : job->y1;
+        /* All samples of a pixel in one call: the float sums then do not
+           depend on how the image was split. */
+        result = rrv_render_rect(job->scene, tx0, ty0, tx1, ty1, 0, job->spp,
+                                 job->sum + 3 * ((size_t)(ty0 - job->y0) * job->stride + (size_t)(tx0 - job->x0)),
+                                 job->stride, &stats);
+
+        job_lock(job);
+        if (result != RRV_OK) {
+            if (job->failure == RRV_OK) job->failure = result;
+        } else {
+            job->tiles_done++;
+            draw_progress(job, 0);
+        }
+        job_unlock(job);
+    }
+    job_lock(job);
+    add_stats(&job->stats, &stats);
+    job_unlock(job);
+    return NULL;
+}
+
+static void run_render_job(render_job *job, int thread_count)
+{
+#if RRV_THREADS
+    pthread_t *threads = NULL;
+    int started = 0, i;
+    if (thread_count > 1) {
+        job->use_lock = pthread_mutex_init(&job->lock, NULL) == 0;
+        if (job->use_lock) threads = (pthread_t *)malloc((size_t)(thread_count - 1) * sizeof *threads);
+    }
+    /* Fewer threads than asked (no memory, no lock, a failed create) is still
+       a correct render, only a slower one. */
+    if (threads) {
+        for (i = 0; i < thread_count - 1; ++i) {
+            if (pthread_create(&threads[started], NULL, render_worker, job) != 0) break;
+            ++started;
+        }
+    }
+    render_worker(job);
+    for (i = 0; i < started; ++i) pthread_join(threads[i], NULL);
+    free(threads);
+    if (job->use_lock) pthread_mutex_destroy(&job->lock);
+    job->use_lock = 0;
+#else
+    (void)thread_count;
+    render_worker(job);
+#endif
+}
+
+static int default_thread_count(void)
+{
+    long cpus = sysconf(_SC_NPROCESSORS_ONLN);
+    if (cpus < 1) return 1;
+    return cpus > MAX_THREADS ? MAX_THREADS : (int)cpus;
+}
+
+/* ---- rrv render ---------------------------------------------------------------- */
+
+typedef struct render_options {
+    const char *scene_path, *pfm_path, *png_path;
+    int spp, has_spp;
+    uint64_t seed;
+    int has_seed;
+    rrv_integrator integrator;
+    int has_integrator;
+    int threads;
+    double exposure;
+    int crop[4], has_crop;
+    size_t max_grid_bytes;
+    int quiet;
+} render_options;
+
+static int parse_render_options(int argc, char **argv, render_options *opt)
+{
+    arg_cursor args;
+    args.argc = argc;
+    args.argv = argv;
+    args.command = "render";
+    memset(opt, 0, sizeof *opt);
+    for (args.index = 0; args.index < argc; ++args.index) {
+        const char *arg = argv[args.index];
+        if (is_help_flag(arg)) {
+            fputs(render_help, stdout);
+            return HELP_SHOWN;
+        } else if (strcmp(arg, "-o") == 0 || strcmp(arg, "--output") == 0) {
+            if (!take_value(&args, arg, "an output path", &opt->pfm_path)) return EXIT_USAGE;
+        } else if (strcmp(arg, "--png") == 0) {
+            if (!take_value(&args, arg, "an output path", &opt->png_path)) return EXIT_USAGE;
+        } else if (strcmp(arg, "--spp") == 0) {
+            if (!take_int(&args, arg, 1, 1L << 24, "a positive integer",
+                          &opt->spp))
+                return EXIT_USAGE;
+            opt->has_spp = 1;
+        } else if (strcmp(arg, "--seed") == 0) {
+            if (!take_u64(&args, arg, "an integer >= 0", &opt->seed)) return EXIT_USAGE;
+            opt->has_seed = 1;
+        } else if (strcmp(arg, "--integrator") == 0) {
+            if (!take_integrator(&args, 1, &opt->integrator)) return EXIT_USAGE;
+            opt->has_integrator = 1;
+        } else if (strcmp(arg, "--threads") == 0) {
+            if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer",
+                          &opt->threads))
+                return EXIT_USAGE;
+        } else if (strcmp(arg, "--exposure") == 0) {
+            if (!take_double(&args, arg, "a number", &opt->exposure)) return EXIT_USAGE;
+        } else if (strcmp(arg, "--crop") == 0) {
+            int i;
+            for (i = 0; i < 4; ++i)
+                if (!take_int(&args, arg, 0, INT_MAX, "four pixel coordinates X0 Y0 X1 Y1",
+                              &opt->crop[i]))
+                    return EXIT_USAGE;
+            opt->has_crop = 1;
+        } else if (strcmp(arg, "--max-grid-mb") == 0) {
+            if (!take_grid_limit(&args, &opt->max_grid_bytes)) return EXIT_USAGE;
+        } else if (strcmp(arg, "-q") == 0 || strcmp(arg, "--quiet") == 0) {
+            opt->quiet = 1;
+        } else if (is_flag(arg)) {
+            return usage_error(&args, "render: unknown option \"%s\"", arg);
+        } else if (opt->scene_path) {
+            return usage_error(&args, "render: unexpected argument \"%s\"", arg);
+        } else {
+            opt->scene_path = arg;
+        }
+    }
+    args.index = argc;
+    if (!opt->scene_path) return usage_error(&args, "render needs a scene file");
+    if (!opt->pfm_path) return usage_error(&args, "render needs an output file: -o OUT.pfm");
+    return EXIT_OK;
+}
+
+static void print_render_summary(int width, int height, int spp, double seconds,
+                                 const rrv_render_stats *stats)
+{
+    char samples_rate[32], paths_rate[32];
+    double rate_time = seconds > 1e-9 ? seconds : 1e-9;
+    format_count((double)stats->samples / rate_time, samples_rate, sizeof samples_rate);
+    format_count((double)stats->paths / rate_time, paths_rate, sizeof paths_rate);
+    fprintf(stderr, "rendered %dx%d at %d spp in %.2f s: %s samples/s, %s paths/s", width,
+            height, spp, seconds, samples_rate, paths_rate);
+    if (stats->nonfinite > 0)
+        fprintf(stderr, " (%" PRIu64 " non-finite samples discarded)", stats->nonfinite);
+    fputc('\n', stderr);
+}
+
+static int command_render(int argc, char **argv)
+{
+    render_options opt;
+    rrv_scene *scene = NULL;
+    render_job job;
+    rrv_error err;
+    float *sum = NULL, *image = NULL;
+    int code, width, height, crop_width, crop_height, x, y, c, thread_count;
+    size_t sum_count, image_count;
+    double seconds;
+
+    code = parse_render_options(argc, argv, &opt);
+    if (code == HELP_SHOWN) return EXIT_OK;
+    if (code != EXIT_OK) return code;
+
+    if (!load_scene(opt.scene_path, opt.max_grid_bytes, &scene)) return EXIT_INPUT;
+    if (opt.has_spp) scene->settings.spp = opt.spp;
+    if (opt.has_seed) scene->settings.seed = opt.seed;
+    if (opt.has_integrator) scene->settings.integrator = opt.integrator;
+    width = scene->camera.width;
+    height = scene->camera.height;
+
+    if (!opt.has_crop) {
+        opt.crop[0] = opt.crop[1] = 0;
+        opt.crop[2] = width;
+        opt.crop[3] = height;
+    } else if (opt.crop[0] >= opt.crop[2] || opt.crop[1] >= opt.crop[3] ||
+               opt.crop[2] > width || opt.crop[3] > height) {
+        arg_cursor args;
+        memset(&args, 0, sizeof args);
+        args.command = "render";
+        rrv_scene_free(scene);
+        return usage_error(&args,
+                           "--crop %d %d %d %d is not a nonempty rectangle inside the %dx%d "
+                           "image (X0 < X1 <= %d, Y0 < Y1 <= %d)",
+                           opt.crop[0], opt.crop[1], opt.crop[2], opt.crop[3], width, height,
+                           width, height);
+    }
+    crop_width = opt.crop[2] - opt.crop[0];
+    crop_height = opt.crop[3] - opt.crop[1];
+
+    if (!check_output(opt.pfm_path) || (opt.png_path && !check_output(opt.png_path))) {
+        rrv_scene_free(scene);
+        return EXIT_IO;
+    }
+
+    sum_count = (size_t)crop_width * (size_t)crop_height * 3;
+    image_count = sum_count;
+    sum = (float *)calloc(sum_count, sizeof *sum);
+    image = (float *)malloc(image_count * sizeof *image);
+    if (!sum || !image) {
+        fprintf(stderr, "rrv: out of memory for a %dx%d framebuffer\n", crop_width, crop_height);
+        free(sum);
+        free(image);
+        rrv_scene_free(scene);
+        return EXIT_INPUT;
+    }
+
+    memset(&job, 0, sizeof job);
+    job.scene = scene;
+    job.x0 = opt.crop[0];
+    job.y0 = opt.crop[1];
+    job.x1 = opt.crop[2];
+    job.y1 = opt.crop[3];
+    job.spp = scene->settings.spp;
+    job.sum = sum;
+    job.stride = crop_width;
+    job.tiles_x = (crop_width + TILE_SIZE - 1) / TILE_SIZE;
+    job.tile_count = job.tiles_x * ((crop_height + TILE_SIZE - 1) / TILE_SIZE);
+    job.failure = RRV_OK;
+    job.show_progress = !opt.quiet && isatty(2);
+    thread_count = opt.threads > 0 ? opt.threads : default_thread_count();
+    if (thread_count > job.tile_count) thread_count = job.tile_count;
+
+    job.start_time = seconds_now();
+    job.last_progress_time = job.start_time;
+    run_render_job(&job, thread_count);
+    seconds = seconds_now() - job.start_time;
+    if (job.show_progress) {
+        draw_progress(&job, 1);
+        /* The summary line takes the bar's place. */
+        fprintf(stderr, "\r%*s\r", PROGRESS_BAR_WIDTH + 48, "");
+    }
+
+    if (job.failure != RRV_OK) {
+        fprintf(stderr, "rrv: %s: render failed: %s\n", opt.scene_path,
+                rrv_result_string(job.failure));
+        free(sum);
+        free(image);
+        rrv_scene_free(scene);
+        return EXIT_INPUT;
+    }
+
+    for (y = 0; y < crop_height; ++y)
+        for (x = 0; x < crop_width; ++x)
+            for (c = 0; c < 3; ++c)
+                image[3 * ((size_t)y * crop_width + x) + c] =
+                    sum[3 * ((size_t)y * crop_width + x) + c] / (float)job.spp;
+    free(sum);
+
+    code = EXIT_OK;
+    memset(&err, 0, sizeof err);
+    if (rrv_write_pfm(opt.pfm_path, image, crop_width, crop_height, &err) != RRV_OK) {
+        print_library_error(&err);
+        code = EXIT_IO;
+    } else if (opt.png_path && rrv_write_png(opt.png_path, image, crop_width, crop_height,
+                                             opt.exposure, &err) != RRV_OK) {
+        print_library_error(&err);
+        code = EXIT_IO;
+    }
+    if (code == EXIT_OK && !opt.quiet)
+        print_render_summary(crop_width, crop_height, job.spp, seconds, &job.stats);
+    free(image);
+    rrv_scene_free(scene);
+    return code;
+}
+
+/* ---- rrv diff -------------------------------------------------------------------- */
+
+static int command_diff(int argc, char **argv)
+{
+    arg_cursor args;
+    const char *paths[2] = {NULL, NULL};
+    float *images[2] = {NULL, NULL};
+    int widths[2], heights[2], count = 0, i, code = EXIT_OK;
+    static const char channel_names[] = "rgb";
+
+    args.argc = argc;
+    args.argv = argv;
+    args.command = "diff";
+    for (args.index = 0; args.index < argc; ++args.index) {
+        const char *arg = argv[args.index];
+        if (is_help_flag(arg)) {
+            fputs(diff_help, stdout);
+            return EXIT_OK;
+        } else if (is_flag(arg)) {
+            return usage_error(&args, "diff: unknown option \"%s\"", arg);
+        } else if (count == 2) {
+            return usage_error(&args, "diff: unexpected argument \"%s\"", arg);
+        } else {
+            paths[count++] = arg;
+        }
+    }
+    if (count != 2) return usage_error(&args, "diff needs two images: A.pfm B.pfm");
+
+    for (i = 0; i < 2 && code == EXIT_OK; ++i) {
+        rrv_error err;
+        memset(&err, 0, sizeof err);
+        if (rrv_read_pfm(paths[i], &images[i], &widths[i], &heights[i], &err) != RRV_OK) {
+            print_library_error(&err);
+            code = EXIT_INPUT;
+        }
+    }
+    if (code == EXIT_OK && (widths[0] != widths[1] || heights[0] != heights[1])) {
+        fprintf(stderr, "rrv: diff: size mismatch: %s is %dx%d, %s is %dx%d\n", paths[0],
+                widths[0], heights[0], paths[1], widths[1], heights[1]);
+        code = EXIT_INPUT;
+    }
+    if (code == EXIT_OK) {
+        size_t n = (size_t)widths[0] * (size_t)heights[0] * 3, k, worst = 0, nonfinite = 0;
+        double squared = 0, relative = 0, absolute = 0, worst_error = 0;
+        for (k = 0; k < n; ++k) {
+            double a = images[0][k], b = images[1][k], d = a - b, e = fabs(d);
+            squared += d * d;
+            relative += d * d / (b * b + 1e-2);
+            absolute += e;
+            if (!isfinite(a) || !isfinite(b)) ++nonfinite;
+            /* A NaN is the worst error there is, so it wins the maximum. */
+            if (e > worst_error || (isnan(e) && !isnan(worst_error))) {
+                worst_error = e;
+                worst = k;
+            }
+        }
+        printf("width: %d\nheight: %d\n", widths[0], heights[0]);
+        printf("rmse: %.9g\n", n ? sqrt(squared / (double)n) : 0.0);
+        printf("relmse: %.9g\n", n ? relative / (double)n : 0.0);
+        printf("mae: %.9g\n", n ? absolute / (double)n : 0.0);
+        printf("max_abs_error: %.9g\n", worst_error);
+        printf("max_abs_pixel: %d %d\n", (int)(worst / 3 % (size_t)widths[0]),
+               (int)(worst / 3 / (size_t)widths[0]));
+        printf("max_abs_channel: %c\n", channel_names[worst % 3]);
+        printf("nonfinite: %lu\n", (unsigned long)nonfinite);
+    }
+    rrv_free(images[0]);
+    rrv_free(images[1]);
+    return code;
+}
+
+/* ---- rrv info -------------------------------------------------------------------- */
+
+static const char *field_kind_name(rrv_field_kind kind)
+{
+    static const char *const names[] = {"none",  "constant", "blobs",   "noise", "grid",
+                                        "luneburg", "fisheye", "slab", "shell"};
+    return (unsigned)kind < sizeof names / sizeof names[0] ? names[kind] : "unknown";
+}
+
+static void print_field(const char *label, const rrv_field *field)
+{
+    printf(", %s %s", label, field_kind_name(field->kind));
+    if (field->kind == RRV_FIELD_GRID)
+        printf(" %dx%dx%d", field->grid.nx, field->grid.ny, field->grid.nz);
+    if (field->kind == RRV_FIELD_GRID && field->grid.channels != 1)
+        printf("x%d", field->grid.channels);
+    if (field->kind == RRV_FIELD_BLOBS) printf(" (%d)", field->blob_count);
+}
+
+static void print_medium(const rrv_medium *medium)
+{
+    printf("  %s: box %g %g %g .. %g %g %g", medium->name, medium->lo.x, medium->lo.y,
+           medium->lo.z, medium->hi.x, medium->hi.y, medium->hi.z);
+    print_field("density", &medium->density);
+    if (medium->temperature.kind != RRV_FIELD_NONE) print_field("temperature", &medium->temperature);
+    if (medium->pressure.kind != RRV_FIELD_NONE) print_field("pressure", &medium->pressure);
+    if (medium->ior.kind != RRV_FIELD_NONE)
+        printf(", refracts (ior %s)", field_kind_name(medium->ior.kind));
+    else if (medium->ior_from_gas)
+        printf(", refracts (ior from gas temperature and pressure)");
+    else
+        printf(", does not refract");
+    if (medium->ior.kind == RRV_FIELD_GRID)
+        printf(" grid %dx%dx%d", medium->ior.grid.nx, medium->ior.grid.ny, medium->ior.grid.nz);
+    putchar('\n');
+}
+
+static int command_info(int argc, char **argv)
+{
+    arg_cursor args;
+    const char *scene_path = NULL;
+    size_t max_grid_bytes = 0;
+    rrv_scene *scene;
+    int kind_counts[3] = {0, 0, 0}, i;
+    char text[64];
+
+    args.argc = argc;
+    args.argv = argv;
+    args.command = "info";
+    for (args.index = 0; args.index < argc; ++args.index) {
+        const char *arg = argv[args.index];
+        if (is_help_flag(arg)) {
+            fputs(info_help, stdout);
+            return EXIT_OK;
+        } else if (strcmp(arg, "--max-grid-mb") == 0) {
+            if (!take_grid_limit(&args, &max_grid_bytes)) return EXIT_USAGE;
+        } else if (is_flag(arg)) {
+            return usage_error(&args, "info: unknown option \"%s\"", arg);
+        } else if (scene_path) {
+            return usage_error(&args, "info: unexpected argument \"%s\"", arg);
+        } else {
+            scene_path = arg;
+        }
+    }
+    if (!scene_path) return usage_error(&args, "info needs a scene file");
+    if (!load_scene(scene_path, max_grid_bytes, &scene)) return EXIT_INPUT;
+
+    for (i = 0; i < scene->shape_count; ++i)
+        if ((unsigned)scene->shapes[i].kind < 3) kind_counts[scene->shapes[i].kind]++;
+
+    printf("scene: %s\n", scene->path[0] ? scene->path : scene_path);
+    printf("resolution: %dx%d\n", scene->camera.width, scene->camera.height);
+    printf("spp: %d\n", scene->settings.spp);
+    printf("max_depth: %d\n", scene->settings.max_depth);
+    printf("seed: %" PRIu64 "\n", scene->settings.seed);
+    printf("integrator: %s\n", integrator_name(scene->settings.integrator));
+    printf("materials: %d\n", scene->material_count);
+    printf("shapes: %d (%d spheres, %d quads, %d triangles)\n", scene->shape_count,
+           kind_counts[RRV_SHAPE_SPHERE], kind_counts[RRV_SHAPE_QUAD],
+           kind_counts[RRV_SHAPE_TRIANGLE]);
+    printf("lights: %d\n", scene->light_count);
+    printf("media: %d\n", scene->medium_count);
+    for (i = 0; i < scene->medium_count; ++i) print_medium(&scene->media[i]);
+    printf("bvh_nodes: %d\n", scene->bvh_node_count);
+    format_bytes((double)scene->bytes, text, sizeof text);
+    printf("scene_memory: %s\n", text);
+    format_bytes((double)scene->grid_bytes, text, sizeof text);
+    printf("grid_memory: %s\n", text);
+    format_bytes((double)scene->camera.width * scene->camera.height * 3 * sizeof(float), text,
+                 sizeof text);
+    printf("framebuffer: %s\n", text);
+    rrv_scene_free(scene);
+    return EXIT_OK;
+}
+
+/* ---- rrv trace ------------------------------------------------------------------- */
+
+typedef struct trace_printer {
+    uint64_t walk;
+} trace_printer;
+
+static void print_trace_vertex(void *user, rrv_vec3 position, rrv_vec3 direction)
+{
+    const trace_printer *printer = (const trace_printer *)user;
+    printf("%" PRIu64 ",%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", printer->walk, position.x, position.y,
+           position.z, direction.x, direction.y, direction.z);
+}
+
+static int command_trace(int argc, char **argv)
+{
+    arg_cursor args;
+    const char *scene_path = NULL;
+    size_t max_grid_bytes = 0;
+    double ray[6];
+    int has_ray = 0, has_integrator = 0, has_seed = 0, print_path = 0, i, code = EXIT_OK;
+    rrv_integrator integrator = RRV_INTEGRATOR_REFRACTIVE;
+    uint64_t seed = 0, walks = 1, walk;
+    rrv_scene *scene;
+    rrv_vec3 origin, direction;
+    double length;
+
+    args.argc = argc;
+    args.argv = argv;
+    args.command = "trace";
+    for (args.index = 0; args.index < argc; ++args.index) {
+        const char *arg = argv[args.index];
+        if (is_help_flag(arg)) {
+            fputs(trace_help, stdout);
+            return EXIT_OK;
+        } else if (strcmp(arg, "--ray") == 0) {
+            for (i = 0; i < 6; ++i)
+                if (!take_double(&args, arg, "six numbers OX OY OZ DX DY DZ", &ray[i]))
+                    return EXIT_USAGE;
+            has_ray = 1;
+        } else if (strcmp(arg, "--integrator") == 0) {
+            if (!take_integrator(&args, 0, &integrator)) return EXIT_USAGE;
+            has_integrator = 1;
+        } else if (strcmp(arg, "--n") == 0) {
+            if (!take_u64(&args, arg, "a positive integer", &walks)) return EXIT_USAGE;
+            if (walks == 0)
+                return usage_error(&args, "--n needs a positive integer, got \"0\"");
+        } else if (strcmp(arg, "--seed") == 0) {
+            if (!take_u64(&args, arg, "an integer >= 0", &seed)) return EXIT_USAGE;
+            has_seed = 1;
+        } else if (strcmp(arg, "--path") == 0) {
+            print_path = 1;
+        } else if (strcmp(arg, "--max-grid-mb") == 0) {
+            if (!take_grid_limit(&args, &max_grid_bytes)) return EXIT_USAGE;
+        } else if (is_flag(arg)) {
+            return usage_error(&args, "trace: unknown option \"%s\"", arg);
+        } else if (scene_path) {
+            return usage_error(&args, "trace: unexpected argument \"%s\"", arg);
+        } else {
+            scene_path = arg;
+        }
+    }
+    if (!scene_path) return usage_error(&args, "trace needs a scene file");
+    if (!has_ray) return usage_error(&args, "trace needs a ray: --ray OX OY OZ DX DY DZ");
+    length = sqrt(ray[3] * ray[3] + ray[4] * ray[4] + ray[5] * ray[5]);
+    if (!(length > 0) || !isfinite(length))
+        return usage_error(&args, "--ray needs a nonzero, finite direction");
+    origin.x = ray[0];
+    origin.y = ray[1];
+    origin.z = ray[2];
+    direction.x = ray[3] / length;
+    direction.y = ray[4] / length;
+    direction.z = ray[5] / length;
+
+    if (!load_scene(scene_path, max_grid_bytes, &scene)) return EXIT_INPUT;
+    if (!has_integrator && scene->settings.integrator != RRV_INTEGRATOR_CLASSIC)
+        integrator = scene->settings.integrator;
+    if (!has_seed) seed = scene->settings.seed;
+
+    puts(print_path ? "walk,x,y,z,dx,dy,dz" : "x,y,z,dx,dy,dz,events");
+    for (walk = 0; walk < walks; ++walk) {
+        trace_printer printer;
+        rrv_trace_result result;
+        rrv_error err;
+        printer.walk = walk;
+        memset(&result, 0, sizeof result);
+        memset(&err, 0, sizeof err);
+        if (rrv_trace_ray(scene, integrator, origin, direction, seed, walk,
+                          print_path ? print_trace_vertex : NULL, &printer, &result,
+                          &err) != RRV_OK) {
+            fflush(stdout);
+            print_library_error(&err);
+            code = EXIT_INPUT;
+            break;
+        }
+        if (!print_path)
+            printf("%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%" PRIu64 "\n", result.position.x,
+                   result.position.y, result.position.z, result.direction.x,
+                   result.direction.y, result.direction.z, result.events);
+    }
+    rrv_scene_free(scene);
+    return code;
+}
+
+/* ---- main ------------------------------------------------------------------------ */
+
+static int show_help(const char *command)
+{
+    if (!command) {
+        fputs(usage_text, stdout);
+    } else if (strcmp(command, "render") == 0) {
+        fputs(render_help, stdout);
+    } else if (strcmp(command, "diff") == 0) {
+        fputs(diff_help, stdout);
+    } else if (strcmp(command, "info") == 0) {
+        fputs(info_help, stdout);
+    } else if (strcmp(command, "trace") == 0) {
+        fputs(trace_help, stdout);
+    } else {
+        return usage_error(NULL, "help: unknown command \"%s\"", command);
+    }
+    return EXIT_OK;
+}
+
+int main(int argc, char **argv)
+{
+    const char *command;
+    int code;
+    if (argc < 2) {
+        fputs(usage_text, stderr);
+        return EXIT_USAGE;
+    }
+    command = argv[1];
+    if (is_help_flag(command) || strcmp(command, "help") == 0) {
+        if (argc > 3) return usage_error(NULL, "help takes at most one command");
+        code = show_help(argc == 3 ? argv[2] : NULL);
+    } else if (strcmp(command, "--version") == 0) {
+        printf("rrv %d.%d.%d%s\n", RRV_VERSION_MAJOR, RRV_VERSION_MINOR, RRV_VERSION_PATCH,
+               RRV_THREADS ? "" : " (without threads)");
+        code = EXIT_OK;
+    } else if (strcmp(command, "render") == 0) {
+        code = command_render(argc - 2, argv + 2);
+    } else if (strcmp(command, "diff") == 0) {
+        code = command_diff(argc - 2, argv + 2);
+    } else if (strcmp(command, "info") == 0) {
+        code = command_info(argc - 2, argv + 2);
+    } else if (strcmp(command, "trace") == 0) {
+        code = command_trace(argc - 2, argv + 2);
+    } else if (is_flag(command)) {
+        code = usage_error(NULL, "unknown option \"%s\"", command);
+    } else {
+        code = usage_error(NULL, "unknown command \"%s\"", command);
+    }
+    return finish_stdout(code);
+}

@@ -1,0 +1,5135 @@
+/* rrv.h 0.1.0 - refractive volume renderer, a single-file C99 library.
+
+   rrv renders participating media whose index of refraction varies in space
+   (heat haze, shock fronts, the caustics of hot air) with refractive
+   null-scattering: delta tracking in which every null collision refracts the
+   ray (Fraboni, Chan, Vergne, Jeziorski, "Can You See the Heat?", SIGGRAPH
+   2023 talk), next to a classic null-scattering volume path tracer
+   (Miller et al. 2019) and an eikonal ray-marching reference (Ament et al. 2014).
+
+   USAGE
+     In exactly one C file:
+         #define RRV_IMPLEMENTATION
+         #include "rrv.h"
+     everywhere else just #include "rrv.h".
+
+     rrv_scene *scene = NULL;
+     rrv_error err;
+     if (rrv_scene_load("scenes/smoke.rrv", NULL, &scene, &err) != RRV_OK) {
+         fprintf(stderr, "%s:%d: %s\n", err.file, err.line, err.message);
+         return 2;
+     }
+     int w = scene->camera.width, h = scene->camera.height;
+     float *sum = calloc((size_t)w * h * 3, sizeof *sum);
+     rrv_render_rect(scene, 0, 0, w, h, 0, scene->settings.spp, sum, w, NULL);
+     for (size_t i = 0; i < (size_t)w * h * 3; ++i) sum[i] /= scene->settings.spp;
+     rrv_write_pfm("out.pfm", sum, w, h, &err);
+     free(sum);
+     rrv_scene_free(scene);
+
+     rrv_render_rect renders any rectangle for any range of sample indices and
+     adds the sums into the caller's buffer: split an image into tiles across
+     threads or machines and the result is bit-identical to one call.
+
+   CONFIGURATION (define before including the implementation)
+     RRV_MALLOC(sz) RRV_REALLOC(p,sz) RRV_FREE(p)   all three or none
+     RRV_ASSERT(x)    defaults to assert(x)
+     RRV_STATIC       make every public function static to the including file
+     RRV_NO_STDIO     no FILE* I/O: load through rrv_load_options.read_file and
+                      write through the callback writers
+
+   HISTORY
+     0.1.0  classic null-scattering path tracer, scene format, image I/O
+*/
+#ifndef RRV_H_INCLUDED
+#define RRV_H_INCLUDED
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define RRV_VERSION_MAJOR 0
+#define RRV_VERSION_MINOR 1
+#define RRV_VERSION_PATCH 0
+
+#ifndef RRV_DEF
+#ifdef RRV_STATIC
+#define RRV_DEF static
+#else
+#define RRV_DEF extern
+#endif
+#endif
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---- results and errors ------------------------------------------------- */
+
+#define RRV_RESULT_LIST(X)                                              \
+    X(RRV_OK, "ok")                                                     \
+    X(RRV_ERROR_ARGUMENT, "invalid argument")                           \
+    X(RRV_ERROR_MEMORY, "out of memory")                                \
+    X(RRV_ERROR_IO, "input/output error")                               \
+    X(RRV_ERROR_PARSE, "malformed scene")                               \
+    X(RRV_ERROR_FORMAT, "malformed file")                               \
+    X(RRV_ERROR_LIMIT, "size limit exceeded")                           \
+    X(RRV_ERROR_UNSUPPORTED, "not supported in this build")
+
+typedef enum rrv_result {
+#define RRV__ENUM(name, text) name,
+    RRV_RESULT_LIST(RRV__ENUM)
+#undef RRV__ENUM
+    RRV_RESULT_COUNT
+} rrv_result;
+
+/* Filled by every fallible call. `file` names the file at fault (the scene,
+   a grid, an OBJ, an image), `line` its 1-based line or 0 when lines do not
+   apply; `message` says what is wrong without repeating file and line, so a
+   caller prints "file:line: message". */
+typedef struct rrv_error {
+    rrv_result code;
+    int line;
+    char file[256];
+    char message[256];
+} rrv_error;
+
+/* A static string for a result code; never NULL. */
+RRV_DEF const char *rrv_result_string(rrv_result r);
+
+/* Frees memory the library handed out (images from rrv_read_pfm). NULL is ok. */
+RRV_DEF void rrv_free(void *p);
+
+/* ---- math types --------------------------------------------------------- */
+
+typedef struct rrv_vec3 { double x, y, z; } rrv_vec3;
+
+/* ---- scalar fields -------------------------------------------------------
+   A field is a scalar function of position inside a medium's box. Outside the
+   box every field takes its ambient value (see rrv_medium). Density, gas
+   temperature, gas pressure and IOR are all fields of these kinds. */
+
+typedef enum rrv_field_kind {
+    RRV_FIELD_NONE = 0, /* absent: the ambient value everywhere */
+    RRV_FIELD_CONSTANT, /* value */
+    RRV_FIELD_BLOBS,    /* base + sum_i weight_i exp(-|x-c_i|^2 / (2 radius_i^2)) */
+    RRV_FIELD_NOISE,    /* base + amplitude * falloff(x) * fbm(x), fbm in [0,1] */
+    RRV_FIELD_GRID,     /* trilinear in a gridvol file, corner-placed samples */
+    /* IOR profiles; value is the IOR eta itself (rrv works with eta - 1 inside) */
+    RRV_FIELD_LUNEBURG, /* eta = sqrt(2 - (r/R)^2) for r < R, 1 outside      */
+    RRV_FIELD_FISHEYE,  /* eta = n0 / (1 + (r/R)^2) for r < R, n0/2 outside  */
+    RRV_FIELD_SLAB,     /* eta - 1 = base + gradient * dot(x - center, normal) */
+    RRV_FIELD_SHELL     /* eta - 1 = base + amplitude * tanh-edged shell       */
+} rrv_field_kind;
+
+typedef struct rrv_blob {
+    rrv_vec3 center; /* m */
+    double radius;   /* standard deviation of the Gaussian, m, > 0 */
+    double weight;   /* peak value added at the centre */
+} rrv_blob;
+
+/* The falloff that shapes fractal noise into a puff of smoke. */
+typedef enum rrv_falloff_kind {
+    RRV_FALLOFF_NONE = 0, /* 1 everywhere */
+    RRV_FALLOFF_SPHERE,   /* 1 at center, smoothly 0 at radius */
+    RRV_FALLOFF_PLUME     /* a rising column: sphere stretched along +y, widening upward */
+} rrv_falloff_kind;
+
+typedef struct rrv_noise {
+    int octaves;        /* 1..12 */
+    double frequency;   /* of the first octave, 1/m */
+    double lacunarity;  /* frequency ratio between octaves */
+    double gain;        /* amplitude ratio between octaves */
+    double threshold;   /* fbm below this is 0; the rest rescaled to [0,1] */
+    uint32_t seed;
+    rrv_falloff_kind falloff;
+    rrv_vec3 center;    /* of the falloff */
+    double radius;      /* of the falloff, m */
+} rrv_noise;
+
+/* A regular grid as read from a gridvol file (corner-placed samples). */
+typedef struct rrv_grid {
+    int nx, ny, nz, channels; /* each >= 2; channels 1 or 3 */
+    rrv_vec3 lo, hi;          /* the box the corner samples span */
+    float *data;              /* ((z*ny + y)*nx + x)*channels + c, owned */
+} rrv_grid;
+
+typedef struct rrv_field {
+    rrv_field_kind kind;
+    double value;      /* CONSTANT */
+    double base;       /* BLOBS, NOISE, SLAB, SHELL: added everywhere inside */
+    double amplitude;  /* NOISE, SHELL */
+    rrv_blob *blobs;   /* BLOBS, owned */
+    int blob_count;
+    rrv_noise noise;   /* NOISE */
+    rrv_grid grid;     /* GRID */
+    rrv_vec3 center;   /* LUNEBURG, FISHEYE, SLAB, SHELL */
+    rrv_vec3 normal;   /* SLAB, unit */
+    double radius;     /* LUNEBURG, FISHEYE, SHELL (outer radius), m */
+    double thickness;  /* SHELL, m */
+    double edge;       /* SHELL: tanh edge width, m */
+    double gradient;   /* SLAB: d(eta)/ds along normal, 1/m */
+    double n0;         /* FISHEYE: IOR at the centre */
+} rrv_field;
+
+/* ---- scene description --------------------------------------------------- */
+
+typedef enum rrv_material_kind { RRV_MATERIAL_DIFFUSE = 0, RRV_MATERIAL_CHECKER } rrv_material_kind;
+
+typedef struct rrv_material {
+    char name[64];
+    rrv_material_kind kind;
+    double albedo[3];   /* DIFFUSE, or the first checker colour; each in [0,1] */
+    double albedo2[3];  /* CHECKER second colour */
+    double checker_scale; /* CHECKER: size of one square, m */
+} rrv_material;
+
+typedef enum rrv_shape_kind { RRV_SHAPE_SPHERE = 0, RRV_SHAPE_QUAD, RRV_SHAPE_TRIANGLE } rrv_shape_kind;
+
+typedef struct rrv_shape {
+    rrv_shape_kind kind;
+    int material;       /* index into scene->materials */
+    double L[3];        /* emitted radiance (already times its scale); zero: not a light */
+    rrv_vec3 p0, e1, e2;/* QUAD: corner and edges; TRIANGLE: p0, p1 - p0, p2 - p0.
+                           Lights emit on the side of cross(e1, e2) */
+    rrv_vec3 center;    /* SPHERE (emits outward) */
+    double radius;
+} rrv_shape;
+
+typedef enum rrv_environment_kind {
+    RRV_ENV_NONE = 0, RRV_ENV_CONSTANT, RRV_ENV_GRADIENT
+} rrv_environment_kind;
+
+typedef struct rrv_environment {
+    rrv_environment_kind kind;
+    double L[3];      /* CONSTANT radiance, or GRADIENT at +y (already scaled) */
+    double L2[3];     /* GRADIENT radiance at -y, blended linearly in direction.y */
+} rrv_environment;
+
+typedef struct rrv_camera {
+    rrv_vec3 eye, look, up;
+    double fov;       /* vertical field of view, degrees, (0,180) */
+    int width, height;
+} rrv_camera;
+
+typedef enum rrv_integrator {
+    RRV_INTEGRATOR_CLASSIC = 0, /* IOR 1 everywhere: the production baseline */
+    RRV_INTEGRATOR_REFRACTIVE,  /* refractive delta tracking */
+    RRV_INTEGRATOR_EIKONAL      /* ray-equation marching: the accuracy reference */
+} rrv_integrator;
+
+/* How the eikonal integrator steps the ray equation. */
+typedef enum rrv_stepper {
+    RRV_STEPPER_DEFAULT = 0, /* the stepper measured best at equal cost: RK4 */
+    RRV_STEPPER_LEAPFROG,    /* kick-drift-kick of Pediredla et al. 2020 */
+    RRV_STEPPER_RK4          /* classic fourth-order Runge-Kutta on (x, eta dx/ds) */
+} rrv_stepper;
+
+/* Where the refractive integrator refracts, and with which normal and ratio. */
+typedef enum rrv_refraction_scheme {
+    RRV_REFRACTION_DEFAULT = 0, /* the scheme measured best: COMB */
+    RRV_REFRACTION_POISSON,     /* the seed paper: at every null event, normal there */
+    RRV_REFRACTION_MIDPOINT,    /* at every null event, normal at the chord midpoint */
+    RRV_REFRACTION_COMB         /* at regularly spaced points (one random offset a
+                                   segment), IOR ratio between chord midpoints */
+} rrv_refraction_scheme;
+
+typedef struct rrv_settings {
+    int spp;              /* samples per pixel, >= 1 */
+    int max_depth;        /* scattering/bounce vertices per path, >= 1 */
+    uint64_t seed;
+    rrv_integrator integrator;
+    double bend_tolerance;/* refractive: radians of bending per null event */
+    double mu_eta;        /* refractive: fixed refraction event rate, 1/m; 0 = automatic */
+    rrv_refraction_scheme refraction; /* refractive */
+    double step;          /* eikonal: step length h, m */
+    rrv_stepper stepper;  /* eikonal */
+    double ambient_ior;   /* IOR outside every medium, >= 1 */
+    int majorant_cells;   /* majorant grid cells per axis; 0 = automatic, 1 = one
+                             global majorant (for comparisons). Used by prepare. */
+} rrv_settings;
+
+struct rrv__majorant_grid;
+
+typedef struct rrv_medium {
+    char name[64];
+    rrv_vec3 lo, hi;        /* the axis-aligned box the medium fills */
+    double sigma_a[3];      /* absorption per unit density, 1/m */
+    double sigma_s[3];      /* scattering per unit density, 1/m */
+    double scale;           /* multiplies sigma_a and sigma_s (pbrt's "scale") */
+    double g;               /* Henyey-Greenstein asymmetry, (-1,1) */
+    double Le[3];           /* emitted radiance: adds sigma_a * Le * Lescale */
+    double Lescale;
+    rrv_field density;      /* extinction = density * scale * (sigma_a + sigma_s) */
+    /* Gas state and IOR (see PHYSICS: Hauf-Grigull). temperature_field gives
+       T = (f - temperatureoffset) * temperaturescale in kelvin; with
+       blackbody_emission the medium also emits sigma_a * Lescale * B(T). */
+    rrv_field temperature;
+    double temperatureoffset, temperaturescale;
+    int blackbody_emission;
+    rrv_field pressure;     /* Pa */
+    rrv_field ior;          /* NONE: the medium does not refract */
+    int ior_from_gas;       /* 1: eta from temperature and pressure */
+    double eta_ref, P_ref, T_ref; /* Hauf-Grigull reference state */
+    double ior_scale;       /* artist scale k on the refractivity eta - 1 */
+    /* Built by rrv_scene_prepare; NULL before. */
+    struct rrv__majorant_grid *majorant;
+} rrv_medium;
+
+struct rrv__bvh_node;
+
+typedef struct rrv_scene {
+    rrv_camera camera;
+    rrv_settings settings;
+    rrv_environment environment;
+    rrv_material *materials; int material_count, material_capacity;
+    rrv_shape *shapes;       int shape_count, shape_capacity;
+    rrv_medium *media;       int medium_count, medium_capacity;
+    /* Built by rrv_scene_prepare: */
+    int *lights; int light_count;          /* indices of emissive shapes */
+    struct rrv__bvh_node *bvh; int bvh_node_count;
+    int *bvh_prims;                        /* shape indices in leaf order */
+    size_t bytes;                          /* heap bytes the scene holds */
+    size_t grid_bytes;                     /* of which grid samples */
+    char path[256];                        /* the file it came from, for messages */
+} rrv_scene;
+
+/* ---- loading -------------------------------------------------------------- */
+
+/* Reads a whole file into a buffer allocated with RRV_MALLOC (freed by the
+   library with RRV_FREE). Return 0 on success, nonzero if it cannot be read. */
+typedef int (*rrv_read_file_func)(void *user, const char *path, void **data, size_t *size);
+
+typedef struct rrv_load_options {
+    size_t max_grid_bytes;       /* refuse a grid larger than this before
+                                    allocating; 0 = RRV_DEFAULT_MAX_GRID_BYTES */
+    rrv_read_file_func read_file;/* NULL: stdio (unavailable with RRV_NO_STDIO) */
+    void *read_file_user;
+} rrv_load_options;
+
+#define RRV_DEFAULT_MAX_GRID_BYTES ((size_t)2 << 30)
+
+/* Parses and prepares a scene file; paths inside are relative to its folder.
+   opt may be NULL. On success *out owns everything; free with rrv_scene_free. */
+RRV_DEF rrv_result rrv_scene_load(const char *path, const rrv_load_options *opt,
+                                  rrv_scene **out, rrv_error *err);
+/* The same from text in memory. `name` is used in messages, `base_dir` to
+   resolve relative paths (NULL: the current directory). */
+RRV_DEF rrv_result rrv_scene_parse(const char *text, size_t size, const char *name,
+                                   const char *base_dir, const rrv_load_options *opt,
+                                   rrv_scene **out, rrv_error *err);
+/* Builds the BVH, light list and majorant grids. rrv_scene_load/parse call it;
+   call it again after editing a scene by hand. */
+RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err);
+RRV_DEF void rrv_scene_free(rrv_scene *scene);
+
+/* Reads and validates a gridvol file (see PHYSICS.md). `nonnegative` rejects
+   negative values (densities). On success grid->data is owned by the caller
+   and freed with rrv_free. */
+RRV_DEF rrv_result rrv_grid_read(const char *path, const rrv_load_options *opt,
+                                 int nonnegative, rrv_grid *grid, rrv_error *err);
+RRV_DEF rrv_result rrv_grid_read_memory(const void *data, size_t size, const char *name,
+                                        size_t max_grid_bytes, int nonnegative,
+                                        rrv_grid *grid, rrv_error *err);
+
+/* ---- rendering -------------------------------------------------------------- */
+
+typedef struct rrv_render_stats {
+    uint64_t samples;   /* pixel samples taken */
+    uint64_t paths;     /* camera paths plus shadow connections traced */
+    uint64_t events;    /* tentative collisions (real and null) sampled */
+    uint64_t nonfinite; /* samples discarded because they were NaN or infinite */
+} rrv_render_stats;
+
+/* Renders pixels [x0,x1) x [y0,y1) of the image (row 0 at the top) for
+   sample indices [sample_begin, sample_end) and ADDS each pixel's sum of RGB
+   radiance into the caller's buffer for that rectangle only:
+   sum[3*((y - y0)*stride + (x - x0)) + c], stride >= x1 - x0 pixels. Divide
+   by the total sample count afterwards. To fill a whole image, pass
+   sum + 3*(y0*width + x0) with stride = width.
+   Random numbers depend only on (seed, pixel, sample index): splitting the
+   pixels between calls (tiles, threads, machines) gives bit-identical sums;
+   splitting a pixel's samples between calls changes them only by float
+   rounding of the additions. stats may be NULL; if not, it is added to.
+   Thread-safe for distinct pixels: the scene is only read. */
+RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
+                                   int sample_begin, int sample_end,
+                                   float *sum, int stride, rrv_render_stats *stats);
+
+/* One walk of a ray through the refractive media only (absorption and
+   scattering ignored), as `rrv trace` prints it. The visit callback, if not
+   NULL, sees every vertex (position, direction after the vertex). */
+typedef void (*rrv_trace_visit_func)(void *user, rrv_vec3 position, rrv_vec3 direction);
+typedef struct rrv_trace_result {
+    rrv_vec3 position, direction; /* where and how the ray left the last medium */
+    uint64_t events;              /* refraction events (or eikonal steps) */
+} rrv_trace_result;
+RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrator,
+                                 rrv_vec3 origin, rrv_vec3 direction,
+                                 uint64_t seed, uint64_t walk,
+                                 rrv_trace_visit_func visit, void *user,
+                                 rrv_trace_result *result, rrv_error *err);
+
+/* ---- image I/O ----------------------------------------------------------------
+   Images are float RGB, row 0 at the top, 3 floats a pixel. */
+
+/* Return 0 on success; nonzero aborts the writer with RRV_ERROR_IO. */
+typedef int (*rrv_write_func)(void *user, const void *data, size_t size);
+
+/* PFM: "PF\n<w> <h>\n-1.0\n", little-endian floats, rows bottom to top. */
+RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user,
+                                    const float *rgb, int width, int height);
+/* PNG preview: 8-bit sRGB of rgb * 2^exposure, stored (uncompressed) deflate. */
+RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
+                                    const float *rgb, int width, int height, double exposure);
+/* Reads a PFM (color "PF" or grey "Pf", either endianness) from memory into a
+   new RGB buffer (free with rrv_free). */
+RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char *name,
+                                       float **rgb, int *width, int *height, rrv_error *err);
+/* File forms. Writers write "<path>.tmp" and rename it over path only when
+   everything was written, so a failure never leaves half an image. */
+RRV_DEF rrv_result rrv_write_pfm(const char *path, const float *rgb, int width, int height,
+                                 rrv_error *err);
+RRV_DEF rrv_result rrv_write_png(const char *path, const float *rgb, int width, int height,
+                                 double exposure, rrv_error *err);
+RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *height,
+                                rrv_error *err);
+
+/* Checksums the PNG writer uses, exposed for tests and tools. Start with 0 (crc)
+   and 1 (adler). */
+RRV_DEF uint32_t rrv_crc32(uint32_t crc, const void *data, size_t size);
+RRV_DEF uint32_t rrv_adler32(uint32_t adler, const void *data, size_t size);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* RRV_H_INCLUDED */
+
+/* ============================================================================
+   IMPLEMENTATION
+   ============================================================================ */
+#ifdef RRV_IMPLEMENTATION
+#ifndef RRV_IMPLEMENTATION_INCLUDED
+#define RRV_IMPLEMENTATION_INCLUDED
+
+/* ==== common: configuration, allocation, errors ============================ */
+#include <math.h>
+#include <string.h>
+#include <stdarg.h>
+#include <stdio.h> /* vsnprintf is needed even with RRV_NO_STDIO */
+#include <limits.h>
+#include <float.h>
+
+#if defined(RRV_MALLOC) && defined(RRV_REALLOC) && defined(RRV_FREE)
+/* all three given */
+#elif !defined(RRV_MALLOC) && !defined(RRV_REALLOC) && !defined(RRV_FREE)
+#include <stdlib.h>
+#define RRV_MALLOC(sz) malloc(sz)
+#define RRV_REALLOC(p, sz) realloc(p, sz)
+#define RRV_FREE(p) free(p)
+#else
+#error "rrv.h: define all of RRV_MALLOC, RRV_REALLOC and RRV_FREE, or none"
+#endif
+
+#ifndef RRV_ASSERT
+#include <assert.h>
+#define RRV_ASSERT(x) assert(x)
+#endif
+
+#define RRV__PI 3.14159265358979323846
+#define RRV__INV_PI 0.31830988618379067154
+#define RRV__INV_4PI 0.07957747154594766788
+
+RRV_DEF const char *rrv_result_string(rrv_result r)
+{
+    static const char *const names[] = {
+#define RRV__NAME(name, text) text,
+        RRV_RESULT_LIST(RRV__NAME)
+#undef RRV__NAME
+    };
+    if ((int)r < 0 || (int)r >= (int)RRV_RESULT_COUNT) return "unknown result";
+    return names[r];
+}
+
+RRV_DEF void rrv_free(void *p) { RRV_FREE(p); }
+
+/* Fills *err (which may be NULL) and returns code, so a failing call can
+   `return rrv__fail(err, ...)` in one line. */
+static rrv_result rrv__fail(rrv_error *err, rrv_result code, const char *file, int line,
+                            const char *fmt, ...)
+{
+    if (err) {
+        va_list args;
+        err->code = code;
+        err->line = line;
+        if (file) {
+            size_t n = strlen(file);
+            if (n >= sizeof err->file) file += n - (sizeof err->file - 1);
+            memcpy(err->file, file, strlen(file) + 1);
+        } else {
+            err->file[0] = '\0';
+        }
+        va_start(args, fmt);
+        vsnprintf(err->message, sizeof err->message, fmt, args);
+        va_end(args);
+    }
+    return code;
+}
+
+static void rrv__clear_error(rrv_error *err)
+{
+    if (err) {
+        err->code = RRV_OK;
+        err->line = 0;
+        err->file[0] = '\0';
+        err->message[0] = '\0';
+    }
+}
+
+/* ==== math: vectors, orthonormal frames, the PCG32 random stream ============
+   Everything geometric is double: a fire changes the IOR of air by ~2e-4, and
+   the positions and directions that carry such bends must not lose them. */
+
+static rrv_vec3 rrv__v3(double x, double y, double z) { rrv_vec3 v; v.x = x; v.y = y; v.z = z; return v; }
+static rrv_vec3 rrv__add(rrv_vec3 a, rrv_vec3 b) { return rrv__v3(a.x + b.x, a.y + b.y, a.z + b.z); }
+static rrv_vec3 rrv__sub(rrv_vec3 a, rrv_vec3 b) { return rrv__v3(a.x - b.x, a.y - b.y, a.z - b.z); }
+static rrv_vec3 rrv__scale(rrv_vec3 a, double s) { return rrv__v3(a.x * s, a.y * s, a.z * s); }
+static rrv_vec3 rrv__madd(rrv_vec3 a, rrv_vec3 b, double s) { return rrv__v3(a.x + b.x * s, a.y + b.y * s, a.z + b.z * s); }
+static double rrv__dot(rrv_vec3 a, rrv_vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+static rrv_vec3 rrv__cross(rrv_vec3 a, rrv_vec3 b)
+{
+    return rrv__v3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+static double rrv__length(rrv_vec3 a) { return sqrt(rrv__dot(a, a)); }
+static rrv_vec3 rrv__normalize(rrv_vec3 a)
+{
+    double len = rrv__length(a);
+    return len > 0 ? rrv__scale(a, 1.0 / len) : a;
+}
+static double rrv__axis(rrv_vec3 a, int axis) { return axis == 0 ? a.x : axis == 1 ? a.y : a.z; }
+static rrv_vec3 rrv__vmin(rrv_vec3 a, rrv_vec3 b) { return rrv__v3(fmin(a.x, b.x), fmin(a.y, b.y), fmin(a.z, b.z)); }
+static rrv_vec3 rrv__vmax(rrv_vec3 a, rrv_vec3 b) { return rrv__v3(fmax(a.x, b.x), fmax(a.y, b.y), fmax(a.z, b.z)); }
+static double rrv__max3(const double c[3]) { return fmax(c[0], fmax(c[1], c[2])); }
+static double rrv__clamp(double x, double lo, double hi) { return x < lo ? lo : x > hi ? hi : x; }
+
+/* Builds tangents t, b so that (t, b, n) is orthonormal, without a branch on a
+   "safe" axis that would make the frame jump (Duff et al. 2017). */
+static void rrv__frame(rrv_vec3 n, rrv_vec3 *t, rrv_vec3 *b)
+{
+    double sign = n.z >= 0 ? 1.0 : -1.0;
+    double a = -1.0 / (sign + n.z);
+    double c = n.x * n.y * a;
+    *t = rrv__v3(1.0 + sign * n.x * n.x * a, sign * c, -sign * n.x);
+    *b = rrv__v3(c, sign + n.y * n.y * a, -n.y);
+}
+static rrv_vec3 rrv__from_frame(rrv_vec3 n, double x, double y, double z)
+{
+    rrv_vec3 t, b;
+    rrv__frame(n, &t, &b);
+    return rrv__add(rrv__add(rrv__scale(t, x), rrv__scale(b, y)), rrv__scale(n, z));
+}
+
+/* PCG32 (O'Neill 2014): small state, good statistics, and independent
+   streams, so each (pixel, sample) owns one and images do not depend on
+   how the work is split between threads. */
+typedef struct rrv__rng { uint64_t state, inc; } rrv__rng;
+
+static uint32_t rrv__next_u32(rrv__rng *rng)
+{
+    uint64_t old = rng->state;
+    uint32_t xorshifted, rot;
+    rng->state = old * 6364136223846793005ULL + rng->inc;
+    xorshifted = (uint32_t)(((old >> 18) ^ old) >> 27);
+    rot = (uint32_t)(old >> 59);
+    return (xorshifted >> rot) | (xorshifted << ((32u - rot) & 31u));
+}
+
+static uint64_t rrv__mix64(uint64_t z)
+{
+    z += 0x9E3779B97F4A7C15ULL;
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+}
+
+static void rrv__rng_seed(rrv__rng *rng, uint64_t seed, uint64_t stream_a, uint64_t stream_b)
+{
+    uint64_t key = rrv__mix64(seed ^ rrv__mix64(stream_a ^ rrv__mix64(stream_b)));
+    rng->state = 0;
+    rng->inc = (rrv__mix64(key + 1) << 1) | 1u;
+    rrv__next_u32(rng);
+    rng->state += key;
+    rrv__next_u32(rng);
+}
+
+/* Uniform in [0,1): 53 random bits, so that -log(1-u) never sees 1. */
+static double rrv__uniform(rrv__rng *rng)
+{
+    uint64_t hi = rrv__next_u32(rng) >> 5, lo = rrv__next_u32(rng) >> 6;
+    return (double)(hi * 67108864.0 + lo) * (1.0 / 9007199254740992.0);
+}
+
+/* ==== sampling: free flights, directions, phase function, MIS ============== */
+
+static double rrv__sample_free_flight(double majorant, rrv__rng *rng)
+{
+    return -log(1.0 - rrv__uniform(rng)) / majorant;
+}
+
+static rrv_vec3 rrv__sample_uniform_sphere(double u1, double u2)
+{
+    double z = 1.0 - 2.0 * u1, r = sqrt(fmax(0.0, 1.0 - z * z)), phi = 2.0 * RRV__PI * u2;
+    return rrv__v3(r * cos(phi), r * sin(phi), z);
+}
+
+static rrv_vec3 rrv__sample_cosine_hemisphere(rrv_vec3 n, double u1, double u2)
+{
+    double r = sqrt(u1), phi = 2.0 * RRV__PI * u2;
+    return rrv__from_frame(n, r * cos(phi), r * sin(phi), sqrt(fmax(0.0, 1.0 - u1)));
+}
+
+/* Henyey-Greenstein with cos_theta = dot(incoming travel direction, outgoing
+   direction), so g > 0 scatters forward; integrates to 1 over the sphere. */
+static double rrv__hg_eval(double g, double cos_theta)
+{
+    double denom = 1.0 + g * g - 2.0 * g * cos_theta;
+    return RRV__INV_4PI * (1.0 - g * g) / (denom * sqrt(fmax(denom, 1e-300)));
+}
+
+static rrv_vec3 rrv__hg_sample(double g, rrv_vec3 forward, double u1, double u2)
+{
+    double cos_theta, sin_theta, phi = 2.0 * RRV__PI * u2;
+    if (fabs(g) < 1e-3) {
+        cos_theta = 1.0 - 2.0 * u1;
+    } else {
+        double s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u1);
+        cos_theta = rrv__clamp((1.0 + g * g - s * s) / (2.0 * g), -1.0, 1.0);
+    }
+    sin_theta = sqrt(fmax(0.0, 1.0 - cos_theta * cos_theta));
+    return rrv__from_frame(forward, sin_theta * cos(phi), sin_theta * sin(phi), cos_theta);
+}
+
+static double rrv__power_heuristic(double pdf_a, double pdf_b)
+{
+    double a = pdf_a * pdf_a, b = pdf_b * pdf_b;
+    return a + b > 0 ? a / (a + b) : 0.0;
+}
+
+/* ==== geometry: ray-primitive intersection and the binned-SAH BVH ========== */
+
+typedef struct rrv__hit {
+    double t;
+    rrv_vec3 p, n; /* n: geometric normal, unit, as the primitive defines it */
+    int shape;
+} rrv__hit;
+
+typedef struct rrv__bvh_node rrv__bvh_node;
+struct rrv__bvh_node {
+    rrv_vec3 lo, hi;
+    int first;     /* leaf: first index into bvh_prims; inner: right child */
+    int count;     /* leaf: primitive count; inner: 0 (left child is next) */
+};
+
+static void rrv__shape_bounds(const rrv_shape *s, rrv_vec3 *lo, rrv_vec3 *hi)
+{
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv_vec3 r = rrv__v3(s->radius, s->radius, s->radius);
+        *lo = rrv__sub(s->center, r);
+        *hi = rrv__add(s->center, r);
+    } else {
+        rrv_vec3 a = s->p0, b = rrv__add(s->p0, s->e1), c = rrv__add(s->p0, s->e2);
+        *lo = rrv__vmin(a, rrv__vmin(b, c));
+        *hi = rrv__vmax(a, rrv__vmax(b, c));
+        if (s->kind == RRV_SHAPE_QUAD) {
+            rrv_vec3 d = rrv__add(b, s->e2);
+            *lo = rrv__vmin(*lo, d);
+            *hi = rrv__vmax(*hi, d);
+        }
+    }
+}
+
+static int rrv__intersect_shape(const rrv_shape *s, rrv_vec3 o, rrv_vec3 d, double tmax, rrv__hit *hit)
+{
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        /* The half-b form with oc projected out keeps precision for spheres
+           far from the ray origin (Haines et al., Ray Tracing Gems ch. 7). */
+        rrv_vec3 oc = rrv__sub(o, s->center);
+        double b = rrv__dot(oc, d);
+        rrv_vec3 perp = rrv__madd(oc, d, -b);
+        double disc = s->radius * s->radius - rrv__dot(perp, perp), sq, q, t0, t1, t;
+        if (disc < 0) return 0;
+        sq = sqrt(disc);
+        q = b > 0 ? -b - sq : -b + sq;
+        t0 = rrv__dot(oc, oc) - s->radius * s->radius;
+        t0 = q != 0 ? t0 / q : 0;
+        t1 = q;
+        if (t0 > t1) { t = t0; t0 = t1; t1 = t; }
+        t = t0 > 0 ? t0 : t1;
+        if (t <= 0 || t >= tmax) return 0;
+        hit->t = t;
+        hit->p = rrv__madd(o, d, t);
+        hit->n = rrv__scale(rrv__sub(hit->p, s->center), 1.0 / s->radius);
+        return 1;
+    } else {
+        /* Moller-Trumbore; a quad is the same test with the (u, v) range
+           widened from the triangle to the parallelogram. */
+        rrv_vec3 pv = rrv__cross(d, s->e2), tv, qv;
+        double det = rrv__dot(s->e1, pv), inv, u, v, t;
+        if (det == 0) return 0;
+        inv = 1.0 / det;
+        tv = rrv__sub(o, s->p0);
+        u = rrv__dot(tv, pv) * inv;
+        if (u < 0 || u > 1) return 0;
+        qv = rrv__cross(tv, s->e1);
+        v = rrv__dot(d, qv) * inv;
+        if (v < 0 || (s->kind == RRV_SHAPE_TRIANGLE ? u + v > 1 : v > 1)) return 0;
+        t = rrv__dot(s->e2, qv) * inv;
+        if (t <= 0 || t >= tmax) return 0;
+        hit->t = t;
+        hit->p = rrv__madd(o, d, t);
+        hit->n = rrv__normalize(rrv__cross(s->e1, s->e2));
+        return 1;
+    }
+}
+
+static int rrv__box_hit(rrv_vec3 lo, rrv_vec3 hi, rrv_vec3 o, rrv_vec3 inv_d, double tmax, double *t_enter)
+{
+    double t0 = 0, t1 = tmax;
+    int axis;
+    for (axis = 0; axis < 3; ++axis) {
+        double inv = rrv__axis(inv_d, axis), oa = rrv__axis(o, axis);
+        double ta = (rrv__axis(lo, axis) - oa) * inv, tb = (rrv__axis(hi, axis) - oa) * inv;
+        if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
+        /* NaN from 0*inf (origin on a slab plane, ray parallel) must not
+           reject: fmax/fmin ignore a NaN operand. */
+        t0 = fmax(t0, ta);
+        t1 = fmin(t1, tb);
+        if (t0 > t1) return 0;
+    }
+    if (t_enter) *t_enter = t0;
+    return 1;
+}
+
+/* Closest hit along o + t d, t in (0, tmax); returns 1 and fills hit. */
+static int rrv__intersect_scene(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, double tmax, rrv__hit *hit)
+{
+    int stack[64], top = 0, found = 0, node_index = 0;
+    rrv_vec3 inv_d = rrv__v3(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+    if (!scene->bvh_node_count) return 0;
+    for (;;) {
+        const rrv__bvh_node *node = &scene->bvh[node_index];
+        double t_enter;
+        if (rrv__box_hit(node->lo, node->hi, o, inv_d, tmax, &t_enter)) {
+            if (node->count) {
+                int i;
+                for (i = 0; i < node->count; ++i) {
+                    int prim = scene->bvh_prims[node->first + i];
+                    if (rrv__intersect_shape(&scene->shapes[prim], o, d, tmax, hit)) {
+                        hit->shape = prim;
+                        tmax = hit->t;
+                        found = 1;
+                    }
+                }
+            } else {
+                stack[top++] = node->first;
+                node_index = node_index + 1;
+                continue;
+            }
+        }
+        if (!top) break;
+        node_index = stack[--top];
+    }
+    return found;
+}
+
+typedef struct rrv__bvh_build {
+    const rrv_scene *scene;
+    rrv__bvh_node *nodes;
+    int node_count;
+    int *prims;
+    rrv_vec3 *centroids, *los, *his;
+} rrv__bvh_build;
+
+#define RRV__BVH_BINS 12
+
+static void rrv__bvh_bounds(const rrv__bvh_build *b, int first, int count, rrv_vec3 *lo, rrv_vec3 *hi,
+                            rrv_vec3 *clo, rrv_vec3 *chi)
+{
+    int i;
+    *lo = *clo = rrv__v3(DBL_MAX, DBL_MAX, DBL_MAX);
+    *hi = *chi = rrv__v3(-DBL_MAX, -DBL_MAX, -DBL_MAX);
+    for (i = first; i < first + count; ++i) {
+        int p = b->prims[i];
+        *lo = rrv__vmin(*lo, b->los[p]);
+        *hi = rrv__vmax(*hi, b->his[p]);
+        *clo = rrv__vmin(*clo, b->centroids[p]);
+        *chi = rrv__vmax(*chi, b->centroids[p]);
+    }
+}
+
+static double rrv__half_area(rrv_vec3 lo, rrv_vec3 hi)
+{
+    rrv_vec3 e = rrv__sub(hi, lo);
+    if (e.x < 0) return 0;
+    return e.x * e.y + e.y * e.z + e.z * e.x;
+}
+
+/* Binned SAH (Wald 2007): 12 bins per axis are within a few percent of the
+   full sweep and keep the build linear per level. Depth is capped so the
+   fixed traversal stack cannot overflow. */
+static void rrv__bvh_split(rrv__bvh_build *b, int node_index, int first, int count, int depth)
+{
+    rrv__bvh_node *node = &b->nodes[node_index];
+    rrv_vec3 clo, chi;
+    int axis, best_axis = -1, best_bin = 0, i, mid, left;
+    double best_cost = DBL_MAX;
+    rrv__bvh_bounds(b, first, count, &node->lo, &node->hi, &clo, &chi);
+    node->first = first;
+    node->count = count;
+    if (count <= 2 || depth >= 60) return;
+    for (axis = 0; axis < 3; ++axis) {
+        double cmin = rrv__axis(clo, axis), extent = rrv__axis(chi, axis) - cmin;
+        rrv_vec3 blo[RRV__BVH_BINS], bhi[RRV__BVH_BINS];
+        int bcount[RRV__BVH_BINS], k;
+        if (extent <= 0) continue;
+        for (k = 0; k < RRV__BVH_BINS; ++k) {
+            blo[k] = rrv__v3(DBL_MAX, DBL_MAX, DBL_MAX);
+            bhi[k] = rrv__v3(-DBL_MAX, -DBL_MAX, -DBL_MAX);
+            bcount[k] = 0;
+        }
+        for (i = first; i < first + count; ++i) {
+            int p = b->prims[i];
+            int bin = (int)(RRV__BVH_BINS * (rrv__axis(b->centroids[p], axis) - cmin) / extent);
+            if (bin >= RRV__BVH_BINS) bin = RRV__BVH_BINS - 1;
+            blo[bin] = rrv__vmin(blo[bin], b->los[p]);
+            bhi[bin] = rrv__vmax(bhi[bin], b->his[p]);
+            bcount[bin]++;
+        }
+        for (k = 1; k < RRV__BVH_BINS; ++k) {
+            rrv_vec3 llo = rrv__v3(DBL_MAX, DBL_MAX, DBL_MAX), lhi = rrv__v3(-DBL_MAX, -DBL_MAX, -DBL_MAX);
+            rrv_vec3 rlo = llo, rhi = lhi;
+            int lc = 0, rc = 0, j;
+            double cost;
+            for (j = 0; j < k; ++j) { llo = rrv__vmin(llo, blo[j]); lhi = rrv__vmax(lhi, bhi[j]); lc += bcount[j]; }
+            for (j = k; j < RRV__BVH_BINS; ++j) { rlo = rrv__vmin(rlo, blo[j]); rhi = rrv__vmax(rhi, bhi[j]); rc += bcount[j]; }
+            if (!lc || !rc) continue;
+            cost = lc * rrv__half_area(llo, lhi) + rc * rrv__half_area(rlo, rhi);
+            if (cost < best_cost) { best_cost = cost; best_axis = axis; best_bin = k; }
+        }
+    }
+    if (best_axis < 0 || best_cost >= count * rrv__half_area(node->lo, node->hi)) {
+        if (count <= 8) return;
+        if (best_axis < 0) return; /* all centroids coincide: nothing to split */
+    }
+    {
+        double cmin = rrv__axis(clo, best_axis), extent = rrv__axis(chi, best_axis) - cmin;
+        mid = first;
+        for (i = first; i < first + count; ++i) {
+            int p = b->prims[i];
+            int bin = (int)(RRV__BVH_BINS * (rrv__axis(b->centroids[p], best_axis) - cmin) / extent);
+            if (bin >= RRV__BVH_BINS) bin = RRV__BVH_BINS - 1;
+            if (bin < best_bin) { b->prims[i] = b->prims[mid]; b->prims[mid] = p; mid++; }
+        }
+    }
+    left = b->node_count++;
+    node->count = 0;
+    rrv__bvh_split(b, left, first, mid - first, depth + 1);
+    b->nodes[node_index].first = b->node_count++;
+    rrv__bvh_split(b, b->nodes[node_index].first, mid, first + count - mid, depth + 1);
+}
+
+static rrv_result rrv__build_bvh(rrv_scene *scene, rrv_error *err)
+{
+    rrv__bvh_build b;
+    int n = scene->shape_count, i;
+    size_t bytes;
+    scene->bvh = NULL;
+    scene->bvh_prims = NULL;
+    scene->bvh_node_count = 0;
+    if (n == 0) return RRV_OK;
+    b.scene = scene;
+    b.node_count = 1;
+    bytes = (size_t)(2 * n) * sizeof(rrv__bvh_node) + (size_t)n * sizeof(int);
+    b.nodes = (rrv__bvh_node *)RRV_MALLOC((size_t)(2 * n) * sizeof(rrv__bvh_node));
+    b.prims = (int *)RRV_MALLOC((size_t)n * sizeof(int));
+    b.centroids = (rrv_vec3 *)RRV_MALLOC((size_t)n * 3 * sizeof(rrv_vec3));
+    if (!b.nodes || !b.prims || !b.centroids) {
+        RRV_FREE(b.nodes); RRV_FREE(b.prims); RRV_FREE(b.centroids);
+        return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory building the BVH");
+    }
+    b.los = b.centroids + n;
+    b.his = b.centroids + 2 * n;
+    for (i = 0; i < n; ++i) {
+        rrv__shape_bounds(&scene->shapes[i], &b.los[i], &b.his[i]);
+        b.centroids[i] = rrv__scale(rrv__add(b.los[i], b.his[i]), 0.5);
+        b.prims[i] = i;
+    }
+    rrv__bvh_split(&b, 0, 0, n, 0);
+    RRV_FREE(b.centroids);
+    scene->bvh = b.nodes;
+    scene->bvh_prims = b.prims;
+    scene->bvh_node_count = b.node_count;
+    scene->bytes += bytes;
+    return RRV_OK;
+}
+
+/* ==== media and fields: densities, gas state, IOR, majorant grids ========== */
+
+static double rrv__smoothstep(double e0, double e1, double x)
+{
+    double t = rrv__clamp((x - e0) / (e1 - e0), 0.0, 1.0);
+    return t * t * (3.0 - 2.0 * t);
+}
+
+static int rrv__inside_box(rrv_vec3 p, rrv_vec3 lo, rrv_vec3 hi)
+{
+    return p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z;
+}
+
+/* Trilinear interpolation between corner-placed samples (PHYSICS.md):
+   sample i along x sits at lo.x + i (hi.x - lo.x)/(nx - 1). Outside the
+   grid's box the caller's ambient value applies. */
+static double rrv__grid_sample(const rrv_grid *g, rrv_vec3 p, int channel, double outside)
+{
+    double fx, fy, fz, tx, ty, tz, c00, c10, c01, c11;
+    int ix, iy, iz;
+    size_t sx, sy, sz, base;
+    const float *d = g->data;
+    if (!rrv__inside_box(p, g->lo, g->hi)) return outside;
+    fx = (p.x - g->lo.x) / (g->hi.x - g->lo.x) * (g->nx - 1);
+    fy = (p.y - g->lo.y) / (g->hi.y - g->lo.y) * (g->ny - 1);
+    fz = (p.z - g->lo.z) / (g->hi.z - g->lo.z) * (g->nz - 1);
+    ix = (int)fx; if (ix > g->nx - 2) ix = g->nx - 2;
+    iy = (int)fy; if (iy > g->ny - 2) iy = g->ny - 2;
+    iz = (int)fz; if (iz > g->nz - 2) iz = g->nz - 2;
+    tx = fx - ix; ty = fy - iy; tz = fz - iz;
+    sx = (size_t)g->channels;
+    sy = sx * (size_t)g->nx;
+    sz = sy * (size_t)g->ny;
+    base = (size_t)iz * sz + (size_t)iy * sy + (size_t)ix * sx + (size_t)channel;
+    c00 = d[base] + tx * (d[base + sx] - d[base]);
+    c10 = d[base + sy] + tx * (d[base + sy + sx] - d[base + sy]);
+    c01 = d[base + sz] + tx * (d[base + sz + sx] - d[base + sz]);
+    c11 = d[base + sz + sy] + tx * (d[base + sz + sy + sx] - d[base + sz + sy]);
+    c00 += ty * (c10 - c00);
+    c01 += ty * (c11 - c01);
+    return c00 + tz * (c01 - c00);
+}
+
+/* Value noise on an integer lattice hashed from the seed: cheap, bounded in
+   [0,1] by construction, which is what lets the majorant be a true bound. */
+static double rrv__lattice(int x, int y, int z, uint32_t seed)
+{
+    uint64_t h = rrv__mix64(((uint64_t)(uint32_t)x * 73856093u) ^ ((uint64_t)(uint32_t)y * 19349663u << 20) ^
+                            ((uint64_t)(uint32_t)z * 83492791u << 40) ^ ((uint64_t)seed << 12));
+    return (double)(h >> 11) * (1.0 / 9007199254740992.0);
+}
+
+static double rrv__value_noise(rrv_vec3 p, uint32_t seed)
+{
+    double fx = floor(p.x), fy = floor(p.y), fz = floor(p.z);
+    int x = (int)fx, y = (int)fy, z = (int)fz;
+    double tx = p.x - fx, ty = p.y - fy, tz = p.z - fz;
+    double sx = tx * tx * (3 - 2 * tx), sy = ty * ty * (3 - 2 * ty), sz = tz * tz * (3 - 2 * tz);
+    double a = rrv__lattice(x, y, z, seed), b = rrv__lattice(x + 1, y, z, seed);
+    double c = rrv__lattice(x, y + 1, z, seed), d = rrv__lattice(x + 1, y + 1, z, seed);
+    double e = rrv__lattice(x, y, z + 1, seed), f = rrv__lattice(x + 1, y, z + 1, seed);
+    double g = rrv__lattice(x, y + 1, z + 1, seed), h = rrv__lattice(x + 1, y + 1, z + 1, seed);
+    double ab = a + sx * (b - a), cd = c + sx * (d - c), ef = e + sx * (f - e), gh = g + sx * (h - g);
+    double lo = ab + sy * (cd - ab), hi = ef + sy * (gh - ef);
+    return lo + sz * (hi - lo);
+}
+
+static double rrv__fbm(const rrv_noise *n, rrv_vec3 p)
+{
+    double sum = 0, norm = 0, amp = 1, freq = n->frequency, v;
+    int o;
+    for (o = 0; o < n->octaves; ++o) {
+        /* Each octave is offset so that lattice points do not line up. */
+        rrv_vec3 q = rrv__v3(p.x * freq + 17.3 * o, p.y * freq + 31.7 * o, p.z * freq + 5.1 * o);
+        sum += amp * rrv__value_noise(q, n->seed + (uint32_t)o);
+        norm += amp;
+        amp *= n->gain;
+        freq *= n->lacunarity;
+    }
+    v = norm > 0 ? sum / norm : 0;
+    if (n->threshold > 0) v = fmax(0.0, (v - n->threshold) / (1.0 - n->threshold));
+    return v;
+}
+
+/* The plume falloff: a column over `center` whose radius grows from 0.4 R at
+   its base (center.y - R) to R at its top (center.y + 2R). */
+static double rrv__plume_radius(const rrv_noise *n, double y)
+{
+    double s = rrv__clamp((y - (n->center.y - n->radius)) / (3.0 * n->radius), 0.0, 1.0);
+    return n->radius * (0.4 + 0.6 * s);
+}
+
+static double rrv__falloff(const rrv_noise *n, rrv_vec3 p)
+{
+    rrv_vec3 d = rrv__sub(p, n->center);
+    switch (n->falloff) {
+    case RRV_FALLOFF_SPHERE:
+        return 1.0 - rrv__smoothstep(0.5 * n->radius, n->radius, rrv__length(d));
+    case RRV_FALLOFF_PLUME: {
+        double rho = sqrt(d.x * d.x + d.z * d.z), r = rrv__plume_radius(n, p.y);
+        double vertical = rrv__smoothstep(-n->radius, -0.7 * n->radius, d.y) *
+                          (1.0 - rrv__smoothstep(1.5 * n->radius, 2.0 * n->radius, d.y));
+        return vertical * (1.0 - rrv__smoothstep(0.5 * r, r, rho));
+    }
+    default:
+        return 1.0;
+    }
+}
+
+/* An upper bound of the falloff over a box, for the majorant grid. */
+static double rrv__falloff_bound(const rrv_noise *n, rrv_vec3 lo, rrv_vec3 hi)
+{
+    rrv_vec3 c = n->center;
+    rrv_vec3 nearest = rrv__vmax(lo, rrv__vmin(hi, c));
+    switch (n->falloff) {
+    case RRV_FALLOFF_SPHERE:
+        return 1.0 - rrv__smoothstep(0.5 * n->radius, n->radius, rrv__length(rrv__sub(nearest, c)));
+    case RRV_FALLOFF_PLUME: {
+        double dx = nearest.x - c.x, dz = nearest.z - c.z;
+        double rho = sqrt(dx * dx + dz * dz), r = rrv__plume_radius(n, hi.y);
+        if (hi.y < c.y - n->radius || lo.y > c.y + 2.0 * n->radius) return 0.0;
+        return 1.0 - rrv__smoothstep(0.5 * r, r, rho);
+    }
+    default:
+        return 1.0;
+    }
+}
+
+static double rrv__blobs_eval(const rrv_field *f, rrv_vec3 p)
+{
+    double sum = f->base;
+    int i;
+    for (i = 0; i < f->blob_count; ++i) {
+        const rrv_blob *b = &f->blobs[i];
+        rrv_vec3 d = rrv__sub(p, b->center);
+        double q = rrv__dot(d, d) / (b->radius * b->radius);
+        /* Beyond 6 sigma a blob adds < 1.6e-8 of its weight. */
+        if (q < 72.0) sum += b->weight * exp(-0.5 * q);
+    }
+    return sum;
+}
+
+/* A field's value at p inside its medium's box (channel for 3-channel grids). */
+static double rrv__field_eval(const rrv_field *f, rrv_vec3 p, int channel, double ambient)
+{
+    switch (f->kind) {
+    case RRV_FIELD_CONSTANT: return f->value;
+    case RRV_FIELD_BLOBS: return rrv__blobs_eval(f, p);
+    case RRV_FIELD_NOISE:
+        return f->base + f->amplitude * rrv__falloff(&f->noise, p) * rrv__fbm(&f->noise, p);
+    case RRV_FIELD_GRID:
+        return rrv__grid_sample(&f->grid, p, f->grid.channels == 3 ? channel : 0, ambient);
+    default: return ambient;
+    }
+}
+
+/* An upper bound of a non-negative field over a box (the majorant grid's cell). */
+static double rrv__field_bound(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
+{
+    switch (f->kind) {
+    case RRV_FIELD_CONSTANT: return f->value;
+    case RRV_FIELD_BLOBS: {
+        double sum = f->base;
+        int i;
+        for (i = 0; i < f->blob_count; ++i) {
+            const rrv_blob *b = &f->blobs[i];
+            rrv_vec3 d = rrv__sub(rrv__vmax(lo, rrv__vmin(hi, b->center)), b->center);
+            if (b->weight > 0) sum += b->weight * exp(-0.5 * rrv__dot(d, d) / (b->radius * b->radius));
+        }
+        return sum;
+    }
+    case RRV_FIELD_NOISE:
+        return f->base + fmax(0.0, f->amplitude) * rrv__falloff_bound(&f->noise, lo, hi);
+    case RRV_FIELD_GRID: {
+        /* Trilinear values never exceed the samples around them, so the max
+           over the samples whose cells touch the box bounds the field. */
+        const rrv_grid *g = &f->grid;
+        double best = 0;
+        int a[3], b[3], x, y, z, c, dim[3];
+        double glo[3], ghi[3], blo[3], bhi[3];
+        size_t n;
+        dim[0] = g->nx; dim[1] = g->ny; dim[2] = g->nz;
+        glo[0] = g->lo.x; glo[1] = g->lo.y; glo[2] = g->lo.z;
+        ghi[0] = g->hi.x; ghi[1] = g->hi.y; ghi[2] = g->hi.z;
+        blo[0] = lo.x; blo[1] = lo.y; blo[2] = lo.z;
+        bhi[0] = hi.x; bhi[1] = hi.y; bhi[2] = hi.z;
+        for (c = 0; c < 3; ++c) {
+            double s = (dim[c] - 1) / (ghi[c] - glo[c]);
+            double fa = floor((blo[c] - glo[c]) * s), fb = ceil((bhi[c] - glo[c]) * s);
+            if (fb < 0 || fa > dim[c] - 1) return 0;
+            a[c] = fa < 0 ? 0 : (int)fa;
+            b[c] = fb > dim[c] - 1 ? dim[c] - 1 : (int)fb;
+        }
+        for (z = a[2]; z <= b[2]; ++z)
+            for (y = a[1]; y <= b[1]; ++y)
+                for (x = a[0]; x <= b[0]; ++x) {
+                    n = (((size_t)z * (size_t)g->ny + (size_t)y) * (size_t)g->nx + (size_t)x) * (size_t)g->channels;
+                    for (c = 0; c < g->channels; ++c) best = fmax(best, g->data[n + (size_t)c]);
+                }
+        return best;
+    }
+    default: return 0;
+    }
+}
+
+/* ---- the refractive index: refractivity r = eta - 1 and its gradient ------ */
+
+/* Does the medium bend light at all? Media without an IOR pay nothing. */
+static int rrv__medium_refracts(const rrv_medium *m)
+{
+    return m->ior_from_gas || m->ior.kind != RRV_FIELD_NONE;
+}
+
+/* Refractivity of the medium's own IOR profile at p (not scaled). */
+static double rrv__profile_refractivity(const rrv_field *f, rrv_vec3 p, double ambient_r)
+{
+    rrv_vec3 d = rrv__sub(p, f->center);
+    double q;
+    switch (f->kind) {
+    case RRV_FIELD_LUNEBURG:
+        q = rrv__dot(d, d) / (f->radius * f->radius);
+        return q < 1.0 ? sqrt(2.0 - q) - 1.0 : 0.0;
+    case RRV_FIELD_FISHEYE:
+        q = rrv__dot(d, d) / (f->radius * f->radius);
+        return q < 1.0 ? f->n0 / (1.0 + q) - 1.0 : f->n0 * 0.5 - 1.0;
+    case RRV_FIELD_SLAB:
+        return f->base + f->gradient * rrv__dot(d, f->normal);
+    case RRV_FIELD_SHELL: {
+        double r = rrv__length(d), inner = f->radius - f->thickness;
+        return f->base + f->amplitude * 0.5 * (tanh((r - inner) / f->edge) - tanh((r - f->radius) / f->edge));
+    }
+    default:
+        return rrv__field_eval(f, p, 0, ambient_r);
+    }
+}
+
+typedef struct rrv__medium_set rrv__medium_set;
+
+/* The gas state at p: temperature (K) and pressure (Pa), ambient outside fields. */
+static double rrv__temperature(const rrv_medium *m, rrv_vec3 p)
+{
+    double f;
+    if (m->temperature.kind == RRV_FIELD_NONE) return m->T_ref;
+    f = rrv__field_eval(&m->temperature, p, 0, m->temperatureoffset + m->T_ref / m->temperaturescale);
+    return (f - m->temperatureoffset) * m->temperaturescale;
+}
+
+static double rrv__pressure(const rrv_medium *m, rrv_vec3 p)
+{
+    if (m->pressure.kind == RRV_FIELD_NONE) return m->P_ref;
+    return rrv__field_eval(&m->pressure, p, 0, m->P_ref);
+}
+
+/* Refractivity eta - 1 of a refractive medium at p, including its artist
+   scale; Hauf-Grigull for a gas: r = r_ref (P / P_ref) (T_ref / T). */
+static double rrv__refractivity(const rrv_medium *m, rrv_vec3 p, double ambient_r)
+{
+    double r;
+    if (m->ior_from_gas) {
+        double T = rrv__temperature(m, p), P = rrv__pressure(m, p);
+        r = (m->eta_ref - 1.0) * (P / m->P_ref) * (m->T_ref / fmax(T, 1e-3));
+    } else {
+        r = rrv__profile_refractivity(&m->ior, p, ambient_r);
+    }
+    return m->ior_scale * r;
+}
+
+/* ---- gradients of the refractivity ----------------------------------------- */
+
+/* Central differences of the trilinear field with a step of one voxel:
+   continuous across cell faces, unlike the gradient of the interpolant. */
+static rrv_vec3 rrv__field_gradient_numeric(const rrv_field *f, rrv_vec3 p, double ambient, double h)
+{
+    rrv_vec3 g;
+    g.x = (rrv__field_eval(f, rrv__v3(p.x + h, p.y, p.z), 0, ambient) -
+           rrv__field_eval(f, rrv__v3(p.x - h, p.y, p.z), 0, ambient)) / (2 * h);
+    g.y = (rrv__field_eval(f, rrv__v3(p.x, p.y + h, p.z), 0, ambient) -
+           rrv__field_eval(f, rrv__v3(p.x, p.y - h, p.z), 0, ambient)) / (2 * h);
+    g.z = (rrv__field_eval(f, rrv__v3(p.x, p.y, p.z + h), 0, ambient) -
+           rrv__field_eval(f, rrv__v3(p.x, p.y, p.z - h), 0, ambient)) / (2 * h);
+    return g;
+}
+
+static double rrv__grid_voxel(const rrv_grid *g)
+{
+    double vx = (g->hi.x - g->lo.x) / (g->nx - 1), vy = (g->hi.y - g->lo.y) / (g->ny - 1);
+    double vz = (g->hi.z - g->lo.z) / (g->nz - 1);
+    return fmin(vx, fmin(vy, vz));
+}
+
+/* Gradient of a scalar field: analytic where the field is, numeric else. */
+static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p, double ambient)
+{
+    switch (f->kind) {
+    case RRV_FIELD_BLOBS: {
+        rrv_vec3 g = rrv__v3(0, 0, 0);
+        int i;
+        for (i = 0; i < f->blob_count; ++i) {
+            const rrv_blob *b = &f->blobs[i];
+            rrv_vec3 d = rrv__sub(p, b->center);
+            double s2 = b->radius * b->radius, q = rrv__dot(d, d) / s2;
+            if (q < 72.0) g = rrv__madd(g, d, -b->weight * exp(-0.5 * q) / s2);
+        }
+        return g;
+    }
+    case RRV_FIELD_NOISE:
+        return rrv__field_gradient_numeric(f, p, ambient, 0.05 / (f->noise.frequency * (1 << (f->noise.octaves > 4 ? 4 : f->noise.octaves))));
+    case RRV_FIELD_GRID:
+        return rrv__field_gradient_numeric(f, p, ambient, rrv__grid_voxel(&f->grid));
+    default:
+        return rrv__v3(0, 0, 0);
+    }
+}
+
+static rrv_vec3 rrv__profile_gradient(const rrv_field *f, rrv_vec3 p, double ambient_r)
+{
+    rrv_vec3 d = rrv__sub(p, f->center);
+    double R2 = f->radius * f->radius, q;
+    switch (f->kind) {
+    case RRV_FIELD_LUNEBURG:
+        q = rrv__dot(d, d) / R2;
+        return q < 1.0 ? rrv__scale(d, -1.0 / (R2 * sqrt(2.0 - q))) : rrv__v3(0, 0, 0);
+    case RRV_FIELD_FISHEYE:
+        q = rrv__dot(d, d) / R2;
+        return q < 1.0 ? rrv__scale(d, -2.0 * f->n0 / (R2 * (1.0 + q) * (1.0 + q))) : rrv__v3(0, 0, 0);
+    case RRV_FIELD_SLAB:
+        return rrv__scale(f->normal, f->gradient);
+    case RRV_FIELD_SHELL: {
+        double r = rrv__length(d), inner = f->radius - f->thickness, a, b;
+        if (r == 0) return rrv__v3(0, 0, 0);
+        a = cosh((r - inner) / f->edge);
+        b = cosh((r - f->radius) / f->edge);
+        return rrv__scale(d, f->amplitude * 0.5 * (1.0 / (a * a) - 1.0 / (b * b)) / (f->edge * r));
+    }
+    default:
+        return rrv__field_gradient(f, p, ambient_r);
+    }
+}
+
+/* Refractivity and its gradient for one refractive medium at p. For a gas,
+   grad r = r (grad P / P - grad T / T) (PHYSICS.md). */
+static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double ambient_r, rrv_vec3 *grad)
+{
+    double r = rrv__refractivity(m, p, ambient_r);
+    if (m->ior_from_gas) {
+        double T = fmax(rrv__temperature(m, p), 1e-3), P = rrv__pressure(m, p);
+        rrv_vec3 gT = rrv__scale(rrv__field_gradient(&m->temperature, p, 0), m->temperaturescale);
+        rrv_vec3 gP = rrv__field_gradient(&m->pressure, p, 0);
+        *grad = rrv__scale(rrv__sub(rrv__scale(gP, 1.0 / P), rrv__scale(gT, 1.0 / T)), r);
+    } else {
+        *grad = rrv__scale(rrv__profile_gradient(&m->ior, p, ambient_r), m->ior_scale);
+    }
+    return r;
+}
+
+/* The refractivity of the scene at p: that of the last listed refractive
+   medium whose box holds p, the ambient one elsewhere. */
+static double rrv__scene_refractivity(const rrv_scene *scene, rrv_vec3 p, rrv_vec3 *grad)
+{
+    double ambient_r = scene->settings.ambient_ior - 1.0;
+    int i;
+    for (i = scene->medium_count - 1; i >= 0; --i) {
+        const rrv_medium *m = &scene->media[i];
+        if (rrv__medium_refracts(m) && rrv__inside_box(p, m->lo, m->hi)) {
+            rrv_vec3 g;
+            double r = rrv__refractivity_gradient(m, p, ambient_r, &g);
+            if (grad) *grad = g;
+            return r;
+        }
+    }
+    if (grad) *grad = rrv__v3(0, 0, 0);
+    return ambient_r;
+}
+
+/* Snell's law at a null event (seed Algorithm 1, PHYSICS.md). r_in is the
+   refractivity the ray carries, r_out the one at the event, grad its
+   gradient. The change of direction is formed directly, because m = eta_in /
+   eta_out differs from 1 by ~1e-4 in air and m d - sqrt(k) n would cancel. */
+static rrv_vec3 rrv__refract_at_null_event(rrv_vec3 d, double r_in, double r_out, rrv_vec3 grad, int *reflected)
+{
+    double big = fmax(fabs(grad.x), fmax(fabs(grad.y), fabs(grad.z)));
+    double delta, c, s2, e, k;
+    rrv_vec3 n, out;
+    *reflected = 0;
+    if (!(big > 0) || big > DBL_MAX) return d;
+    /* Scaling by the largest component first keeps a denormal gradient from
+       overflowing 1/|grad|. */
+    n = rrv__normalize(rrv__scale(grad, 1.0 / big));
+    delta = (r_in - r_out) / (1.0 + r_out);
+    if (delta == 0) return d;
+    c = -rrv__dot(n, d);
+    if (c < 0) { n = rrv__scale(n, -1.0); c = -c; }
+    s2 = fmax(0.0, 1.0 - c * c);
+    e = delta * (2.0 + delta) * s2;
+    k = c * c - e;
+    if (k < 0) {
+        *reflected = 1;
+        out = rrv__madd(d, n, 2.0 * c);
+    } else {
+        out = rrv__madd(rrv__madd(d, d, delta), n, delta * c + e / (c + sqrt(k)));
+    }
+    return rrv__normalize(out);
+}
+
+/* ---- majorant grids ----------------------------------------------------------
+   A coarse grid over each medium holds, per cell, an upper bound of the
+   density and, for refractive media, of |grad r|. Delta and ratio tracking
+   walk it with a 3D DDA, so their majorant is local (tight) instead of the
+   medium-wide maximum. */
+
+struct rrv__majorant_grid {
+    int n[3];
+    rrv_vec3 lo, hi, cell;
+    double sigma_t_max;    /* max over channels of (sigma_a + sigma_s) * scale */
+    float *density_max;    /* per cell */
+    float *grad_max;       /* per cell max |grad r|, NULL if the medium does not refract */
+};
+
+static int rrv__auto_cells(const rrv_medium *m, int axis)
+{
+    if (m->density.kind == RRV_FIELD_GRID) {
+        int n = axis == 0 ? m->density.grid.nx : axis == 1 ? m->density.grid.ny : m->density.grid.nz;
+        n = (n + 3) / 4;
+        return n < 4 ? 4 : n > 64 ? 64 : n;
+    }
+    return 16;
+}
+
+/* max |grad r| over a cell, estimated on a 4^3 lattice with a safety factor:
+   it sets an event rate, not a bound that correctness depends on. */
+static double rrv__cell_gradient_bound(const rrv_medium *m, rrv_vec3 lo, rrv_vec3 hi, double ambient_r)
+{
+    double best = 0;
+    int i, j, k;
+    for (k = 0; k < 4; ++k)
+        for (j = 0; j < 4; ++j)
+            for (i = 0; i < 4; ++i) {
+                rrv_vec3 p = rrv__v3(lo.x + (hi.x - lo.x) * i / 3.0, lo.y + (hi.y - lo.y) * j / 3.0,
+                                     lo.z + (hi.z - lo.z) * k / 3.0);
+                rrv_vec3 g;
+                rrv__refractivity_gradient(m, p, ambient_r, &g);
+                best = fmax(best, rrv__length(g));
+            }
+    return 1.5 * best;
+}
+
+static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, rrv_error *err)
+{
+    struct rrv__majorant_grid *g;
+    size_t cells, c;
+    int x, y, z, refracts = rrv__medium_refracts(m);
+    int forced = scene->settings.majorant_cells;
+    g = (struct rrv__majorant_grid *)RRV_MALLOC(sizeof *g);
+    if (!g) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
+    for (x = 0; x < 3; ++x) g->n[x] = forced > 0 ? (forced > 256 ? 256 : forced) : rrv__auto_cells(m, x);
+    cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
+    g->lo = m->lo;
+    g->hi = m->hi;
+    g->cell = rrv__v3((m->hi.x - m->lo.x) / g->n[0], (m->hi.y - m->lo.y) / g->n[1], (m->hi.z - m->lo.z) / g->n[2]);
+    g->sigma_t_max = 0;
+    for (x = 0; x < 3; ++x) g->sigma_t_max = fmax(g->sigma_t_max, (m->sigma_a[x] + m->sigma_s[x]) * m->scale);
+    g->density_max = (float *)RRV_MALLOC(cells * sizeof(float) * (refracts ? 2 : 1));
+    if (!g->density_max) {
+        RRV_FREE(g);
+        return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
+    }
+    g->grad_max = refracts ? g->density_max + cells : NULL;
+    c = 0;
+    for (z = 0; z < g->n[2]; ++z)
+        for (y = 0; y < g->n[1]; ++y)
+            for (x = 0; x < g->n[0]; ++x, ++c) {
+                rrv_vec3 lo = rrv__v3(m->lo.x + x * g->cell.x, m->lo.y + y * g->cell.y, m->lo.z + z * g->cell.z);
+                rrv_vec3 hi = rrv__add(lo, g->cell);
+                double d = rrv__field_bound(&m->density, lo, hi);
+                /* Round the float bound up so it stays a bound. */
+                float df = (float)d;
+                if ((double)df < d) df = nextafterf(df, FLT_MAX);
+                g->density_max[c] = df > 0 ? df : 0.0f;
+                if (refracts)
+                    g->grad_max[c] = (float)rrv__cell_gradient_bound(m, lo, hi, scene->settings.ambient_ior - 1.0);
+            }
+    m->majorant = g;
+    return RRV_OK;
+}
+
+/* ---- the medium at a point ------------------------------------------------------ */
+
+typedef struct rrv__coeffs {
+    double sigma_a[3], sigma_s[3];
+} rrv__coeffs;
+
+static void rrv__medium_coeffs(const rrv_medium *m, rrv_vec3 p, rrv__coeffs *c)
+{
+    int ch;
+    double d = 0;
+    int rgb = m->density.kind == RRV_FIELD_GRID && m->density.grid.channels == 3;
+    if (!rgb) d = fmax(0.0, rrv__field_eval(&m->density, p, 0, 0.0)) * m->scale;
+    for (ch = 0; ch < 3; ++ch) {
+        double dc = rgb ? fmax(0.0, rrv__field_eval(&m->density, p, ch, 0.0)) * m->scale : d;
+        c->sigma_a[ch] = dc * m->sigma_a[ch];
+        c->sigma_s[ch] = dc * m->sigma_s[ch];
+    }
+}
+
+/* Blackbody radiance reduced to linear sRGB and normalised to luminance 1,
+   so Lescale alone sets the brightness and temperature only the hue. The
+   reduction integrates Planck's law against CIE 1931 matching functions
+   (the multi-lobe Gaussian fit of Wyman et al. 2013) over 380-780 nm. */
+static void rrv__blackbody_rgb(double T, double rgb[3])
+{
+    double X = 0, Y = 0, Z = 0, lambda, r, g, b;
+    if (!(T > 100.0)) { rgb[0] = rgb[1] = rgb[2] = 0; return; }
+    for (lambda = 380.0; lambda <= 780.0; lambda += 5.0) {
+        double l = lambda * 1e-9;
+        double planck = 1.0 / (l * l * l * l * l * (exp(1.4387769e-2 / (l * T)) - 1.0));
+        double t1 = (lambda - 442.0) * (lambda < 442.0 ? 0.0624 : 0.0374);
+        double t2 = (lambda - 599.8) * (lambda < 599.8 ? 0.0264 : 0.0323);
+        double t3 = (lambda - 501.1) * (lambda < 501.1 ? 0.0490 : 0.0382);
+        double xb = 0.362 * exp(-0.5 * t1 * t1) + 1.056 * exp(-0.5 * t2 * t2) - 0.065 * exp(-0.5 * t3 * t3);
+        double u1 = (lambda - 568.8) * (lambda < 568.8 ? 0.0213 : 0.0247);
+        double u2 = (lambda - 530.9) * (lambda < 530.9 ? 0.0613 : 0.0322);
+        double yb = 0.821 * exp(-0.5 * u1 * u1) + 0.286 * exp(-0.5 * u2 * u2);
+        double v1 = (lambda - 437.0) * (lambda < 437.0 ? 0.0845 : 0.0278);
+        double v2 = (lambda - 459.0) * (lambda < 459.0 ? 0.0385 : 0.0725);
+        double zb = 1.217 * exp(-0.5 * v1 * v1) + 0.681 * exp(-0.5 * v2 * v2);
+        X += planck * xb; Y += planck * yb; Z += planck * zb;
+    }
+    r = 3.2404542 * X - 1.5371385 * Y - 0.4985314 * Z;
+    g = -0.9692660 * X + 1.8760108 * Y + 0.0415560 * Z;
+    b = 0.0556434 * X - 0.2040259 * Y + 1.0572252 * Z;
+    rgb[0] = fmax(0.0, r / Y);
+    rgb[1] = fmax(0.0, g / Y);
+    rgb[2] = fmax(0.0, b / Y);
+}
+
+static int rrv__medium_emits(const rrv_medium *m)
+{
+    return m->Lescale > 0 && (m->blackbody_emission || m->Le[0] > 0 || m->Le[1] > 0 || m->Le[2] > 0);
+}
+
+/* Emitted radiance of the medium at p (multiplied by sigma_a by the caller). */
+static void rrv__medium_Le(const rrv_medium *m, rrv_vec3 p, double Le[3])
+{
+    int c;
+    if (m->blackbody_emission) {
+        rrv__blackbody_rgb(rrv__temperature(m, p), Le);
+        for (c = 0; c < 3; ++c) Le[c] = Le[c] * m->Lescale + m->Le[c] * m->Lescale;
+    } else {
+        for (c = 0; c < 3; ++c) Le[c] = m->Le[c] * m->Lescale;
+    }
+}
+
+/* ==== integrators: delta and ratio tracking, refraction, eikonal marching, =====
+   lights, the path tracer, and the public render and trace calls. */
+
+/* ---- tracking: a DDA walker over one medium's majorant grid ------------------ */
+
+#define RRV__MAX_MEDIA 64
+/* A path that has not ended after this many segments (refraction events or
+   eikonal steps) is cut: it can only be a ray trapped by total internal
+   reflection or an absurd event rate, and stalling a render is worse. */
+#define RRV__MAX_PATH_STEPS 10000000L
+
+typedef struct rrv__walker {
+    const rrv_medium *medium;
+    const struct rrv__majorant_grid *grid;
+    int with_refraction;  /* add the refraction event rate to the majorant */
+    double density_weight;/* 1, or 0 to sample refraction events only (rrv trace) */
+    double mu_eta_fixed, inv_tolerance;
+    double t, t_end;      /* current and last parameter inside the box */
+    int cell[3], step[3];
+    double t_next[3], t_delta[3];
+    double t_event, majorant; /* pending tentative collision and its majorant */
+} rrv__walker;
+
+static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
+                             rrv_vec3 o, rrv_vec3 d, double tmax)
+{
+    const struct rrv__majorant_grid *g = m->majorant;
+    rrv_vec3 inv = rrv__v3(1.0 / d.x, 1.0 / d.y, 1.0 / d.z), p;
+    double t0 = 0, t1 = tmax;
+    int a;
+    for (a = 0; a < 3; ++a) {
+        double ia = rrv__axis(inv, a), oa = rrv__axis(o, a);
+        double ta = (rrv__axis(m->lo, a) - oa) * ia, tb = (rrv__axis(m->hi, a) - oa) * ia;
+        if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
+        t0 = fmax(t0, ta);
+        t1 = fmin(t1, tb);
+    }
+    if (!(t0 < t1)) return 0;
+    w->medium = m;
+    w->grid = g;
+    w->with_refraction = with_refraction && g->grad_max != NULL;
+    w->density_weight = 1.0;
+    w->mu_eta_fixed = s->mu_eta;
+    w->inv_tolerance = 1.0 / s->bend_tolerance;
+    w->t = t0;
+    w->t_end = t1;
+    p = rrv__madd(o, d, t0);
+    for (a = 0; a < 3; ++a) {
+        double lo = rrv__axis(g->lo, a), cs = rrv__axis(g->cell, a), da = rrv__axis(d, a);
+        int c = (int)floor((rrv__axis(p, a) - lo) / cs);
+        if (c < 0) c = 0;
+        if (c > g->n[a] - 1) c = g->n[a] - 1;
+        w->cell[a] = c;
+        if (da > 0) {
+            w->step[a] = 1;
+            w->t_next[a] = (lo + (c + 1) * cs - rrv__axis(o, a)) / da;
+            w->t_delta[a] = cs / da;
+        } else if (da < 0) {
+            w->step[a] = -1;
+            w->t_next[a] = (lo + c * cs - rrv__axis(o, a)) / da;
+            w->t_delta[a] = -cs / da;
+        } else {
+            w->step[a] = 0;
+            w->t_next[a] = DBL_MAX;
+            w->t_delta[a] = DBL_MAX;
+        }
+    }
+    w->t_event = DBL_MAX;
+    return 1;
+}
+
+static void rrv__walker_refraction_only(rrv__walker *w) { w->density_weight = 0.0; }
+
+static double rrv__walker_cell_majorant(const rrv__walker *w)
+{
+    const struct rrv__majorant_grid *g = w->grid;
+    size_t c = ((size_t)w->cell[2] * (size_t)g->n[1] + (size_t)w->cell[1]) * (size_t)g->n[0] + (size_t)w->cell[0];
+    double mu = g->density_max[c] * g->sigma_t_max * w->density_weight;
+    if (w->with_refraction)
+        mu += w->mu_eta_fixed > 0 ? w->mu_eta_fixed : g->grad_max[c] * w->inv_tolerance;
+    return mu;
+}
+
+/* Moves the walker to its next tentative collision (t_event), or sets
+   t_event = DBL_MAX when it leaves the box first. Free flights restart at
+   each cell boundary, which the memorylessness of the exponential allows. */
+static void rrv__walker_advance(rrv__walker *w, rrv__rng *rng, uint64_t *events)
+{
+    for (;;) {
+        int a = w->t_next[0] < w->t_next[1] ? (w->t_next[0] < w->t_next[2] ? 0 : 2)
+                                            : (w->t_next[1] < w->t_next[2] ? 1 : 2);
+        double cell_end = fmin(w->t_next[a], w->t_end);
+        double mu = rrv__walker_cell_majorant(w);
+        if (mu > 0) {
+            double t = w->t + rrv__sample_free_flight(mu, rng);
+            if (t < cell_end) {
+                w->t = t;
+                w->t_event = t;
+                w->majorant = mu;
+                ++*events;
+                return;
+            }
+        }
+        w->t = cell_end;
+        if (cell_end >= w->t_end) break;
+        w->cell[a] += w->step[a];
+        if (w->cell[a] < 0 || w->cell[a] >= w->grid->n[a]) break;
+        w->t_next[a] += w->t_delta[a];
+    }
+    w->t_event = DBL_MAX;
+}
+
+/* ---- eikonal: marching the ray equation d/ds(eta dx/ds) = grad eta ------------- */
+
+/* Eta and its gradient at p, in the variables the ray equation uses. */
+static double rrv__eta_gradient(const rrv_scene *scene, rrv_vec3 p, rrv_vec3 *grad)
+{
+    return 1.0 + rrv__scene_refractivity(scene, p, grad);
+}
+
+/* One step of arc length h from x along unit direction d. Leapfrog is the
+   kick-drift-kick scheme of Pediredla et al. 2020's public code with |v| =
+   eta: symplectic, one gradient a step. RK4 integrates (x, v) with four. */
+static void rrv__eikonal_step(const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x, rrv_vec3 d,
+                              rrv_vec3 *x_out, rrv_vec3 *d_out)
+{
+    rrv_vec3 g;
+    double eta = rrv__eta_gradient(scene, x, &g);
+    rrv_vec3 v = rrv__scale(d, eta);
+    if (stepper != RRV_STEPPER_LEAPFROG) {
+        rrv_vec3 k1x, k1v, k2x, k2v, k3x, k3v, k4x, k4v, xs, vs;
+        double e;
+        k1x = rrv__scale(v, 1.0 / eta); k1v = g;
+        xs = rrv__madd(x, k1x, 0.5 * h); vs = rrv__madd(v, k1v, 0.5 * h);
+        e = rrv__eta_gradient(scene, xs, &k2v); k2x = rrv__scale(vs, 1.0 / e);
+        xs = rrv__madd(x, k2x, 0.5 * h); vs = rrv__madd(v, k2v, 0.5 * h);
+        e = rrv__eta_gradient(scene, xs, &k3v); k3x = rrv__scale(vs, 1.0 / e);
+        xs = rrv__madd(x, k3x, h); vs = rrv__madd(v, k3v, h);
+        e = rrv__eta_gradient(scene, xs, &k4v); k4x = rrv__scale(vs, 1.0 / e);
+        *x_out = rrv__madd(x, rrv__add(rrv__add(k1x, k4x), rrv__scale(rrv__add(k2x, k3x), 2.0)), h / 6.0);
+        v = rrv__madd(v, rrv__add(rrv__add(k1v, k4v), rrv__scale(rrv__add(k2v, k3v), 2.0)), h / 6.0);
+    } else {
+        v = rrv__madd(v, g, 0.5 * h);
+        *x_out = rrv__madd(x, v, h / eta);
+        rrv__eta_gradient(scene, *x_out, &g);
+        v = rrv__madd(v, g, 0.5 * h);
+    }
+    *d_out = rrv__normalize(v);
+}
+
+/* Where a medium refracts: its box, narrowed to the sphere of a Luneburg or
+   fish-eye profile. The gradient of those profiles jumps at the sphere, so
+   steps and comb points must start and stop exactly on it: a step straddling
+   the jump makes an error of the order of the step. Fills the parameter
+   interval [t0, t1] of the line o + t d inside the support. */
+static int rrv__support_interval(const rrv_medium *m, rrv_vec3 o, rrv_vec3 d, double *t0, double *t1)
+{
+    double lo = -DBL_MAX, hi = DBL_MAX;
+    int a;
+    for (a = 0; a < 3; ++a) {
+        double da = rrv__axis(d, a), oa = rrv__axis(o, a);
+        if (da == 0) {
+            if (oa < rrv__axis(m->lo, a) || oa > rrv__axis(m->hi, a)) return 0;
+        } else {
+            double ta = (rrv__axis(m->lo, a) - oa) / da, tb = (rrv__axis(m->hi, a) - oa) / da;
+            if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
+            lo = fmax(lo, ta);
+            hi = fmin(hi, tb);
+        }
+    }
+    if (!m->ior_from_gas && (m->ior.kind == RRV_FIELD_LUNEBURG || m->ior.kind == RRV_FIELD_FISHEYE)) {
+        rrv_vec3 oc = rrv__sub(o, m->ior.center);
+        double b = rrv__dot(oc, d);
+        rrv_vec3 perp = rrv__madd(oc, d, -b);
+        double disc = m->ior.radius * m->ior.radius - rrv__dot(perp, perp), sq;
+        if (disc <= 0) return 0;
+        sq = sqrt(disc);
+        lo = fmax(lo, -b - sq);
+        hi = fmin(hi, -b + sq);
+    }
+    *t0 = lo;
+    *t1 = hi;
+    return lo < hi;
+}
+
+/* Distance along the ray to the nearest refraction support (0 if inside one). */
+static double rrv__distance_to_refraction(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, int *inside)
+{
+    double best = DBL_MAX, t0, t1;
+    int i;
+    *inside = 0;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        if (!rrv__medium_refracts(m) || !rrv__support_interval(m, o, d, &t0, &t1)) continue;
+        if (t1 <= 0) continue;
+        if (t0 <= 0) { *inside = 1; return 0; }
+        best = fmin(best, t0);
+    }
+    return best;
+}
+
+/* Distance along the ray to where it leaves the support it is in (0: in none). */
+static double rrv__refraction_exit(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d)
+{
+    double t0, t1;
+    int i;
+    for (i = scene->medium_count - 1; i >= 0; --i) {
+        const rrv_medium *m = &scene->media[i];
+        if (rrv__medium_refracts(m) && rrv__support_interval(m, o, d, &t0, &t1) && t0 <= 0 && t1 > 0) return t1;
+    }
+    return 0;
+}
+
+/* One eikonal step of at most h that never straddles the edge of a support:
+   a step ending outside would take its closing kick from the zero gradient
+   there and lose half a kick. The step that reaches the edge stops 1 nm
+   inside; a micro step then crosses. Returns the step taken. */
+static double rrv__eikonal_advance(const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x, rrv_vec3 d,
+                                   rrv_vec3 *x_out, rrv_vec3 *d_out)
+{
+    const double nudge = 1e-9;
+    double exit = rrv__refraction_exit(scene, x, d);
+    h = exit > 2 * nudge ? fmin(h, exit - nudge) : exit + nudge;
+    rrv__eikonal_step(scene, stepper, h, x, d, x_out, d_out);
+    if (h > 2 * nudge) {
+        rrv_vec3 chord = rrv__sub(*x_out, x);
+        double len = rrv__length(chord);
+        double exit_chord = rrv__refraction_exit(scene, x, rrv__scale(chord, 1.0 / len));
+        if (exit_chord < len && exit_chord > 2 * nudge) {
+            h *= (exit_chord - nudge) / len;
+            rrv__eikonal_step(scene, stepper, h, x, d, x_out, d_out);
+        }
+    }
+    return h;
+}
+
+/* ---- refraction along a walk: the seed's Poisson events, chord midpoints, comb --
+   All three schemes approximate the ray equation d/ds(eta dx/ds) = grad eta
+   by Snell kicks; they differ in where the kicks happen and which normal and
+   IOR ratio they use. Measured in README: the comb wins by far. */
+
+typedef struct rrv__bender {
+    rrv_refraction_scheme scheme;
+    double r;          /* refractivity carried: of the last event (Poisson,
+                          midpoint) or of the current chord's midpoint (comb) */
+    rrv_vec3 last;     /* the previous event (midpoint scheme) */
+    int planned;       /* comb: comb_t is valid for the current ray */
+    int entering;      /* comb: comb_t leads to a refractive box, not a point */
+    int at_exit;       /* comb: the next point is where the ray leaves the support */
+    double comb_t;     /* comb: distance to the next point from the ray origin */
+    double chord;      /* comb: length of the current chord */
+} rrv__bender;
+
+static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
+{
+    return s == RRV_REFRACTION_DEFAULT ? RRV_REFRACTION_COMB : s;
+}
+
+static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o)
+{
+    b->scheme = rrv__resolve_scheme(scene->settings.refraction);
+    b->r = rrv__scene_refractivity(scene, o, NULL);
+    b->last = o;
+    b->planned = 0;
+    b->entering = 0;
+    b->at_exit = 0;
+    b->comb_t = DBL_MAX;
+    b->chord = 0;
+}
+
+/* A real vertex (scattering, a surface) starts a new straight ray. */
+static void rrv__bender_restart(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x)
+{
+    b->r = rrv__scene_refractivity(scene, x, NULL);
+    b->last = x;
+    b->planned = 0;
+}
+
+/* Snell at a null event at x (Poisson and midpoint schemes). */
+static rrv_vec3 rrv__bend_at_null_event(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
+{
+    rrv_vec3 grad, nd;
+    int reflected;
+    double r = rrv__scene_refractivity(scene, x, &grad);
+    if (b->scheme == RRV_REFRACTION_MIDPOINT)
+        rrv__scene_refractivity(scene, rrv__scale(rrv__add(b->last, x), 0.5), &grad);
+    nd = rrv__refract_at_null_event(d, b->r, r, grad, &reflected);
+    b->r = r;
+    b->last = x;
+    return nd;
+}
+
+/* Comb spacing at x: the inverse of the refraction event rate of the cell
+   (fixed mu_eta, or max |grad r| / tolerance), never more than a cell so a
+   step cannot jump over a region of strong gradient. */
+static double rrv__comb_spacing(const rrv_scene *scene, rrv_vec3 x)
+{
+    int i;
+    for (i = scene->medium_count - 1; i >= 0; --i) {
+        const rrv_medium *m = &scene->media[i];
+        const struct rrv__majorant_grid *g = m->majorant;
+        double rate, cell;
+        int c[3], a;
+        size_t k;
+        if (!rrv__medium_refracts(m) || !rrv__inside_box(x, m->lo, m->hi)) continue;
+        if (scene->settings.mu_eta > 0) return 1.0 / scene->settings.mu_eta;
+        for (a = 0; a < 3; ++a) {
+            c[a] = (int)((rrv__axis(x, a) - rrv__axis(g->lo, a)) / rrv__axis(g->cell, a));
+            if (c[a] < 0) c[a] = 0;
+            if (c[a] > g->n[a] - 1) c[a] = g->n[a] - 1;
+        }
+        k = ((size_t)c[2] * (size_t)g->n[1] + (size_t)c[1]) * (size_t)g->n[0] + (size_t)c[0];
+        rate = g->grad_max[k] / scene->settings.bend_tolerance;
+        cell = fmin(g->cell.x, fmin(g->cell.y, g->cell.z));
+        return rate * cell > 1.0 ? 1.0 / rate : cell;
+    }
+    return fmin(scene->settings.step, 1.0);
+}
+
+/* A Snell kick at x standing for half the chord behind and half the chord
+   of length h ahead: the IOR ratio is taken between the two chord midpoints,
+   which makes it a leapfrog step of the ray equation. The normal is grad r
+   at grad_at (x, or a point just inside the support at its boundary). */
+static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double h,
+                               rrv_vec3 grad_at)
+{
+    rrv_vec3 grad;
+    int reflected;
+    double r_ahead = rrv__scene_refractivity(scene, rrv__madd(x, d, 0.5 * h), NULL);
+    rrv__scene_refractivity(scene, grad_at, &grad);
+    d = rrv__refract_at_null_event(d, b->r, r_ahead, grad, &reflected);
+    b->r = r_ahead;
+    return d;
+}
+
+/* Sets the next comb point after x at spacing h, clipped to the support exit. */
+static void rrv__comb_advance(rrv__bender *b, double h, double exit)
+{
+    b->at_exit = h >= exit;
+    b->comb_t = b->at_exit ? exit : h;
+    b->chord = b->comb_t;
+    b->planned = 1;
+    b->entering = 0;
+}
+
+/* Plans the comb on the ray from o: inside a support the first point lies a
+   uniformly random fraction of a spacing ahead (so the comb does not alias
+   with pixels) after a half kick at o; outside, the ray first goes to the
+   nearest support. May change *d. */
+static void rrv__comb_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, rrv_vec3 *d, rrv__rng *rng)
+{
+    int inside;
+    double t_in = rrv__distance_to_refraction(scene, o, *d, &inside);
+    b->planned = 1;
+    if (!inside) {
+        b->entering = 1;
+        b->at_exit = 0;
+        b->comb_t = t_in < DBL_MAX ? t_in + 1e-9 * (1.0 + t_in) : DBL_MAX;
+    } else {
+        double exit = rrv__refraction_exit(scene, o, *d);
+        double first = rrv__comb_spacing(scene, o) * (1.0 - rrv__uniform(rng));
+        rrv__comb_advance(b, first, exit);
+        *d = rrv__comb_kick(b, scene, o, *d, b->chord, rrv__madd(o, *d, 1e-3 * b->chord));
+    }
+}
+
+/* The kick at a comb point x; at the support exit the last half kick. */
+static rrv_vec3 rrv__comb_bend(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
+{
+    double h, exit;
+    if (b->at_exit) {
+        d = rrv__comb_kick(b, scene, x, d, b->chord, rrv__madd(x, d, -1e-3 * b->chord));
+        b->planned = 0;
+        return d;
+    }
+    h = rrv__comb_spacing(scene, x);
+    exit = rrv__refraction_exit(scene, x, d);
+    if (!(exit > 0)) {
+        b->r = rrv__scene_refractivity(scene, x, NULL);
+        b->planned = 0;
+        return d;
+    }
+    rrv__comb_advance(b, h, exit);
+    return rrv__comb_kick(b, scene, x, d, b->chord, x);
+}
+
+/* ---- integrators: classic and refractive null-scattering path tracing ---------- */
+
+typedef struct rrv__context {
+    const rrv_scene *scene;
+    int refract_nulls;       /* refract at null events (Poisson, midpoint schemes) */
+    int comb;                /* refract at comb points */
+    int eikonal;             /* march the ray equation through refractive media */
+    int bends;               /* any of the three: radiance scales with eta^2 */
+    double eta_camera2;      /* (1 + r at the camera)^2: radiance scales as eta^2 */
+    rrv_render_stats stats;
+} rrv__context;
+
+/* Spectral MIS (Miller et al. 2019): a hero channel drives every collision
+   choice; ratio[k] is the pdf of the choices made so far had channel k been
+   the hero, over the hero's own. A contribution is beta / mean(ratio), the
+   balance heuristic over the three channels, so chromatic extinction does
+   not compound weights the way channel-averaged probabilities would. */
+typedef struct rrv__path {
+    double beta[3], L[3];
+    double ratio[3];
+    int hero;
+    rrv__bender bender;      /* refraction state (refractive integrator) */
+} rrv__path;
+
+static void rrv__path_start(rrv__path *path, rrv__rng *rng)
+{
+    int c;
+    for (c = 0; c < 3; ++c) {
+        path->beta[c] = 1.0;
+        path->L[c] = 0.0;
+        path->ratio[c] = 1.0;
+    }
+    path->hero = (int)(rrv__uniform(rng) * 3.0);
+    if (path->hero > 2) path->hero = 2;
+}
+
+/* The factor that turns beta into a contribution: 1 / mean(ratio). */
+static double rrv__path_mis(const rrv__path *path)
+{
+    return 3.0 / (path->ratio[0] + path->ratio[1] + path->ratio[2]);
+}
+
+static void rrv__path_reweight(rrv__path *path, const double f[3])
+{
+    int c;
+    double fh = f[path->hero];
+    for (c = 0; c < 3; ++c) {
+        double q = f[c] / fh;
+        path->beta[c] *= q;
+        path->ratio[c] *= q;
+    }
+}
+
+static int rrv__start_walkers(const rrv__context *ctx, rrv__walker *walkers, int with_refraction,
+                              rrv_vec3 o, rrv_vec3 d, double tmax, rrv__rng *rng, uint64_t *events)
+{
+    const rrv_scene *scene = ctx->scene;
+    int i, n = 0;
+    for (i = 0; i < scene->medium_count; ++i) {
+        rrv__walker *w = &walkers[n];
+        if (rrv__walker_start(w, &scene->media[i], with_refraction, &scene->settings, o, d, tmax)) {
+            rrv__walker_advance(w, rng, events);
+            if (w->t_event < DBL_MAX) ++n;
+        }
+    }
+    return n;
+}
+
+/* Ratio tracking (Novak et al. 2014) of the transmittance along a straight
+   segment, per channel, with Russian roulette once it is small. */
+static void rrv__ratio_tracking_transmittance(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, double tmax,
+                                              rrv__rng *rng, double T[3])
+{
+    const rrv_scene *scene = ctx->scene;
+    int i;
+    T[0] = T[1] = T[2] = 1.0;
+    for (i = 0; i < scene->medium_count; ++i) {
+        rrv__walker w;
+        const rrv_medium *m = &scene->media[i];
+        if (m->density.kind == RRV_FIELD_NONE) continue;
+        if (!rrv__walker_start(&w, m, 0, &scene->settings, o, d, tmax)) continue;
+        for (;;) {
+            rrv__coeffs c;
+            int ch;
+            double tmaxc;
+            rrv__walker_advance(&w, rng, &ctx->stats.events);
+            if (w.t_event == DBL_MAX) break;
+            rrv__medium_coeffs(m, rrv__madd(o, d, w.t_event), &c);
+            for (ch = 0; ch < 3; ++ch) T[ch] *= 1.0 - (c.sigma_a[ch] + c.sigma_s[ch]) / w.majorant;
+            tmaxc = rrv__max3(T);
+            if (tmaxc <= 0) { T[0] = T[1] = T[2] = 0; return; }
+            if (tmaxc < 0.1) {
+                if (rrv__uniform(rng) < 0.5) { T[0] = T[1] = T[2] = 0; return; }
+                T[0] *= 2; T[1] *= 2; T[2] *= 2;
+            }
+        }
+    }
+}
+
+enum { RRV__FLIGHT_PASSED, RRV__FLIGHT_SCATTERED, RRV__FLIGHT_ABSORBED, RRV__FLIGHT_BENT };
+
+typedef struct rrv__flight {
+    double t;                /* where it scattered or bent */
+    const rrv_medium *medium;/* that scattered */
+    rrv_vec3 direction;      /* after bending */
+} rrv__flight;
+
+/* Delta tracking along o + t d for t < tmax through every medium at once:
+   each medium's tentative collisions form an independent Poisson process,
+   so the earliest pending one across media is the next collision. Emission
+   is gathered at every tentative collision (the collision estimator, as in
+   pbrt-v4's volpath). The hero channel picks absorption, scattering or null;
+   the other channels are reweighted by spectral MIS. */
+static int rrv__sample_free_flight_path(rrv__context *ctx, rrv__path *path, rrv_vec3 o, rrv_vec3 d,
+                                        double tmax, rrv__rng *rng, rrv__flight *out)
+{
+    rrv__walker walkers[RRV__MAX_MEDIA];
+    int n = rrv__start_walkers(ctx, walkers, ctx->refract_nulls, o, d, tmax, rng, &ctx->stats.events);
+    while (n > 0) {
+        int i, best = 0, ch;
+        rrv__walker *w;
+        const rrv_medium *m;
+        rrv_vec3 x;
+        rrv__coeffs c;
+        double mu, pa, ps, u;
+        for (i = 1; i < n; ++i)
+            if (walkers[i].t_event < walkers[best].t_event) best = i;
+        w = &walkers[best];
+        if (w->t_event >= tmax) break;
+        m = w->medium;
+        mu = w->majorant;
+        x = rrv__madd(o, d, w->t_event);
+        rrv__medium_coeffs(m, x, &c);
+        if (rrv__medium_emits(m)) {
+            double Le[3], k = rrv__path_mis(path) / mu;
+            rrv__medium_Le(m, x, Le);
+            if (ctx->bends) {
+                double eta = 1.0 + rrv__scene_refractivity(ctx->scene, x, NULL);
+                k *= ctx->eta_camera2 / (eta * eta);
+            }
+            for (ch = 0; ch < 3; ++ch) path->L[ch] += path->beta[ch] * c.sigma_a[ch] * Le[ch] * k;
+        }
+        pa = c.sigma_a[path->hero] / mu;
+        ps = c.sigma_s[path->hero] / mu;
+        u = rrv__uniform(rng);
+        if (u < pa) return RRV__FLIGHT_ABSORBED;
+        if (u < pa + ps) {
+            rrv__path_reweight(path, c.sigma_s);
+            out->t = w->t_event;
+            out->medium = m;
+            return RRV__FLIGHT_SCATTERED;
+        }
+        {
+            double sigma_n[3];
+            for (ch = 0; ch < 3; ++ch) sigma_n[ch] = mu - c.sigma_a[ch] - c.sigma_s[ch];
+            if (sigma_n[0] != sigma_n[1] || sigma_n[1] != sigma_n[2]) rrv__path_reweight(path, sigma_n);
+        }
+        if (ctx->refract_nulls) {
+            rrv_vec3 nd = rrv__bend_at_null_event(&path->bender, ctx->scene, x, d);
+            if (nd.x != d.x || nd.y != d.y || nd.z != d.z) {
+                out->t = w->t_event;
+                out->direction = nd;
+                return RRV__FLIGHT_BENT;
+            }
+        }
+        rrv__walker_advance(w, rng, &ctx->stats.events);
+        if (w->t_event == DBL_MAX) walkers[best] = walkers[--n];
+    }
+    return RRV__FLIGHT_PASSED;
+}
+
+/* ---- lights ------------------------------------------------------------------ */
+
+static void rrv__environment_L(const rrv_environment *env, rrv_vec3 d, double L[3])
+{
+    int c;
+    if (env->kind == RRV_ENV_GRADIENT) {
+        double t = 0.5 * (d.y + 1.0);
+        for (c = 0; c < 3; ++c) L[c] = env->L2[c] + t * (env->L[c] - env->L2[c]);
+    } else if (env->kind == RRV_ENV_CONSTANT) {
+        for (c = 0; c < 3; ++c) L[c] = env->L[c];
+    } else {
+        L[0] = L[1] = L[2] = 0;
+    }
+}
+
+static double rrv__shape_area(const rrv_shape *s)
+{
+    if (s->kind == RRV_SHAPE_SPHERE) return 4.0 * RRV__PI * s->radius * s->radius;
+    return rrv__length(rrv__cross(s->e1, s->e2)) * (s->kind == RRV_SHAPE_TRIANGLE ? 0.5 : 1.0);
+}
+
+static int rrv__light_choices(const rrv_scene *scene)
+{
+    return scene->light_count + (scene->environment.kind != RRV_ENV_NONE ? 1 : 0);
+}
+
+/* Solid-angle pdf of sampling direction toward point q on emitter s from p
+   (sphere: the cone of directions it subtends). Selection not included. */
+static double rrv__emitter_pdf(const rrv_shape *s, rrv_vec3 p, rrv_vec3 q, rrv_vec3 nq)
+{
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        double dc2 = rrv__dot(rrv__sub(s->center, p), rrv__sub(s->center, p));
+        double sin2 = s->radius * s->radius / dc2;
+        double one_minus_cos = sin2 / (1.0 + sqrt(fmax(0.0, 1.0 - sin2)));
+        if (sin2 >= 1.0) return 0.0;
+        return 1.0 / (2.0 * RRV__PI * one_minus_cos);
+    } else {
+        rrv_vec3 w = rrv__sub(q, p);
+        double dist2 = rrv__dot(w, w), cosl = -rrv__dot(nq, w) / sqrt(dist2);
+        return cosl > 0 ? dist2 / (rrv__shape_area(s) * cosl) : 0.0;
+    }
+}
+
+typedef struct rrv__light_sample {
+    rrv_vec3 wi;
+    double dist;      /* DBL_MAX for the environment */
+    double L[3];
+    double pdf;       /* solid angle, selection included */
+    rrv_vec3 point;   /* on the emitter, for the radiance scale with IOR */
+} rrv__light_sample;
+
+static int rrv__sample_light(const rrv_scene *scene, rrv_vec3 p, rrv__rng *rng, rrv__light_sample *ls)
+{
+    int choices = rrv__light_choices(scene), pick, c;
+    double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng);
+    if (!choices) return 0;
+    pick = (int)(u * choices);
+    if (pick >= choices) pick = choices - 1;
+    if (pick == scene->light_count) {
+        ls->wi = rrv__sample_uniform_sphere(u1, u2);
+        ls->dist = DBL_MAX;
+        ls->pdf = RRV__INV_4PI / choices;
+        rrv__environment_L(&scene->environment, ls->wi, ls->L);
+        ls->point = rrv__madd(p, ls->wi, 1e30);
+        return ls->L[0] > 0 || ls->L[1] > 0 || ls->L[2] > 0;
+    } else {
+        const rrv_shape *s = &scene->shapes[scene->lights[pick]];
+        rrv_vec3 q, nq;
+        if (s->kind == RRV_SHAPE_SPHERE) {
+            rrv_vec3 axis = rrv__sub(s->center, p);
+            double dc = rrv__length(axis), sin2 = s->radius * s->radius / (dc * dc);
+            double one_minus_cos_max, cos_t, sin_t, phi, b, disc;
+            if (sin2 >= 1.0) return 0; /* inside an outward-emitting sphere: dark */
+            one_minus_cos_max = sin2 / (1.0 + sqrt(1.0 - sin2));
+            cos_t = 1.0 - u1 * one_minus_cos_max;
+            sin_t = sqrt(fmax(0.0, 1.0 - cos_t * cos_t));
+            phi = 2.0 * RRV__PI * u2;
+            axis = rrv__scale(axis, 1.0 / dc);
+            ls->wi = rrv__from_frame(axis, sin_t * cos(phi), sin_t * sin(phi), cos_t);
+            /* distance to the near side of the sphere along wi */
+            b = dc * cos_t;
+            disc = s->radius * s->radius - dc * dc * sin_t * sin_t;
+            ls->dist = b - sqrt(fmax(0.0, disc));
+            ls->pdf = 1.0 / (2.0 * RRV__PI * one_minus_cos_max * choices);
+            q = rrv__madd(p, ls->wi, ls->dist);
+        } else {
+            if (s->kind == RRV_SHAPE_TRIANGLE) {
+                double su = sqrt(u1);
+                q = rrv__madd(rrv__madd(s->p0, s->e1, 1.0 - su), s->e2, u2 * su);
+            } else {
+                q = rrv__madd(rrv__madd(s->p0, s->e1, u1), s->e2, u2);
+            }
+            nq = rrv__normalize(rrv__cross(s->e1, s->e2));
+            ls->wi = rrv__sub(q, p);
+            ls->dist = rrv__length(ls->wi);
+            if (!(ls->dist > 0)) return 0;
+            ls->wi = rrv__scale(ls->wi, 1.0 / ls->dist);
+            ls->pdf = rrv__emitter_pdf(s, p, q, nq) / choices;
+            if (!(ls->pdf > 0)) return 0;
+        }
+        for (c = 0; c < 3; ++c) ls->L[c] = s->L[c];
+        ls->point = q;
+        return 1;
+    }
+}
+
+/* Visibility (surfaces) times transmittance (media) between p and a light
+   sample, with NEE rays kept straight. */
+static void rrv__light_transmittance(rrv__context *ctx, rrv_vec3 p, const rrv__light_sample *ls, rrv__rng *rng,
+                                     double T[3])
+{
+    rrv__hit hit;
+    double tmax = ls->dist == DBL_MAX ? DBL_MAX : ls->dist * (1.0 - 1e-7);
+    ++ctx->stats.paths;
+    if (rrv__intersect_scene(ctx->scene, p, ls->wi, tmax, &hit)) {
+        T[0] = T[1] = T[2] = 0;
+        return;
+    }
+    rrv__ratio_tracking_transmittance(ctx, p, ls->wi, tmax, rng, T);
+}
+
+static void rrv__material_albedo(const rrv_material *mat, rrv_vec3 p, rrv_vec3 n, double albedo[3])
+{
+    int c;
+    if (mat->kind == RRV_MATERIAL_CHECKER) {
+        /* Evaluated just below the surface so a plane lying on a lattice
+           plane (y = 0) does not flicker between two rows of squares. */
+        rrv_vec3 q = rrv__madd(p, n, -1e-4 * mat->checker_scale);
+        long parity = (long)floor(q.x / mat->checker_scale) + (long)floor(q.y / mat->checker_scale) +
+                      (long)floor(q.z / mat->checker_scale);
+        const double *a = (parity & 1) ? mat->albedo2 : mat->albedo;
+        for (c = 0; c < 3; ++c) albedo[c] = a[c];
+    } else {
+        for (c = 0; c < 3; ++c) albedo[c] = mat->albedo[c];
+    }
+}
+
+static double rrv__offset_scale(rrv_vec3 p)
+{
+    return 1e-6 * (1.0 + fmax(fabs(p.x), fmax(fabs(p.y), fabs(p.z))));
+}
+
+/* Radiance scale for light emitted where the refractivity is r_emit and seen
+   by the camera: L / eta^2 is invariant along a ray (Ament et al. 2014). */
+static double rrv__eta_scale(const rrv__context *ctx, rrv_vec3 p_emit)
+{
+    double eta;
+    if (!ctx->bends) return 1.0;
+    eta = 1.0 + rrv__scene_refractivity(ctx->scene, p_emit, NULL);
+    return ctx->eta_camera2 / (eta * eta);
+}
+
+/* One camera path: classic and refractive null-scattering path tracing with
+   NEE + MIS at every real scattering event and surface bounce. */
+static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng *rng, double L[3])
+{
+    const rrv_scene *scene = ctx->scene;
+    rrv__path path;
+    double prev_pdf = 0; /* solid-angle pdf of the last sampled direction; 0: camera */
+    rrv_vec3 vertex = o; /* the last real vertex: MIS pdfs are measured from it, not from bends */
+    int depth = 0, c;
+    long steps = 0;
+    rrv__path_start(&path, rng);
+    if (ctx->bends) rrv__bender_start(&path.bender, scene, o);
+    ++ctx->stats.paths;
+    for (;;) {
+        rrv__hit hit;
+        rrv__flight flight;
+        double segment = DBL_MAX; /* eikonal: a chord of the curved ray, or up to a refractive box */
+        rrv_vec3 x, next_d = d;
+        int has_hit, outcome;
+        if (++steps > RRV__MAX_PATH_STEPS) break;
+        if (ctx->eikonal) {
+            int inside;
+            double t_in = rrv__distance_to_refraction(scene, o, d, &inside);
+            if (inside) {
+                rrv_vec3 chord;
+                rrv__eikonal_advance(scene, scene->settings.stepper, scene->settings.step, o, d, &x, &next_d);
+                chord = rrv__sub(x, o);
+                segment = rrv__length(chord);
+                d = rrv__scale(chord, 1.0 / segment);
+                ++ctx->stats.events;
+            } else if (t_in < DBL_MAX) {
+                segment = t_in + 1e-9 * (1.0 + t_in); /* just inside the box */
+            }
+        } else if (ctx->comb) {
+            if (!path.bender.planned) rrv__comb_plan(&path.bender, scene, o, &d, rng);
+            segment = path.bender.comb_t;
+        }
+        has_hit = rrv__intersect_scene(scene, o, d, segment, &hit);
+        outcome = rrv__sample_free_flight_path(ctx, &path, o, d, has_hit ? hit.t : segment, rng, &flight);
+        if (outcome == RRV__FLIGHT_ABSORBED) break;
+        if (outcome == RRV__FLIGHT_PASSED && !has_hit && segment < DBL_MAX) {
+            o = rrv__madd(o, d, segment);
+            if (ctx->eikonal) {
+                d = next_d;
+            } else if (path.bender.entering) {
+                path.bender.planned = 0;
+            } else {
+                d = rrv__comb_bend(&path.bender, scene, o, d);
+                ++ctx->stats.events;
+            }
+            continue;
+        }
+        if (outcome == RRV__FLIGHT_BENT) {
+            o = rrv__madd(o, d, flight.t);
+            d = flight.direction;
+            continue;
+        }
+        if (outcome == RRV__FLIGHT_SCATTERED) {
+            rrv__light_sample ls;
+            double g = flight.medium->g;
+            x = rrv__madd(o, d, flight.t);
+            if (++depth > scene->settings.max_depth) break;
+            if (rrv__sample_light(scene, x, rng, &ls)) {
+                double phase = rrv__hg_eval(g, rrv__dot(d, ls.wi)), T[3];
+                rrv__light_transmittance(ctx, x, &ls, rng, T);
+                if (T[0] > 0 || T[1] > 0 || T[2] > 0) {
+                    double k = phase * rrv__power_heuristic(ls.pdf, phase) / ls.pdf * rrv__eta_scale(ctx, ls.point) *
+                               rrv__path_mis(&path);
+                    for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * T[c] * ls.L[c] * k;
+                }
+            }
+            {
+                rrv_vec3 d_in = d;
+                d = rrv__hg_sample(g, d_in, rrv__uniform(rng), rrv__uniform(rng));
+                prev_pdf = rrv__hg_eval(g, rrv__dot(d_in, d));
+            }
+            o = vertex = x;
+            if (ctx->bends) rrv__bender_restart(&path.bender, scene, x);
+        } else if (!has_hit) {
+            double Le[3], w = 1.0;
+            if (scene->environment.kind == RRV_ENV_NONE) break;
+            rrv__environment_L(&scene->environment, d, Le);
+            if (prev_pdf > 0) w = rrv__power_heuristic(prev_pdf, RRV__INV_4PI / rrv__light_choices(scene));
+            {
+                double k = w * rrv__eta_scale(ctx, rrv__madd(o, d, 1e30)) * rrv__path_mis(&path);
+                for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * Le[c] * k;
+            }
+            break;
+        } else {
+            const rrv_shape *s = &scene->shapes[hit.shape];
+            rrv_vec3 n = hit.n, p;
+            double albedo[3];
+            rrv__light_sample ls;
+            int front = rrv__dot(n, d) < 0;
+            x = hit.p;
+            if ((s->L[0] > 0 || s->L[1] > 0 || s->L[2] > 0) && front) {
+                double w = 1.0;
+                if (prev_pdf > 0)
+                    w = rrv__power_heuristic(prev_pdf, rrv__emitter_pdf(s, vertex, x, n) / rrv__light_choices(scene));
+                w *= rrv__eta_scale(ctx, x) * rrv__path_mis(&path);
+                for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * s->L[c] * w;
+            }
+            if (++depth > scene->settings.max_depth) break;
+            if (!front) n = rrv__scale(n, -1.0);
+            p = rrv__madd(x, n, rrv__offset_scale(x));
+            rrv__material_albedo(&scene->materials[s->material], x, n, albedo);
+            if (rrv__sample_light(scene, p, rng, &ls)) {
+                double cosi = rrv__dot(n, ls.wi);
+                if (cosi > 0) {
+                    double T[3];
+                    rrv__light_transmittance(ctx, p, &ls, rng, T);
+                    if (T[0] > 0 || T[1] > 0 || T[2] > 0) {
+                        double bsdf_pdf = cosi * RRV__INV_PI;
+                        double k = cosi * RRV__INV_PI * rrv__power_heuristic(ls.pdf, bsdf_pdf) / ls.pdf *
+                                   rrv__eta_scale(ctx, ls.point) * rrv__path_mis(&path);
+                        for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * albedo[c] * T[c] * ls.L[c] * k;
+                    }
+                }
+            }
+            d = rrv__sample_cosine_hemisphere(n, rrv__uniform(rng), rrv__uniform(rng));
+            prev_pdf = fmax(rrv__dot(n, d), 0.0) * RRV__INV_PI;
+            if (!(prev_pdf > 0)) break;
+            for (c = 0; c < 3; ++c) path.beta[c] *= albedo[c];
+            o = vertex = p;
+            if (ctx->bends) rrv__bender_restart(&path.bender, scene, p);
+        }
+        if (depth >= 3) {
+            double q = rrv__max3(path.beta) * rrv__path_mis(&path);
+            if (q < 1.0) {
+                if (rrv__uniform(rng) >= q) break;
+                for (c = 0; c < 3; ++c) path.beta[c] /= q;
+            }
+        }
+        if (!(rrv__max3(path.beta) > 0)) break;
+    }
+    for (c = 0; c < 3; ++c) L[c] = path.L[c];
+}
+
+
+/* ---- preparing a scene and rendering rectangles --------------------------------- */
+
+static void rrv__scene_release_prepared(rrv_scene *scene)
+{
+    int i;
+    if (!scene) return;
+    for (i = 0; i < scene->medium_count; ++i) {
+        struct rrv__majorant_grid *g = scene->media[i].majorant;
+        if (g) {
+            RRV_FREE(g->density_max);
+            RRV_FREE(g);
+            scene->media[i].majorant = NULL;
+        }
+    }
+    RRV_FREE(scene->bvh);
+    RRV_FREE(scene->bvh_prims);
+    RRV_FREE(scene->lights);
+    scene->bvh = NULL;
+    scene->bvh_prims = NULL;
+    scene->lights = NULL;
+    scene->bvh_node_count = scene->light_count = 0;
+}
+
+RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
+{
+    rrv_result res;
+    int i, n = 0;
+    size_t prepared_bytes = 0;
+    rrv__clear_error(err);
+    if (!scene) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "no scene");
+    rrv__scene_release_prepared(scene);
+    if (scene->medium_count > RRV__MAX_MEDIA)
+        return rrv__fail(err, RRV_ERROR_LIMIT, scene->path, 0, "%d media; at most %d are supported",
+                         scene->medium_count, RRV__MAX_MEDIA);
+    if (scene->settings.bend_tolerance <= 0) scene->settings.bend_tolerance = 0.002;
+    if (scene->settings.step <= 0) scene->settings.step = 0.01;
+    if (scene->settings.ambient_ior < 1.0) scene->settings.ambient_ior = 1.0;
+    for (i = 0; i < scene->shape_count; ++i) {
+        const double *L = scene->shapes[i].L;
+        if (L[0] > 0 || L[1] > 0 || L[2] > 0) ++n;
+    }
+    if (n) {
+        scene->lights = (int *)RRV_MALLOC((size_t)n * sizeof(int));
+        if (!scene->lights) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
+        for (i = 0; i < scene->shape_count; ++i) {
+            const double *L = scene->shapes[i].L;
+            if (L[0] > 0 || L[1] > 0 || L[2] > 0) scene->lights[scene->light_count++] = i;
+        }
+        prepared_bytes += (size_t)n * sizeof(int);
+    }
+    res = rrv__build_bvh(scene, err);
+    if (res != RRV_OK) return res;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const struct rrv__majorant_grid *g;
+        res = rrv__build_majorant(scene, &scene->media[i], err);
+        if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
+        g = scene->media[i].majorant;
+        prepared_bytes += sizeof *g + (size_t)g->n[0] * g->n[1] * g->n[2] * sizeof(float) * (g->grad_max ? 2 : 1);
+    }
+    scene->bytes += prepared_bytes;
+    return RRV_OK;
+}
+
+typedef struct rrv__camera_frame {
+    rrv_vec3 eye, forward, right, up;
+    double tan_half, aspect;
+} rrv__camera_frame;
+
+static void rrv__camera_setup(const rrv_camera *cam, rrv__camera_frame *f)
+{
+    f->eye = cam->eye;
+    f->forward = rrv__normalize(rrv__sub(cam->look, cam->eye));
+    f->right = rrv__normalize(rrv__cross(f->forward, cam->up));
+    f->up = rrv__cross(f->right, f->forward);
+    f->tan_half = tan(0.5 * cam->fov * RRV__PI / 180.0);
+    f->aspect = (double)cam->width / cam->height;
+}
+
+static rrv_vec3 rrv__camera_ray(const rrv__camera_frame *f, const rrv_camera *cam, double px, double py)
+{
+    double sx = (2.0 * px / cam->width - 1.0) * f->tan_half * f->aspect;
+    double sy = (1.0 - 2.0 * py / cam->height) * f->tan_half;
+    return rrv__normalize(rrv__add(f->forward, rrv__add(rrv__scale(f->right, sx), rrv__scale(f->up, sy))));
+}
+
+RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
+                                   int sample_begin, int sample_end,
+                                   float *sum, int stride, rrv_render_stats *stats)
+{
+    rrv__context ctx;
+    rrv__camera_frame frame;
+    double r_camera;
+    int x, y, s;
+    if (!scene || !sum) return RRV_ERROR_ARGUMENT;
+    if (x0 < 0 || y0 < 0 || x1 > scene->camera.width || y1 > scene->camera.height || x0 > x1 || y0 > y1 ||
+        stride < x1 - x0 || sample_begin < 0 || sample_begin > sample_end)
+        return RRV_ERROR_ARGUMENT;
+    if (scene->shape_count && !scene->bvh) return RRV_ERROR_ARGUMENT; /* not prepared */
+    memset(&ctx, 0, sizeof ctx);
+    ctx.scene = scene;
+    if (scene->settings.integrator == RRV_INTEGRATOR_REFRACTIVE) {
+        ctx.comb = rrv__resolve_scheme(scene->settings.refraction) == RRV_REFRACTION_COMB;
+        ctx.refract_nulls = !ctx.comb;
+    }
+    ctx.eikonal = scene->settings.integrator == RRV_INTEGRATOR_EIKONAL;
+    ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
+    rrv__camera_setup(&scene->camera, &frame);
+    r_camera = ctx.bends ? rrv__scene_refractivity(scene, frame.eye, NULL) : 0.0;
+    ctx.eta_camera2 = (1.0 + r_camera) * (1.0 + r_camera);
+    for (y = y0; y < y1; ++y) {
+        for (x = x0; x < x1; ++x) {
+            double acc[3] = {0, 0, 0};
+            uint64_t pixel = (uint64_t)y * (uint64_t)scene->camera.width + (uint64_t)x;
+            float *out = sum + 3 * ((size_t)(y - y0) * (size_t)stride + (size_t)(x - x0));
+            for (s = sample_begin; s < sample_end; ++s) {
+                rrv__rng rng;
+                double L[3];
+                rrv_vec3 d;
+                rrv__rng_seed(&rng, scene->settings.seed, pixel, (uint64_t)s);
+                d = rrv__camera_ray(&frame, &scene->camera, x + rrv__uniform(&rng), y + rrv__uniform(&rng));
+                rrv__trace_path(&ctx, frame.eye, d, &rng, L);
+                ++ctx.stats.samples;
+                if (L[0] - L[0] != 0 || L[1] - L[1] != 0 || L[2] - L[2] != 0) {
+                    ++ctx.stats.nonfinite;
+                    continue;
+                }
+                acc[0] += L[0];
+                acc[1] += L[1];
+                acc[2] += L[2];
+            }
+            out[0] += (float)acc[0];
+            out[1] += (float)acc[1];
+            out[2] += (float)acc[2];
+        }
+    }
+    if (stats) {
+        stats->samples += ctx.stats.samples;
+        stats->paths += ctx.stats.paths;
+        stats->events += ctx.stats.events;
+        stats->nonfinite += ctx.stats.nonfinite;
+    }
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrator,
+                                 rrv_vec3 origin, rrv_vec3 direction, uint64_t seed, uint64_t walk,
+                                 rrv_trace_visit_func visit, void *user, rrv_trace_result *result, rrv_error *err)
+{
+    rrv__rng rng;
+    rrv__bender bender;
+    rrv_vec3 o = origin, d;
+    uint64_t events = 0, unused = 0;
+    rrv__clear_error(err);
+    if (!scene || !result) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "no scene or result");
+    if (!(rrv__length(direction) > 0) || rrv__length(direction) > DBL_MAX)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "the ray direction must be finite and nonzero");
+    d = rrv__normalize(direction);
+    rrv__rng_seed(&rng, seed, walk, 0x7261797472616365ULL);
+    rrv__bender_start(&bender, scene, o);
+    if (visit) visit(user, o, d);
+    for (;;) {
+        if (events > 10000000u)
+            return rrv__fail(err, RRV_ERROR_LIMIT, scene->path, 0,
+                             "the ray did not leave the refractive media after %llu events",
+                             (unsigned long long)events);
+        if (integrator == RRV_INTEGRATOR_EIKONAL) {
+            int inside;
+            double t_in = rrv__distance_to_refraction(scene, o, d, &inside);
+            if (inside) {
+                rrv__eikonal_advance(scene, scene->settings.stepper, scene->settings.step, o, d, &o, &d);
+                ++events;
+                if (visit) visit(user, o, d);
+            } else if (t_in < DBL_MAX) {
+                o = rrv__madd(o, d, t_in + 1e-9 * (1.0 + t_in));
+            } else {
+                break;
+            }
+        } else if (bender.scheme == RRV_REFRACTION_COMB) {
+            if (!bender.planned) rrv__comb_plan(&bender, scene, o, &d, &rng);
+            if (bender.comb_t == DBL_MAX) break;
+            o = rrv__madd(o, d, bender.comb_t);
+            if (bender.entering) {
+                bender.planned = 0;
+            } else {
+                d = rrv__comb_bend(&bender, scene, o, d);
+                ++events;
+                if (visit) visit(user, o, d);
+            }
+        } else {
+            rrv__walker walkers[RRV__MAX_MEDIA], *w;
+            int i, n = 0, best = 0;
+            double t_exit = 0;
+            for (i = 0; i < scene->medium_count; ++i) {
+                const rrv_medium *m = &scene->media[i];
+                if (!rrv__medium_refracts(m)) continue;
+                if (rrv__walker_start(&walkers[n], m, 1, &scene->settings, o, d, DBL_MAX)) {
+                    t_exit = fmax(t_exit, walkers[n].t_end);
+                    rrv__walker_refraction_only(&walkers[n]);
+                    rrv__walker_advance(&walkers[n], &rng, &unused);
+                    if (walkers[n].t_event < DBL_MAX) ++n;
+                }
+            }
+            if (!n) {
+                o = rrv__madd(o, d, t_exit);
+                break;
+            }
+            for (i = 1; i < n; ++i)
+                if (walkers[i].t_event < walkers[best].t_event) best = i;
+            w = &walkers[best];
+            o = rrv__madd(o, d, w->t_event);
+            d = rrv__bend_at_null_event(&bender, scene, o, d);
+            ++events;
+            if (visit) visit(user, o, d);
+        }
+    }
+    result->position = o;
+    result->direction = d;
+    result->events = events;
+    return RRV_OK;
+}
+
+/* ==== image I/O: PFM and PNG files, checksums =================================
+   This section owns everything that turns a float RGB buffer into bytes and
+   back: the PFM writer and reader, the PNG preview writer (stored deflate, so
+   no compressor is needed), the CRC-32 and Adler-32 those formats use, and the
+   file forms that write through a temporary file so a failed write never
+   replaces a good image with half of a new one. */
+
+/* Floats are moved through uint32_t bit patterns to fix their byte order. */
+typedef char rrv__float_must_be_ieee_single[(sizeof(float) == 4 && FLT_MANT_DIG == 24) ? 1 : -1];
+
+/* ---- checksums --------------------------------------------------------------- */
+
+RRV_DEF uint32_t rrv_crc32(uint32_t crc, const void *data, size_t size)
+{
+    /* CRC of each 4-bit value (reflected polynomial 0xEDB88320): half a byte a
+       step keeps the table small enough to write out and read-only. */
+    static const uint32_t nibble_crc[16] = {
+        0x00000000u, 0x1DB71064u, 0x3B6E20C8u, 0x26D930ACu,
+        0x76DC4190u, 0x6B6B51F4u, 0x4DB26158u, 0x5005713Cu,
+        0xEDB88320u, 0xF00F9344u, 0xD6D6A3E8u, 0xCB61B38Cu,
+        0x9B64C2B0u, 0x86D3D2D4u, 0xA00AE278u, 0xBDBDF21Cu
+    };
+    const unsigned char *bytes = (const unsigned char *)data;
+    size_t i;
+    /* The pre- and post-inversion live here so that callers chain calls
+       starting from 0, as with zlib's crc32(). */
+    crc = ~crc;
+    for (i = 0; i < size; ++i) {
+        crc ^= bytes[i];
+        crc = (crc >> 4) ^ nibble_crc[crc & 15u];
+        crc = (crc >> 4) ^ nibble_crc[crc & 15u];
+    }
+    return ~crc;
+}
+
+RRV_DEF uint32_t rrv_adler32(uint32_t adler, const void *data, size_t size)
+{
+    enum { ADLER_MOD = 65521, ADLER_MAX_RUN = 5552 };
+    const unsigned char *bytes = (const unsigned char *)data;
+    uint32_t a = (adler & 0xFFFFu) % ADLER_MOD, b = (adler >> 16) % ADLER_MOD;
+    while (size > 0) {
+        /* ADLER_MAX_RUN is the longest run of 0xFF bytes after which b still
+           fits in 32 bits, so the modulo is needed only once per run. */
+        size_t run = size < ADLER_MAX_RUN ? size : ADLER_MAX_RUN;
+        size -= run;
+        for (; run > 0; --run) {
+            a += *bytes++;
+            b += a;
+        }
+        a %= ADLER_MOD;
+        b %= ADLER_MOD;
+    }
+    return (b << 16) | a;
+}
+
+/* ---- shared helpers ----------------------------------------------------------- */
+
+static void rrv__put_u32_be(unsigned char *out, uint32_t v)
+{
+    out[0] = (unsigned char)(v >> 24);
+    out[1] = (unsigned char)(v >> 16);
+    out[2] = (unsigned char)(v >> 8);
+    out[3] = (unsigned char)v;
+}
+
+/* Returns RRV_OK when rgb can hold width x height pixels whose byte count
+   fits in size_t, so later index arithmetic cannot overflow. */
+static rrv_result rrv__check_image_args(const float *rgb, int width, int height)
+{
+    if (!rgb || width <= 0 || height <= 0) return RRV_ERROR_ARGUMENT;
+    if ((size_t)width > SIZE_MAX / 3 / sizeof(float) / (size_t)height) return RRV_ERROR_ARGUMENT;
+    return RRV_OK;
+}
+
+/* Collects output into pieces of a fixed size so the callback sees neither
+   one call per float nor the whole image at once. Once a write fails every
+   later put is ignored and the writer reports RRV_ERROR_IO. */
+typedef struct rrv__piece_writer {
+    rrv_write_func write;
+    void *user;
+    unsigned char *piece;
+    size_t fill, capacity;
+    int failed;
+} rrv__piece_writer;
+
+static void rrv__piece_flush(rrv__piece_writer *w)
+{
+    if (w->failed || w->fill == 0) return;
+    if (w->write(w->user, w->piece, w->fill) != 0) w->failed = 1;
+    w->fill = 0;
+}
+
+static void rrv__piece_put(rrv__piece_writer *w, const void *data, size_t size)
+{
+    const unsigned char *src = (const unsigned char *)data;
+    while (size > 0 && !w->failed) {
+        size_t room = w->capacity - w->fill;
+        size_t take = size < room ? size : room;
+        memcpy(w->piece + w->fill, src, take);
+        w->fill += take;
+        src += take;
+        size -= take;
+        if (w->fill == w->capacity) rrv__piece_flush(w);
+    }
+}
+
+/* ---- PFM writer ------------------------------------------------------------------ */
+
+#define RRV__PFM_PIECE_BYTES ((size_t)64 * 1024)
+
+RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user,
+                                    const float *rgb, int width, int height)
+{
+    rrv__piece_writer w;
+    char header[64];
+    int header_len, y;
+    size_t row_floats = (size_t)width * 3, i;
+
+    if (!write || rrv__check_image_args(rgb, width, height) != RRV_OK) return RRV_ERROR_ARGUMENT;
+    header_len = snprintf(header, sizeof header, "PF\n%d %d\n-1.0\n", width, height);
+    if (header_len <= 0 || (size_t)header_len >= sizeof header) return RRV_ERROR_ARGUMENT;
+
+    w.write = write;
+    w.user = user;
+    w.fill = 0;
+    w.capacity = RRV__PFM_PIECE_BYTES;
+    w.failed = 0;
+    w.piece = (unsigned char *)RRV_MALLOC(w.capacity);
+    if (!w.piece) return RRV_ERROR_MEMORY;
+
+    rrv__piece_put(&w, header, (size_t)header_len);
+    /* PFM stores the bottom row first; the buffer's row 0 is the top. */
+    for (y = height - 1; y >= 0 && !w.failed; --y) {
+        const float *row = rgb + (size_t)y * row_floats;
+        for (i = 0; i < row_floats; ++i) {
+            uint32_t bits;
+            unsigned char le[4];
+            memcpy(&bits, &row[i], sizeof bits);
+            le[0] = (unsigned char)bits;
+            le[1] = (unsigned char)(bits >> 8);
+            le[2] = (unsigned char)(bits >> 16);
+            le[3] = (unsigned char)(bits >> 24);
+            rrv__piece_put(&w, le, 4);
+        }
+    }
+    rrv__piece_flush(&w);
+    RRV_FREE(w.piece);
+    return w.failed ? RRV_ERROR_IO : RRV_OK;
+}
+
+/* ---- PNG writer ------------------------------------------------------------------ */
+
+/* IDAT payload per chunk; the chunk's length, type and CRC frame it in the
+   same buffer so each chunk reaches the callback in one call. */
+#define RRV__PNG_IDAT_BYTES ((size_t)32 * 1024)
+#define RRV__DEFLATE_STORED_MAX 65535u
+
+typedef struct rrv__png_writer {
+    rrv__piece_writer out;      /* piece = [length, "IDAT", payload, CRC] */
+    uint64_t raw_unblocked;     /* filtered image bytes not yet in a stored block */
+    uint32_t block_left;        /* bytes still to come in the current stored block */
+    uint32_t adler;             /* of the filtered image bytes, for the zlib trailer */
+} rrv__png_writer;
+
+static void rrv__png_flush_idat(rrv__png_writer *png)
+{
+    rrv__piece_writer *w = &png->out;
+    unsigned char *chunk = w->piece - 8;
+    size_t payload = w->fill;
+    if (w->failed || payload == 0) return;
+    rrv__put_u32_be(chunk, (uint32_t)payload);
+    memcpy(chunk + 4, "IDAT", 4);
+    rrv__put_u32_be(chunk + 8 + payload, rrv_crc32(0, chunk + 4, 4 + payload));
+    if (w->write(w->user, chunk, 12 + payload) != 0) w->failed = 1;
+    w->fill = 0;
+}
+
+/* Appends bytes of the zlib stream, emitting an IDAT chunk whenever the
+   payload buffer fills. */
+static void rrv__png_put_zlib(rrv__png_writer *png, const unsigned char *src, size_t size)
+{
+    rrv__piece_writer *w = &png->out;
+    while (size > 0 && !w->failed) {
+        size_t room = w->capacity - w->fill;
+        size_t take = size < room ? size : room;
+        memcpy(w->piece + w->fill, src, take);
+        w->fill += take;
+        src += take;
+        size -= take;
+        if (w->fill == w->capacity) rrv__png_flush_idat(png);
+    }
+}
+
+/* Appends filtered image bytes, opening a stored deflate block whenever the
+   previous one is full. The total is known in advance, so each block header
+   can carry its exact length and the last one its BFINAL bit. */
+static void rrv__png_put_raw(rrv__png_writer *png, const unsigned char *src, size_t size)
+{
+    png->adler = rrv_adler32(png->adler, src, size);
+    while (size > 0 && !png->out.failed) {
+        size_t take;
+        if (png->block_left == 0) {
+            unsigned char header[5];
+            uint32_t len = png->raw_unblocked < RRV__DEFLATE_STORED_MAX
+                         ? (uint32_t)png->raw_unblocked : RRV__DEFLATE_STORED_MAX;
+            uint32_t nlen = ~len & 0xFFFFu;
+            png->raw_unblocked -= len;
+            /* bit 0 BFINAL, bits 1-2 BTYPE = 00 (stored), the rest pads to a byte */
+            header[0] = (unsigned char)(png->raw_unblocked == 0 ? 1 : 0);
+            header[1] = (unsigned char)len;
+            header[2] = (unsigned char)(len >> 8);
+            header[3] = (unsigned char)nlen;
+            header[4] = (unsigned char)(nlen >> 8);
+            rrv__png_put_zlib(png, header, sizeof header);
+            png->block_left = len;
+        }
+        take = size < png->block_left ? size : png->block_left;
+        rrv__png_put_zlib(png, src, take);
+        png->block_left -= (uint32_t)take;
+        src += take;
+        size -= take;
+    }
+}
+
+static unsigned char rrv__srgb8(float value, double gain)
+{
+    double linear = (double)value * gain;
+    double encoded;
+    if (!(linear > 0.0)) return 0; /* negative, zero and NaN */
+    if (linear >= 1.0) return 255;
+    encoded = linear <= 0.0031308 ? 12.92 * linear : 1.055 * pow(linear, 1.0 / 2.4) - 0.055;
+    return (unsigned char)(encoded * 255.0 + 0.5);
+}
+
+RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
+                                    const float *rgb, int width, int height, double exposure)
+{
+    static const unsigned char signature[8] = { 137, 'P', 'N', 'G', '\r', '\n', 26, '\n' };
+    static const unsigned char iend[12] = { 0, 0, 0, 0, 'I', 'E', 'N', 'D', 0xAE, 0x42, 0x60, 0x82 };
+    static const unsigned char zlib_header[2] = { 0x78, 0x01 }; /* 32K window, no dictionary */
+    enum { PIXELS_PER_PUT = 256 };
+    unsigned char head[8 + 25], *buffer, trailer[4], bytes[3 * PIXELS_PER_PUT];
+    const unsigned char filter_none = 0;
+    rrv__png_writer png;
+    double gain;
+    int x, y;
+
+    if (!write || rrv__check_image_args(rgb, width, height) != RRV_OK) return RRV_ERROR_ARGUMENT;
+    if (!isfinite(exposure)) return RRV_ERROR_ARGUMENT;
+    gain = pow(2.0, exposure);
+
+    memcpy(head, signature, 8);
+    rrv__put_u32_be(head + 8, 13);
+    memcpy(head + 12, "IHDR", 4);
+    rrv__put_u32_be(head + 16, (uint32_t)width);
+    rrv__put_u32_be(head + 20, (uint32_t)height);
+    head[24] = 8; /* bits per sample */
+    head[25] = 2; /* colour type: RGB */
+    head[26] = 0; /* compression: deflate */
+    head[27] = 0; /* filter method 0 */
+    head[28] = 0; /* not interlaced */
+    rrv__put_u32_be(head + 29, rrv_crc32(0, head + 12, 17));
+    if (write(user, head, sizeof head) != 0) return RRV_ERROR_IO;
+
+    buffer = (unsigned char *)RRV_MALLOC(RRV__PNG_IDAT_BYTES + 12);
+    if (!buffer) return RRV_ERROR_MEMORY;
+    png.out.write = write;
+    png.out.user = user;
+    png.out.piece = buffer + 8;
+    png.out.fill = 0;
+    png.out.capacity = RRV__PNG_IDAT_BYTES;
+    png.out.failed = 0;
+    png.raw_unblocked = (uint64_t)height * (1 + 3 * (uint64_t)width);
+    png.block_left = 0;
+    png.adler = 1;
+
+    rrv__png_put_zlib(&png, zlib_header, sizeof zlib_header);
+    for (y = 0; y < height && !png.out.failed; ++y) {
+        const float *row = rgb + (size_t)y * (size_t)width * 3;
+        rrv__png_put_raw(&png, &filter_none, 1);
+        for (x = 0; x < width && !png.out.failed; x += PIXELS_PER_PUT) {
+            int count = width - x < PIXELS_PER_PUT ? width - x : PIXELS_PER_PUT, i;
+            const float *pixels = row + 3 * (size_t)x;
+            for (i = 0; i < 3 * count; ++i) bytes[i] = rrv__srgb8(pixels[i], gain);
+            rrv__png_put_raw(&png, bytes, 3 * (size_t)count);
+        }
+    }
+    rrv__put_u32_be(trailer, png.adler);
+    rrv__png_put_zlib(&png, trailer, sizeof trailer);
+    rrv__png_flush_idat(&png);
+    RRV_FREE(buffer);
+    if (png.out.failed) return RRV_ERROR_IO;
+    if (write(user, iend, sizeof iend) != 0) return RRV_ERROR_IO;
+    return RRV_OK;
+}
+
+/* ---- PFM reader ------------------------------------------------------------------ */
+
+static int rrv__pfm_is_space(unsigned char c)
+{
+    return c == ' ' || c == '\t' || c == '\n' || c == '\r' || c == '\v' || c == '\f';
+}
+
+/* Skips whitespace; returns 0 if there was none, which PFM requires between
+   header fields. */
+static int rrv__pfm_skip_space(const unsigned char *p, size_t size, size_t *pos)
+{
+    size_t start = *pos;
+    while (*pos < size && rrv__pfm_is_space(p[*pos])) ++*pos;
+    return *pos > start;
+}
+
+static int rrv__pfm_token_ends(const unsigned char *p, size_t size, size_t pos)
+{
+    return pos == size || rrv__pfm_is_space(p[pos]);
+}
+
+/* Parses a decimal dimension. Returns 1 on success, 0 for anything that is not
+   plain digits, -1 when it exceeds INT_MAX. */
+static int rrv__pfm_parse_dimension(const unsigned char *p, size_t size, size_t *pos, int *out)
+{
+    size_t i = *pos;
+    long long value = 0;
+    int too_large = 0;
+    if (i >= size || p[i] < '0' || p[i] > '9') return 0;
+    for (; i < size && p[i] >= '0' && p[i] <= '9'; ++i) {
+        if (!too_large) value = value * 10 + (p[i] - '0');
+        if (value > INT_MAX) too_large = 1;
+    }
+    if (!rrv__pfm_token_ends(p, size, i)) return 0;
+    *pos = i;
+    if (too_large) return -1;
+    *out = (int)value;
+    return 1;
+}
+
+/* Parses the scale by hand because strtod needs a NUL-terminated copy and
+   follows the locale's decimal point; only the sign of the scale and whether
+   it is a finite nonzero number matter, so a rough value is enough. */
+static int rrv__pfm_parse_scale(const unsigned char *p, size_t size, size_t *pos, double *out)
+{
+    enum { EXPONENT_CAP = 100000 };
+    size_t i = *pos;
+    int negative = 0, digits = 0, exponent = 0, fraction_shift = 0;
+    double mantissa = 0.0;
+
+    if (i < size && (p[i] == '+' || p[i] == '-')) negative = p[i++] == '-';
+    for (; i < size && p[i] >= '0' && p[i] <= '9'; ++i, ++digits) mantissa = mantissa * 10.0 + (p[i] - '0');
+    if (i < size && p[i] == '.') {
+        for (++i; i < size && p[i] >= '0' && p[i] <= '9'; ++i, ++digits) {
+            mantissa = mantissa * 10.0 + (p[i] - '0');
+            if (fraction_shift > -EXPONENT_CAP) --fraction_shift;
+        }
+    }
+    if (digits == 0) return 0;
+    if (i < size && (p[i] == 'e' || p[i] == 'E')) {
+        int exponent_negative = 0, exponent_digits = 0;
+        ++i;
+        if (i < size && (p[i] == '+' || p[i] == '-')) exponent_negative = p[i++] == '-';
+        for (; i < size && p[i] >= '0' && p[i] <= '9'; ++i, ++exponent_digits)
+            if (exponent < EXPONENT_CAP) exponent = exponent * 10 + (p[i] - '0');
+        if (exponent_digits == 0) return 0;
+        if (exponent_negative) exponent = -exponent;
+    }
+    if (!rrv__pfm_token_ends(p, size, i)) return 0;
+    *pos = i;
+    *out = (negative ? -mantissa : mantissa) * pow(10.0, (double)(exponent + fraction_shift));
+    return 1;
+}
+
+static float rrv__float_from_bytes(const unsigned char *b, int little_endian)
+{
+    uint32_t bits = little_endian
+        ? (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24
+        : (uint32_t)b[3] | (uint32_t)b[2] << 8 | (uint32_t)b[1] << 16 | (uint32_t)b[0] << 24;
+    float value;
+    memcpy(&value, &bits, sizeof value);
+    return value;
+}
+
+RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char *name,
+                                       float **rgb, int *width, int *height, rrv_error *err)
+{
+    const unsigned char *p = (const unsigned char *)data;
+    size_t pos = 0, pixel_count, data_bytes, out_bytes, i;
+    int channels, w = 0, h = 0, dim, little_endian, x, y;
+    double scale = 0.0;
+    float *out;
+
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    if (!rgb || !width || !height || (!data && size > 0))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, name, 0, "rrv_read_pfm_memory: NULL argument");
+
+    if (size < 2 || p[0] != 'P' || (p[1] != 'F' && p[1] != 'f'))
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "not a PFM file (it must start with \"PF\" or \"Pf\")");
+    channels = p[1] == 'F' ? 3 : 1;
+    pos = 2;
+
+    if (!rrv__pfm_skip_space(p, size, &pos) || (dim = rrv__pfm_parse_dimension(p, size, &pos, &w)) == 0)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "bad PFM header: expected the width after \"P%c\"", p[1]);
+    if (dim < 0 || w <= 0)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "bad PFM header: width must be from 1 to %d", INT_MAX);
+    if (!rrv__pfm_skip_space(p, size, &pos) || (dim = rrv__pfm_parse_dimension(p, size, &pos, &h)) == 0)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "bad PFM header: expected the height after the width");
+    if (dim < 0 || h <= 0)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "bad PFM header: height must be from 1 to %d", INT_MAX);
+    if (!rrv__pfm_skip_space(p, size, &pos) || !rrv__pfm_parse_scale(p, size, &pos, &scale))
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "bad PFM header: expected the scale after the height");
+    if (scale == 0.0 || !isfinite(scale))
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                         "bad PFM header: the scale must be a finite nonzero number (its sign gives the byte order)");
+    little_endian = scale < 0.0;
+    /* The pixel data starts right after one whitespace byte: any more would
+       be the first bytes of the data. */
+    if (pos >= size)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated PFM: the header ends without pixel data");
+    ++pos;
+
+    if ((size_t)w > SIZE_MAX / (size_t)h
+        || (pixel_count = (size_t)w * (size_t)h) > SIZE_MAX / 3 / sizeof(float))
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "PFM dimensions %dx%d are too large", w, h);
+    data_bytes = pixel_count * (size_t)channels * 4;
+    out_bytes = pixel_count * 3 * sizeof(float);
+    if (data_bytes > size - pos)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                         "truncated PFM: %dx%d needs %llu bytes of pixel data but the file has %llu",
+                         w, h, (unsigned long long)data_bytes, (unsigned long long)(size - pos));
+
+    out = (float *)RRV_MALLOC(out_bytes);
+    if (!out)
+        return rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory for a %dx%d image", w, h);
+    p += pos;
+    /* The file stores the bottom row first; row 0 of the buffer is the top. */
+    for (y = h - 1; y >= 0; --y) {
+        float *row = out + (size_t)y * (size_t)w * 3;
+        for (x = 0; x < w; ++x) {
+            if (channels == 3) {
+                for (i = 0; i < 3; ++i, p += 4) row[3 * (size_t)x + i] = rrv__float_from_bytes(p, little_endian);
+            } else {
+                float grey = rrv__float_from_bytes(p, little_endian);
+                p += 4;
+                row[3 * (size_t)x] = row[3 * (size_t)x + 1] = row[3 * (size_t)x + 2] = grey;
+            }
+        }
+    }
+    *rgb = out;
+    *width = w;
+    *height = h;
+    rrv__clear_error(err);
+    return RRV_OK;
+}
+
+/* ---- file forms ---------------------------------------------------------------- */
+
+#ifndef RRV_NO_STDIO
+
+static int rrv__fwrite_callback(void *user, const void *data, size_t size)
+{
+    return fwrite(data, 1, size, (FILE *)user) == size ? 0 : 1;
+}
+
+/* Writes through "<path>.tmp" and renames it over path only after every
+   fwrite and the fclose succeeded. */
+static rrv_result rrv__write_image_file(const char *path, const float *rgb, int width, int height,
+                                        int as_png, double exposure, rrv_error *err)
+{
+    size_t path_len;
+    char *temp_path;
+    FILE *file;
+    rrv_result result;
+    int closed;
+
+    if (!path) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "no output path");
+    if (rrv__check_image_args(rgb, width, height) != RRV_OK)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "invalid image (%dx%d, data %s)",
+                         width, height, rgb ? "given" : "NULL");
+    if (as_png && !isfinite(exposure))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "exposure must be finite");
+
+    path_len = strlen(path);
+    temp_path = (char *)RRV_MALLOC(path_len + 5);
+    if (!temp_path) return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory");
+    memcpy(temp_path, path, path_len);
+    memcpy(temp_path + path_len, ".tmp", 5);
+
+    file = fopen(temp_path, "wb");
+    if (!file) {
+        RRV_FREE(temp_path);
+        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot write: cannot create the temporary file");
+    }
+    result = as_png ? rrv_write_png_to(rrv__fwrite_callback, file, rgb, width, height, exposure)
+                    : rrv_write_pfm_to(rrv__fwrite_callback, file, rgb, width, height);
+    closed = fclose(file) == 0;
+    if (result != RRV_OK || !closed) {
+        remove(temp_path);
+        RRV_FREE(temp_path);
+        if (result == RRV_ERROR_MEMORY) return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory");
+        return rrv__fail(err, RRV_ERROR_IO, path, 0,
+                         result != RRV_OK ? "cannot write: writing failed" : "cannot write: closing failed");
+    }
+    if (rename(temp_path, path) != 0) {
+#ifdef _WIN32
+        /* Windows' rename refuses an existing target. Removing it first loses
+           atomicity but still never leaves a partial image at path. */
+        if (remove(path) != 0 || rename(temp_path, path) != 0)
+#endif
+        {
+            remove(temp_path);
+            RRV_FREE(temp_path);
+            return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot write: cannot rename the temporary file");
+        }
+    }
+    RRV_FREE(temp_path);
+    rrv__clear_error(err);
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_write_pfm(const char *path, const float *rgb, int width, int height,
+                                 rrv_error *err)
+{
+    return rrv__write_image_file(path, rgb, width, height, 0, 0.0, err);
+}
+
+RRV_DEF rrv_result rrv_write_png(const char *path, const float *rgb, int width, int height,
+                                 double exposure, rrv_error *err)
+{
+    return rrv__write_image_file(path, rgb, width, height, 1, exposure, err);
+}
+
+RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *height,
+                                rrv_error *err)
+{
+    size_t size = 0, capacity = (size_t)64 * 1024;
+    unsigned char *data;
+    FILE *file;
+    int read_failed;
+    rrv_result result;
+
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    if (!path || !rgb || !width || !height)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_read_pfm: NULL argument");
+    file = fopen(path, "rb");
+    if (!file) return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open");
+
+    /* Reading until EOF, growing the buffer, works for pipes and needs no
+       ftell, whose long result cannot describe every file size. */
+    data = (unsigned char *)RRV_MALLOC(capacity);
+    if (!data) {
+        fclose(file);
+        return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory");
+    }
+    for (;;) {
+        size_t got;
+        if (size == capacity) {
+            unsigned char *bigger;
+            if (capacity > SIZE_MAX / 2) {
+                fclose(file);
+                RRV_FREE(data);
+                return rrv__fail(err, RRV_ERROR_LIMIT, path, 0, "file is too large to read");
+            }
+            bigger = (unsigned char *)RRV_REALLOC(data, capacity * 2);
+            if (!bigger) {
+                fclose(file);
+                RRV_FREE(data);
+                return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory reading the file");
+            }
+            data = bigger;
+            capacity *= 2;
+        }
+        got = fread(data + size, 1, capacity - size, file);
+        size += got;
+        if (size < capacity) break;
+    }
+    read_failed = ferror(file) != 0;
+    fclose(file);
+    if (read_failed) {
+        RRV_FREE(data);
+        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot read");
+    }
+    result = rrv_read_pfm_memory(data, size, path, rgb, width, height, err);
+    RRV_FREE(data);
+    return result;
+}
+
+#else /* RRV_NO_STDIO */
+
+RRV_DEF rrv_result rrv_write_pfm(const char *path, const float *rgb, int width, int height,
+                                 rrv_error *err)
+{
+    (void)rgb; (void)width; (void)height;
+    return rrv__fail(err, RRV_ERROR_UNSUPPORTED, path, 0,
+                     "file output is disabled (RRV_NO_STDIO); use rrv_write_pfm_to");
+}
+
+RRV_DEF rrv_result rrv_write_png(const char *path, const float *rgb, int width, int height,
+                                 double exposure, rrv_error *err)
+{
+    (void)rgb; (void)width; (void)height; (void)exposure;
+    return rrv__fail(err, RRV_ERROR_UNSUPPORTED, path, 0,
+                     "file output is disabled (RRV_NO_STDIO); use rrv_write_png_to");
+}
+
+RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *height,
+                                rrv_error *err)
+{
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    return rrv__fail(err, RRV_ERROR_UNSUPPORTED, path, 0,
+                     "file input is disabled (RRV_NO_STDIO); use rrv_read_pfm_memory");
+}
+
+#endif /* RRV_NO_STDIO */
+
+/* ==== scene file: the .rrv parser, the OBJ loader, the gridvol reader =======
+   This section owns rrv_scene_load, rrv_scene_parse, rrv_scene_free,
+   rrv_grid_read and rrv_grid_read_memory, the OBJ loader behind `mesh file`,
+   and the default (stdio) file reader. Every input here is untrusted: scene
+   text is not NUL-terminated, every count is checked before it is multiplied
+   or allocated, and every error names the file, the line and the cause. The
+   grammar lives in parts/SCENE_SPEC.md and scenes/README.md. */
+#include <stdlib.h> /* strtod, also when RRV_MALLOC is the caller's */
+
+#define RRV__SF_GRID_HEADER 48 /* magic 3, version 1, encoding 4, res 12, channels 4, box 24 */
+#define RRV__SF_PATH_MAX 1024
+#define RRV__SF_NO_LO (-DBL_MAX)
+#define RRV__SF_NO_HI DBL_MAX
+/* Tokens quoted in messages are clipped so one garbage line cannot drown the
+   useful part of the 256-byte message. */
+#define RRV__SF_CLIP(t) (int)((t)->n > 60 ? 60 : (t)->n), (t)->p
+
+/* ---- file reading --------------------------------------------------------- */
+
+#ifndef RRV_NO_STDIO
+static int rrv__sf_stdio_size(FILE *f, unsigned long long *size)
+{
+    long len;
+    if (fseek(f, 0, SEEK_END) != 0) return 0;
+    len = ftell(f);
+    if (len < 0 || fseek(f, 0, SEEK_SET) != 0) return 0;
+    *size = (unsigned long long)len;
+    return 1;
+}
+
+static int rrv__sf_stdio_read_file(void *user, const char *path, void **data, size_t *size)
+{
+    FILE *f;
+    unsigned long long len;
+    unsigned char *buf;
+    (void)user;
+    *data = NULL;
+    *size = 0;
+    f = fopen(path, "rb");
+    if (!f) return 1;
+    if (!rrv__sf_stdio_size(f, &len) || len >= (unsigned long long)SIZE_MAX) {
+        fclose(f);
+        return 1;
+    }
+    buf = (unsigned char *)RRV_MALLOC((size_t)len + 1); /* +1: malloc(0) may be NULL */
+    if (!buf) {
+        fclose(f);
+        return 1;
+    }
+    if (len > 0 && fread(buf, 1, (size_t)len, f) != (size_t)len) {
+        RRV_FREE(buf);
+        fclose(f);
+        return 1;
+    }
+    fclose(f);
+    *data = buf;
+    *size = (size_t)len;
+    return 0;
+}
+#endif
+
+/* RRV_OK with the whole file, RRV_ERROR_IO, or RRV_ERROR_UNSUPPORTED when
+   there is no way to read files at all. */
+static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, void **data,
+                                     size_t *size)
+{
+    *data = NULL;
+    *size = 0;
+    if (opt && opt->read_file) {
+        if (opt->read_file(opt->read_file_user, path, data, size) != 0) {
+            if (*data) RRV_FREE(*data);
+            *data = NULL;
+            return RRV_ERROR_IO;
+        }
+        if (!*data && *size > 0) return RRV_ERROR_IO;
+        return RRV_OK;
+    }
+#ifndef RRV_NO_STDIO
+    return rrv__sf_stdio_read_file(NULL, path, data, size) == 0 ? RRV_OK : RRV_ERROR_IO;
+#else
+    return RRV_ERROR_UNSUPPORTED;
+#endif
+}
+
+#define RRV__SF_NO_READER_MESSAGE                                                                  \
+    "this build has no stdio (RRV_NO_STDIO): set rrv_load_options.read_file"
+
+/* Joins a path written in a scene onto the scene's folder. 0 if too long. */
+static int rrv__sf_join_path(const char *base_dir, const char *path, char *out, size_t cap)
+{
+    size_t nb = base_dir ? strlen(base_dir) : 0, np = strlen(path);
+    int absolute = path[0] == '/' || path[0] == '\\' ||
+                   (((path[0] | 32) >= 'a' && (path[0] | 32) <= 'z') && path[1] == ':');
+    if (absolute || nb == 0) {
+        if (np >= cap) return 0;
+        memcpy(out, path, np + 1);
+        return 1;
+    }
+    {
+        int sep = base_dir[nb - 1] != '/' && base_dir[nb - 1] != '\\';
+        if (nb + (size_t)sep + np >= cap) return 0;
+        memcpy(out, base_dir, nb);
+        if (sep) out[nb] = '/';
+        memcpy(out + nb + (size_t)sep, path, np + 1);
+    }
+    return 1;
+}
+
+/* ---- gridvol ---------------------------------------------------------------- */
+
+typedef struct rrv__sf_grid_header {
+    int nx, ny, nz, channels;
+    rrv_vec3 lo, hi;
+    size_t count; /* floats */
+} rrv__sf_grid_header;
+
+static uint32_t rrv__sf_le32(const unsigned char *b)
+{
+    return (uint32_t)b[0] | ((uint32_t)b[1] << 8) | ((uint32_t)b[2] << 16) | ((uint32_t)b[3] << 24);
+}
+
+static int32_t rrv__sf_le32s(const unsigned char *b)
+{
+    uint32_t u = rrv__sf_le32(b);
+    /* two's complement without implementation-defined conversion */
+    return u <= 0x7fffffffu ? (int32_t)u : (int32_t)(u - 0x80000000u) - 0x7fffffff - 1;
+}
+
+static float rrv__sf_bits_float(uint32_t u)
+{
+    float f;
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
+/* Classifies by bit pattern, so it stays right under -ffast-math. */
+static int rrv__sf_bits_finite(uint32_t u) { return (u & 0x7f800000u) != 0x7f800000u; }
+static int rrv__sf_bits_nan(uint32_t u)
+{
+    return !rrv__sf_bits_finite(u) && (u & 0x007fffffu) != 0;
+}
+
+/* Validates the 48-byte header against the whole file size `total`; `avail`
+   header bytes are readable. Errors name `name`, line 0. */
+static rrv_result rrv__sf_grid_parse_header(const unsigned char *h, size_t avail,
+                                            unsigned long long total, const char *name,
+                                            size_t max_bytes, rrv__sf_grid_header *out,
+                                            rrv_error *err)
+{
+    static const char axis[3] = {'x', 'y', 'z'};
+    int32_t version, encoding, res[3], channels;
+    float box[6];
+    unsigned long long count, bytes, have;
+    int i;
+    if (max_bytes == 0) max_bytes = RRV_DEFAULT_MAX_GRID_BYTES;
+    if (avail < 3 || h[0] != 'V' || h[1] != 'O' || h[2] != 'L')
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                         "not a gridvol file: it does not start with \"VOL\"");
+    if (avail < RRV__SF_GRID_HEADER)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                         "truncated header: the file has %llu bytes, the header needs %d", total,
+                         RRV__SF_GRID_HEADER);
+    version = h[3];
+    if (version != 3)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                         "unsupported gridvol version %d (expected 3)", (int)version);
+    encoding = rrv__sf_le32s(h + 4);
+    if (encoding != 1)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                         "unsupported encoding %ld (only 1 = float32 is supported)",
+                         (long)encoding);
+    for (i = 0; i < 3; ++i)
+        res[i] = rrv__sf_le32s(h + 8 + 4 * i);
+    for (i = 0; i < 3; ++i)
+        if (res[i] < 2)
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                             "resolution %ld x %ld x %ld: %cres is %ld, must be >= 2", (long)res[0],
+                             (long)res[1], (long)res[2], axis[i], (long)res[i]);
+    channels = rrv__sf_le32s(h + 20);
+    if (channels != 1 && channels != 3)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "%ld channels: expected 1 or 3",
+                         (long)channels);
+    for (i = 0; i < 6; ++i) {
+        uint32_t u = rrv__sf_le32(h + 24 + 4 * i);
+        if (!rrv__sf_bits_finite(u))
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                             "bounding box is not finite (%c%s is %s)", axis[i % 3],
+                             i < 3 ? "min" : "max", rrv__sf_bits_nan(u) ? "NaN" : "infinite");
+        box[i] = rrv__sf_bits_float(u);
+    }
+    for (i = 0; i < 3; ++i)
+        if (!(box[i] < box[i + 3]))
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                             "bounding box is empty: %cmin %g is not below %cmax %g", axis[i],
+                             (double)box[i], axis[i], (double)box[i + 3]);
+    /* Each factor is < 2^31, so checking before every multiplication keeps
+       the product exact in 64 bits or reports the overflow. */
+    count = (unsigned long long)res[0];
+    if ((unsigned long long)res[1] > ULLONG_MAX / count) goto overflow;
+    count *= (unsigned long long)res[1];
+    if ((unsigned long long)res[2] > ULLONG_MAX / count) goto overflow;
+    count *= (unsigned long long)res[2];
+    if ((unsigned long long)channels > ULLONG_MAX / count) goto overflow;
+    count *= (unsigned long long)channels;
+    if (count > ULLONG_MAX / 4 || count > (unsigned long long)SIZE_MAX / 4) goto overflow;
+    bytes = count * 4;
+    if (bytes > (unsigned long long)max_bytes)
+        return rrv__fail(err, RRV_ERROR_LIMIT, name, 0,
+                         "%ld x %ld x %ld x %ld samples need %llu bytes, over the limit of "
+                         "%llu bytes (raise it with --max-grid-mb N)",
+                         (long)res[0], (long)res[1], (long)res[2], (long)channels, bytes,
+                         (unsigned long long)max_bytes);
+    have = total - RRV__SF_GRID_HEADER;
+    if (have != bytes)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                         "expected %llu bytes of samples, found %llu", bytes, have);
+    out->nx = (int)res[0];
+    out->ny = (int)res[1];
+    out->nz = (int)res[2];
+    out->channels = (int)channels;
+    out->lo.x = box[0];
+    out->lo.y = box[1];
+    out->lo.z = box[2];
+    out->hi.x = box[3];
+    out->hi.y = box[4];
+    out->hi.z = box[5];
+    out->count = (size_t)count;
+    return RRV_OK;
+overflow:
+    return rrv__fail(err, RRV_ERROR_LIMIT, name, 0,
+                     "%ld x %ld x %ld x %ld samples: the byte count overflows", (long)res[0],
+                     (long)res[1], (long)res[2], (long)channels);
+}
+
+/* Decodes `n` floats that start at sample index `first`, validating each. */
+static rrv_result rrv__sf_grid_decode(const unsigned char *b, size_t n, size_t first,
+                                      const rrv__sf_grid_header *h, int nonnegative, float *out,
+                                      const char *name, rrv_error *err)
+{
+    size_t i;
+    for (i = 0; i < n; ++i) {
+        uint32_t u = rrv__sf_le32(b + 4 * i);
+        float v = rrv__sf_bits_float(u);
+        const char *what = NULL;
+        if (!rrv__sf_bits_finite(u))
+            what = rrv__sf_bits_nan(u) ? "is NaN" : "is infinite";
+        else if (nonnegative && v < 0.0f)
+            what = "is negative";
+        if (what) {
+            size_t idx = first + i, s = idx / (size_t)h->channels;
+            int c = (int)(idx % (size_t)h->channels);
+            int x = (int)(s % (size_t)h->nx), y = (int)(s / (size_t)h->nx % (size_t)h->ny);
+            int z = (int)(s / (size_t)h->nx / (size_t)h->ny);
+            char where[64];
+            if (h->channels > 1)
+                sprintf(where, "x=%d y=%d z=%d c=%d", x, y, z, c);
+            else
+                sprintf(where, "x=%d y=%d z=%d", x, y, z);
+            if (rrv__sf_bits_finite(u))
+                return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                                 "value %llu (%s) %s (%g), densities must be >= 0",
+                                 (unsigned long long)idx, where, what, (double)v);
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "value %llu (%s) %s",
+                             (unsigned long long)idx, where, what);
+        }
+        out[first + i] = v;
+    }
+    return RRV_OK;
+}
+
+static void rrv__sf_grid_fill(rrv_grid *grid, const rrv__sf_grid_header *h, float *data)
+{
+    grid->nx = h->nx;
+    grid->ny = h->ny;
+    grid->nz = h->nz;
+    grid->channels = h->channels;
+    grid->lo = h->lo;
+    grid->hi = h->hi;
+    grid->data = data;
+}
+
+RRV_DEF rrv_result rrv_grid_read_memory(const void *data, size_t size, const char *name,
+                                        size_t max_grid_bytes, int nonnegative, rrv_grid *grid,
+                                        rrv_error *err)
+{
+    const unsigned char *b = (const unsigned char *)data;
+    rrv__sf_grid_header h;
+    float *samples;
+    rrv_result r;
+    rrv__clear_error(err);
+    memset(&h, 0, sizeof h);
+    if (!name) name = "<memory>";
+    if (!grid || (!data && size > 0))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, name, 0, "rrv_grid_read_memory: NULL argument");
+    memset(grid, 0, sizeof *grid);
+    r = rrv__sf_grid_parse_header(b, size, (unsigned long long)size, name, max_grid_bytes, &h, err);
+    if (r != RRV_OK) return r;
+    samples = (float *)RRV_MALLOC(h.count * sizeof(float));
+    if (!samples)
+        return rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory for %llu grid samples",
+                         (unsigned long long)h.count);
+    r = rrv__sf_grid_decode(b + RRV__SF_GRID_HEADER, h.count, 0, &h, nonnegative, samples, name,
+                            err);
+    if (r != RRV_OK) {
+        RRV_FREE(samples);
+        return r;
+    }
+    rrv__sf_grid_fill(grid, &h, samples);
+    return RRV_OK;
+}
+
+#ifndef RRV_NO_STDIO
+/* Streams the samples so a grid never sits in memory twice, and reads the
+   header first so the size limit applies before anything large is allocated. */
+static rrv_result rrv__sf_grid_read_stdio(const char *path, const char *name, size_t max_bytes,
+                                          int nonnegative, rrv_grid *grid, rrv_error *err)
+{
+    unsigned char buf[16384];
+    unsigned long long total;
+    size_t got, done = 0;
+    rrv__sf_grid_header h;
+    float *samples;
+    rrv_result r;
+    FILE *f = fopen(path, "rb");
+    if (!f || !rrv__sf_stdio_size(f, &total)) {
+        if (f) fclose(f);
+        return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file");
+    }
+    got = fread(buf, 1, RRV__SF_GRID_HEADER, f);
+    if (got < RRV__SF_GRID_HEADER && ferror(f)) {
+        fclose(f);
+        return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file");
+    }
+    r = rrv__sf_grid_parse_header(buf, got, total, name, max_bytes, &h, err);
+    if (r != RRV_OK) {
+        fclose(f);
+        return r;
+    }
+    samples = (float *)RRV_MALLOC(h.count * sizeof(float));
+    if (!samples) {
+        fclose(f);
+        return rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory for %llu grid samples",
+                         (unsigned long long)h.count);
+    }
+    while (done < h.count) {
+        size_t want = h.count - done;
+        if (want > sizeof buf / 4) want = sizeof buf / 4;
+        if (fread(buf, 4, want, f) != want) {
+            RRV_FREE(samples);
+            fclose(f);
+            return rrv__fail(err, RRV_ERROR_IO, name, 0, "the file ended while reading samples");
+        }
+        r = rrv__sf_grid_decode(buf, want, done, &h, nonnegative, samples, name, err);
+        if (r != RRV_OK) {
+            RRV_FREE(samples);
+            fclose(f);
+            return r;
+        }
+        done += want;
+    }
+    fclose(f);
+    rrv__sf_grid_fill(grid, &h, samples);
+    return RRV_OK;
+}
+#endif
+
+/* Errors name `name`, line 0. An unreadable file gives RRV_ERROR_IO. */
+static rrv_result rrv__sf_grid_load(const char *path, const char *name, const rrv_load_options *opt,
+                                    int nonnegative, rrv_grid *grid, rrv_error *err)
+{
+    size_t max_bytes =
+        opt && opt->max_grid_bytes ? opt->max_grid_bytes : RRV_DEFAULT_MAX_GRID_BYTES;
+    memset(grid, 0, sizeof *grid);
+    if (opt && opt->read_file) {
+        void *data;
+        size_t size;
+        rrv_result r = rrv__sf_read_whole(opt, path, &data, &size);
+        if (r != RRV_OK) return rrv__fail(err, r, name, 0, "cannot read the file");
+        r = rrv_grid_read_memory(data, size, name, max_bytes, nonnegative, grid, err);
+        RRV_FREE(data);
+        return r;
+    }
+#ifndef RRV_NO_STDIO
+    return rrv__sf_grid_read_stdio(path, name, max_bytes, nonnegative, grid, err);
+#else
+    return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0, RRV__SF_NO_READER_MESSAGE);
+#endif
+}
+
+RRV_DEF rrv_result rrv_grid_read(const char *path, const rrv_load_options *opt, int nonnegative,
+                                 rrv_grid *grid, rrv_error *err)
+{
+    rrv__clear_error(err);
+    if (!path || !grid)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_grid_read: NULL argument");
+    return rrv__sf_grid_load(path, path, opt, nonnegative, grid, err);
+}
+
+/* ---- tokens ------------------------------------------------------------------ */
+
+typedef struct rrv__sf_tok {
+    const char *p;
+    size_t n;
+    int quoted;
+} rrv__sf_tok;
+
+typedef struct rrv__sf_toks {
+    rrv__sf_tok *v;
+    size_t n, cap;
+} rrv__sf_toks;
+
+static int rrv__sf_is_space(char c)
+{
+    return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
+}
+
+/* Splits [s, e) into tokens. `#` ends the line outside quotes. Returns 0,
+   1 for an unterminated quote, 2 when out of memory. */
+static int rrv__sf_tokenize(rrv__sf_toks *t, const char *s, const char *e, int quotes)
+{
+    t->n = 0;
+    for (;;) {
+        rrv__sf_tok tok;
+        while (s < e && rrv__sf_is_space(*s))
+            ++s;
+        if (s == e || *s == '#') return 0;
+        tok.quoted = quotes && *s == '"';
+        if (tok.quoted) {
+            const char *q = ++s;
+            while (q < e && *q != '"')
+                ++q;
+            if (q == e) return 1;
+            tok.p = s;
+            tok.n = (size_t)(q - s);
+            s = q + 1;
+        } else {
+            tok.p = s;
+            while (s < e && !rrv__sf_is_space(*s) && *s != '#')
+                ++s;
+            tok.n = (size_t)(s - tok.p);
+        }
+        if (t->n == t->cap) {
+            size_t cap = t->cap ? t->cap * 2 : 32;
+            rrv__sf_tok *v;
+            if (cap > SIZE_MAX / sizeof *v) return 2;
+            v = (rrv__sf_tok *)RRV_REALLOC(t->v, cap * sizeof *v);
+            if (!v) return 2;
+            t->v = v;
+            t->cap = cap;
+        }
+        t->v[t->n++] = tok;
+    }
+}
+
+static int rrv__sf_tok_is(const rrv__sf_tok *t, const char *s)
+{
+    size_t n = strlen(s);
+    return !t->quoted && t->n == n && memcmp(t->p, s, n) == 0;
+}
+
+static int rrv__sf_tok_equals_name(const rrv__sf_tok *t, const char *name)
+{
+    size_t n = strlen(name);
+    return t->n == n && memcmp(t->p, name, n) == 0;
+}
+
+/* 1 when the whole token is a number strtod accepts (inf and nan included:
+   the caller rejects those with a clearer message). */
+static int rrv__sf_tok_number(const rrv__sf_tok *t, double *v)
+{
+    char buf[128], *end;
+    if (t->quoted || t->n == 0 || t->n >= sizeof buf) return 0;
+    memcpy(buf, t->p, t->n);
+    buf[t->n] = '\0';
+    *v = strtod(buf, &end);
+    return end == buf + t->n;
+}
+
+/* Decimal integer with optional sign. 0 if not one; *overflow when the
+   magnitude does not fit 64 bits. */
+static int rrv__sf_tok_integer(const rrv__sf_tok *t, int *neg, uint64_t *mag, int *overflow)
+{
+    size_t i = 0;
+    *neg = 0;
+    *mag = 0;
+    *overflow = 0;
+    if (t->quoted || t->n == 0) return 0;
+    if (t->p[0] == '+' || t->p[0] == '-') {
+        *neg = t->p[0] == '-';
+        i = 1;
+    }
+    if (i == t->n) return 0;
+    for (; i < t->n; ++i) {
+        unsigned d = (unsigned)(unsigned char)t->p[i] - '0';
+        if (d > 9) return 0;
+        if (*mag > (UINT64_MAX - d) / 10)
+            *overflow = 1;
+        else
+            *mag = *mag * 10 + d;
+    }
+    return 1;
+}
+
+/* ---- parser state and errors ------------------------------------------------- */
+
+typedef struct rrv__sf_parser {
+    rrv_scene *scene;
+    const char *name; /* scene name for messages */
+    const char *base_dir; /* NULL: the current directory */
+    const rrv_load_options *opt;
+    rrv_error *err;
+    int line;
+    rrv__sf_toks toks;
+    int have_camera, have_render, have_environment, have_ambient;
+    rrv_field *blob_field; /* so later blob statements of one field can be told apart */
+} rrv__sf_parser;
+
+static rrv_result rrv__sf_perr(rrv__sf_parser *p, rrv_result code, const char *fmt, ...)
+{
+    char buf[256];
+    va_list args;
+    va_start(args, fmt);
+    vsnprintf(buf, sizeof buf, fmt, args);
+    va_end(args);
+    return rrv__fail(p->err, code, p->name, p->line, "%s", buf);
+}
+
+#define RRV__SF_OOM(p) rrv__sf_perr((p), RRV_ERROR_MEMORY, "out of memory")
+
+/* Makes room for one more element; capacity doubles, counts stay ints. */
+static int rrv__sf_reserve(void **array, int *capacity, int count, size_t elem)
+{
+    int cap;
+    void *v;
+    if (count < *capacity) return 1;
+    if (*capacity > INT_MAX / 2) return 0;
+    cap = *capacity ? *capacity * 2 : 8;
+    if ((size_t)cap > SIZE_MAX / elem) return 0;
+    v = RRV_REALLOC(*array, (size_t)cap * elem);
+    if (!v) return 0;
+    *array = v;
+    *capacity = cap;
+    return 1;
+}
+
+/* Blob arrays have no capacity field: their capacity is a function of the
+   count (4, then powers of two), which also lets rrv__sf_scene_bytes count it. */
+static size_t rrv__sf_blob_capacity(int count)
+{
+    size_t cap = 4;
+    while (cap < (size_t)count)
+        cap *= 2;
+    return count > 0 ? cap : 0;
+}
+
+/* ---- keys: the per-statement tables ------------------------------------------ */
+
+enum {
+    RRV__SF_NUM, /* `arity` finite numbers */
+    RRV__SF_INT, /* `arity` integers */
+    RRV__SF_U64, /* one unsigned 64-bit integer */
+    RRV__SF_WORD, /* one word: a name or a path */
+    RRV__SF_CHOICE, /* one word out of `choices` ("a|b|c") */
+    RRV__SF_NUMLIST, /* any count of finite numbers */
+    RRV__SF_INTLIST /* any count of integers */
+};
+enum { RRV__SF_GT = 1, RRV__SF_LT = 2, RRV__SF_REQ = 4 };
+
+typedef struct rrv__sf_key {
+    const char *name;
+    unsigned char kind, arity, flags;
+    double lo, hi; /* RRV__SF_NO_LO / RRV__SF_NO_HI: unbounded; GT/LT make them strict */
+    const char *choices;
+} rrv__sf_key;
+
+typedef struct rrv__sf_slot {
+    int given;
+    double v[6];
+    uint64_t u;
+    int choice;
+    size_t tok; /* first value token */
+    size_t count; /* list length */
+} rrv__sf_slot;
+
+#define RRV__SF_MAX_KEYS 16
+#define RRV__SF_ANY RRV__SF_NO_LO, RRV__SF_NO_HI
+#define RRV__SF_NN 0.0, RRV__SF_NO_HI /* >= 0 (or > 0 with RRV__SF_GT) */
+#define RRV__SF_UNIT 0.0, 1.0
+
+static const rrv__sf_key rrv__sf_camera_keys[] = {
+    {"eye", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"look", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"up", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"fov", RRV__SF_NUM, 1, RRV__SF_GT | RRV__SF_LT, 0.0, 180.0, NULL},
+    {"resolution", RRV__SF_INT, 2, 0, 1.0, 16384.0, NULL},
+};
+static const rrv__sf_key rrv__sf_render_keys[] = {
+    {"spp", RRV__SF_INT, 1, 0, 1.0, 16777216.0, NULL},
+    {"maxdepth", RRV__SF_INT, 1, 0, 1.0, 1024.0, NULL},
+    {"seed", RRV__SF_U64, 1, 0, RRV__SF_NN, NULL},
+    {"integrator", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "classic|refractive|eikonal"},
+    {"bendtolerance", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_UNIT, NULL},
+    {"mueta", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
+    {"step", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"stepper", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|leapfrog|rk4"},
+    {"refraction", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|poisson|midpoint|comb"},
+    {"majorantcells", RRV__SF_INT, 1, 0, 0.0, 256.0, NULL},
+};
+/* Choice index -> enum, spelled out so reordering an enum in api.h cannot
+   silently change what a word means. */
+static const rrv_integrator rrv__sf_integrators[] = {
+    RRV_INTEGRATOR_CLASSIC, RRV_INTEGRATOR_REFRACTIVE, RRV_INTEGRATOR_EIKONAL};
+static const rrv_stepper rrv__sf_steppers[] = {RRV_STEPPER_DEFAULT, RRV_STEPPER_LEAPFROG,
+                                               RRV_STEPPER_RK4};
+static const rrv_refraction_scheme rrv__sf_schemes[] = {
+    RRV_REFRACTION_DEFAULT, RRV_REFRACTION_POISSON, RRV_REFRACTION_MIDPOINT, RRV_REFRACTION_COMB};
+static const rrv_falloff_kind rrv__sf_falloffs[] = {RRV_FALLOFF_NONE, RRV_FALLOFF_SPHERE,
+                                                    RRV_FALLOFF_PLUME};
+static const rrv__sf_key rrv__sf_ambient_keys[] = {
+    {"ior", RRV__SF_NUM, 1, RRV__SF_REQ, 1.0, RRV__SF_NO_HI, NULL},
+};
+static const rrv__sf_key rrv__sf_diffuse_keys[] = {
+    {"albedo", RRV__SF_NUM, 3, 0, RRV__SF_UNIT, NULL},
+};
+static const rrv__sf_key rrv__sf_checker_keys[] = {
+    {"albedo", RRV__SF_NUM, 3, 0, RRV__SF_UNIT, NULL},
+    {"albedo2", RRV__SF_NUM, 3, 0, RRV__SF_UNIT, NULL},
+    {"checkerscale", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+};
+/* Shapes share their last three keys: material, L, scale. */
+#define RRV__SF_SHAPE_TAIL                                                                         \
+    {"material", RRV__SF_WORD, 1, 0, RRV__SF_ANY, NULL},                                           \
+        {"L", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},                                                \
+    {                                                                                              \
+        "scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL                                               \
+    }
+static const rrv__sf_key rrv__sf_sphere_keys[] = {
+    {"center", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+    RRV__SF_SHAPE_TAIL,
+};
+static const rrv__sf_key rrv__sf_quad_keys[] = {
+    {"origin", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"u", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"v", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    RRV__SF_SHAPE_TAIL,
+};
+static const rrv__sf_key rrv__sf_triangle_keys[] = {
+    {"p0", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"p1", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"p2", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    RRV__SF_SHAPE_TAIL,
+};
+static const rrv__sf_key rrv__sf_mesh_keys[] = {
+    {"file", RRV__SF_WORD, 1, 0, RRV__SF_ANY, NULL},
+    {"points", RRV__SF_NUMLIST, 0, 0, RRV__SF_ANY, NULL},
+    {"indices", RRV__SF_INTLIST, 0, 0, 0.0, (double)INT_MAX, NULL},
+    {"translate", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"material", RRV__SF_WORD, 1, 0, RRV__SF_ANY, NULL},
+    {"L", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
+    {"scale", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL}, /* geometry, not emission */
+};
+static const rrv__sf_key rrv__sf_env_constant_keys[] = {
+    {"L", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
+    {"scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
+};
+static const rrv__sf_key rrv__sf_env_gradient_keys[] = {
+    {"top", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_NN, NULL},
+    {"bottom", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_NN, NULL},
+    {"scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
+};
+static const rrv__sf_key rrv__sf_medium_keys[] = {
+    {"box", RRV__SF_NUM, 6, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"sigma_a", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
+    {"sigma_s", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
+    {"scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
+    {"g", RRV__SF_NUM, 1, RRV__SF_GT | RRV__SF_LT, -1.0, 1.0, NULL},
+    {"albedo", RRV__SF_NUM, 3, 0, RRV__SF_UNIT, NULL},
+    {"sigma_t", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
+    {"Le", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
+    {"Lescale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
+};
+
+/* Field kinds. The `base` key sits last where a kind has one. */
+static const rrv__sf_key rrv__sf_blob_keys[] = {
+    {"center", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+    {"weight", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+    {"base", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+};
+static const rrv__sf_key rrv__sf_noise_keys[] = {
+    {"octaves", RRV__SF_INT, 1, 0, 1.0, 12.0, NULL},
+    {"frequency", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"lacunarity", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"gain", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_UNIT, NULL},
+    {"threshold", RRV__SF_NUM, 1, RRV__SF_LT, RRV__SF_UNIT, NULL},
+    {"seed", RRV__SF_INT, 1, 0, 0.0, 4294967295.0, NULL},
+    {"falloff", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "none|sphere|plume"},
+    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"amplitude", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+    {"base", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+};
+static const rrv__sf_key rrv__sf_luneburg_keys[] = {
+    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+};
+static const rrv__sf_key rrv__sf_fisheye_keys[] = {
+    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+    {"n0", RRV__SF_NUM, 1, 0, 1.0, RRV__SF_NO_HI, NULL},
+};
+static const rrv__sf_key rrv__sf_slab_keys[] = {
+    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"normal", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"gradient", RRV__SF_NUM, 1, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"base", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+};
+static const rrv__sf_key rrv__sf_shell_keys[] = {
+    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+    {"thickness", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+    {"edge", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"amplitude", RRV__SF_NUM, 1, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"base", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+};
+static const rrv__sf_key rrv__sf_gas_keys[] = {
+    {"eta_ref", RRV__SF_NUM, 1, 0, 1.0, RRV__SF_NO_HI, NULL},
+    {"P_ref", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"T_ref", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+};
+/* Keys a field statement accepts whatever its kind. */
+static const rrv__sf_key rrv__sf_ior_extra_keys[] = {
+    {"iorscale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
+};
+static const rrv__sf_key rrv__sf_temperature_extra_keys[] = {
+    {"temperatureoffset", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+    {"temperaturescale", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"blackbody", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "on|off"},
+};
+
+#define RRV__SF_COUNT(a) (int)(sizeof(a) / sizeof((a)[0]))
+
+static int rrv__sf_find_key(const rrv__sf_key *keys, int nkeys, const rrv__sf_tok *t)
+{
+    int k;
+    for (k = 0; k < nkeys; ++k)
+        if (rrv__sf_tok_is(t, keys[k].name)) return k;
+    return -1;
+}
+
+static int rrv__sf_in_range(const rrv__sf_key *k, double v)
+{
+    if (k->lo != RRV__SF_NO_LO && ((k->flags & RRV__SF_GT) ? !(v > k->lo) : !(v >= k->lo)))
+        return 0;
+    if (k->hi != RRV__SF_NO_HI && ((k->flags & RRV__SF_LT) ? !(v < k->hi) : !(v <= k->hi)))
+        return 0;
+    return 1;
+}
+
+static void rrv__sf_range_text(const rrv__sf_key *k, char *buf, size_t cap)
+{
+    int gt = (k->flags & RRV__SF_GT) != 0, lt = (k->flags & RRV__SF_LT) != 0;
+    if (k->hi == RRV__SF_NO_HI)
+        snprintf(buf, cap, "%s %.15g", gt ? ">" : ">=", k->lo);
+    else if (k->lo == RRV__SF_NO_LO)
+        snprintf(buf, cap, "%s %.15g", lt ? "<" : "<=", k->hi);
+    else
+        snprintf(buf, cap, "in %c%.15g, %.15g%c", gt ? '(' : '[', k->lo, k->hi, lt ? ')' : ']');
+}
+
+static rrv_result rrv__sf_range_error(rrv__sf_parser *p, const char *stmt, const rrv__sf_key *k,
+                                      const rrv__sf_tok *t)
+{
+    char range[96];
+    rrv__sf_range_text(k, range, sizeof range);
+    return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: %s must be %s, got %.*s", stmt, k->name, range,
+                        RRV__SF_CLIP(t));
+}
+
+/* Parses one numeric value of key k from token t (already known to be a number). */
+static rrv_result rrv__sf_value(rrv__sf_parser *p, const char *stmt, const rrv__sf_key *k,
+                                const rrv__sf_tok *t, double *v, uint64_t *u)
+{
+    if (k->kind == RRV__SF_NUM || k->kind == RRV__SF_NUMLIST) {
+        rrv__sf_tok_number(t, v);
+        if (!(*v == *v) || *v > DBL_MAX || *v < -DBL_MAX)
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: %s must be finite, got %.*s", stmt,
+                                k->name, RRV__SF_CLIP(t));
+    } else {
+        int neg, overflow;
+        uint64_t mag;
+        if (!rrv__sf_tok_integer(t, &neg, &mag, &overflow))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: %s must be an integer, got %.*s", stmt,
+                                k->name, RRV__SF_CLIP(t));
+        if (k->kind == RRV__SF_U64) {
+            if (overflow || (neg && mag != 0))
+                return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                    "%s: %s must be in [0, 18446744073709551615], got %.*s", stmt,
+                                    k->name, RRV__SF_CLIP(t));
+            *u = mag;
+            *v = (double)mag;
+            return RRV_OK;
+        }
+        *v = overflow ? (neg ? -DBL_MAX : DBL_MAX) : (neg ? -(double)mag : (double)mag);
+    }
+    if (!rrv__sf_in_range(k, *v)) return rrv__sf_range_error(p, stmt, k, t);
+    return RRV_OK;
+}
+
+/* Reads `key value... key value...` from token `first` on against a key
+   table, checks counts, numbers, ranges, duplicates and required keys. */
+static rrv_result rrv__sf_parse_keys(rrv__sf_parser *p, const char *stmt, size_t first,
+                                     const rrv__sf_key *keys, int nkeys, rrv__sf_slot *slots)
+{
+    const rrv__sf_tok *toks = p->toks.v;
+    size_t i = first, n = p->toks.n;
+    int prev = -1, k;
+    rrv_result r;
+    memset(slots, 0, (size_t)nkeys * sizeof *slots);
+    while (i < n) {
+        const rrv__sf_tok *t = &toks[i];
+        double dummy;
+        k = rrv__sf_find_key(keys, nkeys, t);
+        if (k < 0) {
+            /* a number where a key should be: the previous key got too many */
+            if (prev >= 0 &&
+                (keys[prev].kind == RRV__SF_NUM || keys[prev].kind == RRV__SF_INT ||
+                 keys[prev].kind == RRV__SF_U64) &&
+                rrv__sf_tok_number(t, &dummy)) {
+                size_t extra = 0;
+                while (i + extra < n && rrv__sf_tok_number(&toks[i + extra], &dummy))
+                    ++extra;
+                return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: \"%s\" needs %d number%s, got %llu",
+                                    stmt, keys[prev].name, keys[prev].arity,
+                                    keys[prev].arity == 1 ? "" : "s",
+                                    (unsigned long long)(keys[prev].arity + extra));
+            }
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: unknown key \"%.*s\"", stmt,
+                                RRV__SF_CLIP(t));
+        }
+        if (slots[k].given)
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: \"%s\" given twice", stmt, keys[k].name);
+        slots[k].given = 1;
+        slots[k].tok = ++i;
+        switch (keys[k].kind) {
+        case RRV__SF_NUM:
+        case RRV__SF_INT:
+        case RRV__SF_U64: {
+            int a;
+            for (a = 0; a < keys[k].arity; ++a, ++i) {
+                if (i >= n || !rrv__sf_tok_number(&toks[i], &dummy)) {
+                    if (i >= n || rrv__sf_find_key(keys, nkeys, &toks[i]) >= 0)
+                        return rrv__sf_perr(
+                            p, RRV_ERROR_PARSE, "%s: \"%s\" needs %d number%s, got %d", stmt,
+                            keys[k].name, keys[k].arity, keys[k].arity == 1 ? "" : "s", a);
+                    return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                        "%s: expected a number for \"%s\", got \"%.*s\"", stmt,
+                                        keys[k].name, RRV__SF_CLIP(&toks[i]));
+                }
+                r = rrv__sf_value(p, stmt, &keys[k], &toks[i], &slots[k].v[a], &slots[k].u);
+                if (r != RRV_OK) return r;
+            }
+            break;
+        }
+        case RRV__SF_WORD:
+        case RRV__SF_CHOICE:
+            if (i >= n)
+                return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: \"%s\" needs a value", stmt,
+                                    keys[k].name);
+            if (keys[k].kind == RRV__SF_CHOICE) {
+                const char *c = keys[k].choices;
+                int index = 0, found = -1;
+                while (*c) {
+                    size_t len = strcspn(c, "|");
+                    if (!toks[i].quoted && toks[i].n == len && memcmp(toks[i].p, c, len) == 0)
+                        found = index;
+                    c += len + (c[len] == '|');
+                    ++index;
+                }
+                if (found < 0)
+                    return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                        "%s: %s must be one of %s, got \"%.*s\"", stmt,
+                                        keys[k].name, keys[k].choices, RRV__SF_CLIP(&toks[i]));
+                slots[k].choice = found;
+            }
+            ++i;
+            break;
+        default: /* lists */
+            while (i < n && rrv__sf_tok_number(&toks[i], &dummy)) {
+                r = rrv__sf_value(p, stmt, &keys[k], &toks[i], &dummy, &slots[k].u);
+                if (r != RRV_OK) return r;
+                ++i;
+                ++slots[k].count;
+            }
+            if (i < n && slots[k].count == 0 && rrv__sf_find_key(keys, nkeys, &toks[i]) < 0)
+                return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                    "%s: expected a number for \"%s\", got \"%.*s\"", stmt,
+                                    keys[k].name, RRV__SF_CLIP(&toks[i]));
+            break;
+        }
+        prev = k;
+    }
+    for (k = 0; k < nkeys; ++k)
+        if ((keys[k].flags & RRV__SF_REQ) && !slots[k].given)
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: missing \"%s\"", stmt, keys[k].name);
+    return RRV_OK;
+}
+
+static rrv_vec3 rrv__sf_slot_vec(const rrv__sf_slot *s, int at)
+{
+    rrv_vec3 v;
+    v.x = s->v[at];
+    v.y = s->v[at + 1];
+    v.z = s->v[at + 2];
+    return v;
+}
+
+static void rrv__sf_slot_rgb(const rrv__sf_slot *s, double *rgb)
+{
+    if (s->given) memcpy(rgb, s->v, 3 * sizeof(double));
+}
+
+static int rrv__sf_finite3(const double *v)
+{
+    int i;
+    for (i = 0; i < 3; ++i)
+        if (!(v[i] == v[i]) || v[i] > DBL_MAX || v[i] < -DBL_MAX) return 0;
+    return 1;
+}
+
+static int rrv__sf_vec_finite(rrv_vec3 v)
+{
+    double d[3];
+    d[0] = v.x;
+    d[1] = v.y;
+    d[2] = v.z;
+    return rrv__sf_finite3(d);
+}
+
+static rrv_vec3 rrv__sf_sub(rrv_vec3 a, rrv_vec3 b)
+{
+    rrv_vec3 r;
+    r.x = a.x - b.x;
+    r.y = a.y - b.y;
+    r.z = a.z - b.z;
+    return r;
+}
+
+static rrv_vec3 rrv__sf_cross3(rrv_vec3 a, rrv_vec3 b)
+{
+    rrv_vec3 r;
+    r.x = a.y * b.z - a.z * b.y;
+    r.y = a.z * b.x - a.x * b.z;
+    r.z = a.x * b.y - a.y * b.x;
+    return r;
+}
+
+static int rrv__sf_vec_zero(rrv_vec3 v) { return v.x == 0.0 && v.y == 0.0 && v.z == 0.0; }
+
+/* Copies a name or path token into a C string; 0 if it does not fit or
+   holds a control character. */
+static int rrv__sf_tok_string(const rrv__sf_tok *t, char *out, size_t cap)
+{
+    size_t i;
+    if (t->n >= cap) return 0;
+    for (i = 0; i < t->n; ++i)
+        if ((unsigned char)t->p[i] < 32) return 0;
+    memcpy(out, t->p, t->n);
+    out[t->n] = '\0';
+    return 1;
+}
+
+/* ---- materials and shapes ------------------------------------------------------ */
+
+static int rrv__sf_find_material(const rrv_scene *s, const rrv__sf_tok *t)
+{
+    int i;
+    for (i = 0; i < s->material_count; ++i)
+        if (rrv__sf_tok_equals_name(t, s->materials[i].name)) return i;
+    return -1;
+}
+
+static int rrv__sf_find_medium(const rrv_scene *s, const rrv__sf_tok *t)
+{
+    int i;
+    for (i = 0; i < s->medium_count; ++i)
+        if (rrv__sf_tok_equals_name(t, s->media[i].name)) return i;
+    return -1;
+}
+
+static rrv_material *rrv__sf_new_material(rrv__sf_parser *p)
+{
+    rrv_scene *s = p->scene;
+    rrv_material *m;
+    if (!rrv__sf_reserve((void **)&s->materials, &s->material_capacity, s->material_count,
+                         sizeof *m))
+        return NULL;
+    m = &s->materials[s->material_count++];
+    memset(m, 0, sizeof *m);
+    return m;
+}
+
+/* The material a shape names, or the implicit grey "default". */
+static rrv_result rrv__sf_shape_material(rrv__sf_parser *p, const char *stmt,
+                                         const rrv__sf_slot *slot, int *index)
+{
+    rrv__sf_tok def;
+    if (slot->given) {
+        const rrv__sf_tok *t = &p->toks.v[slot->tok];
+        *index = rrv__sf_find_material(p->scene, t);
+        if (*index >= 0) return RRV_OK;
+        if (!rrv__sf_tok_equals_name(t, "default"))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: material \"%.*s\" is not defined", stmt,
+                                RRV__SF_CLIP(t));
+    }
+    def.p = "default";
+    def.n = 7;
+    def.quoted = 0;
+    *index = rrv__sf_find_material(p->scene, &def);
+    if (*index < 0) {
+        rrv_material *m = rrv__sf_new_material(p);
+        if (!m) return RRV__SF_OOM(p);
+        memcpy(m->name, "default", 8);
+        m->kind = RRV_MATERIAL_DIFFUSE;
+        m->albedo[0] = m->albedo[1] = m->albedo[2] = 0.5;
+        *index = p->scene->material_count - 1;
+    }
+    return RRV_OK;
+}
+
+static rrv_result rrv__sf_push_shape(rrv__sf_parser *p, const rrv_shape *shape)
+{
+    rrv_scene *s = p->scene;
+    if (!rrv__sf_reserve((void **)&s->shapes, &s->shape_capacity, s->shape_count, sizeof *shape))
+        return RRV__SF_OOM(p);
+    s->shapes[s->shape_count++] = *shape;
+    return RRV_OK;
+}
+
+/* Emission is stored premultiplied by its scale. */
+static rrv_result rrv__sf_emission(rrv__sf_parser *p, const char *stmt, const rrv__sf_slot *L,
+                                   const rrv__sf_slot *scale, double *out)
+{
+    double k = scale && scale->given ? scale->v[0] : 1.0;
+    int c;
+    for (c = 0; c < 3; ++c)
+        out[c] = L->given ? L->v[c] * k : 0.0;
+    if (!rrv__sf_finite3(out))
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: L times scale is not finite", stmt);
+    return RRV_OK;
+}
+
+/* Appends triangle (a, b, c) after transforming; zero-area ones are dropped. */
+static rrv_result rrv__sf_push_triangle(rrv__sf_parser *p, const char *stmt, rrv_vec3 a, rrv_vec3 b,
+                                        rrv_vec3 c, const rrv_shape *proto)
+{
+    rrv_shape s = *proto;
+    s.kind = RRV_SHAPE_TRIANGLE;
+    s.p0 = a;
+    s.e1 = rrv__sf_sub(b, a);
+    s.e2 = rrv__sf_sub(c, a);
+    if (!rrv__sf_vec_finite(a) || !rrv__sf_vec_finite(s.e1) || !rrv__sf_vec_finite(s.e2))
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            "%s: a vertex is not finite after scale and translate", stmt);
+    if (rrv__sf_vec_zero(rrv__sf_cross3(s.e1, s.e2))) return RRV_OK;
+    return rrv__sf_push_shape(p, &s);
+}
+
+static rrv_vec3 rrv__sf_transform(rrv_vec3 v, double scale, rrv_vec3 t)
+{
+    rrv_vec3 r;
+    r.x = v.x * scale + t.x;
+    r.y = v.y * scale + t.y;
+    r.z = v.z * scale + t.z;
+    return r;
+}
+
+/* ---- OBJ ------------------------------------------------------------------------ */
+
+typedef struct rrv__sf_objv {
+    rrv_vec3 *v;
+    int n, cap;
+} rrv__sf_objv;
+
+/* Resolves one face corner ("7", "-1", "7/2", "7//3", "7/2/3") to a 0-based
+   vertex index. 0 = ok, 1 = not an index, 2 = out of range. */
+static int rrv__sf_obj_index(const rrv__sf_tok *t, int nverts, int *out, long long *raw)
+{
+    rrv__sf_tok head = *t;
+    int neg, overflow;
+    uint64_t mag;
+    const char *slash = (const char *)memchr(t->p, '/', t->n);
+    if (slash) head.n = (size_t)(slash - t->p);
+    head.quoted = 0;
+    if (!rrv__sf_tok_integer(&head, &neg, &mag, &overflow)) return 1;
+    *raw = overflow || mag > (uint64_t)LLONG_MAX ? (neg ? LLONG_MIN : LLONG_MAX)
+                                                 : (neg ? -(long long)mag : (long long)mag);
+    if (overflow || mag == 0 || mag > (uint64_t)nverts) return 2;
+    *out = neg ? nverts - (int)mag : (int)mag - 1;
+    return 0;
+}
+
+static rrv_result rrv__sf_obj_parse(rrv__sf_parser *p, const char *text, size_t size,
+                                    const char *file, double scale, rrv_vec3 translate,
+                                    const rrv_shape *proto)
+{
+    rrv__sf_objv verts = {NULL, 0, 0};
+    rrv__sf_toks toks = {NULL, 0, 0};
+    size_t pos = 0;
+    int line = 0;
+    rrv_result r = RRV_OK;
+    while (pos < size && r == RRV_OK) {
+        const char *s = text + pos, *e = (const char *)memchr(s, '\n', size - pos);
+        int tr;
+        if (!e) e = text + size;
+        pos = (size_t)(e - text) + 1;
+        if (line == INT_MAX) {
+            r = rrv__fail(p->err, RRV_ERROR_PARSE, file, line, "too many lines");
+            break;
+        }
+        ++line;
+        tr = rrv__sf_tokenize(&toks, s, e, 0);
+        if (tr != 0) {
+            r = rrv__fail(p->err, RRV_ERROR_MEMORY, file, line, "out of memory");
+            break;
+        }
+        if (toks.n == 0) continue;
+        if (rrv__sf_tok_is(&toks.v[0], "v")) {
+            double c[3];
+            int a;
+            for (a = 0; a < 3; ++a) {
+                if ((size_t)a + 1 >= toks.n) {
+                    r = rrv__fail(p->err, RRV_ERROR_PARSE, file, line,
+                                  "v needs 3 coordinates, got %d", a);
+                    break;
+                }
+                if (!rrv__sf_tok_number(&toks.v[a + 1], &c[a]) || !(c[a] == c[a]) ||
+                    c[a] > DBL_MAX || c[a] < -DBL_MAX) {
+                    r = rrv__fail(p->err, RRV_ERROR_PARSE, file, line,
+                                  "v: expected a finite number, got \"%.*s\"",
+                                  RRV__SF_CLIP(&toks.v[a + 1]));
+                    break;
+                }
+            }
+            if (r != RRV_OK) break;
+            if (!rrv__sf_reserve((void **)&verts.v, &verts.cap, verts.n, sizeof *verts.v)) {
+                r = rrv__fail(p->err, RRV_ERROR_MEMORY, file, line, "out of memory");
+                break;
+            }
+            verts.v[verts.n].x = c[0];
+            verts.v[verts.n].y = c[1];
+            verts.v[verts.n].z = c[2];
+            ++verts.n;
+        } else if (rrv__sf_tok_is(&toks.v[0], "f")) {
+            int first = 0, prev = 0;
+            size_t k;
+            if (toks.n < 4) {
+                r = rrv__fail(p->err, RRV_ERROR_PARSE, file, line,
+                              "f: a face needs at least 3 vertices, got %d", (int)toks.n - 1);
+                break;
+            }
+            for (k = 1; k < toks.n && r == RRV_OK; ++k) {
+                int idx = 0;
+                long long raw = 0;
+                int q = rrv__sf_obj_index(&toks.v[k], verts.n, &idx, &raw);
+                if (q == 1)
+                    r = rrv__fail(p->err, RRV_ERROR_PARSE, file, line,
+                                  "f: expected a vertex index, got \"%.*s\"",
+                                  RRV__SF_CLIP(&toks.v[k]));
+                else if (q == 2)
+                    r = rrv__fail(p->err, RRV_ERROR_PARSE, file, line,
+                                  "f: vertex index %lld is out of range (%d vertices so far)", raw,
+                                  verts.n);
+                else if (k == 1)
+                    first = idx;
+                else if (k >= 3) {
+                    r = rrv__sf_push_triangle(
+                        p, "mesh", rrv__sf_transform(verts.v[first], scale, translate),
+                        rrv__sf_transform(verts.v[prev], scale, translate),
+                        rrv__sf_transform(verts.v[idx], scale, translate), proto);
+                }
+                prev = idx;
+            }
+        }
+    }
+    RRV_FREE(verts.v);
+    RRV_FREE(toks.v);
+    return r;
+}
+
+/* ---- statements -------------------------------------------------------------------- */
+
+static rrv_result rrv__sf_st_camera(rrv__sf_parser *p)
+{
+    rrv__sf_slot sl[RRV__SF_COUNT(rrv__sf_camera_keys)];
+    rrv_camera *c = &p->scene->camera;
+    rrv_vec3 dir;
+    rrv_result r;
+    if (p->have_camera) return rrv__sf_perr(p, RRV_ERROR_PARSE, "camera given twice");
+    p->have_camera = 1;
+    r = rrv__sf_parse_keys(p, "camera", 1, rrv__sf_camera_keys, RRV__SF_COUNT(rrv__sf_camera_keys),
+                           sl);
+    if (r != RRV_OK) return r;
+    c->eye = rrv__sf_slot_vec(&sl[0], 0);
+    c->look = rrv__sf_slot_vec(&sl[1], 0);
+    if (sl[2].given) c->up = rrv__sf_slot_vec(&sl[2], 0);
+    if (sl[3].given) c->fov = sl[3].v[0];
+    if (sl[4].given) {
+        c->width = (int)sl[4].v[0];
+        c->height = (int)sl[4].v[1];
+    }
+    dir = rrv__sf_sub(c->look, c->eye);
+    if (rrv__sf_vec_zero(dir) || !rrv__sf_vec_finite(dir))
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            "camera: eye and look must be distinct finite points");
+    {
+        rrv_vec3 x = rrv__sf_cross3(dir, c->up);
+        double n2 = x.x * x.x + x.y * x.y + x.z * x.z;
+        double d2 = (dir.x * dir.x + dir.y * dir.y + dir.z * dir.z) *
+                    (c->up.x * c->up.x + c->up.y * c->up.y + c->up.z * c->up.z);
+        /* sin^2 of the angle below 1e-12: too close to parallel for a frame */
+        if (!(n2 > 1e-12 * d2))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "camera: up is parallel to the view direction");
+    }
+    return RRV_OK;
+}
+
+static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
+{
+    rrv__sf_slot sl[RRV__SF_COUNT(rrv__sf_render_keys)];
+    rrv_settings *s = &p->scene->settings;
+    rrv_result r;
+    if (p->have_render) return rrv__sf_perr(p, RRV_ERROR_PARSE, "render given twice");
+    p->have_render = 1;
+    r = rrv__sf_parse_keys(p, "render", 1, rrv__sf_render_keys, RRV__SF_COUNT(rrv__sf_render_keys),
+                           sl);
+    if (r != RRV_OK) return r;
+    if (sl[0].given) s->spp = (int)sl[0].v[0];
+    if (sl[1].given) s->max_depth = (int)sl[1].v[0];
+    if (sl[2].given) s->seed = sl[2].u;
+    if (sl[3].given) s->integrator = rrv__sf_integrators[sl[3].choice];
+    if (sl[4].given) s->bend_tolerance = sl[4].v[0];
+    if (sl[5].given) s->mu_eta = sl[5].v[0];
+    if (sl[6].given) s->step = sl[6].v[0];
+    if (sl[7].given) s->stepper = rrv__sf_steppers[sl[7].choice];
+    if (sl[8].given) s->refraction = rrv__sf_schemes[sl[8].choice];
+    if (sl[9].given) s->majorant_cells = (int)sl[9].v[0];
+    return RRV_OK;
+}
+
+static rrv_result rrv__sf_st_ambient(rrv__sf_parser *p)
+{
+    rrv__sf_slot sl[1];
+    rrv_result r;
+    if (p->have_ambient) return rrv__sf_perr(p, RRV_ERROR_PARSE, "ambient given twice");
+    p->have_ambient = 1;
+    r = rrv__sf_parse_keys(p, "ambient", 1, rrv__sf_ambient_keys, 1, sl);
+    if (r != RRV_OK) return r;
+    p->scene->settings.ambient_ior = sl[0].v[0];
+    return RRV_OK;
+}
+
+/* A `material` or `medium` name: present, short enough, not yet used. */
+static rrv_result rrv__sf_new_name(rrv__sf_parser *p, const char *stmt, char *out, int taken)
+{
+    const rrv__sf_tok *t;
+    if (p->toks.n < 2) return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: missing name", stmt);
+    t = &p->toks.v[1];
+    if (t->n == 0 || !rrv__sf_tok_string(t, out, 64))
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            "%s: name \"%.*s\" must be 1 to 63 printable characters", stmt,
+                            RRV__SF_CLIP(t));
+    if (taken) return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s \"%s\" defined twice", stmt, out);
+    return RRV_OK;
+}
+
+static rrv_result rrv__sf_st_material(rrv__sf_parser *p)
+{
+    rrv__sf_slot sl[RRV__SF_COUNT(rrv__sf_checker_keys)];
+    char name[64];
+    rrv_material *m;
+    const rrv__sf_tok *kind;
+    rrv_result r;
+    int checker;
+    r = rrv__sf_new_name(p, "material", name,
+                         p->toks.n >= 2 && rrv__sf_find_material(p->scene, &p->toks.v[1]) >= 0);
+    if (r != RRV_OK) return r;
+    if (p->toks.n < 3)
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "material: missing kind (diffuse or checker)");
+    kind = &p->toks.v[2];
+    if (rrv__sf_tok_is(kind, "diffuse"))
+        checker = 0;
+    else if (rrv__sf_tok_is(kind, "checker"))
+        checker = 1;
+    else
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            "material: unknown kind \"%.*s\" (expected diffuse or checker)",
+                            RRV__SF_CLIP(kind));
+    if (checker)
+        r = rrv__sf_parse_keys(p, "material", 3, rrv__sf_checker_keys,
+                               RRV__SF_COUNT(rrv__sf_checker_keys), sl);
+    else
+        r = rrv__sf_parse_keys(p, "material", 3, rrv__sf_diffuse_keys,
+                               RRV__SF_COUNT(rrv__sf_diffuse_keys), sl);
+    if (r != RRV_OK) return r;
+    m = rrv__sf_new_material(p);
+    if (!m) return RRV__SF_OOM(p);
+    memcpy(m->name, name, sizeof name);
+    if (checker) {
+        m->kind = RRV_MATERIAL_CHECKER;
+        m->albedo[0] = m->albedo[1] = m->albedo[2] = 0.8;
+        m->albedo2[0] = m->albedo2[1] = m->albedo2[2] = 0.2;
+        m->checker_scale = sl[2].given ? sl[2].v[0] : 1.0;
+        rrv__sf_slot_rgb(&sl[1], m->albedo2);
+    } else {
+        m->kind = RRV_MATERIAL_DIFFUSE;
+        m->albedo[0] = m->albedo[1] = m->albedo[2] = 0.5;
+    }
+    rrv__sf_slot_rgb(&sl[0], m->albedo);
+    return RRV_OK;
+}
+
+/* sphere, quad and triangle: the last three slots are material, L, scale. */
+static rrv_result rrv__sf_st_primitive(rrv__sf_parser *p)
+{
+    rrv__sf_slot sl[6];
+    rrv_shape s;
+    const char *stmt = p->toks.v[0].p[0] == 's'   ? "sphere"
+                       : p->toks.v[0].p[0] == 'q' ? "quad"
+                                                  : "triangle";
+    const rrv__sf_key *keys = stmt[0] == 's'   ? rrv__sf_sphere_keys
+                              : stmt[0] == 'q' ? rrv__sf_quad_keys
+                                               : rrv__sf_triangle_keys;
+    int nkeys = stmt[0] == 's' ? RRV__SF_COUNT(rrv__sf_sphere_keys) : 6;
+    rrv_result r = rrv__sf_parse_keys(p, stmt, 1, keys, nkeys, sl);
+    if (r != RRV_OK) return r;
+    memset(&s, 0, sizeof s);
+    r = rrv__sf_shape_material(p, stmt, &sl[nkeys - 3], &s.material);
+    if (r == RRV_OK) r = rrv__sf_emission(p, stmt, &sl[nkeys - 2], &sl[nkeys - 1], s.L);
+    if (r != RRV_OK) return r;
+    if (stmt[0] == 's') {
+        s.kind = RRV_SHAPE_SPHERE;
+        s.center = rrv__sf_slot_vec(&sl[0], 0);
+        s.radius = sl[1].v[0];
+    } else if (stmt[0] == 'q') {
+        s.kind = RRV_SHAPE_QUAD;
+        s.p0 = rrv__sf_slot_vec(&sl[0], 0);
+        s.e1 = rrv__sf_slot_vec(&sl[1], 0);
+        s.e2 = rrv__sf_slot_vec(&sl[2], 0);
+        if (rrv__sf_vec_zero(rrv__sf_cross3(s.e1, s.e2)))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "quad: u and v are parallel (zero area)");
+    } else {
+        rrv_vec3 a = rrv__sf_slot_vec(&sl[0], 0);
+        s.kind = RRV_SHAPE_TRIANGLE;
+        s.p0 = a;
+        s.e1 = rrv__sf_sub(rrv__sf_slot_vec(&sl[1], 0), a);
+        s.e2 = rrv__sf_sub(rrv__sf_slot_vec(&sl[2], 0), a);
+        if (!rrv__sf_vec_finite(s.e1) || !rrv__sf_vec_finite(s.e2))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "triangle: edges are not finite");
+        if (rrv__sf_vec_zero(rrv__sf_cross3(s.e1, s.e2)))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                "triangle: the points are collinear (zero area)");
+    }
+    return rrv__sf_push_shape(p, &s);
+}
+
+static rrv_result rrv__sf_st_mesh(rrv__sf_parser *p)
+{
+    rrv__sf_slot sl[RRV__SF_COUNT(rrv__sf_mesh_keys)];
+    rrv_shape proto;
+    rrv_vec3 translate = {0, 0, 0};
+    double scale;
+    rrv_result r =
+        rrv__sf_parse_keys(p, "mesh", 1, rrv__sf_mesh_keys, RRV__SF_COUNT(rrv__sf_mesh_keys), sl);
+    if (r != RRV_OK) return r;
+    if (sl[0].given == sl[1].given)
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            sl[0].given ? "mesh: give \"file\" or \"points\", not both"
+                                        : "mesh: missing \"file\" or \"points\"");
+    if (sl[2].given && !sl[1].given)
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "mesh: \"indices\" needs \"points\"");
+    memset(&proto, 0, sizeof proto);
+    r = rrv__sf_shape_material(p, "mesh", &sl[4], &proto.material);
+    if (r == RRV_OK) r = rrv__sf_emission(p, "mesh", &sl[5], NULL, proto.L);
+    if (r != RRV_OK) return r;
+    if (sl[3].given) translate = rrv__sf_slot_vec(&sl[3], 0);
+    scale = sl[6].given ? sl[6].v[0] : 1.0;
+    if (sl[0].given) {
+        char written[RRV__SF_PATH_MAX], full[RRV__SF_PATH_MAX];
+        const rrv__sf_tok *t = &p->toks.v[sl[0].tok];
+        void *data;
+        size_t size;
+        if (!rrv__sf_tok_string(t, written, sizeof written) ||
+            !rrv__sf_join_path(p->base_dir, written, full, sizeof full))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                "mesh: path \"%.*s\" is too long or has control characters",
+                                RRV__SF_CLIP(t));
+        r = rrv__sf_read_whole(p->opt, full, &data, &size);
+        if (r == RRV_ERROR_UNSUPPORTED)
+            return rrv__sf_perr(p, r, "cannot read OBJ file \"%s\": " RRV__SF_NO_READER_MESSAGE,
+                                written);
+        if (r != RRV_OK) return rrv__sf_perr(p, r, "cannot read OBJ file \"%s\"", written);
+        r = rrv__sf_obj_parse(p, (const char *)data, size, full, scale, translate, &proto);
+        RRV_FREE(data);
+        return r;
+    } else {
+        const rrv__sf_tok *toks = p->toks.v;
+        size_t np = sl[1].count, ni = sl[2].count, i;
+        if (np == 0 || np % 3 != 0)
+            return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                "mesh: \"points\" needs a multiple of 3 numbers, got %llu",
+                                (unsigned long long)np);
+        if (!sl[2].given || ni == 0 || ni % 3 != 0)
+            return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                "mesh: \"indices\" needs a multiple of 3 integers, got %llu",
+                                (unsigned long long)ni);
+        for (i = 0; i < ni; i += 3) {
+            rrv_vec3 v[3];
+            int c;
+            for (c = 0; c < 3; ++c) {
+                int neg, overflow;
+                uint64_t idx;
+                double x, y, z;
+                rrv__sf_tok_integer(&toks[sl[2].tok + i + (size_t)c], &neg, &idx, &overflow);
+                if (idx >= np / 3)
+                    return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                        "mesh: index %llu is out of range (%llu points)",
+                                        (unsigned long long)idx, (unsigned long long)(np / 3));
+                rrv__sf_tok_number(&toks[sl[1].tok + 3 * (size_t)idx], &x);
+                rrv__sf_tok_number(&toks[sl[1].tok + 3 * (size_t)idx + 1], &y);
+                rrv__sf_tok_number(&toks[sl[1].tok + 3 * (size_t)idx + 2], &z);
+                v[c].x = x;
+                v[c].y = y;
+                v[c].z = z;
+                v[c] = rrv__sf_transform(v[c], scale, translate);
+            }
+            r = rrv__sf_push_triangle(p, "mesh", v[0], v[1], v[2], &proto);
+            if (r != RRV_OK) return r;
+        }
+    }
+    return RRV_OK;
+}
+
+static rrv_result rrv__sf_st_environment(rrv__sf_parser *p)
+{
+    rrv__sf_slot sl[3];
+    rrv_environment *env = &p->scene->environment;
+    const rrv__sf_tok *kind;
+    double k;
+    int c;
+    rrv_result r;
+    if (p->have_environment) return rrv__sf_perr(p, RRV_ERROR_PARSE, "environment given twice");
+    p->have_environment = 1;
+    if (p->toks.n < 2)
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "environment: missing kind (constant or gradient)");
+    kind = &p->toks.v[1];
+    if (rrv__sf_tok_is(kind, "constant")) {
+        r = rrv__sf_parse_keys(p, "environment", 2, rrv__sf_env_constant_keys, 2, sl);
+        if (r != RRV_OK) return r;
+        k = sl[1].given ? sl[1].v[0] : 1.0;
+        env->kind = RRV_ENV_CONSTANT;
+        for (c = 0; c < 3; ++c)
+            env->L[c] = (sl[0].given ? sl[0].v[c] : 1.0) * k;
+    } else if (rrv__sf_tok_is(kind, "gradient")) {
+        r = rrv__sf_parse_keys(p, "environment", 2, rrv__sf_env_gradient_keys, 3, sl);
+        if (r != RRV_OK) return r;
+        k = sl[2].given ? sl[2].v[0] : 1.0;
+        env->kind = RRV_ENV_GRADIENT;
+        for (c = 0; c < 3; ++c) {
+            env->L[c] = sl[0].v[c] * k;
+            env->L2[c] = sl[1].v[c] * k;
+        }
+    } else {
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            "environment: unknown kind \"%.*s\" (expected constant or gradient)",
+                            RRV__SF_CLIP(kind));
+    }
+    if (!rrv__sf_finite3(env->L) || !rrv__sf_finite3(env->L2))
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "environment: radiance times scale is not finite");
+    return RRV_OK;
+}
+
+static rrv_result rrv__sf_st_medium(rrv__sf_parser *p)
+{
+    rrv__sf_slot sl[RRV__SF_COUNT(rrv__sf_medium_keys)];
+    rrv_scene *s = p->scene;
+    rrv_medium *m;
+    char name[64];
+    int c;
+    rrv_result r = rrv__sf_new_name(p, "medium", name,
+                                    p->toks.n >= 2 && rrv__sf_find_medium(s, &p->toks.v[1]) >= 0);
+    if (r != RRV_OK) return r;
+    r = rrv__sf_parse_keys(p, "medium", 2, rrv__sf_medium_keys, RRV__SF_COUNT(rrv__sf_medium_keys),
+                           sl);
+    if (r != RRV_OK) return r;
+    for (c = 0; c < 3; ++c)
+        if (!(sl[0].v[c] < sl[0].v[c + 3]))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                "medium: box is empty along %c (%.*s is not below %.*s)", "xyz"[c],
+                                RRV__SF_CLIP(&p->toks.v[sl[0].tok + (size_t)c]),
+                                RRV__SF_CLIP(&p->toks.v[sl[0].tok + (size_t)c + 3]));
+    if ((sl[5].given || sl[6].given) && (sl[1].given || sl[2].given))
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            "medium: give albedo and sigma_t, or sigma_a and sigma_s, not both");
+    if (sl[5].given != sl[6].given)
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            sl[5].given ? "medium: \"albedo\" needs \"sigma_t\""
+                                        : "medium: \"sigma_t\" needs \"albedo\"");
+    if (!rrv__sf_reserve((void **)&s->media, &s->medium_capacity, s->medium_count, sizeof *m))
+        return RRV__SF_OOM(p);
+    m = &s->media[s->medium_count++];
+    memset(m, 0, sizeof *m);
+    memcpy(m->name, name, sizeof name);
+    m->lo = rrv__sf_slot_vec(&sl[0], 0);
+    m->hi = rrv__sf_slot_vec(&sl[0], 3);
+    for (c = 0; c < 3; ++c) {
+        if (sl[5].given) {
+            m->sigma_s[c] = sl[5].v[c] * sl[6].v[c];
+            m->sigma_a[c] = sl[6].v[c] - m->sigma_s[c];
+            if (m->sigma_a[c] < 0.0) m->sigma_a[c] = 0.0; /* rounding only */
+        } else {
+            m->sigma_a[c] = sl[1].given ? sl[1].v[c] : 1.0;
+            m->sigma_s[c] = sl[2].given ? sl[2].v[c] : 1.0;
+        }
+        m->Le[c] = sl[7].given ? sl[7].v[c] : 0.0;
+    }
+    m->scale = sl[3].given ? sl[3].v[0] : 1.0;
+    m->g = sl[4].given ? sl[4].v[0] : 0.0;
+    m->Lescale = sl[8].given ? sl[8].v[0] : 1.0;
+    m->temperatureoffset = 0.0;
+    m->temperaturescale = 1.0;
+    m->eta_ref = 1.000292;
+    m->P_ref = 101325.0;
+    m->T_ref = 300.0;
+    m->ior_scale = 1.0;
+    return RRV_OK;
+}
+
+enum { RRV__SF_F_DENSITY, RRV__SF_F_TEMPERATURE, RRV__SF_F_PRESSURE, RRV__SF_F_IOR };
+enum {
+    RRV__SF_K_CONSTANT,
+    RRV__SF_K_BLOB,
+    RRV__SF_K_NOISE,
+    RRV__SF_K_GRID,
+    RRV__SF_K_LUNEBURG,
+    RRV__SF_K_FISHEYE,
+    RRV__SF_K_SLAB,
+    RRV__SF_K_SHELL,
+    RRV__SF_K_GAS,
+    RRV__SF_K_COUNT
+};
+
+static const struct rrv__sf_field_kind {
+    const char *name;
+    const rrv__sf_key *keys;
+    int nkeys;
+    int ior_only;
+} rrv__sf_field_kinds[RRV__SF_K_COUNT] = {
+    {"constant", NULL, 0, 0},
+    {"blob", rrv__sf_blob_keys, RRV__SF_COUNT(rrv__sf_blob_keys), 0},
+    {"noise", rrv__sf_noise_keys, RRV__SF_COUNT(rrv__sf_noise_keys), 0},
+    {"grid", NULL, 0, 0},
+    {"luneburg", rrv__sf_luneburg_keys, RRV__SF_COUNT(rrv__sf_luneburg_keys), 1},
+    {"fisheye", rrv__sf_fisheye_keys, RRV__SF_COUNT(rrv__sf_fisheye_keys), 1},
+    {"slab", rrv__sf_slab_keys, RRV__SF_COUNT(rrv__sf_slab_keys), 1},
+    {"shell", rrv__sf_shell_keys, RRV__SF_COUNT(rrv__sf_shell_keys), 1},
+    {"gas", rrv__sf_gas_keys, RRV__SF_COUNT(rrv__sf_gas_keys), 1},
+};
+
+static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const char *stmt, int which,
+                                     const rrv__sf_tok *t, rrv_field *f)
+{
+    char written[RRV__SF_PATH_MAX], full[RRV__SF_PATH_MAX];
+    rrv_error e;
+    rrv_result r;
+    if (!rrv__sf_tok_string(t, written, sizeof written) ||
+        !rrv__sf_join_path(p->base_dir, written, full, sizeof full))
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            "%s: path \"%.*s\" is too long or has control characters", stmt,
+                            RRV__SF_CLIP(t));
+    rrv__clear_error(&e);
+    r = rrv__sf_grid_load(full, written, p->opt, which == RRV__SF_F_DENSITY, &f->grid, &e);
+    if (r == RRV_ERROR_IO) return rrv__sf_perr(p, r, "cannot read grid file \"%s\"", written);
+    if (r == RRV_ERROR_UNSUPPORTED)
+        return rrv__sf_perr(p, r, "cannot read grid file \"%s\": %s", written, e.message);
+    if (r != RRV_OK) return rrv__sf_perr(p, r, "grid \"%s\": %s", written, e.message);
+    f->kind = RRV_FIELD_GRID;
+    p->scene->grid_bytes += (size_t)f->grid.nx * (size_t)f->grid.ny * (size_t)f->grid.nz *
+                            (size_t)f->grid.channels * sizeof(float);
+    if (which != RRV__SF_F_DENSITY && f->grid.channels != 1)
+        return rrv__sf_perr(p, RRV_ERROR_FORMAT, "grid \"%s\": %s grids need 1 channel, found %d",
+                            written, stmt, f->grid.channels);
+    return RRV_OK;
+}
+
+/* density | temperature | pressure | ior  MEDIUM KIND ... */
+static rrv_result rrv__sf_st_field(rrv__sf_parser *p)
+{
+    static const char *const field_names[4] = {"density", "temperature", "pressure", "ior"};
+    static const double blob_base[4] = {0.0, 300.0, 101325.0, 0.0};
+    const rrv__sf_tok *toks = p->toks.v;
+    rrv__sf_key keys[RRV__SF_MAX_KEYS];
+    rrv__sf_slot sl[RRV__SF_MAX_KEYS];
+    const rrv__sf_key *extra = NULL;
+    int which, kind, nkeys, nextra = 0, mi, first_blob;
+    size_t first = 3;
+    const char *stmt;
+    rrv_medium *m;
+    rrv_field *f;
+    rrv_result r;
+    for (which = 0; which < 3 && !rrv__sf_tok_is(&toks[0], field_names[which]); ++which) {
+    }
+    stmt = field_names[which];
+    if (p->toks.n < 2) return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: missing medium name", stmt);
+    mi = rrv__sf_find_medium(p->scene, &toks[1]);
+    if (mi < 0)
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: medium \"%.*s\" is not defined", stmt,
+                            RRV__SF_CLIP(&toks[1]));
+    m = &p->scene->media[mi];
+    f = which == RRV__SF_F_DENSITY       ? &m->density
+        : which == RRV__SF_F_TEMPERATURE ? &m->temperature
+        : which == RRV__SF_F_PRESSURE    ? &m->pressure
+                                         : &m->ior;
+    if (p->toks.n < 3)
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            which == RRV__SF_F_IOR
+                                ? "%s: missing kind (constant, blob, noise, grid, luneburg, "
+                                  "fisheye, slab, shell or gas)"
+                                : "%s: missing kind (constant, blob, noise or grid)",
+                            stmt);
+    for (kind = 0; kind < RRV__SF_K_COUNT; ++kind)
+        if (rrv__sf_tok_is(&toks[2], rrv__sf_field_kinds[kind].name) &&
+            (which == RRV__SF_F_IOR || !rrv__sf_field_kinds[kind].ior_only))
+            break;
+    if (kind == RRV__SF_K_COUNT)
+        return rrv__sf_perr(
+            p, RRV_ERROR_PARSE,
+            which == RRV__SF_F_IOR
+                ? "%s: unknown kind \"%.*s\" (expected constant, blob, noise, grid, luneburg, "
+                  "fisheye, slab, shell or gas)"
+                : "%s: unknown kind \"%.*s\" (expected constant, blob, noise or grid)",
+            stmt, RRV__SF_CLIP(&toks[2]));
+    /* blob statements accumulate; anything else may be given once */
+    first_blob = f->kind != RRV_FIELD_BLOBS;
+    if (f->kind != RRV_FIELD_NONE || (which == RRV__SF_F_IOR && m->ior_from_gas)) {
+        if (kind != RRV__SF_K_BLOB || f->kind != RRV_FIELD_BLOBS)
+            return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                f->kind == RRV_FIELD_BLOBS || kind == RRV__SF_K_BLOB
+                                    ? "%s: blob cannot be mixed with other kinds (medium \"%s\")"
+                                    : "%s: given twice for medium \"%s\"",
+                                stmt, m->name);
+    }
+    if (kind == RRV__SF_K_CONSTANT || kind == RRV__SF_K_GRID) {
+        double dummy;
+        if (p->toks.n < 4)
+            return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                kind == RRV__SF_K_CONSTANT
+                                    ? "%s: \"constant\" needs 1 number, got 0"
+                                    : "%s: \"grid\" needs a file path",
+                                stmt);
+        if (kind == RRV__SF_K_CONSTANT && p->toks.n > 4 && rrv__sf_tok_number(&toks[3], &dummy) &&
+            rrv__sf_tok_number(&toks[4], &dummy)) {
+            size_t end = 4;
+            while (end < p->toks.n && rrv__sf_tok_number(&toks[end], &dummy))
+                ++end;
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: \"constant\" needs 1 number, got %llu",
+                                stmt, (unsigned long long)(end - 3));
+        }
+        first = 4;
+    }
+    nkeys = rrv__sf_field_kinds[kind].nkeys;
+    if (nkeys) memcpy(keys, rrv__sf_field_kinds[kind].keys, (size_t)nkeys * sizeof *keys);
+    if (which == RRV__SF_F_IOR) {
+        extra = rrv__sf_ior_extra_keys;
+        nextra = RRV__SF_COUNT(rrv__sf_ior_extra_keys);
+    } else if (which == RRV__SF_F_TEMPERATURE) {
+        extra = rrv__sf_temperature_extra_keys;
+        nextra = RRV__SF_COUNT(rrv__sf_temperature_extra_keys);
+    }
+    if (nextra) memcpy(keys + nkeys, extra, (size_t)nextra * sizeof *keys);
+    r = rrv__sf_parse_keys(p, stmt, first, keys, nkeys + nextra, sl);
+    if (r != RRV_OK) return r;
+
+    /* the extras first: a temperature constant is checked with them */
+    if (which == RRV__SF_F_IOR && sl[nkeys].given) m->ior_scale = sl[nkeys].v[0];
+    if (which == RRV__SF_F_TEMPERATURE) {
+        if (sl[nkeys].given) m->temperatureoffset = sl[nkeys].v[0];
+        if (sl[nkeys + 1].given) m->temperaturescale = sl[nkeys + 1].v[0];
+        if (sl[nkeys + 2].given)
+            m->blackbody_emission = sl[nkeys + 2].choice == 0;
+        else if (first_blob)
+            m->blackbody_emission = 1;
+    }
+
+    switch (kind) {
+    case RRV__SF_K_CONSTANT: {
+        static const rrv__sf_key any = {"constant", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL};
+        double v;
+        uint64_t u;
+        if (!rrv__sf_tok_number(&toks[3], &v))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                "%s: expected a number for \"constant\", got \"%.*s\"", stmt,
+                                RRV__SF_CLIP(&toks[3]));
+        r = rrv__sf_value(p, stmt, &any, &toks[3], &v, &u);
+        if (r != RRV_OK) return r;
+        if (which == RRV__SF_F_DENSITY && v < 0.0)
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "density: constant must be >= 0, got %.*s",
+                                RRV__SF_CLIP(&toks[3]));
+        if (which == RRV__SF_F_PRESSURE && !(v > 0.0))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "pressure: constant must be > 0, got %.*s",
+                                RRV__SF_CLIP(&toks[3]));
+        if (which == RRV__SF_F_IOR && !(v > -1.0))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                "ior: constant (the refractivity eta - 1) must be > -1, got %.*s",
+                                RRV__SF_CLIP(&toks[3]));
+        if (which == RRV__SF_F_TEMPERATURE) {
+            double T = (v - m->temperatureoffset) * m->temperaturescale;
+            if (!(T > 0.0) || T > DBL_MAX)
+                return rrv__sf_perr(
+                    p, RRV_ERROR_PARSE,
+                    "temperature: constant %.*s gives T = %g K, must be > 0 and finite",
+                    RRV__SF_CLIP(&toks[3]), T);
+        }
+        f->kind = RRV_FIELD_CONSTANT;
+        f->value = v;
+        return RRV_OK;
+    }
+    case RRV__SF_K_GRID:
+        return rrv__sf_field_grid(p, stmt, which, &toks[3], f);
+    case RRV__SF_K_BLOB: {
+        rrv_blob *b;
+        if (f->blob_count == INT_MAX) return RRV__SF_OOM(p);
+        if (f->blob_count == 0 ||
+            (f->blob_count >= 4 && (f->blob_count & (f->blob_count - 1)) == 0)) {
+            size_t cap = rrv__sf_blob_capacity(f->blob_count + 1);
+            if (cap > SIZE_MAX / sizeof *b) return RRV__SF_OOM(p);
+            b = (rrv_blob *)RRV_REALLOC(f->blobs, cap * sizeof *b);
+            if (!b) return RRV__SF_OOM(p);
+            f->blobs = b;
+        }
+        b = &f->blobs[f->blob_count++];
+        b->center = rrv__sf_slot_vec(&sl[0], 0);
+        b->radius = sl[1].v[0];
+        b->weight = sl[2].given ? sl[2].v[0] : 1.0;
+        if (first_blob) {
+            f->kind = RRV_FIELD_BLOBS;
+            f->base = sl[3].given ? sl[3].v[0] : blob_base[which];
+        }
+        return RRV_OK;
+    }
+    case RRV__SF_K_NOISE: {
+        rrv_noise *n = &f->noise;
+        double sx = m->hi.x * 0.5 - m->lo.x * 0.5, sy = m->hi.y * 0.5 - m->lo.y * 0.5,
+               sz = m->hi.z * 0.5 - m->lo.z * 0.5;
+        f->kind = RRV_FIELD_NOISE;
+        n->octaves = sl[0].given ? (int)sl[0].v[0] : 5;
+        n->frequency = sl[1].given ? sl[1].v[0] : 1.0;
+        n->lacunarity = sl[2].given ? sl[2].v[0] : 2.0;
+        n->gain = sl[3].given ? sl[3].v[0] : 0.5;
+        n->threshold = sl[4].given ? sl[4].v[0] : 0.0;
+        n->seed = sl[5].given ? (uint32_t)sl[5].v[0] : 0u;
+        n->falloff = sl[6].given ? rrv__sf_falloffs[sl[6].choice] : RRV_FALLOFF_SPHERE;
+        if (sl[7].given)
+            n->center = rrv__sf_slot_vec(&sl[7], 0);
+        else {
+            n->center.x = m->lo.x * 0.5 + m->hi.x * 0.5;
+            n->center.y = m->lo.y * 0.5 + m->hi.y * 0.5;
+            n->center.z = m->lo.z * 0.5 + m->hi.z * 0.5;
+        }
+        n->radius =
+            sl[8].given ? sl[8].v[0] : (sx < sy ? (sx < sz ? sx : sz) : (sy < sz ? sy : sz));
+        f->amplitude = sl[9].given ? sl[9].v[0] : 1.0;
+        f->base = sl[10].given ? sl[10].v[0] : blob_base[which];
+        return RRV_OK;
+    }
+    case RRV__SF_K_GAS:
+        m->ior_from_gas = 1;
+        if (sl[0].given) m->eta_ref = sl[0].v[0];
+        if (sl[1].given) m->P_ref = sl[1].v[0];
+        if (sl[2].given) m->T_ref = sl[2].v[0];
+        return RRV_OK;
+    default: /* the IOR profiles share center (slot 0) */
+        if (sl[0].given)
+            f->center = rrv__sf_slot_vec(&sl[0], 0);
+        else {
+            f->center.x = m->lo.x * 0.5 + m->hi.x * 0.5;
+            f->center.y = m->lo.y * 0.5 + m->hi.y * 0.5;
+            f->center.z = m->lo.z * 0.5 + m->hi.z * 0.5;
+        }
+        if (kind == RRV__SF_K_LUNEBURG) {
+            f->kind = RRV_FIELD_LUNEBURG;
+            f->radius = sl[1].v[0];
+        } else if (kind == RRV__SF_K_FISHEYE) {
+            f->kind = RRV_FIELD_FISHEYE;
+            f->radius = sl[1].v[0];
+            f->n0 = sl[2].given ? sl[2].v[0] : 2.0;
+        } else if (kind == RRV__SF_K_SLAB) {
+            rrv_vec3 nrm = rrv__sf_slot_vec(&sl[1], 0);
+            /* scaled first so squaring cannot overflow */
+            double big = fabs(nrm.x) > fabs(nrm.y) ? fabs(nrm.x) : fabs(nrm.y), len;
+            if (fabs(nrm.z) > big) big = fabs(nrm.z);
+            if (!(big > 0.0))
+                return rrv__sf_perr(p, RRV_ERROR_PARSE, "ior: slab normal must be nonzero");
+            nrm.x /= big;
+            nrm.y /= big;
+            nrm.z /= big;
+            len = sqrt(nrm.x * nrm.x + nrm.y * nrm.y + nrm.z * nrm.z);
+            f->normal.x = nrm.x / len;
+            f->normal.y = nrm.y / len;
+            f->normal.z = nrm.z / len;
+            f->kind = RRV_FIELD_SLAB;
+            f->gradient = sl[2].v[0];
+            f->base = sl[3].given ? sl[3].v[0] : 0.0;
+        } else {
+            f->kind = RRV_FIELD_SHELL;
+            f->radius = sl[1].v[0];
+            f->thickness = sl[2].v[0];
+            f->edge = sl[3].given ? sl[3].v[0] : f->thickness / 4.0;
+            f->amplitude = sl[4].v[0];
+            f->base = sl[5].given ? sl[5].v[0] : 0.0;
+        }
+        return RRV_OK;
+    }
+}
+
+typedef rrv_result (*rrv__sf_statement_func)(rrv__sf_parser *p);
+static const struct rrv__sf_statement {
+    const char *name;
+    rrv__sf_statement_func parse;
+} rrv__sf_statements[] = {
+    {"camera", rrv__sf_st_camera},           {"render", rrv__sf_st_render},
+    {"ambient", rrv__sf_st_ambient},         {"material", rrv__sf_st_material},
+    {"sphere", rrv__sf_st_primitive},        {"quad", rrv__sf_st_primitive},
+    {"triangle", rrv__sf_st_primitive},      {"mesh", rrv__sf_st_mesh},
+    {"environment", rrv__sf_st_environment}, {"medium", rrv__sf_st_medium},
+    {"density", rrv__sf_st_field},           {"temperature", rrv__sf_st_field},
+    {"pressure", rrv__sf_st_field},          {"ior", rrv__sf_st_field},
+};
+
+/* ---- scene ---------------------------------------------------------------------- */
+
+static void rrv__sf_field_free(rrv_field *f)
+{
+    RRV_FREE(f->blobs);
+    RRV_FREE(f->grid.data);
+    f->blobs = NULL;
+    f->grid.data = NULL;
+}
+
+RRV_DEF void rrv_scene_free(rrv_scene *scene)
+{
+    int i;
+    if (!scene) return;
+    rrv__scene_release_prepared(scene);
+    for (i = 0; i < scene->medium_count; ++i) {
+        rrv__sf_field_free(&scene->media[i].density);
+        rrv__sf_field_free(&scene->media[i].temperature);
+        rrv__sf_field_free(&scene->media[i].pressure);
+        rrv__sf_field_free(&scene->media[i].ior);
+    }
+    RRV_FREE(scene->materials);
+    RRV_FREE(scene->shapes);
+    RRV_FREE(scene->media);
+    RRV_FREE(scene);
+}
+
+static size_t rrv__sf_field_bytes(const rrv_field *f)
+{
+    size_t b = rrv__sf_blob_capacity(f->blob_count) * sizeof(rrv_blob);
+    if (f->grid.data)
+        b += (size_t)f->grid.nx * (size_t)f->grid.ny * (size_t)f->grid.nz *
+             (size_t)f->grid.channels * sizeof(float);
+    return b;
+}
+
+static size_t rrv__sf_scene_bytes(const rrv_scene *s)
+{
+    size_t b = sizeof *s + (size_t)s->material_capacity * sizeof(rrv_material) +
+               (size_t)s->shape_capacity * sizeof(rrv_shape) +
+               (size_t)s->medium_capacity * sizeof(rrv_medium);
+    int i;
+    for (i = 0; i < s->medium_count; ++i)
+        b += rrv__sf_field_bytes(&s->media[i].density) +
+             rrv__sf_field_bytes(&s->media[i].temperature) +
+             rrv__sf_field_bytes(&s->media[i].pressure) + rrv__sf_field_bytes(&s->media[i].ior);
+    return b;
+}
+
+static rrv_result rrv__sf_parse_lines(rrv__sf_parser *p, const char *text, size_t size)
+{
+    size_t pos = 0;
+    while (pos < size) {
+        const char *s = text + pos, *e = (const char *)memchr(s, '\n', size - pos);
+        int tr, k;
+        rrv_result r;
+        if (!e) e = text + size;
+        pos = (size_t)(e - text) + 1;
+        if (p->line == INT_MAX) return rrv__sf_perr(p, RRV_ERROR_LIMIT, "too many lines");
+        ++p->line;
+        tr = rrv__sf_tokenize(&p->toks, s, e, 1);
+        if (tr == 1) return rrv__sf_perr(p, RRV_ERROR_PARSE, "unterminated quote");
+        if (tr == 2) return RRV__SF_OOM(p);
+        if (p->toks.n == 0) continue;
+        for (k = 0; k < RRV__SF_COUNT(rrv__sf_statements); ++k)
+            if (rrv__sf_tok_is(&p->toks.v[0], rrv__sf_statements[k].name)) break;
+        if (k == RRV__SF_COUNT(rrv__sf_statements))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "unknown statement \"%.*s\"",
+                                RRV__SF_CLIP(&p->toks.v[0]));
+        r = rrv__sf_statements[k].parse(p);
+        if (r != RRV_OK) return r;
+    }
+    if (!p->have_camera)
+        return rrv__fail(p->err, RRV_ERROR_PARSE, p->name, 0, "no camera statement");
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_scene_parse(const char *text, size_t size, const char *name,
+                                   const char *base_dir, const rrv_load_options *opt,
+                                   rrv_scene **out, rrv_error *err)
+{
+    rrv__sf_parser p;
+    rrv_scene *s;
+    rrv_result r;
+    rrv__clear_error(err);
+    if (!name) name = "<scene>";
+    if (!out || (!text && size > 0))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, name, 0, "rrv_scene_parse: NULL argument");
+    *out = NULL;
+    s = (rrv_scene *)RRV_MALLOC(sizeof *s);
+    if (!s) return rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory");
+    memset(s, 0, sizeof *s);
+    {
+        size_t n = strlen(name);
+        if (n >= sizeof s->path) name += n - (sizeof s->path - 1); /* keep the file name end */
+        memcpy(s->path, name, strlen(name) + 1);
+    }
+    s->camera.up.y = 1.0;
+    s->camera.fov = 40.0;
+    s->camera.width = 320;
+    s->camera.height = 240;
+    s->settings.spp = 16;
+    s->settings.max_depth = 32;
+    s->settings.integrator = RRV_INTEGRATOR_CLASSIC;
+    s->settings.bend_tolerance = 0.002;
+    s->settings.step = 0.01;
+    s->settings.stepper = RRV_STEPPER_DEFAULT;
+    s->settings.refraction = RRV_REFRACTION_DEFAULT;
+    s->settings.majorant_cells = 0;
+    s->settings.ambient_ior = 1.0;
+    memset(&p, 0, sizeof p);
+    p.scene = s;
+    p.name = s->path;
+    p.base_dir = base_dir;
+    p.opt = opt;
+    p.err = err;
+    r = rrv__sf_parse_lines(&p, text, size);
+    RRV_FREE(p.toks.v);
+    if (r == RRV_OK) {
+        s->bytes = rrv__sf_scene_bytes(s);
+        r = rrv_scene_prepare(s, err);
+    }
+    if (r != RRV_OK) {
+        rrv_scene_free(s);
+        return r;
+    }
+    *out = s;
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_scene_load(const char *path, const rrv_load_options *opt, rrv_scene **out,
+                                  rrv_error *err)
+{
+    char dir[RRV__SF_PATH_MAX];
+    const char *slash = NULL, *c;
+    void *data;
+    size_t size;
+    rrv_result r;
+    rrv__clear_error(err);
+    if (out) *out = NULL;
+    if (!path || !out)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_scene_load: NULL argument");
+    for (c = path; *c; ++c)
+        if (*c == '/' || *c == '\\') slash = c;
+    if (slash) {
+        size_t n = slash == path ? 1 : (size_t)(slash - path);
+        if (n >= sizeof dir) return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "path is too long");
+        memcpy(dir, path, n);
+        dir[n] = '\0';
+    }
+    r = rrv__sf_read_whole(opt, path, &data, &size);
+    if (r == RRV_ERROR_UNSUPPORTED) return rrv__fail(err, r, path, 0, RRV__SF_NO_READER_MESSAGE);
+    if (r != RRV_OK) return rrv__fail(err, r, path, 0, "cannot read scene file");
+    r = rrv_scene_parse((const char *)data, size, path, slash ? dir : NULL, opt, out, err);
+    RRV_FREE(data);
+    return r;
+}
+
+#endif /* RRV_IMPLEMENTATION_INCLUDED */
+#endif /* RRV_IMPLEMENTATION */
+
+/*
+------------------------------------------------------------------------------
+LICENSE (MIT)
+Copyright (c) 2026 the rrv authors
+Permission is hereby granted, free of charge, to any person obtaining a copy of
+this software and associated documentation files (the "Software"), to deal in
+the Software without restriction, including without limitation the rights to
+use, copy, modify, merge, publish, distribute, sublicense, and/or sell copies
+of the Software, and to permit persons to whom the Software is furnished to do
+so, subject to the following conditions:
+The above copyright notice and this permission notice shall be included in all
+copies or substantial portions of the Software.
+THE SOFTWARE IS PROVIDED "AS IS", WITHOUT WARRANTY OF ANY KIND, EXPRESS OR
+IMPLIED, INCLUDING BUT NOT LIMITED TO THE WARRANTIES OF MERCHANTABILITY,
+FITNESS FOR A PARTICULAR PURPOSE AND NONINFRINGEMENT. IN NO EVENT SHALL THE
+AUTHORS OR COPYRIGHT HOLDERS BE LIABLE FOR ANY CLAIM, DAMAGES OR OTHER
+LIABILITY, WHETHER IN AN ACTION OF CONTRACT, TORT OR OTHERWISE, ARISING FROM,
+OUT OF OR IN CONNECTION WITH THE SOFTWARE OR THE USE OR OTHER DEALINGS IN THE
+SOFTWARE.
+------------------------------------------------------------------------------
+*/

@@ -1,0 +1,3 @@
+/* The one translation unit that holds rrv's implementation. */
+#define RRV_IMPLEMENTATION
+#include "rrv.h"

@@ -1,0 +1,596 @@
+/* Tests of the rrv command-line tool: exit codes, error messages, that a
+   failed run never clobbers an image, rrv diff's numbers, and that a render
+   does not depend on the thread count or on being split into crops.
+   Runs BUILD/rrv as a child process; argv[1] is the build folder. */
+#define _POSIX_C_SOURCE 200809L
+#include "../rrv.h"
+#include "check.h"
+
+#include <dirent.h>
+#include <errno.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/types.h>
+#include <sys/wait.h>
+
+#define PATH_SIZE 1024
+#define OUTPUT_SIZE 65536
+
+static char rrv_binary[PATH_SIZE];
+static char tmp_dir[PATH_SIZE / 2]; /* room for a file name in PATH_SIZE */
+static char tiny_scene[PATH_SIZE];
+static char bad_scene[PATH_SIZE];
+static char captured_stdout[PATH_SIZE], captured_stderr[PATH_SIZE];
+
+/* What one run of the tool did. */
+typedef struct run_result {
+    int code; /* exit status, or -1 if it did not exit normally */
+    char out[OUTPUT_SIZE];
+    char err[OUTPUT_SIZE];
+} run_result;
+
+static run_result last_run;
+
+/* Static storage so a test can build several paths without buffers of its own. */
+static const char *tmp_path(const char *name)
+{
+    static char paths[8][PATH_SIZE];
+    static int next;
+    char *path = paths[next++ % 8];
+    snprintf(path, PATH_SIZE, "%s/%s", tmp_dir, name);
+    return path;
+}
+
+static void *read_whole_file(const char *path, size_t *size)
+{
+    FILE *f = fopen(path, "rb");
+    char *data = NULL;
+    size_t capacity = 0, used = 0;
+    if (!f) return NULL;
+    for (;;) {
+        size_t n;
+        if (used + 4096 + 1 > capacity) {
+            char *grown;
+            capacity = capacity * 2 + 8192;
+            grown = (char *)realloc(data, capacity);
+            if (!grown) {
+                free(data);
+                fclose(f);
+                return NULL;
+            }
+            data = grown;
+        }
+        n = fread(data + used, 1, 4096, f);
+        used += n;
+        if (n < 4096) break;
+    }
+    fclose(f);
+    data[used] = '\0';
+    if (size) *size = used;
+    return data;
+}
+
+static int write_whole_file(const char *path, const void *data, size_t size)
+{
+    FILE *f = fopen(path, "wb");
+    int ok;
+    if (!f) return 0;
+    ok = fwrite(data, 1, size, f) == size;
+    return fclose(f) == 0 && ok;
+}
+
+static int write_text(const char *path, const char *text)
+{
+    return write_whole_file(path, text, strlen(text));
+}
+
+static int file_exists(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0;
+}
+
+static void copy_capture(const char *path, char *into)
+{
+    size_t size = 0;
+    char *data = (char *)read_whole_file(path, &size);
+    into[0] = '\0';
+    if (!data) return;
+    if (size >= OUTPUT_SIZE) size = OUTPUT_SIZE - 1;
+    memcpy(into, data, size);
+    into[size] = '\0';
+    free(data);
+}
+
+/* Runs `rrv ARGUMENTS` (a shell fragment) and fills last_run. */
+static int rrv(const char *arguments)
+{
+    char command[4 * PATH_SIZE];
+    int status;
+    snprintf(command, sizeof command, "'%s' %s >'%s' 2>'%s' </dev/null", rrv_binary, arguments,
+             captured_stdout, captured_stderr);
+    status = system(command);
+    last_run.code = status != -1 && WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    copy_capture(captured_stdout, last_run.out);
+    copy_capture(captured_stderr, last_run.err);
+    return last_run.code;
+}
+
+static void strip_trailing_space(char *text)
+{
+    size_t n = strlen(text);
+    while (n > 0 && (text[n - 1] == '\n' || text[n - 1] == '\r' || text[n - 1] == ' ')) text[--n] = '\0';
+}
+
+/* The value after "key: " at the start of a line of `text`, or NULL. */
+static const char *find_key(const char *text, const char *key)
+{
+    size_t key_length = strlen(key);
+    const char *line = text;
+    while (line && *line) {
+        if (strncmp(line, key, key_length) == 0 && line[key_length] == ':' &&
+            line[key_length + 1] == ' ')
+            return line + key_length + 2;
+        line = strchr(line, '\n');
+        if (line) ++line;
+    }
+    return NULL;
+}
+
+static double key_number(const char *text, const char *key)
+{
+    const char *value = find_key(text, key);
+    return value ? strtod(value, NULL) : NAN;
+}
+
+static int near(double a, double b) { return fabs(a - b) <= 1e-6 * (fabs(b) + 1e-9); }
+
+/* ---- PFM by hand, so these tests do not lean on the library under test ---- */
+
+static int write_pfm_by_hand(const char *path, const float *rgb, int width, int height)
+{
+    FILE *f = fopen(path, "wb");
+    int x, y, c, ok;
+    if (!f) return 0;
+    fprintf(f, "PF\n%d %d\n-1.0\n", width, height);
+    for (y = height - 1; y >= 0; --y) /* PFM rows run bottom to top */
+        for (x = 0; x < width; ++x)
+            for (c = 0; c < 3; ++c) {
+                uint32_t bits;
+                unsigned char bytes[4];
+                memcpy(&bits, &rgb[3 * (y * width + x) + c], 4);
+                bytes[0] = (unsigned char)bits;
+                bytes[1] = (unsigned char)(bits >> 8);
+                bytes[2] = (unsigned char)(bits >> 16);
+                bytes[3] = (unsigned char)(bits >> 24);
+                fwrite(bytes, 1, 4, f);
+            }
+    ok = !ferror(f);
+    return fclose(f) == 0 && ok;
+}
+
+/* Reads the little-endian colour PFMs rrv writes; rows come back top first. */
+static float *read_pfm_by_hand(const char *path, int *width, int *height)
+{
+    size_t size = 0, offset, count, i;
+    unsigned char *data = (unsigned char *)read_whole_file(path, &size);
+    float *rgb;
+    double scale;
+    int header_length = 0, x, y, c;
+    if (!data) return NULL;
+    if (sscanf((const char *)data, "PF\n%d %d\n%lf%n", width, height, &scale, &header_length) != 3 ||
+        *width <= 0 || *height <= 0 || scale >= 0) {
+        free(data);
+        return NULL;
+    }
+    offset = (size_t)header_length + 1; /* the single newline after the scale */
+    count = (size_t)*width * (size_t)*height * 3;
+    if (size != offset + 4 * count) {
+        free(data);
+        return NULL;
+    }
+    rgb = (float *)malloc(count * sizeof *rgb);
+    if (!rgb) {
+        free(data);
+        return NULL;
+    }
+    i = offset;
+    for (y = *height - 1; y >= 0; --y)
+        for (x = 0; x < *width; ++x)
+            for (c = 0; c < 3; ++c, i += 4) {
+                uint32_t bits = (uint32_t)data[i] | (uint32_t)data[i + 1] << 8 |
+                                (uint32_t)data[i + 2] << 16 | (uint32_t)data[i + 3] << 24;
+                memcpy(&rgb[3 * ((size_t)y * *width + x) + c], &bits, 4);
+            }
+    free(data);
+    return rgb;
+}
+
+static int files_identical(const char *a, const char *b)
+{
+    size_t size_a = 0, size_b = 0;
+    char *data_a = (char *)read_whole_file(a, &size_a), *data_b = (char *)read_whole_file(b, &size_b);
+    int same = data_a && data_b && size_a == size_b && memcmp(data_a, data_b, size_a) == 0;
+    free(data_a);
+    free(data_b);
+    return same;
+}
+
+/* ---- tests ------------------------------------------------------------------ */
+
+static void help_exits_zero(void)
+{
+    static const char *const commands[] = {"--help", "-h", "help", "help render",
+                                           "render --help", "diff --help", "info --help",
+                                           "trace --help", "help trace"};
+    size_t i;
+    for (i = 0; i < sizeof commands / sizeof commands[0]; ++i) {
+        char arguments[256];
+        snprintf(arguments, sizeof arguments, "%s", commands[i]);
+        CHECKF(rrv(arguments) == 0, "rrv %s exited %d", commands[i], last_run.code);
+        CHECKF(strstr(last_run.out, "usage") != NULL, "rrv %s printed no usage on stdout",
+               commands[i]);
+        CHECKF(last_run.err[0] == '\0', "rrv %s wrote to stderr: %s", commands[i], last_run.err);
+    }
+    rrv("diff --help");
+    CHECKF(strstr(last_run.out, "reference") != NULL, "diff --help does not say B is the reference");
+    CHECK(rrv("--version") == 0);
+    CHECK(strncmp(last_run.out, "rrv ", 4) == 0);
+}
+
+static void expect_usage_error(const char *arguments)
+{
+    rrv(arguments);
+    CHECKF(last_run.code == 1, "rrv %s exited %d, not 1; stderr: %s", arguments, last_run.code,
+           last_run.err);
+    CHECKF(strstr(last_run.err, "--help") != NULL || strstr(last_run.err, "usage") != NULL,
+           "rrv %s gave no hint to --help: %s", arguments, last_run.err);
+}
+
+static void usage_errors_exit_one(void)
+{
+    static const char *const render_flags[] = {
+        "--bogus", "--spp 0", "--spp abc", "--spp 3x", "--spp", "--spp -2", "--threads -1",
+        "--threads 0", "--seed -3", "--seed 1.5", "--exposure nan", "--exposure", "--integrator magic",
+        "--max-grid-mb 0", "--crop 0 0 8", "--crop 0 0 100 100", "--crop 5 5 5 10",
+        "--crop 0 0 24 17", "--crop -1 0 4 4", "--crop a 0 4 4", "extra_positional.rrv"};
+    const char *out = tmp_path("usage_out.pfm");
+    char arguments[2 * PATH_SIZE];
+    size_t i;
+
+    expect_usage_error("frobnicate");
+    expect_usage_error("--frobnicate");
+    CHECK(rrv("") == 1);
+    remove(out);
+    for (i = 0; i < sizeof render_flags / sizeof render_flags[0]; ++i) {
+        snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q %s", tiny_scene, out,
+                 render_flags[i]);
+        expect_usage_error(arguments);
+    }
+    CHECKF(!file_exists(out), "a usage error wrote %s", out);
+
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --spp abc", tiny_scene, out);
+    rrv(arguments);
+    CHECKF(strstr(last_run.err, "rrv: --spp needs a positive integer") != NULL &&
+               strstr(last_run.err, "\"abc\"") != NULL,
+           "unexpected message: %s", last_run.err);
+
+    snprintf(arguments, sizeof arguments, "render '%s'", tiny_scene); /* no -o */
+    expect_usage_error(arguments);
+    snprintf(arguments, sizeof arguments, "render -o '%s'", out); /* no scene */
+    expect_usage_error(arguments);
+    expect_usage_error("diff only_one.pfm");
+    expect_usage_error("diff a.pfm b.pfm c.pfm");
+    expect_usage_error("info");
+    snprintf(arguments, sizeof arguments, "info '%s' --spp 3", tiny_scene);
+    expect_usage_error(arguments);
+    snprintf(arguments, sizeof arguments, "trace '%s'", tiny_scene); /* no --ray */
+    expect_usage_error(arguments);
+    snprintf(arguments, sizeof arguments, "trace '%s' --ray 0 0 0 1 0", tiny_scene);
+    expect_usage_error(arguments);
+    snprintf(arguments, sizeof arguments, "trace '%s' --ray 0 0 0 0 0 0", tiny_scene);
+    expect_usage_error(arguments);
+    snprintf(arguments, sizeof arguments, "trace '%s' --ray 0 0 0 0 0 1 --integrator classic",
+             tiny_scene);
+    expect_usage_error(arguments);
+    snprintf(arguments, sizeof arguments, "trace '%s' --ray 0 0 0 0 0 1 --n 0", tiny_scene);
+    expect_usage_error(arguments);
+}
+
+static int compare_names(const void *a, const void *b)
+{
+    return strcmp(*(char *const *)a, *(char *const *)b);
+}
+
+static void corpus_errors_match_expect(void)
+{
+    DIR *dir = opendir("test/corpus");
+    char *names[1024];
+    int count = 0, i;
+    struct dirent *entry;
+    CHECKF(dir != NULL, "cannot open test/corpus: %s", strerror(errno));
+    if (!dir) return;
+    while ((entry = readdir(dir)) != NULL && count < 1024) {
+        size_t n = strlen(entry->d_name);
+        if (n > 4 && strcmp(entry->d_name + n - 4, ".rrv") == 0) {
+            names[count] = (char *)malloc(n + 1);
+            if (names[count]) memcpy(names[count++], entry->d_name, n + 1);
+        }
+    }
+    closedir(dir);
+    CHECKF(count > 0, "test/corpus holds no .rrv files");
+    qsort(names, (size_t)count, sizeof names[0], compare_names);
+
+    for (i = 0; i < count; ++i) {
+        char scene[PATH_SIZE], expect_path[PATH_SIZE], arguments[2 * PATH_SIZE];
+        char *expected;
+        snprintf(scene, sizeof scene, "test/corpus/%s", names[i]);
+        snprintf(expect_path, sizeof expect_path, "test/corpus/%.*s.expect",
+                 (int)strlen(names[i]) - 4, names[i]);
+        expected = (char *)read_whole_file(expect_path, NULL);
+        CHECKF(expected != NULL, "%s has no %s", scene, expect_path);
+        if (!expected) continue;
+        strip_trailing_space(expected);
+        snprintf(arguments, sizeof arguments, "info '%s'", scene);
+        rrv(arguments);
+        strip_trailing_space(last_run.err);
+        CHECKF(last_run.code == 2, "rrv info %s exited %d, not 2", scene, last_run.code);
+        CHECKF(strcmp(last_run.err, expected) == 0,
+               "rrv info %s:\n    stderr:   %s\n    expected: %s", scene, last_run.err, expected);
+        free(expected);
+    }
+
+    if (count > 0) {
+        const char *out = tmp_path("corpus_out.pfm");
+        char arguments[2 * PATH_SIZE], tmp_out[PATH_SIZE];
+        snprintf(tmp_out, sizeof tmp_out, "%s.tmp", out);
+        remove(out);
+        snprintf(arguments, sizeof arguments, "render 'test/corpus/%s' -o '%s' -q", names[0], out);
+        CHECKF(rrv(arguments) == 2, "rrv %s exited %d, not 2", arguments, last_run.code);
+        CHECKF(!file_exists(out) && !file_exists(tmp_out), "a failed render wrote %s", out);
+    }
+    for (i = 0; i < count; ++i) free(names[i]);
+}
+
+static void failed_render_keeps_existing_output(void)
+{
+    static const char good[] = "a good image from an earlier render";
+    const char *out = tmp_path("keep.pfm");
+    char arguments[3 * PATH_SIZE];
+    size_t size = 0;
+    char *after;
+
+    CHECK(write_text(out, good));
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q", bad_scene, out);
+    CHECKF(rrv(arguments) == 2, "bad scene: exit %d, stderr %s", last_run.code, last_run.err);
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q", tmp_path("missing.rrv"), out);
+    CHECKF(rrv(arguments) == 2, "missing scene: exit %d", last_run.code);
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q --crop 0 0 99 99", tiny_scene,
+             out);
+    CHECKF(rrv(arguments) == 1, "bad crop: exit %d", last_run.code);
+
+    after = (char *)read_whole_file(out, &size);
+    CHECKF(after && size == strlen(good) && memcmp(after, good, size) == 0,
+           "%s was changed by a failed render", out);
+    free(after);
+}
+
+static void unwritable_output_exits_three(void)
+{
+    char arguments[3 * PATH_SIZE];
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q", tiny_scene,
+             tmp_path("no_such_dir/out.pfm"));
+    CHECKF(rrv(arguments) == 3, "exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(last_run.err[0] != '\0');
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --png '%s' -q", tiny_scene,
+             tmp_path("png_dir_missing.pfm"), tmp_path("no_such_dir/out.png"));
+    CHECKF(rrv(arguments) == 3, "exit %d, stderr %s", last_run.code, last_run.err);
+}
+
+static void diff_reports_known_errors(void)
+{
+    /* 2x2 images, rows top first. B is the reference. */
+    static const float a[12] = {1, 2, 3, 4, 5, 6, 0.5f, 0, 0, 7, 8, 9};
+    static const float b[12] = {1, 2, 3, 4, 2, 6, 1.5f, 0, 0, 7, 8, 9};
+    static const float small[3] = {1, 2, 3};
+    const char *path_a = tmp_path("diff_a.pfm"), *path_b = tmp_path("diff_b.pfm");
+    const char *path_small = tmp_path("diff_small.pfm"), *path_junk = tmp_path("diff_junk.pfm");
+    char arguments[3 * PATH_SIZE];
+    double expected_relmse = (9.0 / (4.0 + 1e-2) + 1.0 / (2.25 + 1e-2)) / 12.0;
+    const char *pixel;
+
+    CHECK(write_pfm_by_hand(path_a, a, 2, 2));
+    CHECK(write_pfm_by_hand(path_b, b, 2, 2));
+    CHECK(write_pfm_by_hand(path_small, small, 1, 1));
+    CHECK(write_text(path_junk, "PF\n2 2\n-1.0\nshort"));
+
+    snprintf(arguments, sizeof arguments, "diff '%s' '%s'", path_a, path_a);
+    CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+    CHECKF(key_number(last_run.out, "rmse") == 0, "%s", last_run.out);
+    CHECKF(key_number(last_run.out, "max_abs_error") == 0, "%s", last_run.out);
+
+    snprintf(arguments, sizeof arguments, "diff '%s' '%s'", path_a, path_b);
+    CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+    CHECKF(near(key_number(last_run.out, "rmse"), sqrt(10.0 / 12.0)), "%s", last_run.out);
+    CHECKF(near(key_number(last_run.out, "relmse"), expected_relmse), "%s", last_run.out);
+    CHECKF(near(key_number(last_run.out, "mae"), 4.0 / 12.0), "%s", last_run.out);
+    CHECKF(near(key_number(last_run.out, "max_abs_error"), 3.0), "%s", last_run.out);
+    pixel = find_key(last_run.out, "max_abs_pixel");
+    CHECKF(pixel && strncmp(pixel, "1 0\n", 4) == 0, "%s", last_run.out);
+    pixel = find_key(last_run.out, "max_abs_channel");
+    CHECKF(pixel && strncmp(pixel, "g\n", 2) == 0, "%s", last_run.out);
+
+    snprintf(arguments, sizeof arguments, "diff '%s' '%s'", path_a, path_small);
+    CHECKF(rrv(arguments) == 2, "size mismatch: exit %d", last_run.code);
+    CHECK(last_run.err[0] != '\0');
+    snprintf(arguments, sizeof arguments, "diff '%s' '%s'", path_a, path_junk);
+    CHECKF(rrv(arguments) == 2, "truncated PFM: exit %d", last_run.code);
+    snprintf(arguments, sizeof arguments, "diff '%s' '%s'", tmp_path("missing.pfm"), path_a);
+    CHECKF(rrv(arguments) == 2, "missing PFM: exit %d", last_run.code);
+}
+
+static void render_is_deterministic(void)
+{
+    static const int crops[4][4] = {{0, 0, 10, 7}, {10, 0, 24, 7}, {0, 7, 10, 16}, {10, 7, 24, 16}};
+    const char *one = tmp_path("det_1.pfm"), *two = tmp_path("det_2.pfm");
+    const char *five = tmp_path("det_5.pfm"), *png = tmp_path("det.png");
+    char arguments[3 * PATH_SIZE];
+    float *full;
+    int width = 0, height = 0, i;
+
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --png '%s' --threads 1", tiny_scene,
+             one, png);
+    CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+    CHECKF(strstr(last_run.err, "rendered 24x16 at 4 spp in ") != NULL, "summary: %s", last_run.err);
+    CHECKF(strchr(last_run.err, '\r') == NULL, "progress bar drawn when stderr is not a terminal");
+    {
+        size_t size = 0;
+        unsigned char *data = (unsigned char *)read_whole_file(png, &size);
+        CHECKF(data && size > 8 && memcmp(data, "\x89PNG", 4) == 0, "%s is not a PNG", png);
+        free(data);
+    }
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --threads 2 -q", tiny_scene, two);
+    CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+    CHECKF(last_run.err[0] == '\0', "-q still printed: %s", last_run.err);
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --threads 5 -q", tiny_scene, five);
+    CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+    CHECKF(files_identical(one, two), "1 and 2 threads differ");
+    CHECKF(files_identical(one, five), "1 and 5 threads differ");
+
+    full = read_pfm_by_hand(one, &width, &height);
+    CHECKF(full && width == 24 && height == 16, "%s is not a 24x16 PFM", one);
+    if (!full || width != 24 || height != 16) {
+        free(full);
+        return;
+    }
+    for (i = 0; i < 4; ++i) {
+        const int *crop = crops[i];
+        const char *part = tmp_path("det_crop.pfm");
+        float *tile;
+        int tile_width = 0, tile_height = 0, x, y;
+        snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --threads 3 -q --crop %d %d %d %d",
+                 tiny_scene, part, crop[0], crop[1], crop[2], crop[3]);
+        CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+        tile = read_pfm_by_hand(part, &tile_width, &tile_height);
+        CHECKF(tile && tile_width == crop[2] - crop[0] && tile_height == crop[3] - crop[1],
+               "crop %d is %dx%d", i, tile_width, tile_height);
+        if (tile && tile_width == crop[2] - crop[0] && tile_height == crop[3] - crop[1]) {
+            int same = 1;
+            for (y = 0; y < tile_height; ++y)
+                for (x = 0; x < tile_width; ++x)
+                    same &= memcmp(&tile[3 * (y * tile_width + x)],
+                                   &full[3 * ((y + crop[1]) * width + x + crop[0])],
+                                   3 * sizeof(float)) == 0;
+            CHECKF(same, "crop %d %d %d %d differs from the full render", crop[0], crop[1],
+                   crop[2], crop[3]);
+        }
+        free(tile);
+    }
+    free(full);
+
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --spp 2 --seed 9", tiny_scene, two);
+    CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+    CHECKF(strstr(last_run.err, "at 2 spp") != NULL, "--spp not applied: %s", last_run.err);
+}
+
+static void info_describes_scene(void)
+{
+    char arguments[2 * PATH_SIZE];
+    snprintf(arguments, sizeof arguments, "info '%s'", tiny_scene);
+    CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+    CHECKF(strstr(last_run.out, "resolution: 24x16\n") != NULL, "%s", last_run.out);
+    CHECKF(key_number(last_run.out, "spp") == 4, "%s", last_run.out);
+    CHECKF(key_number(last_run.out, "shapes") == 2, "%s", last_run.out);
+    CHECKF(key_number(last_run.out, "lights") == 1, "%s", last_run.out);
+    CHECKF(key_number(last_run.out, "media") == 1, "%s", last_run.out);
+    CHECKF(strstr(last_run.out, "fog: box") != NULL, "%s", last_run.out);
+    CHECKF(find_key(last_run.out, "framebuffer") != NULL, "%s", last_run.out);
+    CHECKF(find_key(last_run.out, "bvh_nodes") != NULL, "%s", last_run.out);
+    CHECKF(find_key(last_run.out, "scene_memory") != NULL, "%s", last_run.out);
+}
+
+/* rrv_trace_ray may still be unimplemented: then the tool must fail cleanly. */
+static void trace_prints_csv(void)
+{
+    char arguments[2 * PATH_SIZE];
+    snprintf(arguments, sizeof arguments, "trace '%s' --ray 0 1 -3 0 0 1 --n 3", tiny_scene);
+    rrv(arguments);
+    CHECKF(last_run.code == 0 || last_run.code == 2, "exit %d", last_run.code);
+    if (last_run.code == 0) {
+        const char *row = last_run.out;
+        int rows = 0;
+        CHECKF(strncmp(row, "x,y,z,dx,dy,dz,events\n", 22) == 0, "%s", last_run.out);
+        while ((row = strchr(row, '\n')) != NULL && *++row) {
+            int commas = 0;
+            const char *p;
+            for (p = row; *p && *p != '\n'; ++p) commas += *p == ',';
+            CHECKF(commas == 6, "row %d: %.80s", rows, row);
+            ++rows;
+        }
+        CHECKF(rows == 3, "%d rows, not 3", rows);
+        snprintf(arguments, sizeof arguments, "trace '%s' --ray 0 1 -3 0 0 1 --path", tiny_scene);
+        CHECK(rrv(arguments) == 0);
+        CHECKF(strncmp(last_run.out, "walk,x,y,z,dx,dy,dz\n", 20) == 0, "%s", last_run.out);
+    } else {
+        CHECKF(last_run.err[0] != '\0', "exit 2 without a message");
+    }
+}
+
+static int write_scenes(void)
+{
+    /* Quad edges u x v point the light down onto the floor. */
+    static const char tiny[] =
+        "# 24x16, 4 spp: small enough to render many times in a test\n"
+        "camera eye 0 1 -4 look 0 0.8 0 fov 45 resolution 24 16\n"
+        "render spp 4 seed 7 maxdepth 8\n"
+        "environment constant L 0.05 0.05 0.05\n"
+        "material grey diffuse albedo 0.6 0.6 0.6\n"
+        "quad origin -2 0 -2 u 0 0 4 v 4 0 0 material grey\n"
+        "quad origin -0.5 2.5 -0.5 u 1 0 0 v 0 0 1 L 8 8 8\n"
+        "medium fog box -1 0 -1 1 2 1 sigma_a 0.2 0.2 0.2 sigma_s 0.6 0.6 0.6\n"
+        "density fog constant 0.8\n";
+    static const char bad[] =
+        "camera eye 0 0 -3 look 0 0 0\n"
+        "sphere center 0 0 0 radius -1\n";
+    return write_text(tiny_scene, tiny) && write_text(bad_scene, bad);
+}
+
+int main(int argc, char **argv)
+{
+    char command[2 * PATH_SIZE];
+    if (argc < 2 || strlen(argv[1]) > sizeof tmp_dir - 16) {
+        printf("usage: %s BUILD_DIR (a path under %d bytes)\n", argv[0], (int)sizeof tmp_dir - 16);
+        return 2;
+    }
+    snprintf(rrv_binary, sizeof rrv_binary, "%s/rrv", argv[1]);
+    snprintf(tmp_dir, sizeof tmp_dir, "%s/cli_tmp", argv[1]);
+    snprintf(tiny_scene, sizeof tiny_scene, "%s/tiny.rrv", tmp_dir);
+    snprintf(bad_scene, sizeof bad_scene, "%s/bad.rrv", tmp_dir);
+    snprintf(captured_stdout, sizeof captured_stdout, "%s/run_stdout.txt", tmp_dir);
+    snprintf(captured_stderr, sizeof captured_stderr, "%s/run_stderr.txt", tmp_dir);
+    if (mkdir(tmp_dir, 0777) != 0 && errno != EEXIST) {
+        printf("FAIL cannot create %s: %s\n", tmp_dir, strerror(errno));
+        return 1;
+    }
+    if (!file_exists(rrv_binary) || !write_scenes()) {
+        printf("FAIL setup: %s missing or %s not writable\n", rrv_binary, tmp_dir);
+        return 1;
+    }
+    /* A stale directory of this name would hide the exit-3 case. */
+    snprintf(command, sizeof command, "rm -rf '%s/no_such_dir'", tmp_dir);
+    if (system(command) != 0) printf("  could not clear %s/no_such_dir\n", tmp_dir);
+
+    RUN(help_exits_zero);
+    RUN(usage_errors_exit_one);
+    RUN(corpus_errors_match_expect);
+    RUN(failed_render_keeps_existing_output);
+    RUN(unwritable_output_exits_three);
+    RUN(diff_reports_known_errors);
+    RUN(render_is_deterministic);
+    RUN(info_describes_scene);
+    RUN(trace_prints_csv);
+    return CHECK_EXIT_CODE();
+}
