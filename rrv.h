@@ -238,7 +238,7 @@ typedef struct rrv_settings {
     int max_depth;        /* scattering/bounce vertices per path, >= 1 */
     uint64_t seed;
     rrv_integrator integrator;
-    double bend_tolerance;/* refractive: radians of bending per null event */
+    double bend_tolerance;/* refractive: radians of bending per event (default 0.01) */
     double mu_eta;        /* refractive: fixed refraction event rate, 1/m; 0 = automatic */
     rrv_refraction_scheme refraction; /* refractive */
     double step;          /* eikonal: step length h, m */
@@ -510,6 +510,11 @@ static rrv_vec3 rrv__vmin(rrv_vec3 a, rrv_vec3 b) { return rrv__v3(fmin(a.x, b.x
 static rrv_vec3 rrv__vmax(rrv_vec3 a, rrv_vec3 b) { return rrv__v3(fmax(a.x, b.x), fmax(a.y, b.y), fmax(a.z, b.z)); }
 static double rrv__max3(const double c[3]) { return fmax(c[0], fmax(c[1], c[2])); }
 static double rrv__clamp(double x, double lo, double hi) { return x < lo ? lo : x > hi ? hi : x; }
+/* max/min that return a when b is NaN, inlined: libm's fmax is a call in
+   hot loops without -ffast-math. Slab tests rely on ignoring the NaN of
+   0 * inf when a ray lies in a slab plane. */
+static double rrv__maxd(double a, double b) { return b > a ? b : a; }
+static double rrv__mind(double a, double b) { return b < a ? b : a; }
 
 /* Builds tangents t, b so that (t, b, n) is orthonormal, without a branch on a
    "safe" axis that would make the frame jump (Duff et al. 2017). */
@@ -700,9 +705,9 @@ static int rrv__box_hit(rrv_vec3 lo, rrv_vec3 hi, rrv_vec3 o, rrv_vec3 inv_d, do
         double ta = (rrv__axis(lo, axis) - oa) * inv, tb = (rrv__axis(hi, axis) - oa) * inv;
         if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
         /* NaN from 0*inf (origin on a slab plane, ray parallel) must not
-           reject: fmax/fmin ignore a NaN operand. */
-        t0 = fmax(t0, ta);
-        t1 = fmin(t1, tb);
+           reject: rrv__maxd/rrv__mind ignore a NaN second operand. */
+        t0 = rrv__maxd(t0, ta);
+        t1 = rrv__mind(t1, tb);
         if (t0 > t1) return 0;
     }
     if (t_enter) *t_enter = t0;
@@ -1288,6 +1293,8 @@ struct rrv__majorant_grid {
     double sigma_t_max;    /* max over channels of (sigma_a + sigma_s) * scale */
     float *density_max;    /* per cell */
     float *grad_max;       /* per cell max |grad r|, NULL if the medium does not refract */
+    int empty;             /* no extinction anywhere: density tracking can skip it */
+    int surface_free;      /* no surface reaches into the box: chords inside need no ray cast */
 };
 
 static int rrv__auto_cells(const rrv_medium *m, int axis)
@@ -1353,6 +1360,17 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, rrv
                 if (refracts)
                     g->grad_max[c] = (float)rrv__cell_gradient_bound(m, lo, hi, scene->settings.ambient_ior - 1.0);
             }
+    g->empty = 1;
+    for (c = 0; c < cells; ++c)
+        if (g->density_max[c] > 0 && g->sigma_t_max > 0) { g->empty = 0; break; }
+    g->surface_free = 1;
+    for (x = 0; x < scene->shape_count && g->surface_free; ++x) {
+        rrv_vec3 lo, hi;
+        rrv__shape_bounds(&scene->shapes[x], &lo, &hi);
+        if (lo.x <= m->hi.x && hi.x >= m->lo.x && lo.y <= m->hi.y && hi.y >= m->lo.y && lo.z <= m->hi.z &&
+            hi.z >= m->lo.z)
+            g->surface_free = 0;
+    }
     m->majorant = g;
     return RRV_OK;
 }
@@ -1454,12 +1472,14 @@ static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refra
     rrv_vec3 inv = rrv__v3(1.0 / d.x, 1.0 / d.y, 1.0 / d.z), p;
     double t0 = 0, t1 = tmax;
     int a;
+    /* A medium with nothing to collide with has no events to walk. */
+    if (g->empty && !(with_refraction && g->grad_max)) return 0;
     for (a = 0; a < 3; ++a) {
         double ia = rrv__axis(inv, a), oa = rrv__axis(o, a);
         double ta = (rrv__axis(m->lo, a) - oa) * ia, tb = (rrv__axis(m->hi, a) - oa) * ia;
         if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
-        t0 = fmax(t0, ta);
-        t1 = fmin(t1, tb);
+        t0 = rrv__maxd(t0, ta);
+        t1 = rrv__mind(t1, tb);
     }
     if (!(t0 < t1)) return 0;
     w->medium = m;
@@ -1515,7 +1535,7 @@ static void rrv__walker_advance(rrv__walker *w, rrv__rng *rng, uint64_t *events)
     for (;;) {
         int a = w->t_next[0] < w->t_next[1] ? (w->t_next[0] < w->t_next[2] ? 0 : 2)
                                             : (w->t_next[1] < w->t_next[2] ? 1 : 2);
-        double cell_end = fmin(w->t_next[a], w->t_end);
+        double cell_end = rrv__mind(w->t_next[a], w->t_end);
         double mu = rrv__walker_cell_majorant(w);
         if (mu > 0) {
             double t = w->t + rrv__sample_free_flight(mu, rng);
@@ -1590,8 +1610,8 @@ static int rrv__support_interval(const rrv_medium *m, rrv_vec3 o, rrv_vec3 d, do
         } else {
             double ta = (rrv__axis(m->lo, a) - oa) / da, tb = (rrv__axis(m->hi, a) - oa) / da;
             if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
-            lo = fmax(lo, ta);
-            hi = fmin(hi, tb);
+            lo = rrv__maxd(lo, ta);
+            hi = rrv__mind(hi, tb);
         }
     }
     if (!m->ior_from_gas && (m->ior.kind == RRV_FIELD_LUNEBURG || m->ior.kind == RRV_FIELD_FISHEYE)) {
@@ -1601,8 +1621,8 @@ static int rrv__support_interval(const rrv_medium *m, rrv_vec3 o, rrv_vec3 d, do
         double disc = m->ior.radius * m->ior.radius - rrv__dot(perp, perp), sq;
         if (disc <= 0) return 0;
         sq = sqrt(disc);
-        lo = fmax(lo, -b - sq);
-        hi = fmin(hi, -b + sq);
+        lo = rrv__maxd(lo, -b - sq);
+        hi = rrv__mind(hi, -b + sq);
     }
     *t0 = lo;
     *t1 = hi;
@@ -1625,15 +1645,21 @@ static double rrv__distance_to_refraction(const rrv_scene *scene, rrv_vec3 o, rr
     return best;
 }
 
-/* Distance along the ray to where it leaves the support it is in (0: in none). */
-static double rrv__refraction_exit(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d)
+/* Distance along the ray to where it leaves the support it is in (0: in
+   none); *surface_free tells whether no surface reaches into that support,
+   so that a chord inside it needs no ray cast. */
+static double rrv__refraction_exit(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, int *surface_free)
 {
     double t0, t1;
     int i;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
-        if (rrv__medium_refracts(m) && rrv__support_interval(m, o, d, &t0, &t1) && t0 <= 0 && t1 > 0) return t1;
+        if (rrv__medium_refracts(m) && rrv__support_interval(m, o, d, &t0, &t1) && t0 <= 0 && t1 > 0) {
+            if (surface_free) *surface_free = m->majorant->surface_free;
+            return t1;
+        }
     }
+    if (surface_free) *surface_free = 0;
     return 0;
 }
 
@@ -1645,13 +1671,13 @@ static double rrv__eikonal_advance(const rrv_scene *scene, rrv_stepper stepper, 
                                    rrv_vec3 *x_out, rrv_vec3 *d_out)
 {
     const double nudge = 1e-9;
-    double exit = rrv__refraction_exit(scene, x, d);
+    double exit = rrv__refraction_exit(scene, x, d, NULL);
     h = exit > 2 * nudge ? fmin(h, exit - nudge) : exit + nudge;
     rrv__eikonal_step(scene, stepper, h, x, d, x_out, d_out);
     if (h > 2 * nudge) {
         rrv_vec3 chord = rrv__sub(*x_out, x);
         double len = rrv__length(chord);
-        double exit_chord = rrv__refraction_exit(scene, x, rrv__scale(chord, 1.0 / len));
+        double exit_chord = rrv__refraction_exit(scene, x, rrv__scale(chord, 1.0 / len), NULL);
         if (exit_chord < len && exit_chord > 2 * nudge) {
             h *= (exit_chord - nudge) / len;
             rrv__eikonal_step(scene, stepper, h, x, d, x_out, d_out);
@@ -1675,6 +1701,7 @@ typedef struct rrv__bender {
     int at_exit;       /* comb: the next point is where the ray leaves the support */
     double comb_t;     /* comb: distance to the next point from the ray origin */
     double chord;      /* comb: length of the current chord */
+    int surface_free;  /* comb: the chord lies where no surface reaches */
 } rrv__bender;
 
 static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
@@ -1692,6 +1719,7 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     b->at_exit = 0;
     b->comb_t = DBL_MAX;
     b->chord = 0;
+    b->surface_free = 0;
 }
 
 /* A real vertex (scattering, a surface) starts a new straight ray. */
@@ -1783,7 +1811,7 @@ static void rrv__comb_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
         b->at_exit = 0;
         b->comb_t = t_in < DBL_MAX ? t_in + 1e-9 * (1.0 + t_in) : DBL_MAX;
     } else {
-        double exit = rrv__refraction_exit(scene, o, *d);
+        double exit = rrv__refraction_exit(scene, o, *d, &b->surface_free);
         double first = rrv__comb_spacing(scene, o) * (1.0 - rrv__uniform(rng));
         rrv__comb_advance(b, first, exit);
         *d = rrv__comb_kick(b, scene, o, *d, b->chord, rrv__madd(o, *d, 1e-3 * b->chord));
@@ -1800,7 +1828,7 @@ static rrv_vec3 rrv__comb_bend(rrv__bender *b, const rrv_scene *scene, rrv_vec3 
         return d;
     }
     h = rrv__comb_spacing(scene, x);
-    exit = rrv__refraction_exit(scene, x, d);
+    exit = rrv__refraction_exit(scene, x, d, &b->surface_free);
     if (!(exit > 0)) {
         b->r = rrv__scene_refractivity(scene, x, NULL);
         b->planned = 0;
@@ -2170,7 +2198,8 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             if (!path.bender.planned) rrv__comb_plan(&path.bender, scene, o, &d, rng);
             segment = path.bender.comb_t;
         }
-        has_hit = rrv__intersect_scene(scene, o, d, segment, &hit);
+        has_hit = ctx->comb && path.bender.planned && !path.bender.entering && path.bender.surface_free
+                      ? 0 : rrv__intersect_scene(scene, o, d, segment, &hit);
         outcome = rrv__sample_free_flight_path(ctx, &path, o, d, has_hit ? hit.t : segment, rng, &flight);
         if (outcome == RRV__FLIGHT_ABSORBED) break;
         if (outcome == RRV__FLIGHT_PASSED && !has_hit && segment < DBL_MAX) {
@@ -2306,7 +2335,7 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
     if (scene->medium_count > RRV__MAX_MEDIA)
         return rrv__fail(err, RRV_ERROR_LIMIT, scene->path, 0, "%d media; at most %d are supported",
                          scene->medium_count, RRV__MAX_MEDIA);
-    if (scene->settings.bend_tolerance <= 0) scene->settings.bend_tolerance = 0.002;
+    if (scene->settings.bend_tolerance <= 0) scene->settings.bend_tolerance = 0.01;
     if (scene->settings.step <= 0) scene->settings.step = 0.01;
     if (scene->settings.ambient_ior < 1.0) scene->settings.ambient_ior = 1.0;
     for (i = 0; i < scene->shape_count; ++i) {
@@ -5055,7 +5084,7 @@ RRV_DEF rrv_result rrv_scene_parse(const char *text, size_t size, const char *na
     s->settings.spp = 16;
     s->settings.max_depth = 32;
     s->settings.integrator = RRV_INTEGRATOR_CLASSIC;
-    s->settings.bend_tolerance = 0.002;
+    s->settings.bend_tolerance = 0.01;
     s->settings.step = 0.01;
     s->settings.stepper = RRV_STEPPER_DEFAULT;
     s->settings.refraction = RRV_REFRACTION_DEFAULT;
