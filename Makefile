@@ -55,7 +55,7 @@ build-fuzz/fuzz_%: test/fuzz_%.c rrv.h
 	$(FUZZ_CC) $(FUZZ_FLAGS) -o $@ $< -lm
 
 bench: $(BUILD)/rrv
-	sh test/bench.sh $(BUILD)/rrv
+	python3 test/bench/bench.py $(BUILD)/rrv
 
 clean:
 	rm -rf build build-san build-fuzz rrv

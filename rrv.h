@@ -53,7 +53,12 @@
 
 #ifndef RRV_DEF
 #ifdef RRV_STATIC
+#if defined(__GNUC__) || defined(__clang__)
+/* a static library copy need not use every function */
+#define RRV_DEF static __attribute__((unused))
+#else
 #define RRV_DEF static
+#endif
 #else
 #define RRV_DEF extern
 #endif
@@ -2565,7 +2570,7 @@ RRV_DEF uint32_t rrv_adler32(uint32_t adler, const void *data, size_t size)
     while (size > 0) {
         /* ADLER_MAX_RUN is the longest run of 0xFF bytes after which b still
            fits in 32 bits, so the modulo is needed only once per run. */
-        size_t run = size < ADLER_MAX_RUN ? size : ADLER_MAX_RUN;
+        size_t run = size < (size_t)ADLER_MAX_RUN ? size : (size_t)ADLER_MAX_RUN;
         size -= run;
         for (; run > 0; --run) {
             a += *bytes++;

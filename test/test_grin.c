@@ -1,0 +1,671 @@
+/* Refraction against closed forms: Luneburg focus, Maxwell fish-eye circles,
+   the catenary through a linear slab, the Born deflection of a weak Gaussian,
+   and the numerical stability of the Snell kick.
+
+   Error models (measured with test/measure_grin.c, which prints the tables):
+     - RK4 eikonal: fourth order down to a ~1e-9 floor set by the 1 nm nudge
+       at the support edge. Bounds are 10x-100x the measured error, so they
+       catch a lost order (third order at h = 0.05 would already be ~1e-5).
+     - COMB: second order for almost every walk, plus a rare O(h) error when
+       a comb point falls next to a turning point of the ray (see the report);
+       its mean is first order, ~0.05/mu at b = 0.5 in the Luneburg lens.
+     - POISSON: first order, mean error ~0.6/mu (Luneburg, b = 0.5).
+   Stochastic checks use fixed seeds and bound the MEAN error over N walks by
+   (measured-model bias allowance) + 4 standard errors of that mean: a correct
+   scheme fails with probability < 1e-4 even if the seeds changed. Setting
+   GRIN_VERBOSE=1 prints every measured value next to its bound. */
+#define RRV_IMPLEMENTATION
+#include "../rrv.h"
+#include "check.h"
+#include "scene_builder.h"
+
+static int verbose;
+
+#define SAY(...)                                                                                                       \
+    do {                                                                                                               \
+        if (verbose) printf(__VA_ARGS__);                                                                              \
+    } while (0)
+
+/* ---- scenes ------------------------------------------------------------------------ */
+
+static rrv_medium *refractive_medium(rrv_scene *s, rrv_vec3 lo, rrv_vec3 hi, rrv_field_kind kind)
+{
+    rrv_medium *m = tb_medium(s, lo, hi, 0, 0);
+    m->density.kind = RRV_FIELD_NONE;
+    m->ior.kind = kind;
+    return m;
+}
+
+static void prepare(rrv_scene *s)
+{
+    rrv_error err;
+    rrv_result r = rrv_scene_prepare(s, &err);
+    CHECKF(r == RRV_OK, "prepare: %s", err.message);
+}
+
+static rrv_scene *luneburg_scene(void)
+{
+    rrv_scene *s = tb_scene(4, 4);
+    rrv_medium *m = refractive_medium(s, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), RRV_FIELD_LUNEBURG);
+    m->ior.center = rrv__v3(0, 0, 0);
+    m->ior.radius = 1;
+    prepare(s);
+    return s;
+}
+
+static void set_method(rrv_scene *s, rrv_refraction_scheme scheme, double mu_eta, rrv_stepper stepper, double h)
+{
+    s->settings.refraction = scheme;
+    s->settings.mu_eta = mu_eta;
+    s->settings.stepper = stepper;
+    s->settings.step = h;
+}
+
+static int finite3(rrv_vec3 v) { return v.x - v.x == 0 && v.y - v.y == 0 && v.z - v.z == 0; }
+
+/* Distance of the line through p along unit d from the point f. */
+static double line_distance(rrv_vec3 p, rrv_vec3 d, rrv_vec3 f)
+{
+    return rrv__length(rrv__cross(rrv__sub(f, p), d));
+}
+
+static int trace(const rrv_scene *s, rrv_integrator integ, rrv_vec3 o, rrv_vec3 d, uint64_t walk,
+                 rrv_trace_visit_func visit, void *user, rrv_trace_result *r)
+{
+    rrv_error err;
+    rrv_result res = rrv_trace_ray(s, integ, o, d, 2024, walk, visit, user, r, &err);
+    CHECKF(res == RRV_OK, "trace: %s", err.message);
+    CHECKF(finite3(r->position) && finite3(r->direction) && fabs(rrv__length(r->direction) - 1) < 1e-12,
+           "non-finite or non-unit exit (%g %g %g) (%g %g %g)", r->position.x, r->position.y, r->position.z,
+           r->direction.x, r->direction.y, r->direction.z);
+    return res == RRV_OK;
+}
+
+/* Mean and standard error of the mean of `walks` samples. */
+typedef struct stat { double sum, sum2; int n; } stat;
+static void stat_add(stat *s, double x) { s->sum += x; s->sum2 += x * x; s->n++; }
+static double stat_mean(const stat *s) { return s->sum / s->n; }
+static double stat_se(const stat *s)
+{
+    double m = stat_mean(s);
+    return s->n > 1 ? sqrt(fmax(0.0, s->sum2 / s->n - m * m) / (s->n - 1)) : 0.0;
+}
+
+/* ---- a. Luneburg lens: parallel rays focus on the antipodal point ---------------- */
+
+static const double IMPACTS[] = {0.1, 0.3, 0.5, 0.7, 0.9};
+
+static void test_luneburg_rk4(void)
+{
+    rrv_scene *s = luneburg_scene();
+    int i;
+    /* Fourth order: measured 3.5e-9 at b = 0.5, h = 0.05 (0.3e-9 .. 2e-8 over
+       b); bound 1e-7 is ~5x the worst, a third-order method would give 1e-5. */
+    set_method(s, RRV_REFRACTION_DEFAULT, 0, RRV_STEPPER_RK4, 0.05);
+    for (i = 0; i < 5; ++i) {
+        rrv_trace_result r;
+        double e;
+        if (!trace(s, RRV_INTEGRATOR_EIKONAL, rrv__v3(IMPACTS[i], 0, -2), rrv__v3(0, 0, 1), 0, NULL, NULL, &r)) break;
+        e = line_distance(r.position, r.direction, rrv__v3(0, 0, 1));
+        SAY("  luneburg rk4 b=%.1f err=%.3e (bound 1e-7) pos-focus=%.3e\n", IMPACTS[i], e,
+            rrv__length(rrv__sub(r.position, rrv__v3(0, 0, 1))));
+        CHECKF(e < 1e-7, "b = %g: RK4 exit ray misses the focus by %g", IMPACTS[i], e);
+        /* The exit point itself is the focus (it lies on the surface). */
+        CHECKF(rrv__length(rrv__sub(r.position, rrv__v3(0, 0, 1))) < 1e-6, "b = %g: exit point off the focus", IMPACTS[i]);
+    }
+    rrv_scene_free(s);
+}
+
+/* Stochastic schemes: mean over `walks` of the focus miss, bounded by
+   allowance(b) + 4 standard errors. */
+static void luneburg_stochastic(rrv_refraction_scheme scheme, double mu_eta, int walks, const double allowance[5],
+                                const char *name)
+{
+    rrv_scene *s = luneburg_scene();
+    int i, w;
+    set_method(s, scheme, mu_eta, RRV_STEPPER_DEFAULT, 0.01);
+    for (i = 0; i < 5; ++i) {
+        stat st = {0, 0, 0};
+        double bound;
+        for (w = 0; w < walks; ++w) {
+            rrv_trace_result r;
+            if (!trace(s, RRV_INTEGRATOR_REFRACTIVE, rrv__v3(IMPACTS[i], 0, -2), rrv__v3(0, 0, 1), (uint64_t)w, NULL,
+                       NULL, &r))
+                break;
+            stat_add(&st, line_distance(r.position, r.direction, rrv__v3(0, 0, 1)));
+        }
+        if (!st.n) break;
+        bound = allowance[i] + 4 * stat_se(&st);
+        SAY("  luneburg %s b=%.1f mean=%.3e se=%.1e bound=%.3e\n", name, IMPACTS[i], stat_mean(&st), stat_se(&st),
+            bound);
+        CHECKF(stat_mean(&st) < bound, "%s b = %g: mean focus miss %g > %g", name, IMPACTS[i], stat_mean(&st), bound);
+    }
+    rrv_scene_free(s);
+}
+
+static void test_luneburg_comb_default(void)
+{
+    /* Default bend tolerance (0.002 rad): ~750 points/m where |grad eta| ~ 1.
+       Measured means over 64 walks: b = 0.1, 0.3, 0.5: 4e-6, 5e-6, 9e-6 (the
+       second-order part); b = 0.7, 0.9: 3.3e-4, 3.1e-4, dominated by the few
+       walks whose comb point falls next to the ray's turning point (closest
+       approach to the centre), where the Snell kick is ill-conditioned and
+       errs by O(h) (library issue, see the report). Allowances: 3e-5 and
+       8e-4, ~2.5x the measured means, plus 4 standard errors. */
+    static const double allowance[5] = {3e-5, 3e-5, 3e-5, 8e-4, 8e-4};
+    luneburg_stochastic(RRV_REFRACTION_COMB, 0, 64, allowance, "comb(default)");
+}
+
+static void test_luneburg_poisson(void)
+{
+    /* mu_eta = 300: first order, measured mean 2.0e-3 at b = 0.5 (400 walks).
+       Allowance 1.5x the measured mean per b (bias, not noise: the miss is
+       a deterministic drift of the walk plus a random part). */
+    static const double allowance[5] = {1.5e-3, 2.5e-3, 3.0e-3, 4.0e-3, 6.0e-3};
+    luneburg_stochastic(RRV_REFRACTION_POISSON, 300, 64, allowance, "poisson(300)");
+}
+
+/* ---- b. Maxwell fish-eye: rays are circles through P and P' = -R^2 P/|P|^2 ---------- */
+
+/* eta = n0 / (1 + (r/R)^2) maps to a sphere by stereographic projection
+   (Born & Wolf 4.2.2): rays are circles, and every ray from P passes through
+   the inverse antipode P' = -R^2 P / |P|^2. The library truncates the profile
+   at r = R (eta = n0/2 = 1 outside), so for P inside, P' lies outside and is
+   not reached; instead (1) P on the sphere images to -P, on the sphere, where
+   the walk leaves: the walk must end at -P; (2) from P inside, every vertex of
+   the walk must lie on the exact circle through P and P' tangent to d0. */
+
+typedef struct circle { rrv_vec3 c, axis; double rho; } circle;
+
+static circle fisheye_circle(rrv_vec3 P, rrv_vec3 d0, double R)
+{
+    circle k;
+    double p2 = rrv__dot(P, P);
+    rrv_vec3 Pp = rrv__scale(P, -R * R / p2), w = rrv__sub(Pp, P);
+    rrv_vec3 nn = rrv__normalize(rrv__madd(w, d0, -rrv__dot(w, d0)));
+    /* centre C = P + rho nn with |C - P'| = rho */
+    k.rho = rrv__dot(w, w) / (2 * rrv__dot(nn, w));
+    k.c = rrv__madd(P, nn, k.rho);
+    k.axis = rrv__normalize(rrv__cross(d0, nn));
+    return k;
+}
+
+static double circle_distance(const circle *k, rrv_vec3 p)
+{
+    rrv_vec3 q = rrv__sub(p, k->c);
+    double off = rrv__dot(q, k->axis);
+    rrv_vec3 inplane = rrv__madd(q, k->axis, -off);
+    double radial = rrv__length(inplane) - k->rho;
+    return sqrt(off * off + radial * radial);
+}
+
+typedef struct path_check { const circle *k; double worst; rrv_vec3 closest_to; double closest; int count; } path_check;
+
+static void visit_circle(void *user, rrv_vec3 p, rrv_vec3 d)
+{
+    path_check *pc = (path_check *)user;
+    double dist = rrv__length(rrv__sub(p, pc->closest_to));
+    (void)d;
+    pc->worst = fmax(pc->worst, circle_distance(pc->k, p));
+    pc->closest = fmin(pc->closest, dist);
+    pc->count++;
+}
+
+static rrv_scene *fisheye_scene(void)
+{
+    rrv_scene *s = tb_scene(4, 4);
+    rrv_medium *m = refractive_medium(s, rrv__v3(-1.5, -1.5, -1.5), rrv__v3(1.5, 1.5, 1.5), RRV_FIELD_FISHEYE);
+    m->ior.center = rrv__v3(0, 0, 0);
+    m->ior.radius = 1;
+    m->ior.n0 = 2;
+    prepare(s);
+    return s;
+}
+
+static void fisheye_run(rrv_integrator integ, rrv_refraction_scheme scheme, double h, double path_tol,
+                        double focus_tol, const char *name)
+{
+    rrv_scene *s = fisheye_scene();
+    /* P on the sphere (slightly inside, so the walk starts in the support;
+       its image -P R^2/|P|^2 is then 1e-9 outside, within any tolerance). */
+    rrv_vec3 P = rrv__v3(0, 0, -(1 - 1e-9)), Pp = rrv__scale(P, -1.0 / rrv__dot(P, P));
+    /* interior point */
+    rrv_vec3 Q = rrv__v3(0.3, -0.2, 0.1);
+    static const double angles[] = {10, 25, 40, 55, 70, 85};
+    int i;
+    set_method(s, scheme, 0, RRV_STEPPER_RK4, h);
+    for (i = 0; i < 6; ++i) {
+        double a = angles[i] * RRV__PI / 180.0;
+        /* inward directions, rotated about z so the planes differ */
+        rrv_vec3 d0 = rrv__v3(sin(a) * cos(0.7 * i), sin(a) * sin(0.7 * i), cos(a));
+        circle k = fisheye_circle(P, d0, 1.0);
+        path_check pc;
+        rrv_trace_result r;
+        pc.k = &k; pc.worst = 0; pc.closest_to = Pp; pc.closest = DBL_MAX; pc.count = 0;
+        if (!trace(s, integ, P, d0, (uint64_t)i, visit_circle, &pc, &r)) break;
+        SAY("  fisheye %s P on sphere angle %g: end-P'=%.3e closest=%.3e path dev=%.3e (%d vertices)\n", name,
+            angles[i], rrv__length(rrv__sub(r.position, Pp)), pc.closest, pc.worst, pc.count);
+        CHECKF(rrv__length(rrv__sub(r.position, Pp)) < focus_tol, "%s angle %g: walk ends %g from P'", name, angles[i],
+               rrv__length(rrv__sub(r.position, Pp)));
+        CHECKF(pc.worst < path_tol, "%s angle %g: a vertex is %g off the ray circle", name, angles[i], pc.worst);
+    }
+    for (i = 0; i < 6; ++i) {
+        double a = (20.0 + 30.0 * i) * RRV__PI / 180.0;
+        rrv_vec3 d0 = rrv__normalize(rrv__v3(cos(a), sin(a), 0.3 * (i - 2.5)));
+        circle k = fisheye_circle(Q, d0, 1.0);
+        path_check pc;
+        rrv_trace_result r;
+        double tangent;
+        pc.k = &k; pc.worst = 0; pc.closest_to = Q; pc.closest = DBL_MAX; pc.count = 0;
+        if (!trace(s, integ, Q, d0, (uint64_t)i, visit_circle, &pc, &r)) break;
+        /* the exit direction is tangent to the circle: perpendicular to the radius */
+        tangent = fabs(rrv__dot(r.direction, rrv__normalize(rrv__sub(r.position, k.c))));
+        SAY("  fisheye %s interior dir %d: path dev=%.3e exit |p|=%.6f tangent err=%.3e\n", name, i, pc.worst,
+            rrv__length(r.position), tangent);
+        CHECKF(pc.worst < path_tol, "%s interior %d: a vertex is %g off the ray circle", name, i, pc.worst);
+        CHECKF(tangent < path_tol * 10, "%s interior %d: exit direction not tangent (%g)", name, i, tangent);
+        CHECKF(fabs(rrv__length(r.position) - 1) < 1e-6, "%s interior %d: the walk did not end on the sphere", name, i);
+    }
+    rrv_scene_free(s);
+}
+
+static void test_fisheye_rk4(void)
+{
+    /* RK4 h = 0.05: measured path deviation <= 5e-7 (fourth order: 3e-8 at
+       10 degrees to 5e-7 at 85), end point <= 5e-6 (the 85 degree ray leaves
+       the sphere at a grazing angle, which multiplies the along-surface
+       error). Bounds 2e-6 and 2e-5. */
+    fisheye_run(RRV_INTEGRATOR_EIKONAL, RRV_REFRACTION_DEFAULT, 0.05, 2e-6, 2e-5, "rk4");
+}
+
+static void test_fisheye_comb(void)
+{
+    /* COMB at the default tolerance (~1500 points/m): second order, measured
+       path deviation 1e-7 .. 3e-6 for the rays whose comb points stay clear
+       of the turning point (where the ray is tangent to a sphere r = const).
+       Bounds 2e-5 (path) and 5e-5 (end point, grazing exit).
+       KNOWN FAILURE (library): at 55, 70 and 85 degrees the Snell kick at the
+       turning point goes the wrong way; the 85 degree ray is captured into a
+       slow inward spiral (135000 comb points, ~180 m of path) instead of
+       reaching -P. See the report. */
+    fisheye_run(RRV_INTEGRATOR_REFRACTIVE, RRV_REFRACTION_COMB, 0.01, 2e-5, 5e-5, "comb");
+}
+
+/* ---- c. linear slab: the catenary ---------------------------------------------------- */
+
+/* eta - 1 = 0.2 - 0.4 y in y in [-0.5, 0.5] (eta 1.4 .. 1.0): the ray starts
+   inside at y0 = -0.45 (no jump where it starts) and leaves at the top where
+   eta = 1 equals the ambient IOR (no jump where it leaves), so the closed form
+   needs no interface refraction. eta d_h (d_h: horizontal part) is conserved:
+   K = eta0 |d_h0|. With ds = eta dsigma: eta = K cosh psi, eta dy/ds = K sinh
+   psi, psi = psi0 + G sigma, horizontal distance = K sigma: a catenary. At the
+   top psi_t = acosh(eta_t/K) while the ray still rises (eta_t > K), so the
+   horizontal run is K (psi_t - psi0) / G and the exit direction is K/eta_t
+   horizontally, sqrt(1 - (K/eta_t)^2) up. */
+#define SLAB_G (-0.4)
+#define SLAB_BASE 0.2
+#define SLAB_Y0 (-0.45)
+
+static rrv_scene *slab_scene(void)
+{
+    rrv_scene *s = tb_scene(4, 4);
+    rrv_medium *m = refractive_medium(s, rrv__v3(-2, -0.5, -2), rrv__v3(2, 0.5, 2), RRV_FIELD_SLAB);
+    m->ior.center = rrv__v3(0, 0, 0);
+    m->ior.normal = rrv__v3(0, 1, 0);
+    m->ior.gradient = SLAB_G;
+    m->ior.base = SLAB_BASE;
+    prepare(s);
+    return s;
+}
+
+static double slab_eta(double y) { return 1.0 + SLAB_BASE + SLAB_G * y; }
+
+/* Exact exit for a start at (x0, y0, z0) with unit direction d0 (d0.y > 0). */
+static void slab_exact(rrv_vec3 o, rrv_vec3 d0, rrv_vec3 *exit_p, rrv_vec3 *exit_d)
+{
+    double dh = sqrt(d0.x * d0.x + d0.z * d0.z), eta0 = slab_eta(o.y), K = eta0 * dh, eta_t = slab_eta(0.5);
+    double psi0 = asinh(d0.y / dh), psit = acosh(eta_t / K), run = K * (psit - psi0) / SLAB_G;
+    rrv_vec3 u = rrv__v3(d0.x / dh, 0, d0.z / dh);
+    *exit_p = rrv__v3(o.x + run * u.x, 0.5, o.z + run * u.z);
+    *exit_d = rrv__v3(K / eta_t * u.x, sqrt(1 - (K / eta_t) * (K / eta_t)), K / eta_t * u.z);
+}
+
+static void slab_run(rrv_integrator integ, rrv_refraction_scheme scheme, double mu_eta, double h, int walks,
+                     double pos_allow, double dir_allow, const char *name)
+{
+    rrv_scene *s = slab_scene();
+    static const double dirs[4][3] = {{0.64278761, 0.76604444, 0}, /* 50 deg */
+                                      {0.5, 0.86602540, 0},        /* 60 deg */
+                                      {0.25881905, 0.96592583, 0}, /* 75 deg */
+                                      {0.5, 0.7, -0.35}};          /* out of plane */
+    int i, w;
+    set_method(s, scheme, mu_eta, RRV_STEPPER_RK4, h);
+    for (i = 0; i < 4; ++i) {
+        rrv_vec3 o = rrv__v3(-1, SLAB_Y0, 0.2), d0 = rrv__normalize(rrv__v3(dirs[i][0], dirs[i][1], dirs[i][2]));
+        rrv_vec3 ep, ed;
+        stat sp = {0, 0, 0}, sd = {0, 0, 0};
+        slab_exact(o, d0, &ep, &ed);
+        for (w = 0; w < walks; ++w) {
+            rrv_trace_result r;
+            double t;
+            if (!trace(s, integ, o, d0, (uint64_t)w, NULL, NULL, &r)) break;
+            /* where the exit ray crosses the top face */
+            t = (0.5 - r.position.y) / r.direction.y;
+            stat_add(&sp, rrv__length(rrv__sub(rrv__madd(r.position, r.direction, t), ep)));
+            stat_add(&sd, rrv__length(rrv__sub(r.direction, ed)));
+        }
+        if (!sp.n) break;
+        SAY("  slab %s dir %d: pos mean=%.3e se=%.1e (allow %.1e)  dir mean=%.3e se=%.1e (allow %.1e)\n", name, i,
+            stat_mean(&sp), stat_se(&sp), pos_allow, stat_mean(&sd), stat_se(&sd), dir_allow);
+        CHECKF(stat_mean(&sp) < pos_allow + 4 * stat_se(&sp), "%s dir %d: exit position off by %g", name, i,
+               stat_mean(&sp));
+        CHECKF(stat_mean(&sd) < dir_allow + 4 * stat_se(&sd), "%s dir %d: exit direction off by %g", name, i,
+               stat_mean(&sd));
+    }
+    rrv_scene_free(s);
+}
+
+static void test_slab_rk4(void)
+{
+    /* Measured <= 1.03e-9 (position; 4e-12 at 60 degrees, the rest is the
+       1 nm nudge across the top face seen at a slant) and <= 3e-10
+       (direction) at h = 0.05; bounds 1e-8. */
+    slab_run(RRV_INTEGRATOR_EIKONAL, RRV_REFRACTION_DEFAULT, 0, 0.05, 1, 1e-8, 1e-8, "rk4");
+}
+
+static void test_slab_comb(void)
+{
+    /* Default tolerance -> 300 points/m here. Second order: measured 1.3e-7
+       in position at 300/m (1.2e-5 at 30/m), direction ~1e-7. Bounds 2e-6. */
+    slab_run(RRV_INTEGRATOR_REFRACTIVE, RRV_REFRACTION_COMB, 0, 0.01, 16, 2e-6, 2e-6, "comb");
+}
+
+static void test_slab_poisson(void)
+{
+    /* mu = 1000: first order, measured mean position error 1.1e-4 .. 7.2e-4
+       (shallower rays travel further), direction 1.4e-4 .. 3.8e-4 over 32
+       walks; allowances 1.1e-3 and 6e-4 (1.5x the worst) plus 4 standard
+       errors. */
+    slab_run(RRV_INTEGRATOR_REFRACTIVE, RRV_REFRACTION_POISSON, 1000, 0.01, 32, 1.1e-3, 6e-4, "poisson");
+}
+
+/* ---- d. weak Gaussian blob: the Born deflection ---------------------------------------- */
+
+/* r = A exp(-|x|^2 / (2 s^2)); a ray along z at x = b gets, to first order in A,
+   Delta(eta d_x) = int d r/dx dz = -A (b/s^2) exp(-b^2/(2 s^2)) int exp(-z^2/(2 s^2)) dz
+                 = -A (b/s) sqrt(2 pi) exp(-b^2/(2 s^2)),
+   and eta = 1 at both ends, so that is the change of d_x: toward the centre
+   for A > 0 (rays bend toward higher IOR), away for A < 0. The neglected
+   terms are O(A) relative (the path shifts by ~alpha s inside the blob). */
+static rrv_scene *blob_scene(double A, double s_width)
+{
+    rrv_scene *s = tb_scene(4, 4);
+    rrv_medium *m = refractive_medium(s, rrv__v3(-0.6, -0.6, -0.6), rrv__v3(0.6, 0.6, 0.6), RRV_FIELD_BLOBS);
+    rrv_blob *b = tb_blobs(&m->ior, 1);
+    b->center = rrv__v3(0, 0, 0);
+    b->radius = s_width;
+    b->weight = A;
+    prepare(s);
+    return s;
+}
+
+static double born_deflection(double A, double s, double b)
+{
+    return -A * (b / s) * sqrt(2 * RRV__PI) * exp(-b * b / (2 * s * s));
+}
+
+static void blob_run(rrv_integrator integ, rrv_refraction_scheme scheme, double mu_eta, double h, int walks,
+                     double rel_allow, const char *name)
+{
+    static const double amps[] = {1e-3, -1e-3};
+    static const double impacts[] = {0.05, 0.1, 0.2};
+    int ia, ib, w;
+    for (ia = 0; ia < 2; ++ia) {
+        rrv_scene *s = blob_scene(amps[ia], 0.1);
+        set_method(s, scheme, mu_eta, RRV_STEPPER_RK4, h);
+        for (ib = 0; ib < 3; ++ib) {
+            double alpha = born_deflection(amps[ia], 0.1, impacts[ib]);
+            stat st = {0, 0, 0};
+            for (w = 0; w < walks; ++w) {
+                rrv_trace_result r;
+                if (!trace(s, integ, rrv__v3(impacts[ib], 0, -1), rrv__v3(0, 0, 1), (uint64_t)w, NULL, NULL, &r)) break;
+                stat_add(&st, r.direction.x);
+            }
+            if (!st.n) break;
+            SAY("  blob %s A=%g b=%g: dx=%.6e born=%.6e rel=%.2e se=%.1e\n", name, amps[ia], impacts[ib],
+                stat_mean(&st), alpha, stat_mean(&st) / alpha - 1, stat_se(&st) / fabs(alpha));
+            CHECKF(fabs(stat_mean(&st) - alpha) < rel_allow * fabs(alpha) + 4 * stat_se(&st),
+                   "%s A = %g b = %g: deflection %g, Born %g", name, amps[ia], impacts[ib], stat_mean(&st), alpha);
+        }
+        rrv_scene_free(s);
+    }
+}
+
+static void test_blob_born(void)
+{
+    /* Born's own error is O(A) = 1e-3 relative. RK4 h = 0.01 is converged
+       (measured |rel| <= 1.3e-3, all Born); bound 1%. COMB at 100/m (spacing
+       a tenth of sigma): second order, measured rel. error <= 1e-3 + Born;
+       bound 1%. POISSON at 1000/m: first order, measured rel. error ~1e-3,
+       allowance 3% + 4 standard errors. */
+    blob_run(RRV_INTEGRATOR_EIKONAL, RRV_REFRACTION_DEFAULT, 0, 0.01, 1, 0.01, "rk4");
+    blob_run(RRV_INTEGRATOR_REFRACTIVE, RRV_REFRACTION_COMB, 100, 0.01, 8, 0.01, "comb(100)");
+    blob_run(RRV_INTEGRATOR_REFRACTIVE, RRV_REFRACTION_POISSON, 1000, 0.01, 32, 0.03, "poisson(1000)");
+}
+
+/* ---- e. numerical stability of the Snell kick ---------------------------------------------- */
+
+static void test_refract_identity(void)
+{
+    rrv_vec3 d = rrv__normalize(rrv__v3(0.3, -0.7, 0.64)), out;
+    int refl = -1;
+    /* Equal refractivity: the direction is returned bit for bit. */
+    out = rrv__refract_at_null_event(d, 0.25, 0.25, rrv__v3(1, 2, 3), &refl);
+    CHECK(memcmp(&out, &d, sizeof d) == 0 && refl == 0);
+    out = rrv__refract_at_null_event(d, 3e-4, 3e-4, rrv__v3(0, 1e-3, 0), &refl);
+    CHECK(memcmp(&out, &d, sizeof d) == 0 && refl == 0);
+    /* Zero gradient: no normal, no change. */
+    out = rrv__refract_at_null_event(d, 0.1, 0.3, rrv__v3(0, 0, 0), &refl);
+    CHECK(memcmp(&out, &d, sizeof d) == 0 && refl == 0);
+}
+
+static void test_refract_denormal_gradient(void)
+{
+    /* A denormal gradient still defines a normal; the result must be finite
+       and unit whatever the code decides about it.
+       KNOWN FAILURE (library): the code scales grad by 1/big, which overflows
+       to inf for big < 1/DBL_MAX ~ 5.6e-309, and the result is NaN. */
+    static const double tiny[] = {1e-310, 4.9e-324, 1e-300, 5e-309};
+    rrv_vec3 d = rrv__normalize(rrv__v3(0.3, -0.7, 0.64));
+    int i, refl;
+    for (i = 0; i < 4; ++i) {
+        rrv_vec3 g = rrv__v3(tiny[i], -tiny[i], tiny[i]);
+        rrv_vec3 out = rrv__refract_at_null_event(d, 0.1, 0.2, g, &refl);
+        CHECKF(finite3(out) && fabs(rrv__length(out) - 1) < 1e-12, "gradient %g: (%g %g %g)", tiny[i], out.x, out.y,
+               out.z);
+        out = rrv__refract_at_null_event(d, 0.1, 0.2, rrv__v3(0, tiny[i], 0), &refl);
+        CHECKF(finite3(out) && fabs(rrv__length(out) - 1) < 1e-12, "gradient (0,%g,0): (%g %g %g)", tiny[i], out.x,
+               out.y, out.z);
+    }
+}
+
+static void test_refract_grazing_and_tir(void)
+{
+    rrv_vec3 n = rrv__v3(0, 1, 0), d = rrv__v3(1, 0, 0), out;
+    int refl;
+    /* Grazing, m slightly > 1 (toward lower IOR): total internal reflection,
+       which at c = 0 leaves d as it is. */
+    out = rrv__refract_at_null_event(d, 3e-4 + 1e-9, 3e-4, n, &refl);
+    CHECK(finite3(out) && fabs(rrv__length(out) - 1) < 1e-15 && refl == 1);
+    CHECK(fabs(out.x - 1) < 1e-15 && fabs(out.y) < 1e-15);
+    /* Grazing, m slightly < 1 (toward higher IOR): transmitted, finite, unit,
+       bent by sqrt(2 |delta|) (which side: test_refract_grazing_side). */
+    out = rrv__refract_at_null_event(d, 3e-4, 3e-4 + 1e-9, n, &refl);
+    CHECK(finite3(out) && fabs(rrv__length(out) - 1) < 1e-15 && refl == 0);
+    {
+        double delta = (3e-4 - (3e-4 + 1e-9)) / (1 + 3e-4 + 1e-9);
+        double expect = sqrt(-delta * (2 + delta)) / (1 + delta); /* |d'_y| / d'_x from Snell */
+        CHECKF(fabs(fabs(out.y / out.x) - expect) < 1e-9 * expect, "grazing: %.17g vs %.17g", out.y / out.x, expect);
+    }
+    /* TIR at a steep angle: eta 1.5 -> 1.0 at 60 degrees from the normal
+       (critical angle 41.8 degrees): reflection d' = d - 2 (d.n) n. */
+    {
+        double a = 60 * RRV__PI / 180;
+        rrv_vec3 g = rrv__v3(0.2, -1.3, 0.4), nn = rrv__normalize(g), t, b;
+        rrv_vec3 din, expect;
+        rrv__frame(nn, &t, &b);
+        din = rrv__add(rrv__scale(nn, cos(a)), rrv__scale(t, sin(a)));
+        expect = rrv__madd(din, nn, -2 * rrv__dot(din, nn));
+        out = rrv__refract_at_null_event(din, 0.5, 0.0, g, &refl);
+        CHECK(refl == 1);
+        CHECKF(rrv__length(rrv__sub(out, expect)) < 1e-14, "TIR: off by %g", rrv__length(rrv__sub(out, expect)));
+        /* Just under the critical angle: refracted, finite, unit. */
+        a = asin(1 / 1.5) - 1e-9;
+        din = rrv__add(rrv__scale(nn, cos(a)), rrv__scale(t, sin(a)));
+        out = rrv__refract_at_null_event(din, 0.5, 0.0, g, &refl);
+        CHECK(refl == 0 && finite3(out) && fabs(rrv__length(out) - 1) < 1e-15);
+        /* Snell: the tangential component scales by eta_in/eta_out = 1.5 */
+        CHECKF(fabs(rrv__dot(out, t) - 1.5 * rrv__dot(din, t)) < 1e-12, "Snell tangential %.17g vs %.17g",
+               rrv__dot(out, t), 1.5 * rrv__dot(din, t));
+    }
+}
+
+static void test_refract_grazing_side(void)
+{
+    /* At exactly grazing incidence (c = 0) the ray is tangent to the
+       isosurface and the sign of c cannot say which way it crosses; the sign
+       of delta can: r_out > r_in means the ray went up the gradient, so the
+       transmitted ray must bend toward +grad r (rays bend toward higher IOR).
+       KNOWN FAILURE (library): with c = 0 n is not flipped and the kick
+       -sqrt(2|delta|) n sends the ray down the gradient. The same wrong-side
+       kick, with c tiny instead of 0, is what derails the comb at turning
+       points (test_fisheye_comb). */
+    int refl;
+    rrv_vec3 out = rrv__refract_at_null_event(rrv__v3(1, 0, 0), 3e-4, 3e-4 + 1e-9, rrv__v3(0, 1, 0), &refl);
+    CHECKF(out.y > 0, "bent toward lower IOR: d' = (%g %g %g)", out.x, out.y, out.z);
+}
+
+static void test_refract_many_events_constant(void)
+{
+    /* 1e6 kicks with r_in == r_out and zero gradient: d must not drift. */
+    rrv_vec3 d0 = rrv__normalize(rrv__v3(0.48, 0.6, -0.64)), d = d0;
+    int i, refl;
+    for (i = 0; i < 1000000; ++i) d = rrv__refract_at_null_event(d, 0.3, 0.3, rrv__v3(0, 0, 0), &refl);
+    CHECK(memcmp(&d, &d0, sizeof d) == 0);
+    for (i = 0; i < 1000000; ++i) d = rrv__refract_at_null_event(d, 0.3, 0.3, rrv__v3(0.1, -0.2, 0.3), &refl);
+    CHECK(rrv__length(rrv__sub(d, d0)) < 1e-6 && fabs(rrv__length(d) - 1) < 1e-12);
+}
+
+static void test_trace_constant_ior_many_events(void)
+{
+    /* A 10 m box of constant refractivity 0.3 at 1e5 events/m: ~1e6 events per
+       walk for POISSON and COMB; the direction is unchanged and the walk
+       leaves through the far face where the straight line does. */
+    rrv_scene *s = tb_scene(4, 4);
+    rrv_medium *m = refractive_medium(s, rrv__v3(0, -1, -1), rrv__v3(10, 1, 1), RRV_FIELD_CONSTANT);
+    rrv_vec3 d0 = rrv__normalize(rrv__v3(1, 0.05, -0.03));
+    int k;
+    m->ior.value = 0.3;
+    prepare(s);
+    for (k = 0; k < 2; ++k) {
+        rrv_trace_result r;
+        set_method(s, k ? RRV_REFRACTION_COMB : RRV_REFRACTION_POISSON, 1e5, RRV_STEPPER_DEFAULT, 0.01);
+        if (!trace(s, RRV_INTEGRATOR_REFRACTIVE, rrv__v3(-0.5, 0, 0), d0, 1, NULL, NULL, &r)) break;
+        SAY("  constant box %s: events=%llu |d-d0|=%.3e\n", k ? "comb" : "poisson", (unsigned long long)r.events,
+            rrv__length(rrv__sub(r.direction, d0)));
+        CHECKF(r.events > 500000, "only %llu events", (unsigned long long)r.events);
+        CHECKF(rrv__length(rrv__sub(r.direction, d0)) < 1e-6, "direction drifted by %g",
+               rrv__length(rrv__sub(r.direction, d0)));
+        CHECKF(fabs(r.position.x - 10) < 1e-6 && line_distance(rrv__v3(-0.5, 0, 0), d0, r.position) < 1e-6,
+               "left at (%g %g %g)", r.position.x, r.position.y, r.position.z);
+    }
+    rrv_scene_free(s);
+}
+
+static void test_grid_step_grazing(void)
+{
+    /* A GRID refractivity with a jump from 0 to 0.5 over 2 voxels (the
+       numeric gradient there is ~0.5 / (2 voxels) = 16/m over a sliver):
+       rays at grazing incidence must come out finite and unit with all three
+       integrators, whether they refract or totally reflect. */
+    rrv_scene *s = tb_scene(4, 4);
+    rrv_medium *m = refractive_medium(s, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), RRV_FIELD_GRID);
+    rrv_grid *g = &m->ior.grid;
+    int x, y, z, k, a;
+    const int n = 33;
+    g->nx = g->ny = g->nz = n;
+    g->channels = 1;
+    g->lo = m->lo;
+    g->hi = m->hi;
+    g->data = (float *)malloc((size_t)n * n * n * sizeof(float));
+    for (z = 0; z < n; ++z)
+        for (y = 0; y < n; ++y)
+            for (x = 0; x < n; ++x)
+                /* samples y <= 15: 0; y = 16: 0.25; y >= 17: 0.5 (two voxels) */
+                g->data[((size_t)z * n + y) * n + x] = (float)(y <= 15 ? 0.0 : y == 16 ? 0.25 : 0.5);
+    prepare(s);
+    for (k = 0; k < 4; ++k) {
+        for (a = 0; a < 4; ++a) {
+            /* from below and above, nearly parallel to the step */
+            static const double slopes[] = {1e-3, 1e-2, -1e-3, -3e-2};
+            rrv_vec3 o = rrv__v3(-1.5, slopes[a] > 0 ? -0.05 : 0.1, 0.1), d = rrv__v3(1, slopes[a], 0.001);
+            rrv_trace_result r;
+            rrv_integrator integ = k == 3 ? RRV_INTEGRATOR_EIKONAL : RRV_INTEGRATOR_REFRACTIVE;
+            rrv_refraction_scheme sch = k == 0 ? RRV_REFRACTION_POISSON : k == 1 ? RRV_REFRACTION_MIDPOINT
+                                                                                 : RRV_REFRACTION_COMB;
+            set_method(s, sch, k == 0 ? 500 : 0, RRV_STEPPER_RK4, 0.01);
+            if (!trace(s, integ, o, d, (uint64_t)a, NULL, NULL, &r)) break;
+            SAY("  grid step k=%d slope=%g: events=%llu exit (%.4f %.4f %.4f) d=(%.4f %.4f %.4f)\n", k, slopes[a],
+                (unsigned long long)r.events, r.position.x, r.position.y, r.position.z, r.direction.x, r.direction.y,
+                r.direction.z);
+            CHECK(r.events < 10000000u);
+        }
+    }
+    rrv_scene_free(s);
+}
+
+static void test_extreme_rate_blob(void)
+{
+    /* 1e6 events/m through a 0.1 m Gaussian (box 1.2 m): ~1.2e6 events; it
+       must finish, stay finite, and agree with the Born deflection (1%: the
+       schemes are converged at this rate, Born's own error is 1e-3). */
+    rrv_scene *s = blob_scene(1e-3, 0.1);
+    int k;
+    for (k = 0; k < 2; ++k) {
+        rrv_trace_result r;
+        double alpha = born_deflection(1e-3, 0.1, 0.1);
+        set_method(s, k ? RRV_REFRACTION_COMB : RRV_REFRACTION_POISSON, 1e6, RRV_STEPPER_DEFAULT, 0.01);
+        if (!trace(s, RRV_INTEGRATOR_REFRACTIVE, rrv__v3(0.1, 0, -1), rrv__v3(0, 0, 1), 3, NULL, NULL, &r)) break;
+        SAY("  extreme rate %s: events=%llu dx=%.6e born=%.6e\n", k ? "comb" : "poisson", (unsigned long long)r.events,
+            r.direction.x, alpha);
+        CHECK(r.events > 1000000 && r.events < 2000000);
+        CHECKF(fabs(r.direction.x - alpha) < 0.01 * fabs(alpha), "deflection %g vs Born %g", r.direction.x, alpha);
+    }
+    rrv_scene_free(s);
+}
+
+int main(int argc, char **argv)
+{
+    const char *v = getenv("GRIN_VERBOSE");
+    (void)argc;
+    (void)argv;
+    verbose = v && *v && *v != '0';
+    RUN(test_refract_identity);
+    RUN(test_refract_denormal_gradient);
+    RUN(test_refract_grazing_and_tir);
+    RUN(test_refract_grazing_side);
+    RUN(test_refract_many_events_constant);
+    RUN(test_luneburg_rk4);
+    RUN(test_luneburg_comb_default);
+    RUN(test_luneburg_poisson);
+    RUN(test_fisheye_rk4);
+    RUN(test_fisheye_comb);
+    RUN(test_slab_rk4);
+    RUN(test_slab_comb);
+    RUN(test_slab_poisson);
+    RUN(test_blob_born);
+    RUN(test_trace_constant_ior_many_events);
+    RUN(test_grid_step_grazing);
+    RUN(test_extreme_rate_blob);
+    return CHECK_EXIT_CODE();
+}
