@@ -1267,13 +1267,17 @@ static rrv_vec3 rrv__refract_at_null_event(rrv_vec3 d, double r_in, double r_out
     rrv_vec3 n, out;
     *reflected = 0;
     if (!(big > 0) || big > DBL_MAX) return d;
-    /* Scaling by the largest component first keeps a denormal gradient from
-       overflowing 1/|grad|. */
-    n = rrv__normalize(rrv__scale(grad, 1.0 / big));
+    /* Dividing by the largest component first keeps a denormal gradient
+       from overflowing 1/|grad| (its reciprocal is not representable). */
+    n = rrv__normalize(rrv__v3(grad.x / big, grad.y / big, grad.z / big));
     delta = (r_in - r_out) / (1.0 + r_out);
     if (delta == 0) return d;
     c = -rrv__dot(n, d);
-    if (c < 0) { n = rrv__scale(n, -1.0); c = -c; }
+    /* n must face the side the ray comes from (c >= 0). At exact grazing
+       incidence that side is undefined; the IOR change defines it: a ray
+       entering higher IOR (delta < 0) comes from the side grad points away
+       from, and must bend toward grad. */
+    if (c < 0 || (c == 0 && delta < 0)) { n = rrv__scale(n, -1.0); c = -c; }
     s2 = fmax(0.0, 1.0 - c * c);
     e = delta * (2.0 + delta) * s2;
     k = c * c - e;
