@@ -74,6 +74,7 @@ static const char render_help[] =
     "                         top; the output is the size of the crop\n"
     "  --max-grid-mb N        refuse grid files larger than N MiB (default 2048)\n"
     "  -q, --quiet            no progress bar and no summary\n"
+    "%s"
     "\n"
     "The image is bit-identical for any thread count, and crops of a render\n"
     "match the same pixels of the full image.\n";
@@ -120,7 +121,8 @@ static const char trace_help[] =
     "  --seed S                  random seed (default: the scene's)\n"
     "  --path                    print every vertex instead, as rows\n"
     "                            walk,x,y,z,dx,dy,dz\n"
-    "  --max-grid-mb N           refuse grid files larger than N MiB\n";
+    "  --max-grid-mb N           refuse grid files larger than N MiB\n"
+    "%s";
 
 static void print_library_error(const rrv_error *err)
 {
@@ -538,6 +540,91 @@ static int default_thread_count(void)
     return cpus > MAX_THREADS ? MAX_THREADS : (int)cpus;
 }
 
+/* ---- refraction settings shared by render and trace ------------------------- */
+
+typedef struct refraction_options {
+    double bend_tolerance, mu_eta, step;
+    int has_bend_tolerance, has_mu_eta, has_step;
+    int refraction, has_refraction; /* rrv_refraction_scheme */
+    int stepper, has_stepper;       /* rrv_stepper */
+    int majorant_cells, has_majorant_cells;
+} refraction_options;
+
+static const char refraction_help[] =
+    "  --refraction NAME      refractive scheme: comb (default), poisson (the\n"
+    "                         seed paper: at null events) or midpoint\n"
+    "  --bend-tolerance RAD   refractive: bending per refraction event, which\n"
+    "                         sets the event rate (default: the scene's, 0.01)\n"
+    "  --mu-eta RATE          refractive: a fixed refraction event rate, 1/m\n"
+    "                         (0: automatic from the tolerance)\n"
+    "  --step H               eikonal: step length in metres (default 0.01)\n"
+    "  --stepper NAME         eikonal: rk4 (default) or leapfrog\n"
+    "  --majorant-cells N     majorant grid cells per axis, 1 = one global\n"
+    "                         majorant (default: automatic)\n";
+
+/* Takes one refraction option at the cursor; 1 taken, 0 not ours, -1 error. */
+static int take_refraction_option(arg_cursor *args, refraction_options *opt)
+{
+    static const char *const schemes[] = {"default", "poisson", "midpoint", "comb"};
+    static const char *const steppers[] = {"default", "leapfrog", "rk4"};
+    const char *arg = args->argv[args->index], *text;
+    int i;
+    if (strcmp(arg, "--bend-tolerance") == 0) {
+        if (!take_double(args, arg, "an angle in (0, 1] radians", &opt->bend_tolerance)) return -1;
+        if (!(opt->bend_tolerance > 0 && opt->bend_tolerance <= 1))
+            return usage_error(args, "--bend-tolerance must be in (0, 1], got %g", opt->bend_tolerance), -1;
+        opt->has_bend_tolerance = 1;
+    } else if (strcmp(arg, "--mu-eta") == 0) {
+        if (!take_double(args, arg, "a rate >= 0 per metre", &opt->mu_eta)) return -1;
+        if (!(opt->mu_eta >= 0 && opt->mu_eta < 1e9))
+            return usage_error(args, "--mu-eta must be in [0, 1e9), got %g", opt->mu_eta), -1;
+        opt->has_mu_eta = 1;
+    } else if (strcmp(arg, "--step") == 0) {
+        if (!take_double(args, arg, "a length > 0 in metres", &opt->step)) return -1;
+        if (!(opt->step > 0 && opt->step < 1e6))
+            return usage_error(args, "--step must be in (0, 1e6) metres, got %g", opt->step), -1;
+        opt->has_step = 1;
+    } else if (strcmp(arg, "--majorant-cells") == 0) {
+        if (!take_int(args, arg, 1, 256, "an integer in [1, 256]", &opt->majorant_cells)) return -1;
+        opt->has_majorant_cells = 1;
+    } else if (strcmp(arg, "--refraction") == 0 || strcmp(arg, "--stepper") == 0) {
+        int is_scheme = arg[2] == 'r';
+        const char *const *names = is_scheme ? schemes : steppers;
+        int count = is_scheme ? 4 : 3;
+        if (!take_value(args, arg, is_scheme ? "comb, poisson or midpoint" : "rk4 or leapfrog", &text)) return -1;
+        for (i = 0; i < count; ++i)
+            if (strcmp(text, names[i]) == 0) break;
+        if (i == count)
+            return usage_error(args, "%s needs %s, got \"%s\"", arg,
+                               is_scheme ? "comb, poisson or midpoint" : "rk4 or leapfrog", text), -1;
+        if (is_scheme) { opt->refraction = i; opt->has_refraction = 1; }
+        else { opt->stepper = i; opt->has_stepper = 1; }
+    } else {
+        return 0;
+    }
+    return 1;
+}
+
+/* Applies the options; the majorant grid is rebuilt when its size changed. */
+static int apply_refraction_options(rrv_scene *scene, const refraction_options *opt)
+{
+    rrv_error err;
+    if (opt->has_bend_tolerance) scene->settings.bend_tolerance = opt->bend_tolerance;
+    if (opt->has_mu_eta) scene->settings.mu_eta = opt->mu_eta;
+    if (opt->has_step) scene->settings.step = opt->step;
+    if (opt->has_refraction) scene->settings.refraction = (rrv_refraction_scheme)opt->refraction;
+    if (opt->has_stepper) scene->settings.stepper = (rrv_stepper)opt->stepper;
+    if (opt->has_majorant_cells) {
+        scene->settings.majorant_cells = opt->majorant_cells;
+        memset(&err, 0, sizeof err);
+        if (rrv_scene_prepare(scene, &err) != RRV_OK) {
+            print_library_error(&err);
+            return 0;
+        }
+    }
+    return 1;
+}
+
 /* ---- rrv render ---------------------------------------------------------------- */
 
 typedef struct render_options {
@@ -552,11 +639,13 @@ typedef struct render_options {
     int crop[4], has_crop;
     size_t max_grid_bytes;
     int quiet;
+    refraction_options refraction;
 } render_options;
 
 static int parse_render_options(int argc, char **argv, render_options *opt)
 {
     arg_cursor args;
+    int taken;
     args.argc = argc;
     args.argv = argv;
     args.command = "render";
@@ -564,7 +653,7 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
     for (args.index = 0; args.index < argc; ++args.index) {
         const char *arg = argv[args.index];
         if (is_help_flag(arg)) {
-            fputs(render_help, stdout);
+            printf(render_help, refraction_help);
             return HELP_SHOWN;
         } else if (strcmp(arg, "-o") == 0 || strcmp(arg, "--output") == 0) {
             if (!take_value(&args, arg, "an output path", &opt->pfm_path)) return EXIT_USAGE;
@@ -598,6 +687,8 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
             if (!take_grid_limit(&args, &opt->max_grid_bytes)) return EXIT_USAGE;
         } else if (strcmp(arg, "-q") == 0 || strcmp(arg, "--quiet") == 0) {
             opt->quiet = 1;
+        } else if ((taken = take_refraction_option(&args, &opt->refraction)) != 0) {
+            if (taken < 0) return EXIT_USAGE;
         } else if (is_flag(arg)) {
             return usage_error(&args, "render: unknown option \"%s\"", arg);
         } else if (opt->scene_path) {
@@ -645,6 +736,10 @@ static int command_render(int argc, char **argv)
     if (opt.has_spp) scene->settings.spp = opt.spp;
     if (opt.has_seed) scene->settings.seed = opt.seed;
     if (opt.has_integrator) scene->settings.integrator = opt.integrator;
+    if (!apply_refraction_options(scene, &opt.refraction)) {
+        rrv_scene_free(scene);
+        return EXIT_INPUT;
+    }
     width = scene->camera.width;
     height = scene->camera.height;
 
@@ -934,14 +1029,17 @@ static int command_trace(int argc, char **argv)
     rrv_scene *scene;
     rrv_vec3 origin, direction;
     double length;
+    refraction_options refraction;
+    int taken;
 
+    memset(&refraction, 0, sizeof refraction);
     args.argc = argc;
     args.argv = argv;
     args.command = "trace";
     for (args.index = 0; args.index < argc; ++args.index) {
         const char *arg = argv[args.index];
         if (is_help_flag(arg)) {
-            fputs(trace_help, stdout);
+            printf(trace_help, refraction_help);
             return EXIT_OK;
         } else if (strcmp(arg, "--ray") == 0) {
             for (i = 0; i < 6; ++i)
@@ -962,6 +1060,8 @@ static int command_trace(int argc, char **argv)
             print_path = 1;
         } else if (strcmp(arg, "--max-grid-mb") == 0) {
             if (!take_grid_limit(&args, &max_grid_bytes)) return EXIT_USAGE;
+        } else if ((taken = take_refraction_option(&args, &refraction)) != 0) {
+            if (taken < 0) return EXIT_USAGE;
         } else if (is_flag(arg)) {
             return usage_error(&args, "trace: unknown option \"%s\"", arg);
         } else if (scene_path) {
@@ -983,6 +1083,10 @@ static int command_trace(int argc, char **argv)
     direction.z = ray[5] / length;
 
     if (!load_scene(scene_path, max_grid_bytes, &scene)) return EXIT_INPUT;
+    if (!apply_refraction_options(scene, &refraction)) {
+        rrv_scene_free(scene);
+        return EXIT_INPUT;
+    }
     if (!has_integrator && scene->settings.integrator != RRV_INTEGRATOR_CLASSIC)
         integrator = scene->settings.integrator;
     if (!has_seed) seed = scene->settings.seed;
@@ -1019,13 +1123,13 @@ static int show_help(const char *command)
     if (!command) {
         fputs(usage_text, stdout);
     } else if (strcmp(command, "render") == 0) {
-        fputs(render_help, stdout);
+        printf(render_help, refraction_help);
     } else if (strcmp(command, "diff") == 0) {
         fputs(diff_help, stdout);
     } else if (strcmp(command, "info") == 0) {
         fputs(info_help, stdout);
     } else if (strcmp(command, "trace") == 0) {
-        fputs(trace_help, stdout);
+        printf(trace_help, refraction_help);
     } else {
         return usage_error(NULL, "help: unknown command \"%s\"", command);
     }
