@@ -1118,21 +1118,47 @@ static double rrv__profile_refractivity(const rrv_field *f, rrv_vec3 p, double a
     }
 }
 
-typedef struct rrv__medium_set rrv__medium_set;
+/* What rrv_scene_prepare builds for a medium: the majorant grid (below) and
+   procedural fields baked into grids. Fractal noise costs 5 octaves x 8
+   hashed lattice corners a lookup; baked, a lookup is one trilinear fetch,
+   and the majorant bound over it is exact. The user's fields stay as given. */
+enum { RRV__DENSITY, RRV__TEMPERATURE, RRV__PRESSURE, RRV__IOR, RRV__FIELD_KINDS };
+
+struct rrv__majorant_grid {
+    int n[3];
+    rrv_vec3 lo, hi, cell;
+    double sigma_t_max;    /* max over channels of (sigma_a + sigma_s) * scale */
+    float *density_max;    /* per cell */
+    float *grad_max;       /* per cell max |grad r|, NULL if the medium does not refract */
+    int empty;             /* no extinction anywhere: density tracking can skip it */
+    int surface_free;      /* no surface reaches into the box: chords inside need no ray cast */
+    rrv_field baked[RRV__FIELD_KINDS]; /* kind GRID where a noise field was baked */
+};
+
+/* The field to evaluate: the baked copy when there is one. */
+static const rrv_field *rrv__field_of(const rrv_medium *m, int which)
+{
+    const rrv_field *user = which == RRV__DENSITY ? &m->density : which == RRV__TEMPERATURE ? &m->temperature
+                          : which == RRV__PRESSURE ? &m->pressure : &m->ior;
+    if (m->majorant && m->majorant->baked[which].kind == RRV_FIELD_GRID) return &m->majorant->baked[which];
+    return user;
+}
+
 
 /* The gas state at p: temperature (K) and pressure (Pa), ambient outside fields. */
 static double rrv__temperature(const rrv_medium *m, rrv_vec3 p)
 {
     double f;
     if (m->temperature.kind == RRV_FIELD_NONE) return m->T_ref;
-    f = rrv__field_eval(&m->temperature, p, 0, m->temperatureoffset + m->T_ref / m->temperaturescale);
+    f = rrv__field_eval(rrv__field_of(m, RRV__TEMPERATURE), p, 0,
+                        m->temperatureoffset + m->T_ref / m->temperaturescale);
     return (f - m->temperatureoffset) * m->temperaturescale;
 }
 
 static double rrv__pressure(const rrv_medium *m, rrv_vec3 p)
 {
     if (m->pressure.kind == RRV_FIELD_NONE) return m->P_ref;
-    return rrv__field_eval(&m->pressure, p, 0, m->P_ref);
+    return rrv__field_eval(rrv__field_of(m, RRV__PRESSURE), p, 0, m->P_ref);
 }
 
 /* Refractivity eta - 1 of a refractive medium at p, including its artist
@@ -1144,7 +1170,7 @@ static double rrv__refractivity(const rrv_medium *m, rrv_vec3 p, double ambient_
         double T = rrv__temperature(m, p), P = rrv__pressure(m, p);
         r = (m->eta_ref - 1.0) * (P / m->P_ref) * (m->T_ref / fmax(T, 1e-3));
     } else {
-        r = rrv__profile_refractivity(&m->ior, p, ambient_r);
+        r = rrv__profile_refractivity(rrv__field_of(m, RRV__IOR), p, ambient_r);
     }
     return m->ior_scale * r;
 }
@@ -1228,11 +1254,11 @@ static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double
     double r = rrv__refractivity(m, p, ambient_r);
     if (m->ior_from_gas) {
         double T = fmax(rrv__temperature(m, p), 1e-3), P = rrv__pressure(m, p);
-        rrv_vec3 gT = rrv__scale(rrv__field_gradient(&m->temperature, p, 0), m->temperaturescale);
-        rrv_vec3 gP = rrv__field_gradient(&m->pressure, p, 0);
+        rrv_vec3 gT = rrv__scale(rrv__field_gradient(rrv__field_of(m, RRV__TEMPERATURE), p, 0), m->temperaturescale);
+        rrv_vec3 gP = rrv__field_gradient(rrv__field_of(m, RRV__PRESSURE), p, 0);
         *grad = rrv__scale(rrv__sub(rrv__scale(gP, 1.0 / P), rrv__scale(gT, 1.0 / T)), r);
     } else {
-        *grad = rrv__scale(rrv__profile_gradient(&m->ior, p, ambient_r), m->ior_scale);
+        *grad = rrv__scale(rrv__profile_gradient(rrv__field_of(m, RRV__IOR), p, ambient_r), m->ior_scale);
     }
     return r;
 }
@@ -1296,16 +1322,6 @@ static rrv_vec3 rrv__refract_at_null_event(rrv_vec3 d, double r_in, double r_out
    walk it with a 3D DDA, so their majorant is local (tight) instead of the
    medium-wide maximum. */
 
-struct rrv__majorant_grid {
-    int n[3];
-    rrv_vec3 lo, hi, cell;
-    double sigma_t_max;    /* max over channels of (sigma_a + sigma_s) * scale */
-    float *density_max;    /* per cell */
-    float *grad_max;       /* per cell max |grad r|, NULL if the medium does not refract */
-    int empty;             /* no extinction anywhere: density tracking can skip it */
-    int surface_free;      /* no surface reaches into the box: chords inside need no ray cast */
-};
-
 static int rrv__auto_cells(const rrv_medium *m, int axis)
 {
     if (m->density.kind == RRV_FIELD_GRID) {
@@ -1334,7 +1350,47 @@ static double rrv__cell_gradient_bound(const rrv_medium *m, rrv_vec3 lo, rrv_vec
     return 1.5 * best;
 }
 
-static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, rrv_error *err)
+/* Bakes a noise field over the medium box: a voxel of half the finest
+   octave's wavelength, at most 128 samples an axis (8 MiB a field). */
+static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, const rrv_field *f, rrv_field *out,
+                                  size_t *bytes, rrv_error *err)
+{
+    const rrv_noise *nz = &f->noise;
+    double finest = nz->frequency * pow(nz->lacunarity, nz->octaves - 1);
+    rrv_vec3 ext = rrv__sub(m->hi, m->lo);
+    double longest = rrv__maxd(ext.x, rrv__maxd(ext.y, ext.z));
+    double voxel = rrv__maxd(0.5 / finest, longest / 127.0);
+    int n[3], a, x, y, z;
+    size_t count, i = 0;
+    float *data;
+    for (a = 0; a < 3; ++a) {
+        double cells = ceil(rrv__axis(ext, a) / voxel);
+        n[a] = cells < 1 ? 2 : cells > 127 ? 128 : (int)cells + 1;
+    }
+    count = (size_t)n[0] * (size_t)n[1] * (size_t)n[2];
+    data = (float *)RRV_MALLOC(count * sizeof(float));
+    if (!data) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory baking a noise field");
+    for (z = 0; z < n[2]; ++z)
+        for (y = 0; y < n[1]; ++y)
+            for (x = 0; x < n[0]; ++x) {
+                rrv_vec3 p = rrv__v3(m->lo.x + ext.x * x / (n[0] - 1), m->lo.y + ext.y * y / (n[1] - 1),
+                                     m->lo.z + ext.z * z / (n[2] - 1));
+                data[i++] = (float)rrv__field_eval(f, p, 0, 0.0);
+            }
+    memset(out, 0, sizeof *out);
+    out->kind = RRV_FIELD_GRID;
+    out->grid.nx = n[0];
+    out->grid.ny = n[1];
+    out->grid.nz = n[2];
+    out->grid.channels = 1;
+    out->grid.lo = m->lo;
+    out->grid.hi = m->hi;
+    out->grid.data = data;
+    *bytes += count * sizeof(float);
+    return RRV_OK;
+}
+
+static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, size_t *baked_bytes, rrv_error *err)
 {
     struct rrv__majorant_grid *g;
     size_t cells, c;
@@ -1355,13 +1411,23 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, rrv
         return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
     }
     g->grad_max = refracts ? g->density_max + cells : NULL;
+    memset(g->baked, 0, sizeof g->baked);
+    m->majorant = g; /* so rrv__field_of sees the baked fields below */
+    for (x = 0; x < RRV__FIELD_KINDS; ++x) {
+        const rrv_field *user = x == RRV__DENSITY ? &m->density : x == RRV__TEMPERATURE ? &m->temperature
+                              : x == RRV__PRESSURE ? &m->pressure : &m->ior;
+        if (user->kind == RRV_FIELD_NOISE) {
+            rrv_result res = rrv__bake_noise(scene, m, user, &g->baked[x], baked_bytes, err);
+            if (res != RRV_OK) return res; /* the caller releases the half-built grid */
+        }
+    }
     c = 0;
     for (z = 0; z < g->n[2]; ++z)
         for (y = 0; y < g->n[1]; ++y)
             for (x = 0; x < g->n[0]; ++x, ++c) {
                 rrv_vec3 lo = rrv__v3(m->lo.x + x * g->cell.x, m->lo.y + y * g->cell.y, m->lo.z + z * g->cell.z);
                 rrv_vec3 hi = rrv__add(lo, g->cell);
-                double d = rrv__field_bound(&m->density, lo, hi);
+                double d = rrv__field_bound(rrv__field_of(m, RRV__DENSITY), lo, hi);
                 /* Round the float bound up so it stays a bound. */
                 float df = (float)d;
                 if ((double)df < d) df = nextafterf(df, FLT_MAX);
@@ -1392,12 +1458,13 @@ typedef struct rrv__coeffs {
 
 static void rrv__medium_coeffs(const rrv_medium *m, rrv_vec3 p, rrv__coeffs *c)
 {
+    const rrv_field *density = rrv__field_of(m, RRV__DENSITY);
     int ch;
     double d = 0;
-    int rgb = m->density.kind == RRV_FIELD_GRID && m->density.grid.channels == 3;
-    if (!rgb) d = fmax(0.0, rrv__field_eval(&m->density, p, 0, 0.0)) * m->scale;
+    int rgb = density->kind == RRV_FIELD_GRID && density->grid.channels == 3;
+    if (!rgb) d = rrv__maxd(0.0, rrv__field_eval(density, p, 0, 0.0)) * m->scale;
     for (ch = 0; ch < 3; ++ch) {
-        double dc = rgb ? fmax(0.0, rrv__field_eval(&m->density, p, ch, 0.0)) * m->scale : d;
+        double dc = rgb ? rrv__maxd(0.0, rrv__field_eval(density, p, ch, 0.0)) * m->scale : d;
         c->sigma_a[ch] = dc * m->sigma_a[ch];
         c->sigma_s[ch] = dc * m->sigma_s[ch];
     }
@@ -2319,6 +2386,8 @@ static void rrv__scene_release_prepared(rrv_scene *scene)
     for (i = 0; i < scene->medium_count; ++i) {
         struct rrv__majorant_grid *g = scene->media[i].majorant;
         if (g) {
+            int k;
+            for (k = 0; k < RRV__FIELD_KINDS; ++k) RRV_FREE(g->baked[k].grid.data);
             RRV_FREE(g->density_max);
             RRV_FREE(g);
             scene->media[i].majorant = NULL;
@@ -2364,7 +2433,7 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
     if (res != RRV_OK) return res;
     for (i = 0; i < scene->medium_count; ++i) {
         const struct rrv__majorant_grid *g;
-        res = rrv__build_majorant(scene, &scene->media[i], err);
+        res = rrv__build_majorant(scene, &scene->media[i], &prepared_bytes, err);
         if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
         g = scene->media[i].majorant;
         prepared_bytes += sizeof *g + (size_t)g->n[0] * g->n[1] * g->n[2] * sizeof(float) * (g->grad_max ? 2 : 1);
