@@ -54,8 +54,13 @@ build-fuzz/fuzz_%: test/fuzz_%.c rrv.h
 	mkdir -p build-fuzz
 	$(FUZZ_CC) $(FUZZ_FLAGS) -o $@ $< -lm
 
-bench: $(BUILD)/rrv
+bench: $(BUILD)/rrv $(BUILD)/measure_grin
 	python3 test/bench/bench.py $(BUILD)/rrv
+	$(BUILD)/measure_grin
+
+# The convergence study of the refraction schemes (tables in README).
+$(BUILD)/measure_grin: test/measure_grin.c rrv.h | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -o $@ test/measure_grin.c -lm
 
 clean:
 	rm -rf build build-san build-fuzz rrv

@@ -917,10 +917,13 @@ static double rrv__grid_sample(const rrv_grid *g, rrv_vec3 p, int channel, doubl
     sy = sx * (size_t)g->nx;
     sz = sy * (size_t)g->ny;
     base = (size_t)iz * sz + (size_t)iy * sy + (size_t)ix * sx + (size_t)channel;
-    c00 = d[base] + tx * (d[base + sx] - d[base]);
-    c10 = d[base + sy] + tx * (d[base + sy + sx] - d[base + sy]);
-    c01 = d[base + sz] + tx * (d[base + sz + sx] - d[base + sz]);
-    c11 = d[base + sz + sy] + tx * (d[base + sz + sy + sx] - d[base + sz + sy]);
+    /* In double: a float difference of neighbouring samples would round
+       away what a refractivity grid resolves (a fire changes eta - 1 by
+       ~2e-4, a few hundred float ulps of the stored values). */
+    c00 = (double)d[base] + tx * ((double)d[base + sx] - d[base]);
+    c10 = (double)d[base + sy] + tx * ((double)d[base + sy + sx] - d[base + sy]);
+    c01 = (double)d[base + sz] + tx * ((double)d[base + sz + sx] - d[base + sz]);
+    c11 = (double)d[base + sz + sy] + tx * ((double)d[base + sz + sy + sx] - d[base + sz + sy]);
     c00 += ty * (c10 - c00);
     c01 += ty * (c11 - c01);
     return c00 + tz * (c01 - c00);
@@ -1192,11 +1195,51 @@ static rrv_vec3 rrv__field_gradient_numeric(const rrv_field *f, rrv_vec3 p, doub
     return g;
 }
 
-static double rrv__grid_voxel(const rrv_grid *g)
+/* Gradient of a grid field: the trilinear blend of central differences at
+   the eight samples around p. Inside the grid this equals central
+   differences of the trilinear field with a one-voxel step, which is second
+   order (the gradient of the trilinear interpolant itself is first order and
+   jumps at cell faces), but it computes the weights once: measured 2.6x
+   faster (test/measure_grin.c, grid stencil table). At the grid's faces the
+   differences become one-sided. Zero outside the grid. */
+static rrv_vec3 rrv__grid_gradient(const rrv_grid *g, rrv_vec3 p)
 {
-    double vx = (g->hi.x - g->lo.x) / (g->nx - 1), vy = (g->hi.y - g->lo.y) / (g->ny - 1);
-    double vz = (g->hi.z - g->lo.z) / (g->nz - 1);
-    return fmin(vx, fmin(vy, vz));
+    double f[3], t[3], step[3], lo[3], hi[3], grad[3] = {0, 0, 0};
+    int n[3], i0[3], a, corner;
+    size_t stride[3];
+    if (!rrv__inside_box(p, g->lo, g->hi)) return rrv__v3(0, 0, 0);
+    n[0] = g->nx; n[1] = g->ny; n[2] = g->nz;
+    lo[0] = g->lo.x; lo[1] = g->lo.y; lo[2] = g->lo.z;
+    hi[0] = g->hi.x; hi[1] = g->hi.y; hi[2] = g->hi.z;
+    f[0] = p.x; f[1] = p.y; f[2] = p.z;
+    stride[0] = (size_t)g->channels;
+    stride[1] = stride[0] * (size_t)g->nx;
+    stride[2] = stride[1] * (size_t)g->ny;
+    for (a = 0; a < 3; ++a) {
+        double u = (f[a] - lo[a]) / (hi[a] - lo[a]) * (n[a] - 1);
+        i0[a] = (int)u;
+        if (i0[a] > n[a] - 2) i0[a] = n[a] - 2;
+        t[a] = u - i0[a];
+        step[a] = (hi[a] - lo[a]) / (n[a] - 1);
+    }
+    for (corner = 0; corner < 8; ++corner) {
+        int c[3];
+        double w = 1;
+        size_t base = 0;
+        for (a = 0; a < 3; ++a) {
+            int bit = (corner >> a) & 1;
+            c[a] = i0[a] + bit;
+            w *= bit ? t[a] : 1.0 - t[a];
+            base += (size_t)c[a] * stride[a];
+        }
+        for (a = 0; a < 3; ++a) {
+            int m = c[a] > 0 ? c[a] - 1 : c[a], q = c[a] < n[a] - 1 ? c[a] + 1 : c[a];
+            double up = (double)g->data[base + (size_t)(q - c[a]) * stride[a]];
+            double down = (double)g->data[base - (size_t)(c[a] - m) * stride[a]];
+            grad[a] += w * (up - down) / ((q - m) * step[a]);
+        }
+    }
+    return rrv__v3(grad[0], grad[1], grad[2]);
 }
 
 /* Gradient of a scalar field: analytic where the field is, numeric else. */
@@ -1217,7 +1260,7 @@ static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p, double ambie
     case RRV_FIELD_NOISE:
         return rrv__field_gradient_numeric(f, p, ambient, 0.05 / (f->noise.frequency * (1 << (f->noise.octaves > 4 ? 4 : f->noise.octaves))));
     case RRV_FIELD_GRID:
-        return rrv__field_gradient_numeric(f, p, ambient, rrv__grid_voxel(&f->grid));
+        return rrv__grid_gradient(&f->grid, p);
     default:
         return rrv__v3(0, 0, 0);
     }

@@ -290,6 +290,39 @@ static void test_tiles_are_bit_identical(void)
     rrv_scene_free(s);
 }
 
+static void test_grid_gradient_stencil(void)
+{
+    /* The fused stencil equals central differences of the trilinear field
+       with a one-voxel step wherever both stay inside the grid. */
+    rrv_field f;
+    rrv__rng rng;
+    int i, n = 9, worst_i = -1;
+    double worst = 0;
+    memset(&f, 0, sizeof f);
+    f.kind = RRV_FIELD_GRID;
+    f.grid.nx = n; f.grid.ny = n + 2; f.grid.nz = n - 1; f.grid.channels = 1;
+    f.grid.lo = rrv__v3(-1, -0.5, 0); f.grid.hi = rrv__v3(1, 1.5, 0.7);
+    f.grid.data = (float *)malloc((size_t)(n * (n + 2) * (n - 1)) * sizeof(float));
+    rrv__rng_seed(&rng, 9, 0, 0);
+    for (i = 0; i < n * (n + 2) * (n - 1); ++i) f.grid.data[i] = (float)rrv__uniform(&rng);
+    for (i = 0; i < 20000; ++i) {
+        /* stay a voxel and a bit away from every face */
+        rrv_vec3 p = rrv__v3(-1 + 0.26 + 1.48 * rrv__uniform(&rng), -0.5 + 0.21 + 1.58 * rrv__uniform(&rng),
+                             0.11 + 0.48 * rrv__uniform(&rng));
+        rrv_vec3 fused = rrv__grid_gradient(&f.grid, p), ref;
+        double hx = 2.0 / (n - 1), hy = 2.0 / (n + 1), hz = 0.7 / (n - 2), e;
+        ref.x = (rrv__field_eval(&f, rrv__v3(p.x + hx, p.y, p.z), 0, 0) - rrv__field_eval(&f, rrv__v3(p.x - hx, p.y, p.z), 0, 0)) / (2 * hx);
+        ref.y = (rrv__field_eval(&f, rrv__v3(p.x, p.y + hy, p.z), 0, 0) - rrv__field_eval(&f, rrv__v3(p.x, p.y - hy, p.z), 0, 0)) / (2 * hy);
+        ref.z = (rrv__field_eval(&f, rrv__v3(p.x, p.y, p.z + hz), 0, 0) - rrv__field_eval(&f, rrv__v3(p.x, p.y, p.z - hz), 0, 0)) / (2 * hz);
+        /* absolute: values are in [0,1], so gradients are O(1/voxel) ~ 10 */
+        e = rrv__length(rrv__sub(fused, ref));
+        if (e > worst) { worst = e; worst_i = i; }
+    }
+    CHECKF(worst < 1e-9, "difference %g at sample %d", worst, worst_i);
+    CHECK(rrv__length(rrv__grid_gradient(&f.grid, rrv__v3(5, 0, 0))) == 0);
+    free(f.grid.data);
+}
+
 int main(int argc, char **argv)
 {
     (void)argc; (void)argv;
@@ -303,5 +336,6 @@ int main(int argc, char **argv)
     RUN(test_white_furnace);
     RUN(test_white_furnace_chromatic);
     RUN(test_tiles_are_bit_identical);
+    RUN(test_grid_gradient_stencil);
     return CHECK_EXIT_CODE();
 }
