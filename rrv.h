@@ -1,4 +1,4 @@
-/* rrv.h 0.1.0 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.2.0 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -6,6 +6,21 @@
    ray (Fraboni, Chan, Vergne, Jeziorski, "Can You See the Heat?", SIGGRAPH
    2023 talk), next to a classic null-scattering volume path tracer
    (Miller et al. 2019) and an eikonal ray-marching reference (Ament et al. 2014).
+
+   INTEGRATORS (rrv_settings.integrator)
+     classic     IOR 1 everywhere: delta tracking, ratio-tracked NEE with MIS,
+                 spectral MIS for chromatic media. The production baseline.
+     refractive  the same, with rays bent inside media that carry an IOR.
+                 Scheme (rrv_settings.refraction): COMB, the default, kicks
+                 the direction at regularly spaced points with the leapfrog
+                 kick d(eta d) = grad eta h (second order); POISSON is the
+                 seed paper's Snell refraction at every null event and
+                 MIDPOINT its variant with the normal at the chord midpoint
+                 (both first order). NEE rays stay straight: near refractive
+                 media direct light is biased until manifold NEE lands.
+     eikonal     marches the ray equation d/ds(eta dx/ds) = grad eta with RK4
+                 (default) or a symplectic leapfrog, step rrv_settings.step.
+   Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2.
 
    USAGE
      In exactly one C file:
@@ -39,6 +54,8 @@
                       write through the callback writers
 
    HISTORY
+     0.2.0  refraction: IOR fields (gas state, profiles, grids), refractive
+            and eikonal integrators, rrv_trace_ray
      0.1.0  classic null-scattering path tracer, scene format, image I/O
 */
 #ifndef RRV_H_INCLUDED
@@ -48,7 +65,7 @@
 #include <stdint.h>
 
 #define RRV_VERSION_MAJOR 0
-#define RRV_VERSION_MINOR 1
+#define RRV_VERSION_MINOR 2
 #define RRV_VERSION_PATCH 0
 
 #ifndef RRV_DEF
@@ -236,7 +253,7 @@ typedef enum rrv_refraction_scheme {
     RRV_REFRACTION_POISSON,     /* the seed paper: at every null event, normal there */
     RRV_REFRACTION_MIDPOINT,    /* at every null event, normal at the chord midpoint */
     RRV_REFRACTION_COMB         /* at regularly spaced points (one random offset a
-                                   segment), IOR ratio between chord midpoints */
+                                   segment), leapfrog kick d(eta d) = grad eta h */
 } rrv_refraction_scheme;
 
 typedef struct rrv_settings {
