@@ -1775,6 +1775,12 @@ static int rrv__support_interval(const rrv_medium *m, rrv_vec3 o, rrv_vec3 d, do
     return lo < hi;
 }
 
+/* A point counts as inside a support only if the support reaches at least
+   this far ahead of it: a ray that stopped on the edge (after its exit kick)
+   would otherwise find a rounding-sized remainder, step by 1e-16, and never
+   move again. Steps and comb points cross edges by the same nudge. */
+#define RRV__EDGE_NUDGE 1e-9
+
 /* Distance along the ray to the nearest refraction support (0 if inside one). */
 static double rrv__distance_to_refraction(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, int *inside)
 {
@@ -1784,9 +1790,9 @@ static double rrv__distance_to_refraction(const rrv_scene *scene, rrv_vec3 o, rr
     for (i = 0; i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i];
         if (!rrv__medium_refracts(m) || !rrv__support_interval(m, o, d, &t0, &t1)) continue;
-        if (t1 <= 0) continue;
+        if (t1 <= RRV__EDGE_NUDGE) continue;
         if (t0 <= 0) { *inside = 1; return 0; }
-        best = fmin(best, t0);
+        best = rrv__mind(best, t0);
     }
     return best;
 }
@@ -1800,7 +1806,7 @@ static double rrv__refraction_exit(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 
     int i;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
-        if (rrv__medium_refracts(m) && rrv__support_interval(m, o, d, &t0, &t1) && t0 <= 0 && t1 > 0) {
+        if (rrv__medium_refracts(m) && rrv__support_interval(m, o, d, &t0, &t1) && t0 <= 0 && t1 > RRV__EDGE_NUDGE) {
             if (surface_free) *surface_free = m->majorant->surface_free;
             return t1;
         }
@@ -1816,7 +1822,7 @@ static double rrv__refraction_exit(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 
 static double rrv__eikonal_advance(const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x, rrv_vec3 d,
                                    rrv_vec3 *x_out, rrv_vec3 *d_out)
 {
-    const double nudge = 1e-9;
+    const double nudge = RRV__EDGE_NUDGE;
     double exit = rrv__refraction_exit(scene, x, d, NULL);
     h = exit > 2 * nudge ? fmin(h, exit - nudge) : exit + nudge;
     rrv__eikonal_step(scene, stepper, h, x, d, x_out, d_out);
@@ -1963,7 +1969,7 @@ static void rrv__comb_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
     if (!inside) {
         b->entering = 1;
         b->at_exit = 0;
-        b->comb_t = t_in < DBL_MAX ? t_in + 1e-9 * (1.0 + t_in) : DBL_MAX;
+        b->comb_t = t_in < DBL_MAX ? t_in + RRV__EDGE_NUDGE * (1.0 + t_in) : DBL_MAX;
     } else {
         double exit = rrv__refraction_exit(scene, o, *d, &b->surface_free);
         double first = rrv__comb_spacing(scene, o) * (1.0 - rrv__uniform(rng));
@@ -2349,7 +2355,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                 d = rrv__scale(chord, 1.0 / segment);
                 ++ctx->stats.events;
             } else if (t_in < DBL_MAX) {
-                segment = t_in + 1e-9 * (1.0 + t_in); /* just inside the box */
+                segment = t_in + RRV__EDGE_NUDGE * (1.0 + t_in); /* just inside the box */
             }
         } else if (ctx->comb) {
             if (!path.bender.planned) rrv__comb_plan(&path.bender, scene, o, &d, rng);
@@ -2633,7 +2639,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
                 ++events;
                 if (visit) visit(user, o, d);
             } else if (t_in < DBL_MAX) {
-                o = rrv__madd(o, d, t_in + 1e-9 * (1.0 + t_in));
+                o = rrv__madd(o, d, t_in + RRV__EDGE_NUDGE * (1.0 + t_in));
             } else {
                 break;
             }

@@ -673,6 +673,35 @@ static void test_extreme_rate_blob(void)
     rrv_scene_free(s);
 }
 
+static void test_exits_never_stall(void)
+{
+    /* Rays from outside across a fish-eye and a Luneburg lens, out to the
+       grazing rim: each must leave within a bounded number of kicks. A ray
+       that stopped exactly on the sphere once found a rounding-sized piece
+       of support ahead (t1 ~ 1e-16), stepped by it without moving, and
+       stalled until the 1e7-event cap (seen at impact 0.97 R). */
+    int lens, i, k;
+    for (lens = 0; lens < 2; ++lens) {
+        rrv_scene *s = lens ? luneburg_scene() : fisheye_scene();
+        uint64_t worst = 0;
+        for (k = 0; k < 3; ++k) {
+            s->settings.refraction = k == 0 ? RRV_REFRACTION_COMB : k == 1 ? RRV_REFRACTION_POISSON : RRV_REFRACTION_DEFAULT;
+            for (i = 0; i <= 400; ++i) {
+                rrv_trace_result r;
+                double b = i / 400.0 * 1.02;
+                rrv_vec3 o = rrv__v3(0, 0, -4), d = rrv__normalize(rrv__v3(-b, 0.1 * b, 4.0));
+                rrv_integrator integ = k == 2 ? RRV_INTEGRATOR_EIKONAL : RRV_INTEGRATOR_REFRACTIVE;
+                if (!trace(s, integ, o, d, (uint64_t)i, NULL, NULL, &r)) break;
+                if (r.events > worst) worst = r.events;
+            }
+        }
+        SAY("  %s: most events for one ray %llu\n", lens ? "luneburg" : "fisheye", (unsigned long long)worst);
+        /* a full crossing at the default tolerance takes a few hundred */
+        CHECKF(worst < 20000, "%s: a ray needed %llu events", lens ? "luneburg" : "fisheye", (unsigned long long)worst);
+        rrv_scene_free(s);
+    }
+}
+
 int main(int argc, char **argv)
 {
     const char *v = getenv("GRIN_VERBOSE");
@@ -686,6 +715,7 @@ int main(int argc, char **argv)
     RUN(test_refract_grazing_side);
     RUN(test_refract_many_events_constant);
     RUN(test_luneburg_rk4);
+    RUN(test_exits_never_stall);
     RUN(test_luneburg_leapfrog_order);
     RUN(test_luneburg_comb_default);
     RUN(test_luneburg_poisson);
