@@ -1533,17 +1533,25 @@ static void rrv__medium_coeffs(const rrv_medium *m, rrv_vec3 p, rrv__coeffs *c)
     }
 }
 
-/* Blackbody radiance reduced to linear sRGB and normalised to luminance 1,
-   so Lescale alone sets the brightness and temperature only the hue. The
-   reduction integrates Planck's law against CIE 1931 matching functions
-   (the multi-lobe Gaussian fit of Wyman et al. 2013) over 380-780 nm. */
+/* Blackbody radiance in linear sRGB, normalised as pbrt-v4 normalises its
+   BlackbodySpectrum: Planck's law divided by its value at the peak
+   wavelength (Wien), so Lescale is the artist's intensity control while a
+   cooler gas still glows dimmer and redder, and air at 300 K is black. The
+   spectrum is integrated against the CIE 1931 matching functions (the
+   multi-lobe Gaussian fit of Wyman et al. 2013) over 380-780 nm and divided
+   by the integral of y-bar, so a flat spectrum of 1 has luminance 1.
+   (Normalising every temperature to luminance 1 instead made 300 K glow:
+   the fit's far-red tails turned its residue yellow or green.) */
 static void rrv__blackbody_rgb(double T, double rgb[3])
 {
-    double X = 0, Y = 0, Z = 0, lambda, r, g, b;
+    const double c2 = 1.4387769e-2; /* second radiation constant, m K */
+    double X = 0, Y = 0, Z = 0, ybar_sum = 0, lambda, peak, peak_planck;
     if (!(T > 100.0)) { rgb[0] = rgb[1] = rgb[2] = 0; return; }
+    peak = 2.8977721e-3 / T;
+    peak_planck = 1.0 / (peak * peak * peak * peak * peak * (exp(c2 / (peak * T)) - 1.0));
     for (lambda = 380.0; lambda <= 780.0; lambda += 5.0) {
         double l = lambda * 1e-9;
-        double planck = 1.0 / (l * l * l * l * l * (exp(1.4387769e-2 / (l * T)) - 1.0));
+        double planck = 1.0 / (l * l * l * l * l * (exp(c2 / (l * T)) - 1.0)) / peak_planck;
         double t1 = (lambda - 442.0) * (lambda < 442.0 ? 0.0624 : 0.0374);
         double t2 = (lambda - 599.8) * (lambda < 599.8 ? 0.0264 : 0.0323);
         double t3 = (lambda - 501.1) * (lambda < 501.1 ? 0.0490 : 0.0382);
@@ -1555,13 +1563,12 @@ static void rrv__blackbody_rgb(double T, double rgb[3])
         double v2 = (lambda - 459.0) * (lambda < 459.0 ? 0.0385 : 0.0725);
         double zb = 1.217 * exp(-0.5 * v1 * v1) + 0.681 * exp(-0.5 * v2 * v2);
         X += planck * xb; Y += planck * yb; Z += planck * zb;
+        ybar_sum += yb;
     }
-    r = 3.2404542 * X - 1.5371385 * Y - 0.4985314 * Z;
-    g = -0.9692660 * X + 1.8760108 * Y + 0.0415560 * Z;
-    b = 0.0556434 * X - 0.2040259 * Y + 1.0572252 * Z;
-    rgb[0] = fmax(0.0, r / Y);
-    rgb[1] = fmax(0.0, g / Y);
-    rgb[2] = fmax(0.0, b / Y);
+    X /= ybar_sum; Y /= ybar_sum; Z /= ybar_sum;
+    rgb[0] = rrv__maxd(0.0, 3.2404542 * X - 1.5371385 * Y - 0.4985314 * Z);
+    rgb[1] = rrv__maxd(0.0, -0.9692660 * X + 1.8760108 * Y + 0.0415560 * Z);
+    rgb[2] = rrv__maxd(0.0, 0.0556434 * X - 0.2040259 * Y + 1.0572252 * Z);
 }
 
 static int rrv__medium_emits(const rrv_medium *m)

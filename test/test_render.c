@@ -323,6 +323,23 @@ static void test_grid_gradient_stencil(void)
     free(f.grid.data);
 }
 
+static void test_blackbody(void)
+{
+    double c300[3], c1500[3], c3000[3], c6500[3];
+    rrv__blackbody_rgb(300, c300);
+    rrv__blackbody_rgb(1500, c1500);
+    rrv__blackbody_rgb(3000, c3000);
+    rrv__blackbody_rgb(6500, c6500);
+    /* air at ambient temperature does not glow */
+    CHECKF(rrv__max3(c300) < 1e-20, "300 K glows: %g %g %g", c300[0], c300[1], c300[2]);
+    /* hotter is brighter (peak-normalised like pbrt-v4) and less red */
+    CHECK(c1500[1] < c3000[1] && c3000[1] < c6500[1]);
+    CHECK(c1500[0] / c1500[1] > c3000[0] / c3000[1] && c3000[0] / c3000[1] > c6500[0] / c6500[1]);
+    /* 6500 K is close to the sRGB white point (D65) */
+    CHECKF(fabs(c6500[0] / c6500[1] - 1) < 0.1 && fabs(c6500[2] / c6500[1] - 1) < 0.15, "6500 K: %g %g %g",
+           c6500[0], c6500[1], c6500[2]);
+}
+
 int main(int argc, char **argv)
 {
     (void)argc; (void)argv;
@@ -337,5 +354,6 @@ int main(int argc, char **argv)
     RUN(test_white_furnace_chromatic);
     RUN(test_tiles_are_bit_identical);
     RUN(test_grid_gradient_stencil);
+    RUN(test_blackbody);
     return CHECK_EXIT_CODE();
 }
