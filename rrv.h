@@ -1154,6 +1154,7 @@ struct rrv__majorant_grid {
     int empty;             /* no extinction anywhere: density tracking can skip it */
     int surface_free;      /* no surface reaches into the box: chords inside need no ray cast */
     rrv_field baked[RRV__FIELD_KINDS]; /* kind GRID where a noise field was baked */
+    rrv_grid refraction;   /* 4 channels, r and grad r, where r comes from a grid */
 };
 
 /* The field to evaluate: the baked copy when there is one. */
@@ -1184,9 +1185,57 @@ static double rrv__pressure(const rrv_medium *m, rrv_vec3 p)
 
 /* Refractivity eta - 1 of a refractive medium at p, including its artist
    scale; Hauf-Grigull for a gas: r = r_ref (P / P_ref) (T_ref / T). */
+/* Trilinear interpolation of the first `channels` channels of a grid at p
+   (inside its box). */
+static void rrv__grid_sample_all(const rrv_grid *g, rrv_vec3 p, int channels, double *out)
+{
+    double f[3], t[3], lo[3], hi[3];
+    int n[3], i0[3], a, c;
+    size_t stride[3], base = 0;
+    n[0] = g->nx; n[1] = g->ny; n[2] = g->nz;
+    lo[0] = g->lo.x; lo[1] = g->lo.y; lo[2] = g->lo.z;
+    hi[0] = g->hi.x; hi[1] = g->hi.y; hi[2] = g->hi.z;
+    f[0] = p.x; f[1] = p.y; f[2] = p.z;
+    stride[0] = (size_t)g->channels;
+    stride[1] = stride[0] * (size_t)g->nx;
+    stride[2] = stride[1] * (size_t)g->ny;
+    for (a = 0; a < 3; ++a) {
+        double u = (f[a] - lo[a]) / (hi[a] - lo[a]) * (n[a] - 1);
+        i0[a] = (int)u;
+        if (i0[a] > n[a] - 2) i0[a] = n[a] - 2;
+        if (i0[a] < 0) i0[a] = 0;
+        t[a] = u - i0[a];
+        base += (size_t)i0[a] * stride[a];
+    }
+    for (c = 0; c < channels; ++c) {
+        const float *d = g->data + base + c;
+        double c00 = (double)d[0] + t[0] * ((double)d[stride[0]] - d[0]);
+        double c10 = (double)d[stride[1]] + t[0] * ((double)d[stride[1] + stride[0]] - d[stride[1]]);
+        double c01 = (double)d[stride[2]] + t[0] * ((double)d[stride[2] + stride[0]] - d[stride[2]]);
+        double c11 = (double)d[stride[2] + stride[1]] +
+                     t[0] * ((double)d[stride[2] + stride[1] + stride[0]] - d[stride[2] + stride[1]]);
+        c00 += t[1] * (c10 - c00);
+        c01 += t[1] * (c11 - c01);
+        out[c] = c00 + t[2] * (c01 - c00);
+    }
+}
+
+/* The baked refractivity grid, if one covers p. */
+static const rrv_grid *rrv__refraction_grid_at(const rrv_medium *m, rrv_vec3 p)
+{
+    const rrv_grid *g = m->majorant ? &m->majorant->refraction : NULL;
+    return g && g->data && rrv__inside_box(p, g->lo, g->hi) ? g : NULL;
+}
+
 static double rrv__refractivity(const rrv_medium *m, rrv_vec3 p, double ambient_r)
 {
     double r;
+    const rrv_grid *baked = rrv__refraction_grid_at(m, p);
+    if (baked) {
+        double v;
+        rrv__grid_sample_all(baked, p, 1, &v);
+        return v;
+    }
     if (m->ior_from_gas) {
         double T = rrv__temperature(m, p), P = rrv__pressure(m, p);
         r = (m->eta_ref - 1.0) * (P / m->P_ref) * (m->T_ref / fmax(T, 1e-3));
@@ -1312,7 +1361,15 @@ static rrv_vec3 rrv__profile_gradient(const rrv_field *f, rrv_vec3 p, double amb
    grad r = r (grad P / P - grad T / T) (PHYSICS.md). */
 static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double ambient_r, rrv_vec3 *grad)
 {
-    double r = rrv__refractivity(m, p, ambient_r);
+    double r;
+    const rrv_grid *baked = rrv__refraction_grid_at(m, p);
+    if (baked) {
+        double v[4];
+        rrv__grid_sample_all(baked, p, 4, v);
+        *grad = rrv__v3(v[1], v[2], v[3]);
+        return v[0];
+    }
+    r = rrv__refractivity(m, p, ambient_r);
     if (m->ior_from_gas) {
         double T = fmax(rrv__temperature(m, p), 1e-3), P = rrv__pressure(m, p);
         rrv_vec3 gT = rrv__scale(rrv__field_gradient(rrv__field_of(m, RRV__TEMPERATURE), p, 0), m->temperaturescale);
@@ -1416,8 +1473,10 @@ static double rrv__cell_gradient_bound(const rrv_medium *m, rrv_vec3 lo, rrv_vec
     return 1.5 * best;
 }
 
-/* Bakes a noise field over the medium box: a voxel of half the finest
-   octave's wavelength, at most 128 samples an axis (8 MiB a field). */
+/* Bakes a noise field over the medium box: four samples to the finest
+   octave's wavelength (at two, trilinear interpolation of T and of r = k/T
+   already disagreed by 10% in the bending of heat haze), at most 128
+   samples an axis (8 MiB a field). */
 static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, const rrv_field *f, rrv_field *out,
                                   size_t *bytes, rrv_error *err)
 {
@@ -1425,7 +1484,7 @@ static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, c
     double finest = nz->frequency * pow(nz->lacunarity, nz->octaves - 1);
     rrv_vec3 ext = rrv__sub(m->hi, m->lo);
     double longest = rrv__maxd(ext.x, rrv__maxd(ext.y, ext.z));
-    double voxel = rrv__maxd(0.5 / finest, longest / 127.0);
+    double voxel = rrv__maxd(0.25 / finest, longest / 127.0);
     int n[3], a, x, y, z;
     size_t count, i = 0;
     float *data;
@@ -1456,6 +1515,68 @@ static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, c
     return RRV_OK;
 }
 
+/* Bakes the refractivity r and its gradient into one 4-channel grid on the
+   lattice of the grid the IOR comes from (a temperature, pressure or IOR
+   grid, given or baked from noise): a refraction kick then costs one
+   trilinear fetch instead of a temperature lookup, Hauf-Grigull and a
+   48-sample gradient stencil. The gradient is the central difference at
+   each sample (one-sided at the faces), blended trilinearly: the second-order
+   stencil of rrv__grid_gradient. Analytic profiles keep their closed forms. */
+static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, size_t *bytes, rrv_error *err)
+{
+    const rrv_grid *lattice = NULL;
+    const rrv_field *candidates[3];
+    struct rrv__majorant_grid *g = m->majorant;
+    double ambient_r = scene->settings.ambient_ior - 1.0;
+    size_t count, i;
+    int k, x, y, z, n[3];
+    float *data;
+    if (!rrv__medium_refracts(m)) return RRV_OK;
+    candidates[0] = m->ior_from_gas ? rrv__field_of(m, RRV__TEMPERATURE) : rrv__field_of(m, RRV__IOR);
+    candidates[1] = m->ior_from_gas ? rrv__field_of(m, RRV__PRESSURE) : NULL;
+    candidates[2] = NULL;
+    for (k = 0; k < 2 && !lattice; ++k)
+        if (candidates[k] && candidates[k]->kind == RRV_FIELD_GRID) lattice = &candidates[k]->grid;
+    if (!lattice) return RRV_OK;
+    n[0] = lattice->nx; n[1] = lattice->ny; n[2] = lattice->nz;
+    count = (size_t)n[0] * (size_t)n[1] * (size_t)n[2];
+    data = (float *)RRV_MALLOC(count * 4 * sizeof(float));
+    if (!data) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory baking a refractivity grid");
+    i = 0;
+    for (z = 0; z < n[2]; ++z)
+        for (y = 0; y < n[1]; ++y)
+            for (x = 0; x < n[0]; ++x, ++i) {
+                rrv_vec3 p = rrv__v3(lattice->lo.x + (lattice->hi.x - lattice->lo.x) * x / (n[0] - 1),
+                                     lattice->lo.y + (lattice->hi.y - lattice->lo.y) * y / (n[1] - 1),
+                                     lattice->lo.z + (lattice->hi.z - lattice->lo.z) * z / (n[2] - 1));
+                data[4 * i] = (float)rrv__refractivity(m, p, ambient_r);
+            }
+    i = 0;
+    for (z = 0; z < n[2]; ++z)
+        for (y = 0; y < n[1]; ++y)
+            for (x = 0; x < n[0]; ++x, ++i) {
+                int c[3], a;
+                size_t stride[3];
+                double extent[3];
+                c[0] = x; c[1] = y; c[2] = z;
+                stride[0] = 1; stride[1] = (size_t)n[0]; stride[2] = (size_t)n[0] * (size_t)n[1];
+                extent[0] = lattice->hi.x - lattice->lo.x;
+                extent[1] = lattice->hi.y - lattice->lo.y;
+                extent[2] = lattice->hi.z - lattice->lo.z;
+                for (a = 0; a < 3; ++a) {
+                    int lo = c[a] > 0 ? c[a] - 1 : c[a], hi = c[a] < n[a] - 1 ? c[a] + 1 : c[a];
+                    double up = data[4 * (i + (size_t)(hi - c[a]) * stride[a])];
+                    double down = data[4 * (i - (size_t)(c[a] - lo) * stride[a])];
+                    data[4 * i + 1 + a] = (float)((up - down) / ((hi - lo) * extent[a] / (n[a] - 1)));
+                }
+            }
+    g->refraction = *lattice;
+    g->refraction.channels = 4;
+    g->refraction.data = data;
+    *bytes += count * 4 * sizeof(float);
+    return RRV_OK;
+}
+
 static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, size_t *baked_bytes, rrv_error *err)
 {
     struct rrv__majorant_grid *g;
@@ -1474,6 +1595,10 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
             rrv_result res = rrv__bake_noise(scene, m, user, &g->baked[x], baked_bytes, err);
             if (res != RRV_OK) return res;
         }
+    }
+    {
+        rrv_result res = rrv__bake_refraction(scene, m, baked_bytes, err);
+        if (res != RRV_OK) return res;
     }
     for (x = 0; x < 3; ++x) g->n[x] = forced > 0 ? (forced > 256 ? 256 : forced) : rrv__auto_cells(m, x);
     cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
@@ -2482,6 +2607,7 @@ static void rrv__scene_release_prepared(rrv_scene *scene)
         if (g) {
             int k;
             for (k = 0; k < RRV__FIELD_KINDS; ++k) RRV_FREE(g->baked[k].grid.data);
+            RRV_FREE(g->refraction.data);
             RRV_FREE(g->density_max);
             RRV_FREE(g);
             scene->media[i].majorant = NULL;
