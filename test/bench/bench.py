@@ -104,6 +104,37 @@ def main():
                 base = wall
             print("| %s | %.2f | %.2fx |" % (integ, wall, wall / base))
 
+    print("\n## Error against a converged reference: scenes/luneburg.rrv at 64x64\n")
+    print("Reference: eikonal RK4, h = 0.01, 1024 spp. RMSE over pixels and channels. At 64 spp")
+    print("Monte Carlo noise alone gives ~0.019: the second comb row, with another seed, shows")
+    print("how much the RMSE moves with the noise alone.\n")
+    lune = os.path.join(OUT, "luneburg64.rrv")
+    text = open(os.path.join(ROOT, "scenes", "luneburg.rrv")).read().replace("resolution 320 320", "resolution 64 64")
+    open(lune, "w").write(text)
+    lune = os.path.relpath(lune, ROOT)
+    ref = os.path.join(OUT, "lune_ref.pfm")
+    if not os.path.exists(ref):
+        run([rrv, "render", lune, "-o", ref, "--integrator", "eikonal", "--stepper", "rk4", "--step", "0.01",
+             "--spp", "1024", "-q"])
+    def rmse(img):
+        out = subprocess.run([rrv, "diff", img, ref], cwd=ROOT, stdout=subprocess.PIPE, text=True).stdout
+        return float(re.search(r"rmse: ([\d.e+-]+)", out).group(1))
+    print("| integrator | settings | spp | wall s | RMSE |")
+    print("|---|---|---|---|---|")
+    cases = [("refractive", ["--refraction", "comb"], "comb, default tolerance 0.01", 64),
+             ("refractive", ["--refraction", "comb", "--seed", "7"], "comb, default, another seed", 64),
+             ("refractive", ["--refraction", "poisson"], "poisson (seed paper), tolerance 0.01", 64),
+             ("eikonal", ["--stepper", "rk4", "--step", "0.2"], "RK4, h = 0.2", 64),
+             ("eikonal", ["--stepper", "rk4", "--step", "0.05"], "RK4, h = 0.05", 64),
+             ("eikonal", ["--stepper", "leapfrog", "--step", "0.01"], "leapfrog, h = 0.01", 64)]
+    results = {}
+    for integ, flags, label, spp in cases:
+        img = os.path.join(OUT, "lune_%d.pfm" % len(results))
+        wall, _, _ = median_run([rrv, "render", lune, "-o", img, "--integrator", integ, "--spp", str(spp), "-q"] + flags,
+                                runs)
+        results[label] = (wall, rmse(img))
+        print("| %s | %s | %d | %.2f | %.4f |" % (integ, label, spp, wall, results[label][1]))
+
 
 if __name__ == "__main__":
     main()
