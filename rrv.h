@@ -2063,8 +2063,11 @@ static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 
                                double h_bar, rrv_vec3 grad_at)
 {
     rrv_vec3 grad;
-    double r_ahead = rrv__scene_refractivity(scene, rrv__madd(x, d, 0.5 * h), NULL);
-    rrv__scene_refractivity(scene, grad_at, &grad);
+    /* The refractivity at the midpoint of the chord ahead, from the value and
+       gradient fetched here anyway: its O(h^2) error keeps the kick second
+       order (measured), and it halves the field lookups per kick. */
+    double r_here = rrv__scene_refractivity(scene, grad_at, &grad);
+    double r_ahead = r_here + rrv__dot(grad, rrv__sub(rrv__madd(x, d, 0.5 * h), grad_at));
     d = rrv__normalize(rrv__madd(rrv__scale(d, 1.0 + b->r), grad, h_bar));
     b->r = r_ahead;
     return d;
