@@ -1464,6 +1464,14 @@ static double rrv__cell_gradient_bound(const rrv_medium *m, rrv_vec3 lo, rrv_vec
     return 1.5 * best;
 }
 
+/* The position of sample (x, y, z) of an n[0] x n[1] x n[2] lattice whose
+   corner samples lie on the faces of the box [lo, hi] (PHYSICS.md). */
+static rrv_vec3 rrv__lattice_point(rrv_vec3 lo, rrv_vec3 hi, const int n[3], int x, int y, int z)
+{
+    return rrv__v3(lo.x + (hi.x - lo.x) * x / (n[0] - 1), lo.y + (hi.y - lo.y) * y / (n[1] - 1),
+                   lo.z + (hi.z - lo.z) * z / (n[2] - 1));
+}
+
 /* Bakes a noise field over the medium box: four samples to the finest
    octave's wavelength (at two, trilinear interpolation of T and of r = k/T
    already disagreed by 10% in the bending of heat haze), at most 128
@@ -1489,9 +1497,7 @@ static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, c
     for (z = 0; z < n[2]; ++z)
         for (y = 0; y < n[1]; ++y)
             for (x = 0; x < n[0]; ++x) {
-                rrv_vec3 p = rrv__v3(m->lo.x + ext.x * x / (n[0] - 1), m->lo.y + ext.y * y / (n[1] - 1),
-                                     m->lo.z + ext.z * z / (n[2] - 1));
-                data[i++] = (float)rrv__field_eval(f, p, 0, 0.0);
+                data[i++] = (float)rrv__field_eval(f, rrv__lattice_point(m->lo, m->hi, n, x, y, z), 0, 0.0);
             }
     memset(out, 0, sizeof *out);
     out->kind = RRV_FIELD_GRID;
@@ -1516,7 +1522,7 @@ static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, c
 static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, size_t *bytes, rrv_error *err)
 {
     const rrv_grid *lattice = NULL;
-    const rrv_field *candidates[3];
+    const rrv_field *candidates[2];
     struct rrv__majorant_grid *g = m->majorant;
     double ambient_r = scene->settings.ambient_ior - 1.0;
     size_t count, i;
@@ -1525,7 +1531,6 @@ static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, si
     if (!rrv__medium_refracts(m)) return RRV_OK;
     candidates[0] = m->ior_from_gas ? rrv__field_of(m, RRV__TEMPERATURE) : rrv__field_of(m, RRV__IOR);
     candidates[1] = m->ior_from_gas ? rrv__field_of(m, RRV__PRESSURE) : NULL;
-    candidates[2] = NULL;
     for (k = 0; k < 2 && !lattice; ++k)
         if (candidates[k] && candidates[k]->kind == RRV_FIELD_GRID) lattice = &candidates[k]->grid;
     if (!lattice) return RRV_OK;
@@ -1537,9 +1542,7 @@ static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, si
     for (z = 0; z < n[2]; ++z)
         for (y = 0; y < n[1]; ++y)
             for (x = 0; x < n[0]; ++x, ++i) {
-                rrv_vec3 p = rrv__v3(lattice->lo.x + (lattice->hi.x - lattice->lo.x) * x / (n[0] - 1),
-                                     lattice->lo.y + (lattice->hi.y - lattice->lo.y) * y / (n[1] - 1),
-                                     lattice->lo.z + (lattice->hi.z - lattice->lo.z) * z / (n[2] - 1));
+                rrv_vec3 p = rrv__lattice_point(lattice->lo, lattice->hi, n, x, y, z);
                 data[4 * i] = (float)rrv__refractivity(m, p, ambient_r);
             }
     i = 0;
@@ -1727,6 +1730,18 @@ typedef struct rrv__walker {
     double t_event, majorant; /* pending tentative collision and its majorant */
 } rrv__walker;
 
+/* The majorant cell holding p (clamped into the grid), per axis and as an
+   index into the per-cell arrays. */
+static size_t rrv__majorant_cell(const struct rrv__majorant_grid *g, rrv_vec3 p, int cell[3])
+{
+    int a;
+    for (a = 0; a < 3; ++a) {
+        int c = (int)floor((rrv__axis(p, a) - rrv__axis(g->lo, a)) / rrv__axis(g->cell, a));
+        cell[a] = c < 0 ? 0 : c > g->n[a] - 1 ? g->n[a] - 1 : c;
+    }
+    return ((size_t)cell[2] * (size_t)g->n[1] + (size_t)cell[1]) * (size_t)g->n[0] + (size_t)cell[0];
+}
+
 static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
                              rrv_vec3 o, rrv_vec3 d, double tmax)
 {
@@ -1753,12 +1768,10 @@ static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refra
     w->t = t0;
     w->t_end = t1;
     p = rrv__madd(o, d, t0);
+    rrv__majorant_cell(g, p, w->cell);
     for (a = 0; a < 3; ++a) {
         double lo = rrv__axis(g->lo, a), cs = rrv__axis(g->cell, a), da = rrv__axis(d, a);
-        int c = (int)floor((rrv__axis(p, a) - lo) / cs);
-        if (c < 0) c = 0;
-        if (c > g->n[a] - 1) c = g->n[a] - 1;
-        w->cell[a] = c;
+        int c = w->cell[a];
         if (da > 0) {
             w->step[a] = 1;
             w->t_next[a] = (lo + (c + 1) * cs - rrv__axis(o, a)) / da;
@@ -2031,17 +2044,10 @@ static double rrv__comb_spacing(const rrv_scene *scene, rrv_vec3 x)
         const rrv_medium *m = &scene->media[i];
         const struct rrv__majorant_grid *g = m->majorant;
         double rate, cell;
-        int c[3], a;
-        size_t k;
+        int c[3];
         if (!rrv__medium_refracts(m) || !rrv__inside_box(x, m->lo, m->hi)) continue;
         if (scene->settings.mu_eta > 0) return 1.0 / scene->settings.mu_eta;
-        for (a = 0; a < 3; ++a) {
-            c[a] = (int)((rrv__axis(x, a) - rrv__axis(g->lo, a)) / rrv__axis(g->cell, a));
-            if (c[a] < 0) c[a] = 0;
-            if (c[a] > g->n[a] - 1) c[a] = g->n[a] - 1;
-        }
-        k = ((size_t)c[2] * (size_t)g->n[1] + (size_t)c[1]) * (size_t)g->n[0] + (size_t)c[0];
-        rate = g->grad_max[k] / scene->settings.bend_tolerance;
+        rate = g->grad_max[rrv__majorant_cell(g, x, c)] / scene->settings.bend_tolerance;
         cell = fmin(g->cell.x, fmin(g->cell.y, g->cell.z));
         return rate * cell > 1.0 ? 1.0 / rate : cell;
     }
