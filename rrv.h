@@ -1138,12 +1138,6 @@ static double rrv__field_bound(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
 
 /* ---- the refractive index: refractivity r = eta - 1 and its gradient ------ */
 
-/* Does the medium bend light at all? Media without an IOR pay nothing. */
-static int rrv__medium_refracts(const rrv_medium *m)
-{
-    return m->ior_from_gas || m->ior.kind != RRV_FIELD_NONE;
-}
-
 /* Refractivity of the medium's own IOR profile at p (not scaled). */
 static double rrv__profile_refractivity(const rrv_field *f, rrv_vec3 p, double ambient_r)
 {
@@ -1181,9 +1175,34 @@ struct rrv__majorant_grid {
     float *grad_max;       /* per cell max |grad r|, NULL if the medium does not refract */
     int empty;             /* no extinction anywhere: density tracking can skip it */
     int surface_free;      /* no surface reaches into the box: chords inside need no ray cast */
+    int ior_inert;         /* the IOR is the ambient one throughout: the medium does not refract */
     rrv_field baked[RRV__FIELD_KINDS]; /* kind GRID where a noise field was baked */
     rrv_grid refraction;   /* 4 channels, r and grad r, where r comes from a grid */
 };
+
+/* Does the medium bend light at all? Media without an IOR pay nothing. */
+static int rrv__medium_refracts(const rrv_medium *m)
+{
+    if (m->majorant && m->majorant->ior_inert) return 0;
+    return m->ior_from_gas || m->ior.kind != RRV_FIELD_NONE;
+}
+
+/* An IOR that is the ambient one everywhere in the box (a constant equal to
+   it) bends nothing and has no interface: such a medium renders exactly as
+   classic does, paying nothing for its IOR. */
+static int rrv__ior_is_ambient(const rrv_scene *scene, const rrv_medium *m)
+{
+    double r;
+    if (m->ior_from_gas) {
+        if (m->temperature.kind != RRV_FIELD_NONE || m->pressure.kind != RRV_FIELD_NONE) return 0;
+        r = (m->eta_ref - 1.0) * m->ior_scale;
+    } else if (m->ior.kind == RRV_FIELD_CONSTANT) {
+        r = m->ior.value * m->ior_scale;
+    } else {
+        return 0;
+    }
+    return r == scene->settings.ambient_ior - 1.0;
+}
 
 /* The field to evaluate: the baked copy when there is one. */
 static const rrv_field *rrv__field_of(const rrv_medium *m, int which)
@@ -1582,6 +1601,8 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
     memset(g, 0, sizeof *g);
     /* From here on the caller's release frees whatever was built. */
     m->majorant = g;
+    g->ior_inert = rrv__ior_is_ambient(scene, m);
+    refracts = rrv__medium_refracts(m);
     for (x = 0; x < RRV__FIELD_KINDS; ++x) {
         const rrv_field *user = x == RRV__DENSITY ? &m->density : x == RRV__TEMPERATURE ? &m->temperature
                               : x == RRV__PRESSURE ? &m->pressure : &m->ior;
@@ -1876,102 +1897,127 @@ static void rrv__eikonal_step(const rrv_scene *scene, rrv_stepper stepper, doubl
     *d_out = rrv__normalize(v);
 }
 
-/* Where a medium refracts: its box, narrowed to the sphere of a Luneburg or
-   fish-eye profile. The gradient of those profiles jumps at the sphere, so
-   steps and comb points must start and stop exactly on it: a step straddling
-   the jump makes an error of the order of the step. Fills the parameter
-   interval [t0, t1] of the line o + t d inside the support. */
-static int rrv__support_interval(const rrv_medium *m, rrv_vec3 o, rrv_vec3 d, double *t0, double *t1)
+/* ---- refraction supports, their faces, and sharp interfaces ------------------
+   Where a medium refracts: inside its box, and for a Luneburg or fish-eye
+   profile only inside its sphere (outside it, in the box, the IOR is
+   constant). Inside a support the IOR is smooth and bends rays by its
+   gradient; across a face (of the box or the sphere) the gradient jumps and
+   the IOR itself may jump, from the ambient IOR or another medium's to this
+   one's. Every integrator ends its segments on faces: a step or comb chord
+   straddling a jump of the gradient makes an error of the order of the step,
+   and a jump of the IOR is a sharp interface (rrv__cross_face). */
+
+/* The interval [*t0, *t1] of the line o + t d inside the box lo..hi and the
+   normals of the faces at both ends. */
+static int rrv__box_interval(rrv_vec3 lo_box, rrv_vec3 hi_box, rrv_vec3 o, rrv_vec3 d, double *t0, double *t1,
+                             rrv_vec3 *n0, rrv_vec3 *n1)
 {
     double lo = -DBL_MAX, hi = DBL_MAX;
-    int a;
+    int a, axis_lo = 0, axis_hi = 0;
     for (a = 0; a < 3; ++a) {
         double da = rrv__axis(d, a), oa = rrv__axis(o, a);
         if (da == 0) {
-            if (oa < rrv__axis(m->lo, a) || oa > rrv__axis(m->hi, a)) return 0;
+            if (oa < rrv__axis(lo_box, a) || oa > rrv__axis(hi_box, a)) return 0;
         } else {
-            double ta = (rrv__axis(m->lo, a) - oa) / da, tb = (rrv__axis(m->hi, a) - oa) / da;
+            double ta = (rrv__axis(lo_box, a) - oa) / da, tb = (rrv__axis(hi_box, a) - oa) / da;
             if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
-            lo = rrv__maxd(lo, ta);
-            hi = rrv__mind(hi, tb);
+            if (ta > lo) { lo = ta; axis_lo = a; }
+            if (tb < hi) { hi = tb; axis_hi = a; }
         }
     }
-    if (!m->ior_from_gas && (m->ior.kind == RRV_FIELD_LUNEBURG || m->ior.kind == RRV_FIELD_FISHEYE)) {
-        rrv_vec3 oc = rrv__sub(o, m->ior.center);
-        double b = rrv__dot(oc, d);
-        rrv_vec3 perp = rrv__madd(oc, d, -b);
-        double disc = m->ior.radius * m->ior.radius - rrv__dot(perp, perp), sq;
-        if (disc <= 0) return 0;
-        sq = sqrt(disc);
-        lo = rrv__maxd(lo, -b - sq);
-        hi = rrv__mind(hi, -b + sq);
-    }
+    *n0 = rrv__v3(axis_lo == 0, axis_lo == 1, axis_lo == 2);
+    *n1 = rrv__v3(axis_hi == 0, axis_hi == 1, axis_hi == 2);
     *t0 = lo;
     *t1 = hi;
     return lo < hi;
 }
 
-/* A point counts as inside a support only if the support reaches at least
-   this far ahead of it: a ray that stopped on the edge (after its exit kick)
-   would otherwise find a rounding-sized remainder, step by 1e-16, and never
-   move again. Steps and comb points cross edges by the same nudge. */
+static int rrv__has_sphere_support(const rrv_medium *m)
+{
+    return !m->ior_from_gas && (m->ior.kind == RRV_FIELD_LUNEBURG || m->ior.kind == RRV_FIELD_FISHEYE);
+}
+
+/* The interval of the line inside a profile's sphere, and its normals there. */
+static int rrv__sphere_interval(const rrv_field *f, rrv_vec3 o, rrv_vec3 d, double *t0, double *t1, rrv_vec3 *n0,
+                                rrv_vec3 *n1)
+{
+    rrv_vec3 oc = rrv__sub(o, f->center);
+    double b = rrv__dot(oc, d);
+    rrv_vec3 perp = rrv__madd(oc, d, -b);
+    double disc = f->radius * f->radius - rrv__dot(perp, perp), sq;
+    if (disc <= 0) return 0;
+    sq = sqrt(disc);
+    *t0 = -b - sq;
+    *t1 = -b + sq;
+    *n0 = rrv__madd(oc, d, *t0);
+    *n1 = rrv__madd(oc, d, *t1);
+    return 1;
+}
+
+/* Eikonal steps stop this far short of a face, so that a step's closing
+   gradient is taken inside the support; the rest is a straight segment. */
 #define RRV__EDGE_NUDGE 1e-9
 
-/* Distance along the ray to the nearest refraction support (0 if inside one). */
-static double rrv__distance_to_refraction(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, int *inside)
+/* After crossing a face the ray is moved this far past it, so that which
+   side it is on never rests on rounding (a ray left exactly on a face once
+   found a 1e-16 remainder ahead, stepped by it and never moved again). */
+static double rrv__face_gap(rrv_vec3 x)
 {
-    double best = DBL_MAX, t0, t1;
+    return RRV__EDGE_NUDGE * (1.0 + fmax(fabs(x.x), fmax(fabs(x.y), fabs(x.z))));
+}
+
+/* What a ray from o along d sees of the refraction supports. */
+typedef struct rrv__support_view {
+    int inside;       /* o is inside a support */
+    int surface_free; /* one support holding o has no surface reaching into it */
+    double t_face;    /* distance to the next face crossed, entering or leaving; DBL_MAX: none */
+    rrv_vec3 normal;  /* that face's normal (either orientation, not unit) */
+} rrv__support_view;
+
+/* Offers the face crossed at parameter t to the view if it is the nearest ahead. */
+static void rrv__view_face(rrv__support_view *v, double t, rrv_vec3 normal)
+{
+    if (t > 0 && t < v->t_face) { v->t_face = t; v->normal = normal; }
+}
+
+static void rrv__look_along(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, rrv__support_view *v)
+{
     int i;
-    *inside = 0;
+    v->inside = v->surface_free = 0;
+    v->t_face = DBL_MAX;
+    v->normal = rrv__v3(0, 0, 1);
     for (i = 0; i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i];
-        if (!rrv__medium_refracts(m) || !rrv__support_interval(m, o, d, &t0, &t1)) continue;
-        if (t1 <= RRV__EDGE_NUDGE) continue;
-        if (t0 <= 0) { *inside = 1; return 0; }
-        best = rrv__mind(best, t0);
-    }
-    return best;
-}
-
-/* Distance along the ray to where it leaves the support it is in (0: in
-   none); *surface_free tells whether no surface reaches into that support,
-   so that a chord inside it needs no ray cast. */
-static double rrv__refraction_exit(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, int *surface_free)
-{
-    double t0, t1;
-    int i;
-    for (i = scene->medium_count - 1; i >= 0; --i) {
-        const rrv_medium *m = &scene->media[i];
-        if (rrv__medium_refracts(m) && rrv__support_interval(m, o, d, &t0, &t1) && t0 <= 0 && t1 > RRV__EDGE_NUDGE) {
-            if (surface_free) *surface_free = m->majorant->surface_free;
-            return t1;
+        double t0, t1, s0, s1;
+        rrv_vec3 n0, n1, sn0, sn1;
+        int inside;
+        if (!rrv__medium_refracts(m) || !rrv__box_interval(m->lo, m->hi, o, d, &t0, &t1, &n0, &n1) || !(t1 > 0))
+            continue;
+        rrv__view_face(v, t0, n0);
+        rrv__view_face(v, t1, n1);
+        inside = t0 <= 0;
+        if (rrv__has_sphere_support(m)) {
+            inside = 0;
+            if (rrv__sphere_interval(&m->ior, o, d, &s0, &s1, &sn0, &sn1) && s0 < t1 && s1 > t0) {
+                if (s0 > t0) rrv__view_face(v, s0, sn0);
+                if (s1 < t1) rrv__view_face(v, s1, sn1);
+                inside = t0 <= 0 && s0 <= 0 && s1 > 0;
+            }
+        }
+        if (inside) {
+            v->inside = 1;
+            if (m->majorant->surface_free) v->surface_free = 1;
         }
     }
-    if (surface_free) *surface_free = 0;
-    return 0;
 }
 
-/* One eikonal step of at most h that never straddles the edge of a support:
-   a step ending outside would take its closing kick from the zero gradient
-   there and lose half a kick. The step that reaches the edge stops 1 nm
-   inside; a micro step then crosses. Returns the step taken. */
-static double rrv__eikonal_advance(const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x, rrv_vec3 d,
-                                   rrv_vec3 *x_out, rrv_vec3 *d_out)
+/* Fresnel reflectance of unpolarised light at a smooth dielectric interface,
+   from the cosines of incidence and transmission. */
+static double rrv__fresnel(double eta_i, double eta_t, double cos_i, double cos_t)
 {
-    const double nudge = RRV__EDGE_NUDGE;
-    double exit = rrv__refraction_exit(scene, x, d, NULL);
-    h = exit > 2 * nudge ? fmin(h, exit - nudge) : exit + nudge;
-    rrv__eikonal_step(scene, stepper, h, x, d, x_out, d_out);
-    if (h > 2 * nudge) {
-        rrv_vec3 chord = rrv__sub(*x_out, x);
-        double len = rrv__length(chord);
-        double exit_chord = rrv__refraction_exit(scene, x, rrv__scale(chord, 1.0 / len), NULL);
-        if (exit_chord < len && exit_chord > 2 * nudge) {
-            h *= (exit_chord - nudge) / len;
-            rrv__eikonal_step(scene, stepper, h, x, d, x_out, d_out);
-        }
-    }
-    return h;
+    double rs = (eta_i * cos_i - eta_t * cos_t) / (eta_i * cos_i + eta_t * cos_t);
+    double rp = (eta_t * cos_i - eta_i * cos_t) / (eta_t * cos_i + eta_i * cos_t);
+    return 0.5 * (rs * rs + rp * rp);
 }
 
 /* ---- refraction along a walk: the seed's Poisson events, chord midpoints, comb --
@@ -1979,19 +2025,29 @@ static double rrv__eikonal_advance(const rrv_scene *scene, rrv_stepper stepper, 
    by kicks of the direction; they differ in where the kicks happen and what
    a kick is. POISSON (the seed paper) and MIDPOINT apply Snell's law at null
    events; the COMB kicks at regularly spaced points with the leapfrog kick.
-   Measured in README: the comb is second order, the others first. */
+   Measured in README: the comb is second order, the others first.
+   A walk is a sequence of straight segments, each ending in one event: a
+   comb point, the end of an eikonal chord, or a support face. Delta
+   tracking, surfaces and lights see only straight segments, and both the
+   path tracer and rrv_trace_ray walk them with the same two calls:
+   rrv__plan_segment and rrv__finish_segment. */
+
+enum { RRV__END_NONE, RRV__END_FACE, RRV__END_KICK, RRV__END_STEP };
 
 typedef struct rrv__bender {
     rrv_refraction_scheme scheme;
+    int eikonal;       /* march the ray equation instead of a scheme */
     double r;          /* refractivity carried: of the last event (Poisson,
                           midpoint) or of the current chord's midpoint (comb) */
     rrv_vec3 last;     /* the previous event (midpoint scheme) */
-    int planned;       /* comb: comb_t is valid for the current ray */
-    int entering;      /* comb: comb_t leads to a refractive box, not a point */
-    int at_exit;       /* comb: the next point is where the ray leaves the support */
-    double comb_t;     /* comb: distance to the next point from the ray origin */
-    double chord;      /* comb: length of the current chord */
-    int surface_free;  /* comb: the chord lies where no surface reaches */
+    int pending;       /* a segment from the current point is planned */
+    int end;           /* what ends it: RRV__END_* */
+    double segment;    /* its length; DBL_MAX: the ray leaves every support */
+    rrv_vec3 normal;   /* END_FACE: the face's normal */
+    rrv_vec3 next_d;   /* END_STEP: the direction after the eikonal chord */
+    int surface_free;  /* the segment lies where no surface reaches */
+    int combing;       /* comb: a comb is running (its first half kick is done) */
+    double chord;      /* comb: length of the chord behind the next point */
 } rrv__bender;
 
 static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
@@ -1999,25 +2055,21 @@ static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
     return s == RRV_REFRACTION_DEFAULT ? RRV_REFRACTION_COMB : s;
 }
 
-static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o)
-{
-    b->scheme = rrv__resolve_scheme(scene->settings.refraction);
-    b->r = rrv__scene_refractivity(scene, o, NULL);
-    b->last = o;
-    b->planned = 0;
-    b->entering = 0;
-    b->at_exit = 0;
-    b->comb_t = DBL_MAX;
-    b->chord = 0;
-    b->surface_free = 0;
-}
-
-/* A real vertex (scattering, a surface) starts a new straight ray. */
+/* A real vertex (the camera, scattering, a surface) starts a new straight ray. */
 static void rrv__bender_restart(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x)
 {
     b->r = rrv__scene_refractivity(scene, x, NULL);
     b->last = x;
-    b->planned = 0;
+    b->pending = 0;
+    b->combing = 0;
+}
+
+static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikonal, rrv_vec3 o)
+{
+    b->scheme = rrv__resolve_scheme(scene->settings.refraction);
+    b->eikonal = eikonal;
+    b->chord = 0;
+    rrv__bender_restart(b, scene, o);
 }
 
 /* Snell at a null event at x (Poisson and midpoint schemes). */
@@ -2031,6 +2083,45 @@ static rrv_vec3 rrv__bend_at_null_event(rrv__bender *b, const rrv_scene *scene, 
     nd = rrv__refract_at_null_event(d, b->r, r, grad, &reflected);
     b->r = r;
     b->last = x;
+    b->pending = 0;
+    return nd;
+}
+
+/* A sharp interface at a support face x: the IOR just behind and just past
+   the face differ (a medium box whose field does not end at the ambient
+   IOR, a fish-eye's rim). Real temperature grids rarely end exactly at the
+   ambient value, so a jump is what the data says, and it is refracted once
+   by Snell's law with the face normal, as a smooth dielectric surface: the
+   ray reflects with the Fresnel probability (always, past the critical
+   angle) and refracts otherwise, so the estimate stays unbiased with weight
+   1. Refracting the jump with the interior gradient as the normal, as
+   Poisson events once did, never converged (0.27 m off on a slab grid at
+   any event rate). Moves x just past the face on the side the ray leaves to. */
+static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3 *x, rrv_vec3 d, rrv_vec3 normal,
+                                rrv__rng *rng)
+{
+    double gap = rrv__face_gap(*x);
+    double r_before = rrv__scene_refractivity(scene, rrv__madd(*x, d, -gap), NULL);
+    double r_after = rrv__scene_refractivity(scene, rrv__madd(*x, d, gap), NULL);
+    rrv_vec3 nd = d;
+    b->r = r_after;
+    if (r_before != r_after) {
+        int reflected;
+        rrv_vec3 n = rrv__normalize(normal);
+        nd = rrv__refract_at_null_event(d, r_before, r_after, n, &reflected);
+        if (!reflected) {
+            double cos_i = fabs(rrv__dot(n, d)), cos_t = fabs(rrv__dot(n, nd));
+            if (rrv__uniform(rng) < rrv__fresnel(1.0 + r_before, 1.0 + r_after, cos_i, cos_t)) reflected = 1;
+        }
+        if (reflected) {
+            nd = rrv__normalize(rrv__madd(d, n, -2.0 * rrv__dot(n, d)));
+            b->r = r_before;
+        }
+    }
+    *x = rrv__madd(*x, nd, gap);
+    b->last = *x;
+    b->pending = 0;
+    b->combing = 0;
     return nd;
 }
 
@@ -2079,57 +2170,112 @@ static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 
     return d;
 }
 
-/* Sets the next comb point after x at spacing h, clipped to the support exit. */
-static void rrv__comb_advance(rrv__bender *b, double h, double exit)
+/* The comb from x along *d: the chord to the next point at spacing h,
+   clipped to the next face, then the kick at x (a half kick when the comb
+   starts), then the chord clipped again along the kicked direction, which
+   may reach the face sooner. */
+static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 *d, double h,
+                           const rrv__support_view *view)
 {
-    b->at_exit = h >= exit;
-    b->comb_t = b->at_exit ? exit : h;
-    b->chord = b->comb_t;
-    b->planned = 1;
-    b->entering = 0;
-}
-
-/* Plans the comb on the ray from o: inside a support the first point lies a
-   uniformly random fraction of a spacing ahead (so the comb does not alias
-   with pixels) after a half kick at o; outside, the ray first goes to the
-   nearest support. May change *d. */
-static void rrv__comb_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, rrv_vec3 *d, rrv__rng *rng)
-{
-    int inside;
-    double t_in = rrv__distance_to_refraction(scene, o, *d, &inside);
-    b->planned = 1;
-    if (!inside) {
-        b->entering = 1;
-        b->at_exit = 0;
-        b->comb_t = t_in < DBL_MAX ? t_in + RRV__EDGE_NUDGE * (1.0 + t_in) : DBL_MAX;
+    rrv__support_view after;
+    double ahead = fmin(h, view->t_face);
+    if (b->combing) {
+        *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * (b->chord + ahead), x);
     } else {
-        double exit = rrv__refraction_exit(scene, o, *d, &b->surface_free);
-        double first = rrv__comb_spacing(scene, o) * (1.0 - rrv__uniform(rng));
-        rrv__comb_advance(b, first, exit);
-        *d = rrv__comb_kick(b, scene, o, *d, b->chord, 0.5 * b->chord, rrv__madd(o, *d, 1e-3 * b->chord));
+        /* the first half kick takes its gradient just ahead, inside */
+        *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * ahead, rrv__madd(x, *d, 1e-3 * ahead));
+        b->combing = 1;
+    }
+    rrv__look_along(scene, x, *d, &after);
+    b->segment = fmin(ahead, after.t_face);
+    b->end = b->segment == after.t_face ? RRV__END_FACE : RRV__END_KICK;
+    b->normal = after.normal;
+    b->surface_free = after.inside && after.surface_free;
+    b->chord = b->segment;
+    b->pending = 1;
+}
+
+/* One eikonal step of at most h from x that stops short of the next face
+   (a step ending past it would take its closing kick from the other side's
+   gradient); the curved step is shortened if its chord would cross a face. */
+static void rrv__eikonal_plan(rrv__bender *b, const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x,
+                              rrv_vec3 *d, const rrv__support_view *view)
+{
+    const double nudge = RRV__EDGE_NUDGE;
+    rrv_vec3 x1, chord;
+    double len;
+    rrv__support_view along;
+    h = fmin(h, view->t_face - nudge);
+    rrv__eikonal_step(scene, stepper, h, x, *d, &x1, &b->next_d);
+    chord = rrv__sub(x1, x);
+    len = rrv__length(chord);
+    rrv__look_along(scene, x, rrv__scale(chord, 1.0 / len), &along);
+    if (along.t_face < len + nudge && along.t_face > 2 * nudge) {
+        h *= (along.t_face - nudge) / len;
+        rrv__eikonal_step(scene, stepper, h, x, *d, &x1, &b->next_d);
+        chord = rrv__sub(x1, x);
+        len = rrv__length(chord);
+    }
+    *d = rrv__scale(chord, 1.0 / len);
+    b->segment = len;
+    b->end = RRV__END_STEP;
+    b->surface_free = 0;
+}
+
+/* Plans the straight segment from o: it runs to the next face, comb point
+   or eikonal chord end. May change *d (a comb's first half kick, an eikonal
+   chord's direction). */
+static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, rrv_vec3 *d, rrv__rng *rng)
+{
+    rrv__support_view view;
+    rrv__look_along(scene, o, *d, &view);
+    b->pending = 1;
+    b->segment = view.t_face;
+    b->end = view.t_face < DBL_MAX ? RRV__END_FACE : RRV__END_NONE;
+    b->normal = view.normal;
+    b->surface_free = 0;
+    if (!view.inside) return;
+    if (b->eikonal) {
+        if (view.t_face > 2 * RRV__EDGE_NUDGE)
+            rrv__eikonal_plan(b, scene, scene->settings.stepper, scene->settings.step, o, d, &view);
+    } else if (b->scheme == RRV_REFRACTION_COMB) {
+        /* the first point a uniformly random fraction of a spacing ahead, so
+           the comb does not alias with pixels */
+        rrv__comb_step(b, scene, o, d, rrv__comb_spacing(scene, o) * (1.0 - rrv__uniform(rng)), &view);
     }
 }
 
-/* The kick at a comb point x; at the support exit the last half kick. */
-static rrv_vec3 rrv__comb_bend(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
+/* The ray has run the whole planned segment from *o: moves *o to its end
+   and applies the event there. */
+static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 *o, rrv_vec3 *d, rrv__rng *rng)
 {
-    double h, exit;
-    if (b->at_exit) {
-        d = rrv__comb_kick(b, scene, x, d, b->chord, 0.5 * b->chord, rrv__madd(x, d, -1e-3 * b->chord));
-        b->planned = 0;
-        return d;
+    *o = rrv__madd(*o, *d, b->segment);
+    switch (b->end) {
+    case RRV__END_STEP:
+        *d = b->next_d;
+        b->pending = 0;
+        break;
+    case RRV__END_KICK: {
+        rrv__support_view view;
+        rrv__look_along(scene, *o, *d, &view);
+        if (view.inside) {
+            rrv__comb_step(b, scene, *o, d, rrv__comb_spacing(scene, *o), &view);
+        } else {
+            /* a kick that turned the chord out through a face it grazed:
+               the comb ends here, without an interface to refract */
+            b->r = rrv__scene_refractivity(scene, *o, NULL);
+            b->pending = b->combing = 0;
+        }
+        break;
     }
-    h = rrv__comb_spacing(scene, x);
-    exit = rrv__refraction_exit(scene, x, d, &b->surface_free);
-    if (!(exit > 0)) {
-        b->r = rrv__scene_refractivity(scene, x, NULL);
-        b->planned = 0;
-        return d;
-    }
-    {
-        double behind = b->chord;
-        rrv__comb_advance(b, h, exit);
-        return rrv__comb_kick(b, scene, x, d, b->chord, 0.5 * (behind + b->chord), x);
+    case RRV__END_FACE:
+        if (b->combing) /* the comb's last half kick, gradient just behind the face */
+            *d = rrv__comb_kick(b, scene, *o, *d, b->chord, 0.5 * b->chord, rrv__madd(*o, *d, -1e-3 * b->chord));
+        *d = rrv__cross_face(b, scene, o, *d, b->normal, rng);
+        break;
+    default:
+        b->pending = 0;
+        break;
     }
 }
 
@@ -2467,46 +2613,30 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
     int depth = 0, c;
     long steps = 0;
     rrv__path_start(&path, rng);
-    if (ctx->bends) rrv__bender_start(&path.bender, scene, o);
+    if (ctx->bends) rrv__bender_start(&path.bender, scene, ctx->eikonal, o);
     ++ctx->stats.paths;
     for (;;) {
         rrv__hit hit;
         rrv__flight flight;
-        double segment = DBL_MAX; /* eikonal: a chord of the curved ray, or up to a refractive box */
-        rrv_vec3 x, next_d = d;
+        double segment = DBL_MAX; /* a straight piece of the (bent) ray */
+        rrv_vec3 x;
         int has_hit, outcome;
         if (++steps > RRV__MAX_PATH_STEPS) break;
-        if (ctx->eikonal) {
-            int inside;
-            double t_in = rrv__distance_to_refraction(scene, o, d, &inside);
-            if (inside) {
-                rrv_vec3 chord;
-                rrv__eikonal_advance(scene, scene->settings.stepper, scene->settings.step, o, d, &x, &next_d);
-                chord = rrv__sub(x, o);
-                segment = rrv__length(chord);
-                d = rrv__scale(chord, 1.0 / segment);
-                ++ctx->stats.events;
-            } else if (t_in < DBL_MAX) {
-                segment = t_in + RRV__EDGE_NUDGE * (1.0 + t_in); /* just inside the box */
-            }
-        } else if (ctx->comb) {
-            if (!path.bender.planned) rrv__comb_plan(&path.bender, scene, o, &d, rng);
-            segment = path.bender.comb_t;
+        if (ctx->bends) {
+            if (!path.bender.pending) rrv__plan_segment(&path.bender, scene, o, &d, rng);
+            segment = path.bender.segment;
         }
-        has_hit = ctx->comb && path.bender.planned && !path.bender.entering && path.bender.surface_free
-                      ? 0 : rrv__intersect_scene(scene, o, d, segment, &hit);
+        /* A surface lying on the face that ends the segment belongs to it:
+           looked for a gap past the end, it cannot slip between this
+           segment's end and the next one's start. */
+        has_hit = ctx->bends && path.bender.surface_free
+                      ? 0 : rrv__intersect_scene(
+                            scene, o, d, segment < DBL_MAX ? segment + rrv__face_gap(rrv__madd(o, d, segment)) : DBL_MAX, &hit);
         outcome = rrv__sample_free_flight_path(ctx, &path, o, d, has_hit ? hit.t : segment, rng, &flight);
         if (outcome == RRV__FLIGHT_ABSORBED) break;
         if (outcome == RRV__FLIGHT_PASSED && !has_hit && segment < DBL_MAX) {
-            o = rrv__madd(o, d, segment);
-            if (ctx->eikonal) {
-                d = next_d;
-            } else if (path.bender.entering) {
-                path.bender.planned = 0;
-            } else {
-                d = rrv__comb_bend(&path.bender, scene, o, d);
-                ++ctx->stats.events;
-            }
+            if (path.bender.end == RRV__END_KICK || path.bender.end == RRV__END_STEP) ++ctx->stats.events;
+            rrv__finish_segment(&path.bender, scene, &o, &d, rng);
             continue;
         }
         if (outcome == RRV__FLIGHT_BENT) {
@@ -2757,62 +2887,42 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
         return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "the ray direction must be finite and nonzero");
     d = rrv__normalize(direction);
     rrv__rng_seed(&rng, seed, walk, 0x7261797472616365ULL);
-    rrv__bender_start(&bender, scene, o);
+    rrv__bender_start(&bender, scene, integrator == RRV_INTEGRATOR_EIKONAL, o);
     if (visit) visit(user, o, d);
     for (;;) {
         if (events > 10000000u)
             return rrv__fail(err, RRV_ERROR_LIMIT, scene->path, 0,
                              "the ray did not leave the refractive media after %llu events",
                              (unsigned long long)events);
-        if (integrator == RRV_INTEGRATOR_EIKONAL) {
-            int inside;
-            double t_in = rrv__distance_to_refraction(scene, o, d, &inside);
-            if (inside) {
-                rrv__eikonal_advance(scene, scene->settings.stepper, scene->settings.step, o, d, &o, &d);
-                ++events;
-                if (visit) visit(user, o, d);
-            } else if (t_in < DBL_MAX) {
-                o = rrv__madd(o, d, t_in + RRV__EDGE_NUDGE * (1.0 + t_in));
-            } else {
-                break;
-            }
-        } else if (bender.scheme == RRV_REFRACTION_COMB) {
-            if (!bender.planned) rrv__comb_plan(&bender, scene, o, &d, &rng);
-            if (bender.comb_t == DBL_MAX) break;
-            o = rrv__madd(o, d, bender.comb_t);
-            if (bender.entering) {
-                bender.planned = 0;
-            } else {
-                d = rrv__comb_bend(&bender, scene, o, d);
-                ++events;
-                if (visit) visit(user, o, d);
-            }
-        } else {
-            rrv__walker walkers[RRV__MAX_MEDIA], *w;
+        if (!bender.pending) rrv__plan_segment(&bender, scene, o, &d, &rng);
+        if (bender.end == RRV__END_NONE) break;
+        if (integrator != RRV_INTEGRATOR_EIKONAL && bender.scheme != RRV_REFRACTION_COMB) {
+            /* Poisson and midpoint: null events of the refraction rate alone
+               along the segment, the earliest across media first */
+            rrv__walker walkers[RRV__MAX_MEDIA];
             int i, n = 0, best = 0;
-            double t_exit = 0;
             for (i = 0; i < scene->medium_count; ++i) {
                 const rrv_medium *m = &scene->media[i];
                 if (!rrv__medium_refracts(m)) continue;
-                if (rrv__walker_start(&walkers[n], m, 1, &scene->settings, o, d, DBL_MAX)) {
-                    t_exit = fmax(t_exit, walkers[n].t_end);
+                if (rrv__walker_start(&walkers[n], m, 1, &scene->settings, o, d, bender.segment)) {
                     rrv__walker_refraction_only(&walkers[n]);
                     rrv__walker_advance(&walkers[n], &rng, &unused);
-                    if (walkers[n].t_event < DBL_MAX) ++n;
+                    if (walkers[n].t_event < bender.segment) ++n;
                 }
-            }
-            if (!n) {
-                o = rrv__madd(o, d, t_exit);
-                break;
             }
             for (i = 1; i < n; ++i)
                 if (walkers[i].t_event < walkers[best].t_event) best = i;
-            w = &walkers[best];
-            o = rrv__madd(o, d, w->t_event);
-            d = rrv__bend_at_null_event(&bender, scene, o, d);
-            ++events;
-            if (visit) visit(user, o, d);
+            if (n) {
+                o = rrv__madd(o, d, walkers[best].t_event);
+                d = rrv__bend_at_null_event(&bender, scene, o, d);
+                ++events;
+                if (visit) visit(user, o, d);
+                continue;
+            }
         }
+        if (bender.end != RRV__END_FACE) ++events;
+        rrv__finish_segment(&bender, scene, &o, &d, &rng);
+        if (visit) visit(user, o, d);
     }
     result->position = o;
     result->direction = d;
