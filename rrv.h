@@ -1262,7 +1262,12 @@ static double rrv__refractivity(const rrv_medium *m, rrv_vec3 p, double ambient_
         double T = rrv__temperature(m, p), P = rrv__pressure(m, p);
         r = (m->eta_ref - 1.0) * (P / m->P_ref) * (m->T_ref / fmax(T, 1e-3));
     } else {
-        r = rrv__profile_refractivity(rrv__field_of(m, RRV__IOR), p, ambient_r);
+        const rrv_field *f = rrv__field_of(m, RRV__IOR);
+        /* Outside its own box an IOR grid gives the ambient IOR, which the
+           artist scale (meant for the grid's values) must not move: a scaled
+           ambient would be a jump at the grid's box that no data holds. */
+        if (f->kind == RRV_FIELD_GRID && !rrv__inside_box(p, f->grid.lo, f->grid.hi)) return ambient_r;
+        r = rrv__profile_refractivity(f, p, ambient_r);
     }
     return m->ior_scale * r;
 }
@@ -1716,15 +1721,18 @@ static int rrv__medium_emits(const rrv_medium *m)
     return m->Lescale > 0 && (m->blackbody_emission || m->Le[0] > 0 || m->Le[1] > 0 || m->Le[2] > 0);
 }
 
-/* Emitted radiance of the medium at p (multiplied by sigma_a by the caller). */
-static void rrv__medium_Le(const rrv_medium *m, rrv_vec3 p, double Le[3])
+/* Emitted radiance of the medium at p (multiplied by sigma_a by the caller).
+   The given Le is radiance at the emitter's own IOR and is scaled by
+   given_scale; thermal emission by thermal_scale (Kirchhoff: a blackbody in
+   a medium of index n emits n^2 B, so it must not dim by 1/n^2 on leaving). */
+static void rrv__medium_Le(const rrv_medium *m, rrv_vec3 p, double given_scale, double thermal_scale, double Le[3])
 {
     int c;
     if (m->blackbody_emission) {
         rrv__blackbody_rgb(rrv__temperature(m, p), Le);
-        for (c = 0; c < 3; ++c) Le[c] = Le[c] * m->Lescale + m->Le[c] * m->Lescale;
+        for (c = 0; c < 3; ++c) Le[c] = (Le[c] * thermal_scale + m->Le[c] * given_scale) * m->Lescale;
     } else {
-        for (c = 0; c < 3; ++c) Le[c] = m->Le[c] * m->Lescale;
+        for (c = 0; c < 3; ++c) Le[c] = m->Le[c] * given_scale * m->Lescale;
     }
 }
 
@@ -2046,6 +2054,7 @@ typedef struct rrv__bender {
     rrv_vec3 normal;   /* END_FACE: the face's normal */
     rrv_vec3 next_d;   /* END_STEP: the direction after the eikonal chord */
     int surface_free;  /* the segment lies where no surface reaches */
+    int reflected;     /* the last face crossed reflected the ray */
     int combing;       /* comb: a comb is running (its first half kick is done) */
     double chord;      /* comb: length of the chord behind the next point */
 } rrv__bender;
@@ -2062,6 +2071,7 @@ static void rrv__bender_restart(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     b->last = x;
     b->pending = 0;
     b->combing = 0;
+    b->reflected = 0;
 }
 
 static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikonal, rrv_vec3 o)
@@ -2105,6 +2115,7 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     double r_after = rrv__scene_refractivity(scene, rrv__madd(*x, d, gap), NULL);
     rrv_vec3 nd = d;
     b->r = r_after;
+    b->reflected = 0;
     if (r_before != r_after) {
         int reflected;
         rrv_vec3 n = rrv__normalize(normal);
@@ -2116,6 +2127,7 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
         if (reflected) {
             nd = rrv__normalize(rrv__madd(d, n, -2.0 * rrv__dot(n, d)));
             b->r = r_before;
+            b->reflected = 1;
         }
     }
     *x = rrv__madd(*x, nd, gap);
@@ -2288,6 +2300,8 @@ typedef struct rrv__context {
     int eikonal;             /* march the ray equation through refractive media */
     int bends;               /* any of the three: radiance scales with eta^2 */
     double eta_camera2;      /* (1 + r at the camera)^2: radiance scales as eta^2 */
+    double thermal_scale;    /* blackbody radiance at the camera over that in
+                                ambient air: (eta_camera / eta_ambient)^2 */
     rrv_render_stats stats;
 } rrv__context;
 
@@ -2413,12 +2427,12 @@ static int rrv__sample_free_flight_path(rrv__context *ctx, rrv__path *path, rrv_
         x = rrv__madd(o, d, w->t_event);
         rrv__medium_coeffs(m, x, &c);
         if (rrv__medium_emits(m)) {
-            double Le[3], k = rrv__path_mis(path) / mu;
-            rrv__medium_Le(m, x, Le);
+            double Le[3], k = rrv__path_mis(path) / mu, given = 1.0;
             if (ctx->bends) {
                 double eta = 1.0 + rrv__scene_refractivity(ctx->scene, x, NULL);
-                k *= ctx->eta_camera2 / (eta * eta);
+                given = ctx->eta_camera2 / (eta * eta);
             }
+            rrv__medium_Le(m, x, given, ctx->thermal_scale, Le);
             for (ch = 0; ch < 3; ++ch) path->L[ch] += path->beta[ch] * c.sigma_a[ch] * Le[ch] * k;
         }
         pa = c.sigma_a[path->hero] / mu;
@@ -2635,8 +2649,13 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
         outcome = rrv__sample_free_flight_path(ctx, &path, o, d, has_hit ? hit.t : segment, rng, &flight);
         if (outcome == RRV__FLIGHT_ABSORBED) break;
         if (outcome == RRV__FLIGHT_PASSED && !has_hit && segment < DBL_MAX) {
-            if (path.bender.end == RRV__END_KICK || path.bender.end == RRV__END_STEP) ++ctx->stats.events;
+            int end = path.bender.end;
+            if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
             rrv__finish_segment(&path.bender, scene, &o, &d, rng);
+            /* A reflection at an interface is a specular vertex of the path
+               and counts toward its depth: light trapped by total internal
+               reflection in a lossless box would otherwise bounce forever. */
+            if (end == RRV__END_FACE && path.bender.reflected && ++depth > scene->settings.max_depth) break;
             continue;
         }
         if (outcome == RRV__FLIGHT_BENT) {
@@ -2838,6 +2857,9 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     rrv__camera_setup(&scene->camera, &frame);
     r_camera = ctx.bends ? rrv__scene_refractivity(scene, frame.eye, NULL) : 0.0;
     ctx.eta_camera2 = (1.0 + r_camera) * (1.0 + r_camera);
+    /* Blackbody radiance B is taken as the ambient air's, so a classic
+       render and a refractive one of a fire in air agree exactly. */
+    ctx.thermal_scale = ctx.bends ? ctx.eta_camera2 / (scene->settings.ambient_ior * scene->settings.ambient_ior) : 1.0;
     for (y = y0; y < y1; ++y) {
         for (x = x0; x < x1; ++x) {
             double acc[3] = {0, 0, 0};
@@ -2881,6 +2903,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
     rrv__bender bender;
     rrv_vec3 o = origin, d;
     uint64_t events = 0, unused = 0;
+    long segments;
     rrv__clear_error(err);
     if (!scene || !result) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "no scene or result");
     if (!(rrv__length(direction) > 0) || rrv__length(direction) > DBL_MAX)
@@ -2889,11 +2912,13 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
     rrv__rng_seed(&rng, seed, walk, 0x7261797472616365ULL);
     rrv__bender_start(&bender, scene, integrator == RRV_INTEGRATOR_EIKONAL, o);
     if (visit) visit(user, o, d);
-    for (;;) {
-        if (events > 10000000u)
+    for (segments = 0;; ++segments) {
+        /* faces count too: a ray trapped by total internal reflection in a
+           box of constant IOR meets nothing but faces */
+        if (events > 10000000u || segments > 2 * 10000000L)
             return rrv__fail(err, RRV_ERROR_LIMIT, scene->path, 0,
-                             "the ray did not leave the refractive media after %llu events",
-                             (unsigned long long)events);
+                             "the ray did not leave the refractive media after %llu events and %ld segments",
+                             (unsigned long long)events, segments);
         if (!bender.pending) rrv__plan_segment(&bender, scene, o, &d, &rng);
         if (bender.end == RRV__END_NONE) break;
         if (integrator != RRV_INTEGRATOR_EIKONAL && bender.scheme != RRV_REFRACTION_COMB) {
