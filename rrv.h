@@ -20,7 +20,19 @@
                  media direct light is biased until manifold NEE lands.
      eikonal     marches the ray equation d/ds(eta dx/ds) = grad eta with RK4
                  (default) or a symplectic leapfrog, step rrv_settings.step.
-   Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2.
+   Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2;
+   blackbody emission is n^2 B where the IOR is n (Kirchhoff), so a fire does
+   not dim by 1/n^2 on leaving a dense medium.
+
+   BOUNDARIES (design decisions)
+     Faces of refractive media (a medium's box; the sphere of a Luneburg or
+     fish-eye profile) end every straight segment. An IOR that jumps across
+     a face is a sharp interface: refracted once by Snell's law with the
+     face normal, reflected with the Fresnel probability or by total
+     internal reflection; such reflections count toward max_depth. A medium
+     whose IOR equals the ambient IOR everywhere does not refract. Outside an
+     IOR grid's own box (inside its medium's) the IOR is the ambient one,
+     unscaled by ior_scale.
 
    USAGE
      In exactly one C file:
