@@ -1,0 +1,334 @@
+/* Known answers for every integrator and refraction scheme (the way
+   pbrt-v4's integrators_test runs each integrator over scenes whose radiance
+   is known): white furnaces, grey and chromatic; refractive furnaces, where
+   non-absorbing refractive media under a uniform sky show exactly the sky,
+   and a camera at the centre of a Luneburg lens sees it (eta_c / 1)^2 = 2
+   times as bright; scenes without an IOR rendered bit for bit alike by all
+   integrators; and a diffuse floor under a light of each shape, whose
+   radiance is albedo / pi times the light's closed-form irradiance.
+   Every check holds to 4 standard errors with fixed seeds; where every
+   pixel has the same expectation, pixel samples are the independent
+   estimates. INTEGRATORS_VERBOSE=1 prints the values. */
+#define RRV_IMPLEMENTATION
+#include "../rrv.h"
+#include "check.h"
+#include "scene_builder.h"
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int verbose;
+#define SAY(...)                                                                                                       \
+    do {                                                                                                               \
+        if (verbose) printf(__VA_ARGS__);                                                                              \
+    } while (0)
+
+typedef struct method {
+    rrv_integrator integrator;
+    rrv_refraction_scheme scheme;
+    const char *name;
+} method;
+
+static const method methods[] = {
+    {RRV_INTEGRATOR_CLASSIC, RRV_REFRACTION_DEFAULT, "classic"},
+    {RRV_INTEGRATOR_REFRACTIVE, RRV_REFRACTION_COMB, "comb"},
+    {RRV_INTEGRATOR_REFRACTIVE, RRV_REFRACTION_POISSON, "poisson"},
+    {RRV_INTEGRATOR_REFRACTIVE, RRV_REFRACTION_MIDPOINT, "midpoint"},
+    {RRV_INTEGRATOR_EIKONAL, RRV_REFRACTION_DEFAULT, "eikonal"},
+};
+#define METHOD_COUNT ((int)(sizeof methods / sizeof methods[0]))
+
+static void use(rrv_scene *s, const method *m)
+{
+    s->settings.integrator = m->integrator;
+    s->settings.refraction = m->scheme;
+}
+
+static void prepare(rrv_scene *s)
+{
+    rrv_error err;
+    rrv_result r = rrv_scene_prepare(s, &err);
+    CHECKF(r == RRV_OK, "prepare: %s", err.message);
+}
+
+typedef struct stats { double sum, sum2; long n; } stats;
+static void stats_add(stats *s, double x) { s->sum += x; s->sum2 += x * x; s->n++; }
+static double stats_mean(const stats *s) { return s->sum / s->n; }
+static double stats_se(const stats *s)
+{
+    double m = stats_mean(s);
+    return sqrt(fmax(0.0, s->sum2 / s->n - m * m) / (s->n - 1));
+}
+
+/* Every sample of every pixel as one estimate, for one channel: valid where
+   every pixel has the same expectation. */
+static stats pixel_samples(rrv_scene *s, int spp, int channel)
+{
+    int w = s->camera.width, h = s->camera.height, k, i;
+    float *img = (float *)malloc((size_t)w * h * 3 * sizeof(float));
+    stats st = {0, 0, 0};
+    for (k = 0; k < spp; ++k) {
+        memset(img, 0, (size_t)w * h * 3 * sizeof(float));
+        rrv_render_rect(s, 0, 0, w, h, k, k + 1, img, w, NULL);
+        for (i = 0; i < w * h; ++i) stats_add(&st, img[3 * i + channel]);
+    }
+    free(img);
+    return st;
+}
+
+/* Checks every channel's mean against `expected` for every method. */
+static void expect_everywhere(rrv_scene *s, const char *scene_name, const double expected[3], int spp,
+                              double max_relative_se)
+{
+    int i, c;
+    for (i = 0; i < METHOD_COUNT; ++i) {
+        use(s, &methods[i]);
+        for (c = 0; c < 3; ++c) {
+            stats st = pixel_samples(s, spp, c);
+            double mean = stats_mean(&st), se = stats_se(&st);
+            SAY("  %-24s %-8s channel %d: %.5f se %.1e (expected %.5f)\n", scene_name, methods[i].name, c, mean, se,
+                expected[c]);
+            CHECKF(fabs(mean - expected[c]) < 4 * se + 1e-6 * expected[c], "%s, %s, channel %d: %g +- %g, expected %g",
+                   scene_name, methods[i].name, c, mean, se, expected[c]);
+            /* a bound this loose could not see an energy error */
+            CHECKF(se < max_relative_se * expected[c], "%s, %s: standard error %g too large to test", scene_name,
+                   methods[i].name, se);
+        }
+    }
+}
+
+static rrv_scene *sky_scene(int size, double L)
+{
+    rrv_scene *s = tb_scene(size, size);
+    s->environment.kind = RRV_ENV_CONSTANT;
+    s->environment.L[0] = s->environment.L[1] = s->environment.L[2] = L;
+    s->settings.max_depth = 1000;
+    s->settings.seed = 11;
+    return s;
+}
+
+/* ---- white furnaces ----------------------------------------------------------- */
+
+static void furnace(double s0, double s1, double s2, int spp, double max_rel_se, const char *name)
+{
+    rrv_scene *s = sky_scene(6, 0.75);
+    rrv_medium *m = tb_medium(s, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 0.0, 1.0);
+    static const double expected[3] = {0.75, 0.75, 0.75};
+    m->sigma_s[0] = s0; m->sigma_s[1] = s1; m->sigma_s[2] = s2;
+    m->g = 0.6;
+    prepare(s);
+    expect_everywhere(s, name, expected, spp, max_rel_se);
+    rrv_scene_free(s);
+}
+
+static void test_white_furnace_every_integrator(void) { furnace(2.0, 2.0, 2.0, 48, 0.02, "white furnace"); }
+
+static void test_chromatic_furnace_every_integrator(void)
+{
+    furnace(1.0, 2.0, 4.0, 256, 0.03, "chromatic furnace");
+}
+
+/* ---- refractive furnaces ------------------------------------------------------ */
+
+static void test_refractive_furnace_lens(void)
+{
+    /* A Luneburg lens and a fish-eye beside it, no density: every camera ray
+       bends, and ends in the sky. */
+    rrv_scene *s = sky_scene(8, 0.5);
+    rrv_medium *a = tb_medium(s, rrv__v3(-1.2, -0.6, -0.6), rrv__v3(0, 0.6, 0.6), 0, 0);
+    rrv_medium *b = tb_medium(s, rrv__v3(0, -0.6, -0.6), rrv__v3(1.2, 0.6, 0.6), 0, 0);
+    static const double expected[3] = {0.5, 0.5, 0.5};
+    a->density.kind = b->density.kind = RRV_FIELD_NONE;
+    a->ior.kind = RRV_FIELD_LUNEBURG;
+    a->ior.center = rrv__v3(-0.6, 0, 0);
+    a->ior.radius = 0.55;
+    b->ior.kind = RRV_FIELD_FISHEYE;
+    b->ior.center = rrv__v3(0.6, 0, 0);
+    b->ior.radius = 0.55;
+    b->ior.n0 = 1.6;
+    s->settings.step = 0.02;
+    prepare(s);
+    expect_everywhere(s, "lens furnace", expected, 4, 1e-6);
+    rrv_scene_free(s);
+}
+
+static void test_refractive_furnace_sharp_box(void)
+{
+    /* A box of constant IOR 1.5: its faces refract and reflect (Fresnel),
+       which moves light around but neither makes nor loses any. */
+    rrv_scene *s = sky_scene(8, 0.5);
+    rrv_medium *m = tb_medium(s, rrv__v3(-0.7, -0.5, -0.6), rrv__v3(0.7, 0.5, 0.6), 0, 0);
+    static const double expected[3] = {0.5, 0.5, 0.5};
+    m->density.kind = RRV_FIELD_NONE;
+    m->ior.kind = RRV_FIELD_CONSTANT;
+    m->ior.value = 0.5;
+    prepare(s);
+    expect_everywhere(s, "sharp box furnace", expected, 4, 1e-6);
+    rrv_scene_free(s);
+}
+
+static void test_camera_inside_luneburg(void)
+{
+    /* At the lens centre eta = sqrt(2); basic radiance L / eta^2 is
+       invariant along rays, so the sky (at eta 1) looks 2 times as bright. */
+    rrv_scene *s = sky_scene(6, 0.5);
+    rrv_medium *m = tb_medium(s, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 0, 0);
+    static const double expected[3] = {1.0, 1.0, 1.0};
+    int i, c;
+    m->density.kind = RRV_FIELD_NONE;
+    m->ior.kind = RRV_FIELD_LUNEBURG;
+    m->ior.center = rrv__v3(0, 0, 0);
+    m->ior.radius = 1;
+    s->camera.eye = rrv__v3(0, 0, 0);
+    s->camera.look = rrv__v3(0, 0, 1);
+    s->camera.fov = 90;
+    s->settings.step = 0.02;
+    prepare(s);
+    for (i = 1; i < METHOD_COUNT; ++i) {
+        use(s, &methods[i]);
+        for (c = 0; c < 3; ++c) {
+            stats st = pixel_samples(s, 2, c);
+            SAY("  camera in a Luneburg lens %-8s channel %d: %.7f\n", methods[i].name, c, stats_mean(&st));
+            CHECKF(fabs(stats_mean(&st) - expected[c]) < 1e-6, "%s: %g, expected %g", methods[i].name,
+                   stats_mean(&st), expected[c]);
+        }
+    }
+    rrv_scene_free(s);
+}
+
+/* ---- scenes without an IOR ---------------------------------------------------- */
+
+static void test_no_ior_renders_alike(void)
+{
+    /* Smoke over a floor under a quad light and a sky, no IOR anywhere:
+       the refractive and eikonal integrators must do exactly what classic
+       does, sample for sample. */
+    rrv_scene *s = sky_scene(10, 0.3);
+    rrv_medium *m = tb_medium(s, rrv__v3(-1, 0, -1), rrv__v3(1, 1.5, 1), 0.3, 2.0);
+    rrv_shape *floor_quad = tb_shape(s, RRV_SHAPE_QUAD), *light = tb_shape(s, RRV_SHAPE_QUAD);
+    rrv_blob *b = tb_blobs(&m->density, 1);
+    size_t n = 10 * 10 * 3;
+    float *ref = (float *)calloc(n, sizeof(float)), *img = (float *)calloc(n, sizeof(float));
+    int i;
+    b->center = rrv__v3(0, 0.7, 0);
+    b->radius = 0.4;
+    b->weight = 2;
+    floor_quad->p0 = rrv__v3(-4, 0, -4);
+    floor_quad->e1 = rrv__v3(0, 0, 8);
+    floor_quad->e2 = rrv__v3(8, 0, 0);
+    light->p0 = rrv__v3(-0.5, 3, -0.5);
+    light->e1 = rrv__v3(1, 0, 0);
+    light->e2 = rrv__v3(0, 0, 1);
+    light->L[0] = light->L[1] = light->L[2] = 5;
+    s->camera.eye = rrv__v3(0, 1.5, -5);
+    s->camera.look = rrv__v3(0, 0.6, 0);
+    s->camera.fov = 35;
+    s->settings.max_depth = 16;
+    prepare(s);
+    use(s, &methods[0]);
+    rrv_render_rect(s, 0, 0, 10, 10, 0, 8, ref, 10, NULL);
+    for (i = 1; i < METHOD_COUNT; ++i) {
+        memset(img, 0, n * sizeof(float));
+        use(s, &methods[i]);
+        rrv_render_rect(s, 0, 0, 10, 10, 0, 8, img, 10, NULL);
+        CHECKF(memcmp(img, ref, n * sizeof(float)) == 0, "%s renders a scene without IOR differently from classic",
+               methods[i].name);
+    }
+    free(ref);
+    free(img);
+    rrv_scene_free(s);
+}
+
+/* ---- a light of each shape over a diffuse floor -------------------------------- */
+
+/* Irradiance at a point below the corner of a parallel rectangle of sides
+   a, b at height h, for radiance L: pi L times the form factor. */
+static double corner_rectangle_irradiance(double L, double a, double b, double h)
+{
+    double X = a / h, Y = b / h, sx = sqrt(1 + X * X), sy = sqrt(1 + Y * Y);
+    return L * 0.5 * (X / sx * atan(Y / sx) + Y / sy * atan(X / sy));
+}
+
+/* The floor point at the origin, seen through a tiny field of view from
+   the side; a light above it. Returns the pixel's statistics per sample. */
+static void light_shape_case(rrv_shape_kind kind, const char *name)
+{
+    rrv_scene *s = tb_scene(1, 1);
+    rrv_shape *floor_quad = tb_shape(s, RRV_SHAPE_QUAD);
+    const double albedo = 0.6, L = 4, h = 1.5, half = 0.5;
+    double E, expected;
+    int i;
+    s->camera.eye = rrv__v3(0, 2, -3);
+    s->camera.look = rrv__v3(0, 0, 0);
+    s->camera.fov = 0.01;
+    /* one bounce: lights are diffuse surfaces too, and light the floor sends
+       back off them is not in the closed form */
+    s->settings.max_depth = 1;
+    s->settings.seed = 5;
+    s->materials[0].albedo[0] = s->materials[0].albedo[1] = s->materials[0].albedo[2] = albedo;
+    floor_quad->p0 = rrv__v3(-5, 0, -5);
+    floor_quad->e1 = rrv__v3(0, 0, 10);
+    floor_quad->e2 = rrv__v3(10, 0, 0);
+    if (kind == RRV_SHAPE_SPHERE) {
+        /* E = pi L sin^2(alpha), sin(alpha) = R / distance */
+        rrv_shape *sph = tb_shape(s, RRV_SHAPE_SPHERE);
+        sph->center = rrv__v3(0, h, 0);
+        sph->radius = 0.4;
+        sph->L[0] = sph->L[1] = sph->L[2] = L;
+        E = RRV__PI * L * (0.4 / h) * (0.4 / h);
+    } else if (kind == RRV_SHAPE_QUAD) {
+        /* a square centred above: four corner rectangles */
+        rrv_shape *q = tb_shape(s, RRV_SHAPE_QUAD);
+        q->p0 = rrv__v3(-half, h, -half);
+        q->e1 = rrv__v3(2 * half, 0, 0);
+        q->e2 = rrv__v3(0, 0, 2 * half); /* e1 x e2 = -y: emits down */
+        q->L[0] = q->L[1] = q->L[2] = L;
+        E = 4 * corner_rectangle_irradiance(L, half, half, h);
+    } else {
+        /* the square cut along a diagonal through its centre: the half-turn
+           about the vertical axis maps one triangle onto the other, so each
+           gives half the square's irradiance */
+        rrv_shape *t = tb_shape(s, RRV_SHAPE_TRIANGLE);
+        t->p0 = rrv__v3(-half, h, -half);
+        t->e1 = rrv__v3(2 * half, 0, 0);
+        t->e2 = rrv__v3(2 * half, 0, 2 * half);
+        t->L[0] = t->L[1] = t->L[2] = L;
+        E = 2 * corner_rectangle_irradiance(L, half, half, h);
+    }
+    expected = albedo / RRV__PI * E;
+    prepare(s);
+    for (i = 0; i < METHOD_COUNT; ++i) {
+        stats st;
+        use(s, &methods[i]);
+        st = pixel_samples(s, 20000, 0);
+        SAY("  %-8s light, %-8s: %.5f se %.1e (expected %.5f)\n", name, methods[i].name, stats_mean(&st),
+            stats_se(&st), expected);
+        CHECKF(fabs(stats_mean(&st) - expected) < 4 * stats_se(&st), "%s light, %s: %g +- %g, expected %g", name,
+               methods[i].name, stats_mean(&st), stats_se(&st), expected);
+        CHECKF(stats_se(&st) < 0.01 * expected, "%s light: standard error %g too large to test", name,
+               stats_se(&st));
+    }
+    rrv_scene_free(s);
+}
+
+static void test_sphere_light_irradiance(void) { light_shape_case(RRV_SHAPE_SPHERE, "sphere"); }
+static void test_quad_light_irradiance(void) { light_shape_case(RRV_SHAPE_QUAD, "quad"); }
+static void test_triangle_light_irradiance(void) { light_shape_case(RRV_SHAPE_TRIANGLE, "triangle"); }
+
+int main(int argc, char **argv)
+{
+    const char *v = getenv("INTEGRATORS_VERBOSE");
+    (void)argc;
+    (void)argv;
+    verbose = v && *v && *v != '0';
+    RUN(test_white_furnace_every_integrator);
+    RUN(test_chromatic_furnace_every_integrator);
+    RUN(test_refractive_furnace_lens);
+    RUN(test_refractive_furnace_sharp_box);
+    RUN(test_camera_inside_luneburg);
+    RUN(test_no_ior_renders_alike);
+    RUN(test_sphere_light_irradiance);
+    RUN(test_quad_light_irradiance);
+    RUN(test_triangle_light_irradiance);
+    return CHECK_EXIT_CODE();
+}
