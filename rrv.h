@@ -4209,6 +4209,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"stepper", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|leapfrog|rk4"},
     {"refraction", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|poisson|midpoint|comb"},
     {"majorantcells", RRV__SF_INT, 1, 0, 0.0, 256.0, NULL},
+    {"iorinterp", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "trilinear|cubic"},
 };
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
@@ -4850,6 +4851,7 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[7].given) s->stepper = rrv__sf_steppers[sl[7].choice];
     if (sl[8].given) s->refraction = rrv__sf_schemes[sl[8].choice];
     if (sl[9].given) s->majorant_cells = (int)sl[9].v[0];
+    if (sl[10].given) s->ior_interpolation = sl[10].choice ? RRV_IOR_INTERP_CUBIC : RRV_IOR_INTERP_TRILINEAR;
     return RRV_OK;
 }
 
