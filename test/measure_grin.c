@@ -9,7 +9,11 @@
         log-log slopes, field evaluations and wall time per ray.
      2. The same sweeps on the linear slab and on a Gaussian blob.
      3. Float versus double ray state, delta versus naive Snell form.
-     4. Gradient stencils on a grid. */
+     4. Gradient stencils on a grid.
+     5. IOR grids (also alone: `build/measure_grin grids`): orders of the comb,
+        leapfrog and RK4 against the ray through the same grid, trilinear
+        against cubic interpolation, how far each grid's ray is from the
+        analytic field's, and the cost of both. */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "scene_builder.h"
@@ -699,11 +703,11 @@ static rrv_vec3 eikonal_ref_hit(rrv_scene *s, int which, int j, double h)
     return trace_hit(s, which, j, RRV_INTEGRATOR_EIKONAL, 0, NULL);
 }
 
-/* The analytic field's ray 0 (RK4 at h = 1e-4 through the closed form). */
-static rrv_vec3 analytic_hit(int which)
+/* The analytic field's rays (RK4 at h = 1e-4 through the closed form). */
+static void analytic_hits(int which, rrv_vec3 *hits)
 {
     rrv_scene *s;
-    rrv_vec3 h;
+    int j;
     if (which == GCASE_LUNEBURG) {
         s = make_case(CASE_LUNEBURG);
     } else {
@@ -720,9 +724,8 @@ static rrv_vec3 analytic_hit(int which)
         bl->weight = which == GCASE_LENS ? LENS_A : BLOB_A;
         if (rrv_scene_prepare(s, &err) != RRV_OK) exit(1);
     }
-    h = eikonal_ref_hit(s, which, 0, 1e-4);
+    for (j = 0; j < GRAYS; ++j) hits[j] = eikonal_ref_hit(s, which, j, 1e-4);
     rrv_scene_free(s);
-    return h;
 }
 
 #define GRID_WALKS 50 /* comb walks per ray: 400 a rate */
@@ -747,28 +750,30 @@ static void grid_sweep(int which, int N, rrv_ior_interpolation interp)
     static const int ids[] = {2, 3, 4}; /* COMB, LEAPFROG, RK4 */
     rrv_scene *s = make_grid_case(which, N, interp);
     rrv_vec3 ref_eik[GRAYS], ref_dir[GRAYS];
-    double check_eik, check_dir, limits = 0;
-    rrv_vec3 ana = analytic_hit(which);
+    double check_eik, check_dir, limits = 0, discretisation = 0;
+    rrv_vec3 ana[GRAYS];
     int k, i, j;
+    analytic_hits(which, ana);
     for (j = 0; j < GRAYS; ++j) {
         ref_eik[j] = eikonal_ref_hit(s, which, j, GREF_H);
         ref_dir[j] = direction_ode_hit(s, which, j, GREF_H);
         limits = fmax(limits, rrv__length(rrv__sub(ref_eik[j], ref_dir[j])));
+        discretisation += rrv__length(rrv__sub(ref_eik[j], ana[j])) / GRAYS;
     }
     check_eik = rrv__length(rrv__sub(ref_eik[0], eikonal_ref_hit(s, which, 0, 2 * GREF_H)));
     check_dir = rrv__length(rrv__sub(ref_dir[0], direction_ode_hit(s, which, 0, 2 * GREF_H)));
     printf("\n#### %s, %d^3 (voxel %.3g m), %s\n\n", GCASE_NAMES[which], N, 2 * gcase_half(which) / (N - 1),
            interp == RRV_IOR_INTERP_CUBIC ? "cubic" : "trilinear");
     printf("References per ray: RK4 (eikonal) and direction-form RK4 (comb) at h = %g; from h = %g they move "
-           "by %.1e / %.1e; the two limits differ by up to %.1e. The grid's ray 0 misses the analytic "
-           "field's by %.2e (discretisation, not the integrator).\n\n",
-           GREF_H, 2 * GREF_H, check_eik, check_dir, limits, rrv__length(rrv__sub(ref_eik[0], ana)));
+           "by %.1e / %.1e; the two limits differ by up to %.1e. The grid's rays miss the analytic "
+           "field's by %.2e on average (discretisation, not the integrator).\n\n",
+           GREF_H, 2 * GREF_H, check_eik, check_dir, limits, discretisation);
     printf("| method | events/m or h | mean error vs same grid | std. error | order | events/ray |\n|---|---|---|---|---|---|\n");
     for (k = 0; k < 3; ++k) {
         const method *me = &METHODS[ids[k]];
         int eik = me->integ == RRV_INTEGRATOR_EIKONAL;
         int n = eik ? (int)(sizeof GRID_STEPS / sizeof GRID_STEPS[0]) : (int)(sizeof GRID_RATES / sizeof GRID_RATES[0]);
-        double params[8], errs[8];
+        double params[8], errs[8], lo = 1e9, hi = 0;
         for (i = 0; i < n; ++i) {
             double param = eik ? GRID_STEPS[i] : GRID_RATES[i], sum = 0, sum2 = 0, ev = 0, err, se;
             int w, walks = eik ? 1 : GRID_WALKS;
@@ -791,8 +796,14 @@ static void grid_sweep(int which, int N, rrv_ior_interpolation interp)
             if (i > 0 && err > 0 && errs[i - 1] > 0)
                 sprintf(order, "%.2f", fabs(log(err / errs[i - 1]) / log(param / params[i - 1])));
             printf("| %s | %g | %.3e | %.1e | %s | %.0f |\n", me->name, param, err, se, order, ev / walks);
+            if (i > 0) {
+                double p = fabs(log(err / errs[i - 1]) / log(param / params[i - 1]));
+                lo = fmin(lo, p);
+                hi = fmax(hi, p);
+            }
         }
-        printf("| %s | fitted order, finest 4 | | | **%.2f** | |\n", me->name, fitted_order(params, errs, n - 4, n));
+        printf("| %s | fitted order (all rows); range of the pairwise orders | | | **%.2f**; %.2f to %.2f | |\n",
+               me->name, fitted_order(params, errs, 0, n), lo, hi);
     }
     rrv_scene_free(s);
 }
@@ -839,6 +850,27 @@ static void grid_cost(int which, int N)
     }
 }
 
+/* Load-time cost: rrv_scene_prepare of a 128^3 IOR grid (the bake, plus the
+   majorant grid both share), interleaved, median of 5 rounds. */
+static void grid_bake_cost(void)
+{
+    enum { ROUNDS = 5 };
+    double t[2][ROUNDS];
+    int round, v;
+    for (round = 0; round < ROUNDS; ++round)
+        for (v = 0; v < 2; ++v) {
+            int which_v = (round & 1) ? 1 - v : v;
+            clock_t t0 = clock();
+            rrv_scene *s = make_grid_case(GCASE_LENS, 128, which_v ? RRV_IOR_INTERP_CUBIC : RRV_IOR_INTERP_TRILINEAR);
+            t[which_v][round] = (double)(clock() - t0) / CLOCKS_PER_SEC;
+            rrv_scene_free(s);
+        }
+    for (v = 0; v < 2; ++v) qsort(t[v], ROUNDS, sizeof(double), cmp_double);
+    printf("\nSampling and preparing a 128^3 IOR grid (CPU s, median of %d interleaved): trilinear %.3f, "
+           "cubic %.3f; baked bytes a sample: trilinear 16, cubic 8 (doubles, plus one ghost layer).\n",
+           ROUNDS, t[0][ROUNDS / 2], t[1][ROUNDS / 2]);
+}
+
 static void grid_study(void)
 {
     static const int sizes[] = {32, 64};
@@ -850,6 +882,7 @@ static void grid_study(void)
         for (si = 0; si < 2; ++si)
             for (interp = 0; interp < 2; ++interp) grid_sweep(which, sizes[si], (rrv_ior_interpolation)interp);
     for (which = 0; which < GCASE_COUNT; ++which) grid_cost(which, 64);
+    grid_bake_cost();
 }
 
 int main(int argc, char **argv)
