@@ -9,7 +9,11 @@
         log-log slopes, field evaluations and wall time per ray.
      2. The same sweeps on the linear slab and on a Gaussian blob.
      3. Float versus double ray state, delta versus naive Snell form.
-     4. Gradient stencils on a grid. */
+     4. Gradient stencils on a grid.
+     5. IOR grids (also alone: `build/measure_grin grids`): orders of the comb,
+        leapfrog and RK4 against the ray through the same grid, trilinear
+        against cubic interpolation, how far each grid's ray is from the
+        analytic field's, and the cost of both. */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "scene_builder.h"
@@ -566,7 +570,322 @@ static void stencil_study(void)
     }
 }
 
-int main(void)
+/* ---- the same fields sampled into IOR grids ------------------------------------
+   The order question on a grid: how fast does each integrator converge to the
+   ray of the SAME interpolated field? The reference for RK4 and leapfrog is
+   the library's RK4 at a tiny step (both solve d/ds(v) = grad eta, dx/ds =
+   v / eta); for the comb it is RK4 on the direction form it converges to,
+   dx/ds = d, dd/ds = (grad r - (grad r . d) d) / (1 + r). The two limits
+   differ only where the value and gradient channels disagree (trilinear),
+   and the table prints by how much. Separately, how far the grid's ray is
+   from the analytic field's (discretisation, not the integrator). */
+
+enum { GCASE_BLOB, GCASE_LENS, GCASE_LUNEBURG, GCASE_COUNT };
+static const char *const GCASE_NAMES[] = {
+    "weak Gaussian blob (A = 1e-2, sigma = 0.1) on [-0.6, 0.6]^3, b = 0.1 to 0.128",
+    "strong Gaussian lens (A = 0.2, sigma = 0.25) on [-1.5, 1.5]^3, b = 0.25 to 0.306",
+    "Luneburg lens (R = 1) on [-1.25, 1.25]^3, b = 0.5 to 0.563 (gradient jumps at the sphere)"};
+#define LENS_A 0.2
+#define LENS_S 0.25
+#define GRAYS 8 /* rays a case: impact parameters spread over ~1 voxel, so
+                   errors average over where steps fall in the cells */
+
+static double gcase_r(int which, double x, double y, double z)
+{
+    double q = x * x + y * y + z * z;
+    if (which == GCASE_LUNEBURG) return q < 1.0 ? sqrt(2.0 - q) - 1.0 : 0.0;
+    if (which == GCASE_LENS) return LENS_A * exp(-0.5 * q / (LENS_S * LENS_S));
+    return BLOB_A * exp(-0.5 * q / (BLOB_S * BLOB_S));
+}
+
+/* Half widths: the fields have fallen to < 1e-8 at the faces, so no jump to
+   the ambient IOR there adds the box-face error to the interior one. */
+static double gcase_half(int which) { return which == GCASE_BLOB ? 0.6 : which == GCASE_LENS ? 1.5 : 1.25; }
+static double gcase_plane(int which) { return gcase_half(which) + 0.5; } /* errors: where exit rays cross z = this */
+
+static rrv_scene *make_grid_case(int which, int N, rrv_ior_interpolation interp)
+{
+    rrv_scene *s = tb_scene(4, 4);
+    double hw = gcase_half(which), vox = 2.0 * hw / (N - 1);
+    rrv_medium *m = tb_medium(s, rrv__v3(-hw, -hw, -hw), rrv__v3(hw, hw, hw), 0, 0);
+    rrv_error err;
+    int x, y, z;
+    m->density.kind = RRV_FIELD_NONE;
+    m->ior.kind = RRV_FIELD_GRID;
+    m->ior.grid.nx = m->ior.grid.ny = m->ior.grid.nz = N;
+    m->ior.grid.channels = 1;
+    m->ior.grid.lo = m->lo;
+    m->ior.grid.hi = m->hi;
+    m->ior.grid.data = (float *)malloc((size_t)N * N * N * sizeof(float));
+    for (z = 0; z < N; ++z)
+        for (y = 0; y < N; ++y)
+            for (x = 0; x < N; ++x)
+                m->ior.grid.data[((size_t)z * N + y) * N + x] =
+                    (float)gcase_r(which, -hw + x * vox, -hw + y * vox, -hw + z * vox);
+    s->settings.ior_interpolation = interp;
+    if (rrv_scene_prepare(s, &err) != RRV_OK) {
+        fprintf(stderr, "prepare: %s\n", err.message);
+        exit(1);
+    }
+    return s;
+}
+
+/* Ray j of a case: along +z at impact parameter b_j, 0.3 rad off the x
+   axis so no coordinate plane of the lattice contains it. */
+static void gcase_ray(int which, int j, rrv_vec3 *o, rrv_vec3 *d)
+{
+    double b = which == GCASE_BLOB ? BLOB_B + 0.004 * j : which == GCASE_LENS ? 0.25 + 0.008 * j : 0.5 + 0.009 * j;
+    *o = rrv__v3(b * cos(0.3), b * sin(0.3), -gcase_half(which) - 0.5);
+    *d = rrv__v3(0, 0, 1);
+}
+
+static rrv_vec3 plane_hit(int which, rrv_vec3 p, rrv_vec3 d)
+{
+    return rrv__madd(p, d, (gcase_plane(which) - p.z) / d.z);
+}
+
+/* RK4 on (x, d) with the comb's limit equation, through the whole box. */
+static rrv_vec3 direction_ode_hit(const rrv_scene *s, int which, int j, double h)
+{
+    rrv_vec3 x, d, kx[4], kd[4], xs, ds;
+    double hw = gcase_half(which);
+    int k;
+    gcase_ray(which, j, &x, &d);
+    x = rrv__madd(x, d, (-hw - x.z) / d.z); /* straight to the box */
+    while (x.z < hw) {
+        /* The last step ends on the exit face: a step straddling the jump
+           to the ambient value there would be first order. */
+        if (x.z + h * d.z > hw) h = (hw - x.z) / d.z * (1.0 + 1e-12);
+        for (k = 0; k < 4; ++k) {
+            rrv_vec3 g;
+            double r, c = k == 0 ? 0 : k == 3 ? 1 : 0.5;
+            xs = k == 0 ? x : rrv__madd(x, kx[k - 1], c * h);
+            ds = k == 0 ? d : rrv__madd(d, kd[k - 1], c * h);
+            r = rrv__scene_refractivity(s, xs, &g);
+            kx[k] = ds;
+            kd[k] = rrv__scale(rrv__madd(g, ds, -rrv__dot(g, ds)), 1.0 / (1.0 + r));
+        }
+        x = rrv__madd(x, rrv__add(rrv__add(kx[0], kx[3]), rrv__scale(rrv__add(kx[1], kx[2]), 2.0)), h / 6.0);
+        d = rrv__madd(d, rrv__add(rrv__add(kd[0], kd[3]), rrv__scale(rrv__add(kd[1], kd[2]), 2.0)), h / 6.0);
+        d = rrv__normalize(d);
+    }
+    return plane_hit(which, x, d);
+}
+
+static rrv_vec3 trace_hit(const rrv_scene *s, int which, int j, rrv_integrator integ, uint64_t walk, uint64_t *events)
+{
+    rrv_trace_result r;
+    rrv_error err;
+    rrv_vec3 o, d;
+    gcase_ray(which, j, &o, &d);
+    if (rrv_trace_ray(s, integ, o, d, 42, walk, NULL, NULL, &r, &err) != RRV_OK) {
+        fprintf(stderr, "trace failed: %s\n", err.message);
+        exit(1);
+    }
+    if (events) *events = r.events;
+    return plane_hit(which, r.position, r.direction);
+}
+
+static void set_method(rrv_scene *s, const method *me, double param)
+{
+    s->settings.integrator = me->integ;
+    s->settings.refraction = me->scheme;
+    s->settings.stepper = me->stepper;
+    if (me->integ == RRV_INTEGRATOR_EIKONAL) s->settings.step = param;
+    else s->settings.mu_eta = param;
+}
+
+static rrv_vec3 eikonal_ref_hit(rrv_scene *s, int which, int j, double h)
+{
+    s->settings.integrator = RRV_INTEGRATOR_EIKONAL;
+    s->settings.stepper = RRV_STEPPER_RK4;
+    s->settings.step = h;
+    return trace_hit(s, which, j, RRV_INTEGRATOR_EIKONAL, 0, NULL);
+}
+
+/* The analytic field's rays (RK4 at h = 1e-4 through the closed form). */
+static void analytic_hits(int which, rrv_vec3 *hits)
+{
+    rrv_scene *s;
+    int j;
+    if (which == GCASE_LUNEBURG) {
+        s = make_case(CASE_LUNEBURG);
+    } else {
+        rrv_medium *m;
+        rrv_blob *bl;
+        rrv_error err;
+        double hw = gcase_half(which);
+        s = tb_scene(4, 4);
+        m = tb_medium(s, rrv__v3(-hw, -hw, -hw), rrv__v3(hw, hw, hw), 0, 0);
+        m->density.kind = RRV_FIELD_NONE;
+        bl = tb_blobs(&m->ior, 1);
+        bl->center = rrv__v3(0, 0, 0);
+        bl->radius = which == GCASE_LENS ? LENS_S : BLOB_S;
+        bl->weight = which == GCASE_LENS ? LENS_A : BLOB_A;
+        if (rrv_scene_prepare(s, &err) != RRV_OK) exit(1);
+    }
+    for (j = 0; j < GRAYS; ++j) hits[j] = eikonal_ref_hit(s, which, j, 1e-4);
+    rrv_scene_free(s);
+}
+
+#define GRID_WALKS 50 /* comb walks per ray: 400 a rate */
+static const double GRID_RATES[] = {30, 100, 300, 1000, 3000};
+static const double GRID_STEPS[] = {0.2, 0.1, 0.05, 0.02, 0.01, 0.005};
+#define GREF_H 4e-5
+
+/* Least-squares slope of log err against log param over rows from..n-1. */
+static double fitted_order(const double *param, const double *err, int from, int n)
+{
+    double sx = 0, sy = 0, sxx = 0, sxy = 0;
+    int i, m = n - from;
+    for (i = from; i < n; ++i) {
+        double x = log(param[i]), y = log(err[i]);
+        sx += x; sy += y; sxx += x * x; sxy += x * y;
+    }
+    return fabs((m * sxy - sx * sy) / (m * sxx - sx * sx));
+}
+
+static void grid_sweep(int which, int N, rrv_ior_interpolation interp)
+{
+    static const int ids[] = {2, 3, 4}; /* COMB, LEAPFROG, RK4 */
+    rrv_scene *s = make_grid_case(which, N, interp);
+    rrv_vec3 ref_eik[GRAYS], ref_dir[GRAYS];
+    double check_eik, check_dir, limits = 0, discretisation = 0;
+    rrv_vec3 ana[GRAYS];
+    int k, i, j;
+    analytic_hits(which, ana);
+    for (j = 0; j < GRAYS; ++j) {
+        ref_eik[j] = eikonal_ref_hit(s, which, j, GREF_H);
+        ref_dir[j] = direction_ode_hit(s, which, j, GREF_H);
+        limits = fmax(limits, rrv__length(rrv__sub(ref_eik[j], ref_dir[j])));
+        discretisation += rrv__length(rrv__sub(ref_eik[j], ana[j])) / GRAYS;
+    }
+    check_eik = rrv__length(rrv__sub(ref_eik[0], eikonal_ref_hit(s, which, 0, 2 * GREF_H)));
+    check_dir = rrv__length(rrv__sub(ref_dir[0], direction_ode_hit(s, which, 0, 2 * GREF_H)));
+    printf("\n#### %s, %d^3 (voxel %.3g m), %s\n\n", GCASE_NAMES[which], N, 2 * gcase_half(which) / (N - 1),
+           interp == RRV_IOR_INTERP_CUBIC ? "cubic" : "trilinear");
+    printf("References per ray: RK4 (eikonal) and direction-form RK4 (comb) at h = %g; from h = %g they move "
+           "by %.1e / %.1e; the two limits differ by up to %.1e. The grid's rays miss the analytic "
+           "field's by %.2e on average (discretisation, not the integrator).\n\n",
+           GREF_H, 2 * GREF_H, check_eik, check_dir, limits, discretisation);
+    printf("| method | events/m or h | mean error vs same grid | std. error | order | events/ray |\n|---|---|---|---|---|---|\n");
+    for (k = 0; k < 3; ++k) {
+        const method *me = &METHODS[ids[k]];
+        int eik = me->integ == RRV_INTEGRATOR_EIKONAL;
+        int n = eik ? (int)(sizeof GRID_STEPS / sizeof GRID_STEPS[0]) : (int)(sizeof GRID_RATES / sizeof GRID_RATES[0]);
+        double params[8], errs[8], lo = 1e9, hi = 0;
+        for (i = 0; i < n; ++i) {
+            double param = eik ? GRID_STEPS[i] : GRID_RATES[i], sum = 0, sum2 = 0, ev = 0, err, se;
+            int w, walks = eik ? 1 : GRID_WALKS;
+            char order[16] = "";
+            set_method(s, me, param);
+            for (j = 0; j < GRAYS; ++j)
+                for (w = 0; w < walks; ++w) {
+                    uint64_t events;
+                    double e = rrv__length(rrv__sub(trace_hit(s, which, j, me->integ, (uint64_t)w, &events),
+                                                    eik ? ref_eik[j] : ref_dir[j]));
+                    sum += e;
+                    sum2 += e * e;
+                    ev += (double)events;
+                }
+            walks *= GRAYS;
+            err = sum / walks;
+            se = sqrt(fmax(0.0, sum2 / walks - err * err) / (walks - 1));
+            params[i] = param;
+            errs[i] = err;
+            if (i > 0 && err > 0 && errs[i - 1] > 0)
+                sprintf(order, "%.2f", fabs(log(err / errs[i - 1]) / log(param / params[i - 1])));
+            printf("| %s | %g | %.3e | %.1e | %s | %.0f |\n", me->name, param, err, se, order, ev / walks);
+            if (i > 0) {
+                double p = fabs(log(err / errs[i - 1]) / log(param / params[i - 1]));
+                lo = fmin(lo, p);
+                hi = fmax(hi, p);
+            }
+        }
+        printf("| %s | fitted order (all rows); range of the pairwise orders | | | **%.2f**; %.2f to %.2f | |\n",
+               me->name, fitted_order(params, errs, 0, n), lo, hi);
+    }
+    rrv_scene_free(s);
+}
+
+/* Cost of one ray, trilinear against cubic: rounds alternate which goes
+   first, each times a batch of rays; medians of CPU time (user+sys, clock()). */
+static void grid_cost(int which, int N)
+{
+    static const int ids[] = {2, 4};
+    static const double params[] = {300, 0.02};
+    enum { ROUNDS = 11 };
+    int k;
+    printf("\n#### Cost per ray, %s, %d^3 (median of %d interleaved rounds, CPU user+sys)\n\n", GCASE_NAMES[which], N,
+           ROUNDS);
+    printf("| method | trilinear us/ray | cubic us/ray | cubic / trilinear | events/ray | trilinear ns/event | cubic ns/event |\n");
+    printf("|---|---|---|---|---|---|---|\n");
+    for (k = 0; k < 2; ++k) {
+        const method *me = &METHODS[ids[k]];
+        rrv_scene *sc[2];
+        double t[2][ROUNDS], med[2];
+        uint64_t events = 0;
+        int round, v, w, walks = me->integ == RRV_INTEGRATOR_EIKONAL ? 400 : 200;
+        for (v = 0; v < 2; ++v) {
+            sc[v] = make_grid_case(which, N, v ? RRV_IOR_INTERP_CUBIC : RRV_IOR_INTERP_TRILINEAR);
+            set_method(sc[v], me, params[k]);
+        }
+        trace_hit(sc[0], which, 0, me->integ, 0, &events);
+        for (round = 0; round < ROUNDS; ++round)
+            for (v = 0; v < 2; ++v) {
+                int which_v = (round & 1) ? 1 - v : v;
+                clock_t t0 = clock();
+                double sink = 0;
+                for (w = 0; w < walks; ++w) sink += trace_hit(sc[which_v], which, 0, me->integ, (uint64_t)w, NULL).x;
+                t[which_v][round] = 1e6 * (double)(clock() - t0) / CLOCKS_PER_SEC / walks + (sink == 1e300);
+            }
+        for (v = 0; v < 2; ++v) {
+            qsort(t[v], ROUNDS, sizeof(double), cmp_double);
+            med[v] = t[v][ROUNDS / 2];
+            rrv_scene_free(sc[v]);
+        }
+        printf("| %s %g | %.1f | %.1f | %.2f | %llu | %.0f | %.0f |\n", me->name, params[k], med[0], med[1],
+               med[1] / med[0], (unsigned long long)events, 1e3 * med[0] / (double)events,
+               1e3 * med[1] / (double)events);
+    }
+}
+
+/* Load-time cost: rrv_scene_prepare of a 128^3 IOR grid (the bake, plus the
+   majorant grid both share), interleaved, median of 5 rounds. */
+static void grid_bake_cost(void)
+{
+    enum { ROUNDS = 5 };
+    double t[2][ROUNDS];
+    int round, v;
+    for (round = 0; round < ROUNDS; ++round)
+        for (v = 0; v < 2; ++v) {
+            int which_v = (round & 1) ? 1 - v : v;
+            clock_t t0 = clock();
+            rrv_scene *s = make_grid_case(GCASE_LENS, 128, which_v ? RRV_IOR_INTERP_CUBIC : RRV_IOR_INTERP_TRILINEAR);
+            t[which_v][round] = (double)(clock() - t0) / CLOCKS_PER_SEC;
+            rrv_scene_free(s);
+        }
+    for (v = 0; v < 2; ++v) qsort(t[v], ROUNDS, sizeof(double), cmp_double);
+    printf("\nSampling and preparing a 128^3 IOR grid (CPU s, median of %d interleaved): trilinear %.3f, "
+           "cubic %.3f; baked bytes a sample: trilinear 16, cubic 8 (doubles, plus one ghost layer).\n",
+           ROUNDS, t[0][ROUNDS / 2], t[1][ROUNDS / 2]);
+}
+
+static void grid_study(void)
+{
+    static const int sizes[] = {32, 64};
+    int which, si, interp;
+    printf("\n### IOR grids: order of each integrator on the grid's own field\n\n");
+    printf("Error: distance, where the exit ray crosses z = (box half width + 0.5), from the reference ray "
+           "through the same interpolated grid; mean over %d rays (comb: %d walks each).\n", GRAYS, GRID_WALKS);
+    for (which = 0; which < GCASE_COUNT; ++which)
+        for (si = 0; si < 2; ++si)
+            for (interp = 0; interp < 2; ++interp) grid_sweep(which, sizes[si], (rrv_ior_interpolation)interp);
+    for (which = 0; which < GCASE_COUNT; ++which) grid_cost(which, 64);
+    grid_bake_cost();
+}
+
+int main(int argc, char **argv)
 {
     (void)tb_shape; /* the shared builder's; unused here */
     static const int refr_and_eik[] = {0, 1, 2, 3, 4};
@@ -578,11 +897,17 @@ int main(void)
            "Stochastic schemes: mean over 400 walks (std. error of that mean given); eikonal: one deterministic ray. "
            "Field evals: calls of rrv__scene_refractivity per ray, counted from the code "
            "(POISSON 1, MIDPOINT 2, COMB 1 (with gradient), LEAPFROG 2, RK4 4 per event/step).\n");
+    if (argc > 1 && strcmp(argv[1], "grids") == 0) {
+        grid_study();
+        printf("\n(total %.1f s)\n", (double)(clock() - t0) / CLOCKS_PER_SEC);
+        return 0;
+    }
     sweep(CASE_LUNEBURG, "Luneburg lens, b = 0.5", refr_and_eik, 5, 400);
     sweep(CASE_SLAB, "Linear slab, 60 degrees", refr_and_eik, 5, 400);
     sweep(CASE_BLOB, "Gaussian blob A = 1e-2, sigma = 0.1, b = 0.1", refr_and_eik, 5, 400);
     precision_study();
     stencil_study();
+    grid_study();
     printf("\n(total %.1f s)\n", (double)(clock() - t0) / CLOCKS_PER_SEC);
     return 0;
 }
