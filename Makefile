@@ -45,7 +45,7 @@ $(BUILD):
 	mkdir -p $(BUILD)
 
 test: $(BUILD)/rrv $(TEST_BINS)
-	sh test/run_tests.sh $(BUILD) $(TEST_BINS)
+	sh test/run_tests.sh $(BUILD) $(TEST_BINS) test/compile_checks.sh
 
 FUZZ_CC    ?= clang
 FUZZ_FLAGS := -std=c99 -g -O1 -fsanitize=fuzzer,address,undefined
