@@ -3993,15 +3993,19 @@ static rrv_result rrv__sf_grid_read_stdio(const char *path, const char *name, si
         *why = rrv__io_reason(errno);
         return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
     }
-    /* The header is read before the size is trusted: a folder opens and
-       claims a size, and only the read says what it is. */
-    sized = rrv__sf_stdio_size(f, &total);
+    /* The header is read before the size is asked for: a folder opens and
+       may claim any size, and only a read says what it is. */
     errno = 0;
-    got = sized ? fread(buf, 1, RRV__SF_GRID_HEADER, f) : 0;
-    if (!sized || (got < RRV__SF_GRID_HEADER && ferror(f))) {
+    got = fread(buf, 1, RRV__SF_GRID_HEADER, f);
+    if (got < RRV__SF_GRID_HEADER && ferror(f)) {
         *why = rrv__io_reason(errno);
         fclose(f);
         return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
+    }
+    sized = rrv__sf_stdio_size(f, &total) && fseek(f, (long)got, SEEK_SET) == 0;
+    if (!sized) {
+        fclose(f);
+        return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file: cannot tell its size");
     }
     r = rrv__sf_grid_parse_header(buf, got, total, name, max_bytes, &h, err);
     if (r != RRV_OK) {
