@@ -62,8 +62,11 @@ static const char usage_text[] =
 static const char render_help[] =
     "usage: rrv render SCENE -o OUT.pfm [options]\n"
     "\n"
-    "Renders SCENE into a float RGB PFM. Every output is written to a temporary\n"
-    "file and renamed into place, so a failed run never clobbers an image.\n"
+    "Renders SCENE into a float RGB PFM. Every output is written to a new\n"
+    "temporary file in its folder and renamed into place, so a failed run never\n"
+    "clobbers an image. An output that is the scene or a file it reads, the\n"
+    "other output, or an existing non-regular file (a folder, a device) is\n"
+    "refused.\n"
     "\n"
     "options:\n"
     "  -o, --output OUT.pfm   the PFM to write (required)\n"
@@ -75,7 +78,8 @@ static const char render_help[] =
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop\n"
-    "  --max-grid-mb N        refuse grid files larger than N MiB (default 2048)\n"
+    "  --max-grid-mb N        refuse grids, scene and OBJ files over N MiB\n"
+    "                         (default 2048)\n"
     "  -q, --quiet            no progress bar and no summary\n"
     "%s"
     "\n"
@@ -105,7 +109,8 @@ static const char info_help[] =
     "what a full-frame render buffer would need.\n"
     "\n"
     "options:\n"
-    "  --max-grid-mb N   refuse grid files larger than N MiB (default 2048)\n";
+    "  --max-grid-mb N   refuse grids, scene and OBJ files over N MiB\n"
+    "                    (default 2048)\n";
 
 static const char trace_help[] =
     "usage: rrv trace SCENE --ray OX OY OZ DX DY DZ [options]\n"
@@ -124,7 +129,7 @@ static const char trace_help[] =
     "  --seed S                  random seed (default: the scene's)\n"
     "  --path                    print every vertex instead, as rows\n"
     "                            walk,x,y,z,dx,dy,dz\n"
-    "  --max-grid-mb N           refuse grid files larger than N MiB\n"
+    "  --max-grid-mb N           refuse grids, scene and OBJ files over N MiB\n"
     "%s";
 
 static void print_library_error(const rrv_error *err)
@@ -198,7 +203,8 @@ static int parse_double(const char *text, double *out)
 {
     char *end;
     double value;
-    if (!text[0] || isspace((unsigned char)text[0])) return 0;
+    /* Decimal only: strtod would also take "0x1p3", "inf" and "nan". */
+    if (!text[0] || text[strspn(text, "0123456789+-.eE")] != '\0') return 0;
     errno = 0;
     value = strtod(text, &end);
     if (end == text || *end || errno == ERANGE || !isfinite(value)) return 0;

@@ -3656,7 +3656,7 @@ static rrv_result rrv__sf_stdio_read(const char *path, size_t max_bytes, int tex
             buf = bigger;
             capacity = grown;
         }
-        want = capacity - have < PIECE ? capacity - have : PIECE;
+        want = capacity - have < (size_t)PIECE ? capacity - have : (size_t)PIECE;
         errno = 0;
         got = fread(buf + have, 1, want, f);
         if (text && memchr(buf + have, '\0', got)) {
