@@ -53,6 +53,13 @@
      RRV_NO_STDIO     no FILE* I/O: load through rrv_load_options.read_file and
                       write through the callback writers
 
+   FILES
+     Every input is untrusted and read with bounds: a scene or OBJ file up to
+     rrv_load_options.max_grid_bytes, a PFM header and then exactly the pixels
+     it announces. Scene numbers are decimal (no hexadecimal) and read the
+     same in any locale. The file writers replace their target through a new
+     temporary file; rrv_write_pfm says what plain C cannot promise there.
+
    HISTORY
      0.2.0  refraction: IOR fields (gas state, profiles, grids), refractive
             and eikonal integrators, rrv_trace_ray
