@@ -3515,11 +3515,10 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
         fclose(file);
         return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot read%s%s", why[0] ? ": " : "", why);
     }
-    if (header_size == sizeof header)
+    result = rrv__pfm_parse_header(header, header_size, path, &h, err);
+    if (result != RRV_OK && header_size == sizeof header)
         result = rrv__fail(err, RRV_ERROR_FORMAT, path, 0, "bad PFM header: longer than %d bytes",
                            RRV__PFM_HEADER_MAX);
-    else
-        result = rrv__pfm_parse_header(header, header_size, path, &h, err);
     if (result != RRV_OK) {
         fclose(file);
         return result;
@@ -3605,7 +3604,6 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
    or allocated, and every error names the file, the line and the cause. The
    grammar lives in parts/SCENE_SPEC.md and scenes/README.md. */
 #include <stdlib.h> /* strtod, also when RRV_MALLOC is the caller's */
-#include <locale.h> /* localeconv: the decimal point strtod expects */
 
 #define RRV__SF_GRID_HEADER 48 /* magic 3, version 1, encoding 4, res 12, channels 4, box 24 */
 #define RRV__SF_PATH_MAX 1024
@@ -4177,10 +4175,11 @@ static int rrv__sf_tok_equals_name(const rrv__sf_tok *t, const char *name)
    follow the host's LC_NUMERIC, so a host program in a decimal-comma locale
    could not load a scene: the syntax is checked here, and strtod then sees
    the number with the locale's own decimal point, which gives the correctly
-   rounded value whatever the locale. */
+   rounded value whatever the locale (as long as no other thread changes the
+   locale meanwhile, which would race in strtod anyway). */
 static int rrv__sf_tok_number(const rrv__sf_tok *t, double *v)
 {
-    char buf[128], *end;
+    char buf[128], probe[16], *end;
     const char *q = t->p, *stop = t->p + t->n, *point;
     size_t o = 0, point_len;
     int negative = 0, mantissa_digits = 0;
@@ -4199,11 +4198,17 @@ static int rrv__sf_tok_number(const rrv__sf_tok *t, double *v)
             }
         }
     }
-    point = localeconv()->decimal_point;
-    point_len = point && point[0] ? strlen(point) : 0;
-    if (point_len == 0 || point_len > 8) { /* a broken locale: C's point */
-        point = ".";
-        point_len = 1;
+    {
+        /* The locale's decimal point as printf writes it: unlike localeconv,
+           snprintf is safe to call from several threads at once. */
+        int n = snprintf(probe, sizeof probe, "%.1f", 1.5);
+        if (n >= 3 && n - 2 <= 8 && probe[0] == '1' && probe[n - 1] == '5') {
+            point = probe + 1;
+            point_len = (size_t)n - 2;
+        } else { /* a locale we cannot read: C's point */
+            point = ".";
+            point_len = 1;
+        }
     }
     if (negative) buf[o++] = '-';
     for (; q < stop && *q >= '0' && *q <= '9'; ++q, ++mantissa_digits) buf[o++] = *q;
