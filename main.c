@@ -4,7 +4,7 @@
    place that does either, so it also shows how a client is meant to split a
    render across threads (tiles through rrv_render_rect, all samples of a
    pixel in one call, so the image does not depend on the split). */
-#define _POSIX_C_SOURCE 200809L
+#define _XOPEN_SOURCE 700 /* POSIX 2008 with realpath */
 #include "rrv.h"
 
 #include <ctype.h>
@@ -17,6 +17,9 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <sys/types.h>
 #include <unistd.h>
 
 #ifndef RRV_THREADS
@@ -59,8 +62,11 @@ static const char usage_text[] =
 static const char render_help[] =
     "usage: rrv render SCENE -o OUT.pfm [options]\n"
     "\n"
-    "Renders SCENE into a float RGB PFM. Every output is written to a temporary\n"
-    "file and renamed into place, so a failed run never clobbers an image.\n"
+    "Renders SCENE into a float RGB PFM. Every output is written to a new\n"
+    "temporary file in its folder and renamed into place, so a failed run never\n"
+    "clobbers an image. An output that is the scene or a file it reads, the\n"
+    "other output, or an existing non-regular file (a folder, a device) is\n"
+    "refused.\n"
     "\n"
     "options:\n"
     "  -o, --output OUT.pfm   the PFM to write (required)\n"
@@ -72,7 +78,8 @@ static const char render_help[] =
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop\n"
-    "  --max-grid-mb N        refuse grid files larger than N MiB (default 2048)\n"
+    "  --max-grid-mb N        refuse grids, scene and OBJ files over N MiB\n"
+    "                         (default 2048)\n"
     "  -q, --quiet            no progress bar and no summary\n"
     "%s"
     "\n"
@@ -102,7 +109,8 @@ static const char info_help[] =
     "what a full-frame render buffer would need.\n"
     "\n"
     "options:\n"
-    "  --max-grid-mb N   refuse grid files larger than N MiB (default 2048)\n";
+    "  --max-grid-mb N   refuse grids, scene and OBJ files over N MiB\n"
+    "                    (default 2048)\n";
 
 static const char trace_help[] =
     "usage: rrv trace SCENE --ray OX OY OZ DX DY DZ [options]\n"
@@ -121,7 +129,7 @@ static const char trace_help[] =
     "  --seed S                  random seed (default: the scene's)\n"
     "  --path                    print every vertex instead, as rows\n"
     "                            walk,x,y,z,dx,dy,dz\n"
-    "  --max-grid-mb N           refuse grid files larger than N MiB\n"
+    "  --max-grid-mb N           refuse grids, scene and OBJ files over N MiB\n"
     "%s";
 
 static void print_library_error(const rrv_error *err)
@@ -195,7 +203,8 @@ static int parse_double(const char *text, double *out)
 {
     char *end;
     double value;
-    if (!text[0] || isspace((unsigned char)text[0])) return 0;
+    /* Decimal only: strtod would also take "0x1p3", "inf" and "nan". */
+    if (!text[0] || text[strspn(text, "0123456789+-.eE")] != '\0') return 0;
     errno = 0;
     value = strtod(text, &end);
     if (end == text || *end || errno == ERANGE || !isfinite(value)) return 0;
@@ -342,10 +351,13 @@ static void format_bytes(double bytes, char *buf, size_t size)
         snprintf(buf, size, "%.2f %s", bytes, units[unit]);
 }
 
-/* ---- output files -------------------------------------------------------------- */
+/* ---- output files --------------------------------------------------------------
+   The library's file writers are plain C; the tool writes through
+   rrv_write_pfm_to with POSIX calls instead so that it can create its
+   temporary file exclusively (mkstemp), tell a device or a folder from a
+   file (stat) and compare files by identity rather than by spelling. */
 
-/* Catches a mistyped output folder before the render rather than after it;
-   the library's writers still make the final write atomic. */
+/* Catches a mistyped output folder before the render rather than after it. */
 static int output_folder_writable(const char *path)
 {
     const char *slash = strrchr(path, '/');
@@ -359,11 +371,241 @@ static int output_folder_writable(const char *path)
     return access(folder, W_OK | X_OK) == 0;
 }
 
+static const char *file_kind_name(mode_t mode)
+{
+    if (S_ISDIR(mode)) return "a directory";
+    if (S_ISCHR(mode)) return "a character device";
+    if (S_ISBLK(mode)) return "a block device";
+    if (S_ISFIFO(mode)) return "a FIFO";
+    if (S_ISSOCK(mode)) return "a socket";
+    return "not a regular file";
+}
+
+/* An existing output must be a regular file: renaming over a device node, a
+   FIFO or a socket would replace it with an image (rename refuses folders,
+   but the message should say why). stat follows symbolic links, so a link
+   to a device is refused too. */
+static int check_output_target(const char *path)
+{
+    struct stat st;
+    if (stat(path, &st) != 0) return 1; /* new file, or the writer reports it */
+    if (S_ISREG(st.st_mode)) return 1;
+    fprintf(stderr, "rrv: refusing to write \"%s\": it is %s, not a regular file\n", path,
+            file_kind_name(st.st_mode));
+    return 0;
+}
+
 static int check_output(const char *path)
 {
+    if (!check_output_target(path)) return 0;
     if (output_folder_writable(path)) return 1;
     fprintf(stderr, "rrv: cannot write \"%s\": %s\n", path, strerror(errno));
     return 0;
+}
+
+/* The folder part of path ("." for a bare name) and a pointer to the name. */
+static int split_path(const char *path, char *folder, size_t cap, const char **name)
+{
+    const char *slash = strrchr(path, '/');
+    size_t length;
+    if (!slash) {
+        if (cap < 2) return 0;
+        strcpy(folder, ".");
+        *name = path;
+        return 1;
+    }
+    length = slash == path ? 1 : (size_t)(slash - path);
+    if (length >= cap) return 0;
+    memcpy(folder, path, length);
+    folder[length] = '\0';
+    *name = slash + 1;
+    return 1;
+}
+
+/* 1 when a and b name one file. Existing files are compared by device and
+   inode (hard links, symbolic links, "./a" and "a"); a file that does not
+   exist yet by its folder's real path and its name. */
+static int same_file(const char *a, const char *b)
+{
+    struct stat sa, sb;
+    int has_a = stat(a, &sa) == 0, has_b = stat(b, &sb) == 0;
+    char folder_a[4096], folder_b[4096], *real_a, *real_b;
+    const char *name_a, *name_b;
+    int same;
+    if (has_a && has_b) return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+    if (has_a != has_b) return 0;
+    if (strcmp(a, b) == 0) return 1;
+    if (!split_path(a, folder_a, sizeof folder_a, &name_a) ||
+        !split_path(b, folder_b, sizeof folder_b, &name_b) || strcmp(name_a, name_b) != 0)
+        return 0;
+    real_a = realpath(folder_a, NULL);
+    real_b = realpath(folder_b, NULL);
+    same = real_a && real_b && strcmp(real_a, real_b) == 0;
+    free(real_a);
+    free(real_b);
+    return same;
+}
+
+/* The files a scene load read, collected through rrv_load_options.on_input. */
+typedef struct input_list {
+    char **paths;
+    int count, capacity;
+    int out_of_memory;
+} input_list;
+
+static void record_input(void *user, const char *path)
+{
+    input_list *list = (input_list *)user;
+    char *copy;
+    if (list->count == list->capacity) {
+        int capacity = list->capacity ? 2 * list->capacity : 8;
+        char **grown = (char **)realloc(list->paths, (size_t)capacity * sizeof *grown);
+        if (!grown) {
+            list->out_of_memory = 1;
+            return;
+        }
+        list->paths = grown;
+        list->capacity = capacity;
+    }
+    copy = (char *)malloc(strlen(path) + 1);
+    if (!copy) {
+        list->out_of_memory = 1;
+        return;
+    }
+    strcpy(copy, path);
+    list->paths[list->count++] = copy;
+}
+
+static void free_inputs(input_list *list)
+{
+    int i;
+    for (i = 0; i < list->count; ++i) free(list->paths[i]);
+    free(list->paths);
+    memset(list, 0, sizeof *list);
+}
+
+/* Refuses an output that already exists as one of the scene's inputs. */
+static int check_output_not_input(const char *output, const input_list *inputs)
+{
+    struct stat out_st, in_st;
+    int i;
+    if (stat(output, &out_st) != 0) return 1; /* an input exists, so this is none */
+    for (i = 0; i < inputs->count; ++i) {
+        if (stat(inputs->paths[i], &in_st) != 0) continue;
+        if (in_st.st_dev == out_st.st_dev && in_st.st_ino == out_st.st_ino) {
+            if (i == 0)
+                fprintf(stderr, "rrv: refusing to write \"%s\": it is the scene file\n", output);
+            else
+                fprintf(stderr, "rrv: refusing to write \"%s\": the scene reads it (as \"%s\")\n",
+                        output, inputs->paths[i]);
+            return 0;
+        }
+    }
+    return 1;
+}
+
+typedef struct pending_output {
+    const char *path;
+    char temp[4096 + 32]; /* "" when no temporary file exists; room for a folder and ".rrv.XXXXXX" */
+} pending_output;
+
+static int fwrite_callback(void *user, const void *data, size_t size)
+{
+    return fwrite(data, 1, size, (FILE *)user) == size ? 0 : 1;
+}
+
+static void remove_temp(pending_output *out)
+{
+    if (out->temp[0]) unlink(out->temp);
+    out->temp[0] = '\0';
+}
+
+/* Writes the image to a new temporary file in the output's folder: mkstemp
+   picks a name no other file has, so neither a file called "<out>.tmp" nor a
+   second render to the same output is touched. On failure nothing is left. */
+static int write_temp(pending_output *out, const float *image, int width, int height, int as_png,
+                      double exposure)
+{
+    char folder[4096];
+    const char *name;
+    mode_t mask;
+    FILE *file;
+    rrv_result result;
+    int fd, ok;
+    out->temp[0] = '\0';
+    if (!split_path(out->path, folder, sizeof folder, &name) ||
+        snprintf(out->temp, sizeof out->temp, "%s/.%s.XXXXXX", folder, name) >= (int)sizeof out->temp) {
+        out->temp[0] = '\0';
+        fprintf(stderr, "rrv: cannot write \"%s\": the path is too long\n", out->path);
+        return 0;
+    }
+    fd = mkstemp(out->temp);
+    if (fd < 0 && errno == ENAMETOOLONG) { /* a long name: a short temporary one */
+        snprintf(out->temp, sizeof out->temp, "%s/.rrv.XXXXXX", folder);
+        fd = mkstemp(out->temp);
+    }
+    if (fd < 0) {
+        fprintf(stderr, "rrv: cannot write \"%s\": cannot create a temporary file in \"%s\": %s\n",
+                out->path, folder, strerror(errno));
+        out->temp[0] = '\0';
+        return 0;
+    }
+    /* mkstemp makes the file private (0600); an image gets the usual
+       permissions, as if it had been created with fopen. */
+    mask = umask(0);
+    umask(mask);
+    if (fchmod(fd, 0666 & ~mask) != 0 || !(file = fdopen(fd, "wb"))) {
+        fprintf(stderr, "rrv: cannot write \"%s\": %s\n", out->path, strerror(errno));
+        close(fd);
+        remove_temp(out);
+        return 0;
+    }
+    result = as_png ? rrv_write_png_to(fwrite_callback, file, image, width, height, exposure)
+                    : rrv_write_pfm_to(fwrite_callback, file, image, width, height);
+    errno = 0;
+    ok = result == RRV_OK && fflush(file) == 0 && fsync(fileno(file)) == 0;
+    if (!ok && result == RRV_OK && errno == EINVAL) ok = 1; /* no fsync here, e.g. a pipe fs */
+    if (fclose(file) != 0) ok = 0;
+    if (!ok) {
+        fprintf(stderr, "rrv: cannot write \"%s\": %s\n", out->path,
+                result == RRV_ERROR_MEMORY ? "out of memory"
+                : errno ? strerror(errno) : "writing failed");
+        remove_temp(out);
+        return 0;
+    }
+    return 1;
+}
+
+/* Writes every output to its temporary file first and renames them into
+   place only when all were written, so a failure (a full disk, say) keeps
+   every old output. Signals that would end the process are held meanwhile,
+   so an interrupt does not strand a temporary file. */
+static int write_outputs(pending_output *outputs, int count, const float *image, int width,
+                         int height, double exposure)
+{
+    sigset_t hold, previous;
+    int i, ok = 1;
+    sigemptyset(&hold);
+    sigaddset(&hold, SIGINT);
+    sigaddset(&hold, SIGTERM);
+    sigaddset(&hold, SIGHUP);
+    sigaddset(&hold, SIGQUIT);
+    sigprocmask(SIG_BLOCK, &hold, &previous);
+    for (i = 0; i < count && ok; ++i) ok = write_temp(&outputs[i], image, width, height, i == 1, exposure);
+    /* Checked again: a device may have appeared at the path since the start. */
+    for (i = 0; i < count && ok; ++i) ok = check_output_target(outputs[i].path);
+    for (i = 0; i < count && ok; ++i) {
+        if (rename(outputs[i].temp, outputs[i].path) != 0) {
+            fprintf(stderr, "rrv: cannot write \"%s\": cannot rename the temporary file: %s\n",
+                    outputs[i].path, strerror(errno));
+            ok = 0;
+            break;
+        }
+        outputs[i].temp[0] = '\0';
+    }
+    for (i = 0; i < count; ++i) remove_temp(&outputs[i]);
+    sigprocmask(SIG_SETMASK, &previous, NULL);
+    return ok;
 }
 
 static int finish_stdout(int code)
@@ -375,16 +617,28 @@ static int finish_stdout(int code)
     return code;
 }
 
-static int load_scene(const char *path, size_t max_grid_bytes, rrv_scene **scene)
+/* inputs, if not NULL, collects every file the load read, the scene first. */
+static int load_scene(const char *path, size_t max_grid_bytes, input_list *inputs,
+                      rrv_scene **scene)
 {
     rrv_load_options options;
     rrv_error err;
     memset(&options, 0, sizeof options);
     memset(&err, 0, sizeof err);
     options.max_grid_bytes = max_grid_bytes;
+    if (inputs) {
+        options.on_input = record_input;
+        options.on_input_user = inputs;
+    }
     *scene = NULL;
     if (rrv_scene_load(path, &options, scene, &err) != RRV_OK) {
         print_library_error(&err);
+        return 0;
+    }
+    if (inputs && inputs->out_of_memory) {
+        fprintf(stderr, "rrv: out of memory\n");
+        rrv_scene_free(*scene);
+        *scene = NULL;
         return 0;
     }
     return 1;
@@ -733,7 +987,8 @@ static int command_render(int argc, char **argv)
     render_options opt;
     rrv_scene *scene = NULL;
     render_job job;
-    rrv_error err;
+    input_list inputs;
+    pending_output outputs[2];
     float *sum = NULL, *image = NULL;
     int code, width, height, crop_width, crop_height, x, y, c, thread_count;
     size_t sum_count, image_count;
@@ -743,7 +998,28 @@ static int command_render(int argc, char **argv)
     if (code == HELP_SHOWN) return EXIT_OK;
     if (code != EXIT_OK) return code;
 
-    if (!load_scene(opt.scene_path, opt.max_grid_bytes, &scene)) return EXIT_INPUT;
+    /* Output problems are found before a long load or render, except that
+       only the load knows which files the scene reads. */
+    if (opt.png_path && same_file(opt.pfm_path, opt.png_path)) {
+        arg_cursor args;
+        memset(&args, 0, sizeof args);
+        args.command = "render";
+        return usage_error(&args, "-o and --png name the same file \"%s\"", opt.png_path);
+    }
+    if (!check_output(opt.pfm_path) || (opt.png_path && !check_output(opt.png_path)))
+        return EXIT_IO;
+    memset(&inputs, 0, sizeof inputs);
+    if (!load_scene(opt.scene_path, opt.max_grid_bytes, &inputs, &scene)) {
+        free_inputs(&inputs);
+        return EXIT_INPUT;
+    }
+    code = check_output_not_input(opt.pfm_path, &inputs) &&
+           (!opt.png_path || check_output_not_input(opt.png_path, &inputs));
+    free_inputs(&inputs);
+    if (!code) {
+        rrv_scene_free(scene);
+        return EXIT_USAGE;
+    }
     if (opt.has_spp) scene->settings.spp = opt.spp;
     if (opt.has_seed) scene->settings.seed = opt.seed;
     if (opt.has_integrator) scene->settings.integrator = opt.integrator;
@@ -772,11 +1048,6 @@ static int command_render(int argc, char **argv)
     }
     crop_width = opt.crop[2] - opt.crop[0];
     crop_height = opt.crop[3] - opt.crop[1];
-
-    if (!check_output(opt.pfm_path) || (opt.png_path && !check_output(opt.png_path))) {
-        rrv_scene_free(scene);
-        return EXIT_IO;
-    }
 
     sum_count = (size_t)crop_width * (size_t)crop_height * 3;
     image_count = sum_count;
@@ -832,16 +1103,13 @@ static int command_render(int argc, char **argv)
                     sum[3 * ((size_t)y * crop_width + x) + c] / (float)job.spp;
     free(sum);
 
-    code = EXIT_OK;
-    memset(&err, 0, sizeof err);
-    if (rrv_write_pfm(opt.pfm_path, image, crop_width, crop_height, &err) != RRV_OK) {
-        print_library_error(&err);
-        code = EXIT_IO;
-    } else if (opt.png_path && rrv_write_png(opt.png_path, image, crop_width, crop_height,
-                                             opt.exposure, &err) != RRV_OK) {
-        print_library_error(&err);
-        code = EXIT_IO;
-    }
+    memset(outputs, 0, sizeof outputs);
+    outputs[0].path = opt.pfm_path;
+    outputs[1].path = opt.png_path;
+    code = write_outputs(outputs, opt.png_path ? 2 : 1, image, crop_width, crop_height,
+                         opt.exposure)
+               ? EXIT_OK
+               : EXIT_IO;
     if (code == EXIT_OK && !opt.quiet)
         print_render_summary(crop_width, crop_height, job.spp, seconds, &job.stats);
     free(image);
@@ -985,7 +1253,7 @@ static int command_info(int argc, char **argv)
         }
     }
     if (!scene_path) return usage_error(&args, "info needs a scene file");
-    if (!load_scene(scene_path, max_grid_bytes, &scene)) return EXIT_INPUT;
+    if (!load_scene(scene_path, max_grid_bytes, NULL, &scene)) return EXIT_INPUT;
 
     for (i = 0; i < scene->shape_count; ++i)
         if ((unsigned)scene->shapes[i].kind < 3) kind_counts[scene->shapes[i].kind]++;
@@ -1093,7 +1361,7 @@ static int command_trace(int argc, char **argv)
     direction.y = ray[4] / length;
     direction.z = ray[5] / length;
 
-    if (!load_scene(scene_path, max_grid_bytes, &scene)) return EXIT_INPUT;
+    if (!load_scene(scene_path, max_grid_bytes, NULL, &scene)) return EXIT_INPUT;
     if (!apply_refraction_options(scene, &refraction)) {
         rrv_scene_free(scene);
         return EXIT_INPUT;

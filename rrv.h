@@ -83,6 +83,13 @@
      RRV_NO_STDIO     no FILE* I/O: load through rrv_load_options.read_file and
                       write through the callback writers
 
+   FILES
+     Every input is untrusted and read with bounds: a scene or OBJ file up to
+     rrv_load_options.max_grid_bytes, a PFM header and then exactly the pixels
+     it announces. Scene numbers are decimal (no hexadecimal) and read the
+     same in any locale. The file writers replace their target through a new
+     temporary file; rrv_write_pfm says what plain C cannot promise there.
+
    HISTORY
      0.2.0  refraction: IOR fields (gas state, profiles, grids), refractive
             and eikonal integrators, rrv_trace_ray
@@ -362,11 +369,19 @@ typedef struct rrv_scene {
    library with RRV_FREE). Return 0 on success, nonzero if it cannot be read. */
 typedef int (*rrv_read_file_func)(void *user, const char *path, void **data, size_t *size);
 
+/* Sees the path of every file the loader is about to read (the scene, OBJ
+   meshes, grids), spelled as it will be opened: lets a client refuse to
+   write its output over one of the inputs. */
+typedef void (*rrv_input_func)(void *user, const char *path);
+
 typedef struct rrv_load_options {
     size_t max_grid_bytes;       /* refuse a grid larger than this before
-                                    allocating; 0 = RRV_DEFAULT_MAX_GRID_BYTES */
+                                    allocating, and a scene or OBJ file larger
+                                    than this; 0 = RRV_DEFAULT_MAX_GRID_BYTES */
     rrv_read_file_func read_file;/* NULL: stdio (unavailable with RRV_NO_STDIO) */
     void *read_file_user;
+    rrv_input_func on_input;     /* NULL: not called */
+    void *on_input_user;
 } rrv_load_options;
 
 #define RRV_DEFAULT_MAX_GRID_BYTES ((size_t)2 << 30)
@@ -448,8 +463,15 @@ RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
    new RGB buffer (free with rrv_free). */
 RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char *name,
                                        float **rgb, int *width, int *height, rrv_error *err);
-/* File forms. Writers write "<path>.tmp" and rename it over path only when
-   everything was written, so a failure never leaves half an image. */
+/* File forms. Writers write a new temporary file "<path>.<random>.tmp" next
+   to path and rename it over path only when everything was written, so a
+   failure never leaves half an image and never touches an existing file of
+   another name. Plain C cannot create a file exclusively before C11 nor tell
+   a device or a folder from a file, so with C99 two writers can in rare
+   cases pick the same temporary name, and an existing device node at path
+   is replaced: a client that needs more (rrv's CLI) uses its platform's
+   mkstemp, stat and rename around rrv_write_pfm_to. The reader reads the
+   header first and then exactly the pixel data it announces. */
 RRV_DEF rrv_result rrv_write_pfm(const char *path, const float *rgb, int width, int height,
                                  rrv_error *err);
 RRV_DEF rrv_result rrv_write_png(const char *path, const float *rgb, int width, int height,
@@ -3529,76 +3551,111 @@ static float rrv__float_from_bytes(const unsigned char *b, int little_endian)
     return value;
 }
 
-RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char *name,
-                                       float **rgb, int *width, int *height, rrv_error *err)
-{
-    const unsigned char *p = (const unsigned char *)data;
-    size_t pos = 0, pixel_count, data_bytes, out_bytes, i;
-    int channels, w = 0, h = 0, dim, little_endian, x, y;
-    double scale = 0.0;
-    float *out;
+/* The parsed PFM header; `pos` is where the pixel data starts. */
+typedef struct rrv__pfm_header {
+    int width, height, channels, little_endian;
+    size_t pos, data_bytes, out_bytes;
+} rrv__pfm_header;
 
-    if (rgb) *rgb = NULL;
-    if (width) *width = 0;
-    if (height) *height = 0;
-    if (!rgb || !width || !height || (!data && size > 0))
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, name, 0, "rrv_read_pfm_memory: NULL argument");
+/* Parses the header at the start of p[0, size): magic, width, height, scale
+   and the single whitespace byte after the scale. */
+static rrv_result rrv__pfm_parse_header(const unsigned char *p, size_t size, const char *name,
+                                        rrv__pfm_header *h, rrv_error *err)
+{
+    size_t pos, pixel_count;
+    int w = 0, ht = 0, dim;
+    double scale = 0.0;
 
     if (size < 2 || p[0] != 'P' || (p[1] != 'F' && p[1] != 'f'))
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "not a PFM file (it must start with \"PF\" or \"Pf\")");
-    channels = p[1] == 'F' ? 3 : 1;
+    h->channels = p[1] == 'F' ? 3 : 1;
     pos = 2;
 
     if (!rrv__pfm_skip_space(p, size, &pos) || (dim = rrv__pfm_parse_dimension(p, size, &pos, &w)) == 0)
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "bad PFM header: expected the width after \"P%c\"", p[1]);
     if (dim < 0 || w <= 0)
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "bad PFM header: width must be from 1 to %d", INT_MAX);
-    if (!rrv__pfm_skip_space(p, size, &pos) || (dim = rrv__pfm_parse_dimension(p, size, &pos, &h)) == 0)
+    if (!rrv__pfm_skip_space(p, size, &pos) || (dim = rrv__pfm_parse_dimension(p, size, &pos, &ht)) == 0)
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "bad PFM header: expected the height after the width");
-    if (dim < 0 || h <= 0)
+    if (dim < 0 || ht <= 0)
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "bad PFM header: height must be from 1 to %d", INT_MAX);
     if (!rrv__pfm_skip_space(p, size, &pos) || !rrv__pfm_parse_scale(p, size, &pos, &scale))
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "bad PFM header: expected the scale after the height");
     if (scale == 0.0 || !isfinite(scale))
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
                          "bad PFM header: the scale must be a finite nonzero number (its sign gives the byte order)");
-    little_endian = scale < 0.0;
+    h->little_endian = scale < 0.0;
     /* The pixel data starts right after one whitespace byte: any more would
        be the first bytes of the data. */
     if (pos >= size)
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated PFM: the header ends without pixel data");
     ++pos;
 
-    if ((size_t)w > SIZE_MAX / (size_t)h
-        || (pixel_count = (size_t)w * (size_t)h) > SIZE_MAX / 3 / sizeof(float))
-        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "PFM dimensions %dx%d are too large", w, h);
-    data_bytes = pixel_count * (size_t)channels * 4;
-    out_bytes = pixel_count * 3 * sizeof(float);
-    if (data_bytes > size - pos)
-        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
-                         "truncated PFM: %dx%d needs %llu bytes of pixel data but the file has %llu",
-                         w, h, (unsigned long long)data_bytes, (unsigned long long)(size - pos));
+    if ((size_t)w > SIZE_MAX / (size_t)ht
+        || (pixel_count = (size_t)w * (size_t)ht) > SIZE_MAX / 3 / sizeof(float))
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "PFM dimensions %dx%d are too large", w, ht);
+    h->width = w;
+    h->height = ht;
+    h->pos = pos;
+    h->data_bytes = pixel_count * (size_t)h->channels * 4;
+    h->out_bytes = pixel_count * 3 * sizeof(float);
+    return RRV_OK;
+}
 
-    out = (float *)RRV_MALLOC(out_bytes);
+/* Turns the pixel data (h->data_bytes at p) into a new RGB buffer. */
+static rrv_result rrv__pfm_decode(const unsigned char *p, const rrv__pfm_header *h, const char *name,
+                                  float **rgb, rrv_error *err)
+{
+    int x, y;
+    size_t i;
+    float *out = (float *)RRV_MALLOC(h->out_bytes);
     if (!out)
-        return rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory for a %dx%d image", w, h);
-    p += pos;
+        return rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory for a %dx%d image",
+                         h->width, h->height);
     /* The file stores the bottom row first; row 0 of the buffer is the top. */
-    for (y = h - 1; y >= 0; --y) {
-        float *row = out + (size_t)y * (size_t)w * 3;
-        for (x = 0; x < w; ++x) {
-            if (channels == 3) {
-                for (i = 0; i < 3; ++i, p += 4) row[3 * (size_t)x + i] = rrv__float_from_bytes(p, little_endian);
+    for (y = h->height - 1; y >= 0; --y) {
+        float *row = out + (size_t)y * (size_t)h->width * 3;
+        for (x = 0; x < h->width; ++x) {
+            if (h->channels == 3) {
+                for (i = 0; i < 3; ++i, p += 4) row[3 * (size_t)x + i] = rrv__float_from_bytes(p, h->little_endian);
             } else {
-                float grey = rrv__float_from_bytes(p, little_endian);
+                float grey = rrv__float_from_bytes(p, h->little_endian);
                 p += 4;
                 row[3 * (size_t)x] = row[3 * (size_t)x + 1] = row[3 * (size_t)x + 2] = grey;
             }
         }
     }
     *rgb = out;
-    *width = w;
-    *height = h;
+    return RRV_OK;
+}
+
+static rrv_result rrv__pfm_truncated(rrv_error *err, const char *name, const rrv__pfm_header *h,
+                                     size_t have)
+{
+    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                     "truncated PFM: %dx%d needs %llu bytes of pixel data but the file has %llu",
+                     h->width, h->height, (unsigned long long)h->data_bytes, (unsigned long long)have);
+}
+
+RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char *name,
+                                       float **rgb, int *width, int *height, rrv_error *err)
+{
+    const unsigned char *p = (const unsigned char *)data;
+    rrv__pfm_header h;
+    rrv_result result;
+
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    if (!rgb || !width || !height || (!data && size > 0))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, name, 0, "rrv_read_pfm_memory: NULL argument");
+    result = rrv__pfm_parse_header(p, size, name, &h, err);
+    if (result != RRV_OK) return result;
+    if (h.data_bytes > size - h.pos) return rrv__pfm_truncated(err, name, &h, size - h.pos);
+    result = rrv__pfm_decode(p + h.pos, &h, name, rgb, err);
+    if (result != RRV_OK) return result;
+    *width = h.width;
+    *height = h.height;
     rrv__clear_error(err);
     return RRV_OK;
 }
@@ -3606,18 +3663,70 @@ RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char
 /* ---- file forms ---------------------------------------------------------------- */
 
 #ifndef RRV_NO_STDIO
+#include <errno.h>
+#include <time.h>
 
 static int rrv__fwrite_callback(void *user, const void *data, size_t size)
 {
     return fwrite(data, 1, size, (FILE *)user) == size ? 0 : 1;
 }
 
-/* Writes through "<path>.tmp" and renames it over path only after every
-   fwrite and the fclose succeeded. */
+/* Why fopen or fread failed, in words that do not depend on the platform's
+   strerror, or "" when errno says nothing we can name. The scene reader
+   shares it. */
+static const char *rrv__io_reason(int errnum)
+{
+#ifdef ENOENT
+    if (errnum == ENOENT) return "no such file";
+#endif
+#ifdef EACCES
+    if (errnum == EACCES) return "permission denied";
+#endif
+#ifdef EISDIR
+    if (errnum == EISDIR) return "is a directory";
+#endif
+    (void)errnum;
+    return "";
+}
+
+/* Opens a new temporary file next to path. The name carries a value mixed
+   from the clock, the address of the stack and the attempt, so two writers
+   to one path (or a leftover file) rarely meet; a name that exists is
+   skipped, and C11's exclusive "x" mode closes the remaining race where it
+   is available. */
+static FILE *rrv__open_temp(const char *path, char *temp_path, size_t cap)
+{
+    int attempt;
+    for (attempt = 0; attempt < 64; ++attempt) {
+        uint64_t mix = rrv__mix64((uint64_t)time(NULL) ^ ((uint64_t)clock() << 20) ^
+                                  ((uint64_t)(uintptr_t)&attempt << 7) ^ (uint64_t)attempt);
+        FILE *f;
+        snprintf(temp_path, cap, "%s.%08lx.tmp", path, (unsigned long)(mix & 0xffffffffu));
+        f = fopen(temp_path, "rb");
+        if (f) { /* taken: never write over a file we did not create */
+            fclose(f);
+            continue;
+        }
+#if defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
+        f = fopen(temp_path, "wbx");
+#else
+        f = fopen(temp_path, "wb");
+#endif
+        if (f) return f;
+#ifdef EEXIST
+        if (errno == EEXIST) continue;
+#endif
+        return NULL;
+    }
+    return NULL;
+}
+
+/* Writes through a new temporary file and renames it over path only after
+   every fwrite and the fclose succeeded. */
 static rrv_result rrv__write_image_file(const char *path, const float *rgb, int width, int height,
                                         int as_png, double exposure, rrv_error *err)
 {
-    size_t path_len;
+    size_t cap;
     char *temp_path;
     FILE *file;
     rrv_result result;
@@ -3630,16 +3739,16 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
     if (as_png && !isfinite(exposure))
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "exposure must be finite");
 
-    path_len = strlen(path);
-    temp_path = (char *)RRV_MALLOC(path_len + 5);
+    cap = strlen(path) + 16; /* ".%08lx.tmp" and the NUL */
+    temp_path = (char *)RRV_MALLOC(cap);
     if (!temp_path) return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory");
-    memcpy(temp_path, path, path_len);
-    memcpy(temp_path + path_len, ".tmp", 5);
-
-    file = fopen(temp_path, "wb");
+    errno = 0;
+    file = rrv__open_temp(path, temp_path, cap);
     if (!file) {
+        const char *why = rrv__io_reason(errno);
         RRV_FREE(temp_path);
-        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot write: cannot create the temporary file");
+        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot write: cannot create a temporary file%s%s",
+                         why[0] ? ": " : "", why);
     }
     result = as_png ? rrv_write_png_to(rrv__fwrite_callback, file, rgb, width, height, exposure)
                     : rrv_write_pfm_to(rrv__fwrite_callback, file, rgb, width, height);
@@ -3680,13 +3789,38 @@ RRV_DEF rrv_result rrv_write_png(const char *path, const float *rgb, int width, 
     return rrv__write_image_file(path, rgb, width, height, 1, exposure, err);
 }
 
+/* A header longer than this is not a PFM: rrv writes 20-odd bytes, and a
+   file of endless whitespace or digits must not be read to its end. */
+#define RRV__PFM_HEADER_MAX 1024
+
+/* Reads up to the single whitespace byte after the scale (the third field),
+   stopping early at anything that cannot be a PFM header so that the
+   parser's message describes it. Returns the bytes read. */
+static size_t rrv__pfm_read_header(FILE *file, unsigned char *header, size_t cap)
+{
+    size_t n = 0;
+    int fields = 0, in_field = 0, c;
+    while (n < cap && (c = getc(file)) != EOF) {
+        header[n++] = (unsigned char)c;
+        if (n <= 2) {
+            if (n == 1 ? c != 'P' : c != 'F' && c != 'f') break;
+        } else if (rrv__pfm_is_space((unsigned char)c)) {
+            if (in_field && ++fields == 3) break;
+            in_field = 0;
+        } else {
+            in_field = 1;
+        }
+    }
+    return n;
+}
+
 RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *height,
                                 rrv_error *err)
 {
-    size_t size = 0, capacity = (size_t)64 * 1024;
-    unsigned char *data;
+    unsigned char header[RRV__PFM_HEADER_MAX], *data = NULL;
+    size_t header_size, have = 0, capacity = 0;
+    rrv__pfm_header h;
     FILE *file;
-    int read_failed;
     rrv_result result;
 
     if (rgb) *rgb = NULL;
@@ -3694,47 +3828,71 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
     if (height) *height = 0;
     if (!path || !rgb || !width || !height)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_read_pfm: NULL argument");
+    errno = 0;
     file = fopen(path, "rb");
-    if (!file) return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open");
-
-    /* Reading until EOF, growing the buffer, works for pipes and needs no
-       ftell, whose long result cannot describe every file size. */
-    data = (unsigned char *)RRV_MALLOC(capacity);
-    if (!data) {
-        fclose(file);
-        return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory");
+    if (!file) {
+        const char *why = rrv__io_reason(errno);
+        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open%s%s", why[0] ? ": " : "", why);
     }
-    for (;;) {
-        size_t got;
-        if (size == capacity) {
+
+    /* The header first, then exactly the pixel data it announces: a stream
+       without end (a device, a pipe) is read no further than that. */
+    errno = 0;
+    header_size = rrv__pfm_read_header(file, header, sizeof header);
+    if (ferror(file)) {
+        const char *why = rrv__io_reason(errno);
+        fclose(file);
+        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot read%s%s", why[0] ? ": " : "", why);
+    }
+    result = rrv__pfm_parse_header(header, header_size, path, &h, err);
+    if (result != RRV_OK && header_size == sizeof header)
+        result = rrv__fail(err, RRV_ERROR_FORMAT, path, 0, "bad PFM header: longer than %d bytes",
+                           RRV__PFM_HEADER_MAX);
+    if (result != RRV_OK) {
+        fclose(file);
+        return result;
+    }
+
+    /* The buffer grows with what arrives, so a header announcing more than
+       the file holds costs at most twice what the file holds. */
+    while (have < h.data_bytes) {
+        size_t want, got;
+        if (have == capacity) {
+            size_t grown = capacity ? capacity * 2 : (size_t)1 << 20;
             unsigned char *bigger;
-            if (capacity > SIZE_MAX / 2) {
-                fclose(file);
-                RRV_FREE(data);
-                return rrv__fail(err, RRV_ERROR_LIMIT, path, 0, "file is too large to read");
-            }
-            bigger = (unsigned char *)RRV_REALLOC(data, capacity * 2);
+            if (grown > h.data_bytes || grown < capacity) grown = h.data_bytes;
+            bigger = (unsigned char *)RRV_REALLOC(data, grown);
             if (!bigger) {
-                fclose(file);
                 RRV_FREE(data);
-                return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory reading the file");
+                fclose(file);
+                return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory for a %dx%d image",
+                                 h.width, h.height);
             }
             data = bigger;
-            capacity *= 2;
+            capacity = grown;
         }
-        got = fread(data + size, 1, capacity - size, file);
-        size += got;
-        if (size < capacity) break;
+        want = capacity - have;
+        got = fread(data + have, 1, want, file);
+        have += got;
+        if (got < want) break;
     }
-    read_failed = ferror(file) != 0;
-    fclose(file);
-    if (read_failed) {
+    if (ferror(file)) {
         RRV_FREE(data);
+        fclose(file);
         return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot read");
     }
-    result = rrv_read_pfm_memory(data, size, path, rgb, width, height, err);
+    fclose(file);
+    if (have < h.data_bytes) {
+        RRV_FREE(data);
+        return rrv__pfm_truncated(err, path, &h, have);
+    }
+    result = rrv__pfm_decode(data, &h, path, rgb, err);
     RRV_FREE(data);
-    return result;
+    if (result != RRV_OK) return result;
+    *width = h.width;
+    *height = h.height;
+    rrv__clear_error(err);
+    return RRV_OK;
 }
 
 #else /* RRV_NO_STDIO */
@@ -3797,44 +3955,79 @@ static int rrv__sf_stdio_size(FILE *f, unsigned long long *size)
     return 1;
 }
 
-static int rrv__sf_stdio_read_file(void *user, const char *path, void **data, size_t *size)
+/* Reads a whole file in pieces that grow with what arrives: the size a file
+   claims is never trusted for an allocation (a folder's can be 2^63), and
+   nothing beyond max_bytes is read. A text file (`text`) stops after the
+   piece holding its first NUL byte: the parser refuses the file on that
+   line anyway, and a device such as /dev/zero would otherwise be read up
+   to the limit. */
+static rrv_result rrv__sf_stdio_read(const char *path, size_t max_bytes, int text, void **data,
+                                     size_t *size, const char **why)
 {
+    enum { PIECE = 64 * 1024 };
+    unsigned char *buf = NULL;
+    size_t have = 0, capacity = 0;
     FILE *f;
-    unsigned long long len;
-    unsigned char *buf;
-    (void)user;
-    *data = NULL;
-    *size = 0;
+    errno = 0;
     f = fopen(path, "rb");
-    if (!f) return 1;
-    if (!rrv__sf_stdio_size(f, &len) || len >= (unsigned long long)SIZE_MAX) {
-        fclose(f);
-        return 1;
+    if (!f) {
+        *why = rrv__io_reason(errno);
+        return RRV_ERROR_IO;
     }
-    buf = (unsigned char *)RRV_MALLOC((size_t)len + 1); /* +1: malloc(0) may be NULL */
-    if (!buf) {
-        fclose(f);
-        return 1;
+    for (;;) {
+        size_t want, got;
+        if (capacity - have < PIECE && capacity <= max_bytes) {
+            size_t grown = capacity < PIECE ? 2 * (size_t)PIECE : capacity * 2;
+            unsigned char *bigger;
+            if (grown - 1 > max_bytes) grown = max_bytes + 1; /* +1 sees a file over the limit */
+            if (grown <= capacity) grown = SIZE_MAX;          /* doubling overflowed */
+            bigger = (unsigned char *)RRV_REALLOC(buf, grown);
+            if (!bigger) {
+                RRV_FREE(buf);
+                fclose(f);
+                return RRV_ERROR_MEMORY;
+            }
+            buf = bigger;
+            capacity = grown;
+        }
+        want = capacity - have < (size_t)PIECE ? capacity - have : (size_t)PIECE;
+        errno = 0;
+        got = fread(buf + have, 1, want, f);
+        if (text && memchr(buf + have, '\0', got)) {
+            have += got;
+            break;
+        }
+        have += got;
+        if (have > max_bytes) {
+            RRV_FREE(buf);
+            fclose(f);
+            return RRV_ERROR_LIMIT;
+        }
+        if (got < want) break;
     }
-    if (len > 0 && fread(buf, 1, (size_t)len, f) != (size_t)len) {
+    if (ferror(f)) {
+        *why = rrv__io_reason(errno);
         RRV_FREE(buf);
         fclose(f);
-        return 1;
+        return RRV_ERROR_IO;
     }
     fclose(f);
     *data = buf;
-    *size = (size_t)len;
-    return 0;
+    *size = have;
+    return RRV_OK;
 }
 #endif
 
-/* RRV_OK with the whole file, RRV_ERROR_IO, or RRV_ERROR_UNSUPPORTED when
-   there is no way to read files at all. */
-static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, void **data,
-                                     size_t *size)
+/* RRV_OK with the whole file; RRV_ERROR_IO (*why says why, or ""),
+   RRV_ERROR_LIMIT past max_bytes, RRV_ERROR_MEMORY, or RRV_ERROR_UNSUPPORTED
+   when there is no way to read files at all. */
+static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, int text,
+                                     size_t max_bytes, void **data, size_t *size, const char **why)
 {
     *data = NULL;
     *size = 0;
+    *why = "";
+    if (opt && opt->on_input) opt->on_input(opt->on_input_user, path);
     if (opt && opt->read_file) {
         if (opt->read_file(opt->read_file_user, path, data, size) != 0) {
             if (*data) RRV_FREE(*data);
@@ -3842,13 +4035,38 @@ static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *pa
             return RRV_ERROR_IO;
         }
         if (!*data && *size > 0) return RRV_ERROR_IO;
+        if (*size > max_bytes) {
+            RRV_FREE(*data);
+            *data = NULL;
+            return RRV_ERROR_LIMIT;
+        }
         return RRV_OK;
     }
 #ifndef RRV_NO_STDIO
-    return rrv__sf_stdio_read_file(NULL, path, data, size) == 0 ? RRV_OK : RRV_ERROR_IO;
+    return rrv__sf_stdio_read(path, max_bytes, text, data, size, why);
 #else
+    (void)text;
     return RRV_ERROR_UNSUPPORTED;
 #endif
+}
+
+static size_t rrv__sf_max_bytes(const rrv_load_options *opt)
+{
+    return opt && opt->max_grid_bytes ? opt->max_grid_bytes : RRV_DEFAULT_MAX_GRID_BYTES;
+}
+
+/* The message for a file rrv__sf_read_whole could not read: `what` is
+   "scene file" or "OBJ file \"x\"". */
+static void rrv__sf_read_message(rrv_result r, const char *what, const char *why, size_t max_bytes,
+                                 char *buf, size_t cap)
+{
+    if (r == RRV_ERROR_LIMIT)
+        snprintf(buf, cap, "%s is larger than the limit of %llu bytes", what,
+                 (unsigned long long)max_bytes);
+    else if (r == RRV_ERROR_MEMORY)
+        snprintf(buf, cap, "out of memory reading %s", what);
+    else
+        snprintf(buf, cap, "cannot read %s%s%s", what, why[0] ? ": " : "", why);
 }
 
 #define RRV__SF_NO_READER_MESSAGE                                                                  \
@@ -3858,15 +4076,25 @@ static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *pa
 static int rrv__sf_join_path(const char *base_dir, const char *path, char *out, size_t cap)
 {
     size_t nb = base_dir ? strlen(base_dir) : 0, np = strlen(path);
+    /* "C:x" and "\\x" are absolute only on Windows; elsewhere they are
+       ordinary relative names. */
+#ifdef _WIN32
     int absolute = path[0] == '/' || path[0] == '\\' ||
                    (((path[0] | 32) >= 'a' && (path[0] | 32) <= 'z') && path[1] == ':');
+#else
+    int absolute = path[0] == '/';
+#endif
     if (absolute || nb == 0) {
         if (np >= cap) return 0;
         memcpy(out, path, np + 1);
         return 1;
     }
     {
+#ifdef _WIN32
         int sep = base_dir[nb - 1] != '/' && base_dir[nb - 1] != '\\';
+#else
+        int sep = base_dir[nb - 1] != '/';
+#endif
         if (nb + (size_t)sep + np >= cap) return 0;
         memcpy(out, base_dir, nb);
         if (sep) out[nb] = '/';
@@ -4082,23 +4310,36 @@ RRV_DEF rrv_result rrv_grid_read_memory(const void *data, size_t size, const cha
 /* Streams the samples so a grid never sits in memory twice, and reads the
    header first so the size limit applies before anything large is allocated. */
 static rrv_result rrv__sf_grid_read_stdio(const char *path, const char *name, size_t max_bytes,
-                                          int nonnegative, rrv_grid *grid, rrv_error *err)
+                                          int nonnegative, rrv_grid *grid, rrv_error *err,
+                                          const char **why)
 {
     unsigned char buf[16384];
-    unsigned long long total;
+    unsigned long long total = 0;
     size_t got, done = 0;
     rrv__sf_grid_header h;
     float *samples;
     rrv_result r;
-    FILE *f = fopen(path, "rb");
-    if (!f || !rrv__sf_stdio_size(f, &total)) {
-        if (f) fclose(f);
-        return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file");
+    FILE *f;
+    int sized;
+    errno = 0;
+    f = fopen(path, "rb");
+    if (!f) {
+        *why = rrv__io_reason(errno);
+        return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
     }
+    /* The header is read before the size is asked for: a folder opens and
+       may claim any size, and only a read says what it is. */
+    errno = 0;
     got = fread(buf, 1, RRV__SF_GRID_HEADER, f);
     if (got < RRV__SF_GRID_HEADER && ferror(f)) {
+        *why = rrv__io_reason(errno);
         fclose(f);
-        return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file");
+        return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
+    }
+    sized = rrv__sf_stdio_size(f, &total) && fseek(f, (long)got, SEEK_SET) == 0;
+    if (!sized) {
+        fclose(f);
+        return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file: cannot tell its size");
     }
     r = rrv__sf_grid_parse_header(buf, got, total, name, max_bytes, &h, err);
     if (r != RRV_OK) {
@@ -4133,24 +4374,28 @@ static rrv_result rrv__sf_grid_read_stdio(const char *path, const char *name, si
 }
 #endif
 
-/* Errors name `name`, line 0. An unreadable file gives RRV_ERROR_IO. */
+/* Errors name `name`, line 0. An unreadable file gives RRV_ERROR_IO and
+   *why the reason in words, or "". */
 static rrv_result rrv__sf_grid_load(const char *path, const char *name, const rrv_load_options *opt,
-                                    int nonnegative, rrv_grid *grid, rrv_error *err)
+                                    int nonnegative, rrv_grid *grid, rrv_error *err,
+                                    const char **why)
 {
-    size_t max_bytes =
-        opt && opt->max_grid_bytes ? opt->max_grid_bytes : RRV_DEFAULT_MAX_GRID_BYTES;
+    size_t max_bytes = rrv__sf_max_bytes(opt);
     memset(grid, 0, sizeof *grid);
+    *why = "";
     if (opt && opt->read_file) {
         void *data;
         size_t size;
-        rrv_result r = rrv__sf_read_whole(opt, path, &data, &size);
-        if (r != RRV_OK) return rrv__fail(err, r, name, 0, "cannot read the file");
+        rrv_result r = rrv__sf_read_whole(opt, path, 0, SIZE_MAX, &data, &size, why);
+        if (r != RRV_OK)
+            return rrv__fail(err, r, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
         r = rrv_grid_read_memory(data, size, name, max_bytes, nonnegative, grid, err);
         RRV_FREE(data);
         return r;
     }
 #ifndef RRV_NO_STDIO
-    return rrv__sf_grid_read_stdio(path, name, max_bytes, nonnegative, grid, err);
+    if (opt && opt->on_input) opt->on_input(opt->on_input_user, path);
+    return rrv__sf_grid_read_stdio(path, name, max_bytes, nonnegative, grid, err, why);
 #else
     return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0, RRV__SF_NO_READER_MESSAGE);
 #endif
@@ -4159,10 +4404,11 @@ static rrv_result rrv__sf_grid_load(const char *path, const char *name, const rr
 RRV_DEF rrv_result rrv_grid_read(const char *path, const rrv_load_options *opt, int nonnegative,
                                  rrv_grid *grid, rrv_error *err)
 {
+    const char *why;
     rrv__clear_error(err);
     if (!path || !grid)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_grid_read: NULL argument");
-    return rrv__sf_grid_load(path, path, opt, nonnegative, grid, err);
+    return rrv__sf_grid_load(path, path, opt, nonnegative, grid, err, &why);
 }
 
 /* ---- tokens ------------------------------------------------------------------ */
@@ -4221,6 +4467,25 @@ static int rrv__sf_tokenize(rrv__sf_toks *t, const char *s, const char *e, int q
     }
 }
 
+/* Scene and OBJ files are text: a NUL or another control byte would be
+   hidden or garbled in every message that quotes its token (a NUL ends
+   "%.*s", so "1\0" would be shown as the number 1). Writes a message for the
+   first one in [s, e) and returns 1, or returns 0. */
+static int rrv__sf_control_byte(const char *s, const char *e, char *msg, size_t cap)
+{
+    const char *c;
+    for (c = s; c < e; ++c) {
+        unsigned char b = (unsigned char)*c;
+        if (b >= 32 || b == '\t' || b == '\r' || b == '\v' || b == '\f') continue;
+        if (b == 0)
+            snprintf(msg, cap, "NUL byte in column %d: not a text file", (int)(c - s) + 1);
+        else
+            snprintf(msg, cap, "control character 0x%02X in column %d", b, (int)(c - s) + 1);
+        return 1;
+    }
+    return 0;
+}
+
 static int rrv__sf_tok_is(const rrv__sf_tok *t, const char *s)
 {
     size_t n = strlen(s);
@@ -4233,16 +4498,66 @@ static int rrv__sf_tok_equals_name(const rrv__sf_tok *t, const char *name)
     return t->n == n && memcmp(t->p, name, n) == 0;
 }
 
-/* 1 when the whole token is a number strtod accepts (inf and nan included:
-   the caller rejects those with a clearer message). */
+/* 1 when the whole token is a decimal number: [+-] digits [. digits]
+   [e [+-] digits], or inf, infinity or nan (the caller rejects those with a
+   clearer message). strtod alone would also take hexadecimal ("0x1p3") and
+   follow the host's LC_NUMERIC, so a host program in a decimal-comma locale
+   could not load a scene: the syntax is checked here, and strtod then sees
+   the number with the locale's own decimal point, which gives the correctly
+   rounded value whatever the locale (as long as no other thread changes the
+   locale meanwhile, which would race in strtod anyway). */
 static int rrv__sf_tok_number(const rrv__sf_tok *t, double *v)
 {
-    char buf[128], *end;
-    if (t->quoted || t->n == 0 || t->n >= sizeof buf) return 0;
-    memcpy(buf, t->p, t->n);
-    buf[t->n] = '\0';
+    char buf[128], probe[16], *end;
+    const char *q = t->p, *stop = t->p + t->n, *point;
+    size_t o = 0, point_len;
+    int negative = 0, mantissa_digits = 0;
+    if (t->quoted || t->n == 0 || t->n > 100) return 0;
+    if (*q == '+' || *q == '-') negative = *q++ == '-';
+    {
+        size_t rest = (size_t)(stop - q), k;
+        static const char *const words[] = {"inf", "infinity", "nan"};
+        for (k = 0; k < 3; ++k) {
+            size_t n = strlen(words[k]), i;
+            if (rest != n) continue;
+            for (i = 0; i < n && (q[i] | 32) == words[k][i]; ++i) {}
+            if (i == n) {
+                *v = k < 2 ? (negative ? -HUGE_VAL : HUGE_VAL) : (double)NAN;
+                return 1;
+            }
+        }
+    }
+    {
+        /* The locale's decimal point as printf writes it: unlike localeconv,
+           snprintf is safe to call from several threads at once. */
+        int n = snprintf(probe, sizeof probe, "%.1f", 1.5);
+        if (n >= 3 && n - 2 <= 8 && probe[0] == '1' && probe[n - 1] == '5') {
+            point = probe + 1;
+            point_len = (size_t)n - 2;
+        } else { /* a locale we cannot read: C's point */
+            point = ".";
+            point_len = 1;
+        }
+    }
+    if (negative) buf[o++] = '-';
+    for (; q < stop && *q >= '0' && *q <= '9'; ++q, ++mantissa_digits) buf[o++] = *q;
+    if (q < stop && *q == '.') {
+        memcpy(buf + o, point, point_len);
+        o += point_len;
+        for (++q; q < stop && *q >= '0' && *q <= '9'; ++q, ++mantissa_digits) buf[o++] = *q;
+    }
+    if (mantissa_digits == 0) return 0;
+    if (q < stop && (*q == 'e' || *q == 'E')) {
+        int exponent_digits = 0;
+        buf[o++] = *q++;
+        if (q < stop && (*q == '+' || *q == '-')) buf[o++] = *q++;
+        for (; q < stop && *q >= '0' && *q <= '9'; ++q, ++exponent_digits) buf[o++] = *q;
+        if (exponent_digits == 0) return 0;
+    }
+    if (q != stop) return 0;
+    buf[o] = '\0';
     *v = strtod(buf, &end);
-    return end == buf + t->n;
+    return end == buf + o;
 }
 
 /* Decimal integer with optional sign. 0 if not one; *overflow when the
@@ -4357,8 +4672,10 @@ typedef struct rrv__sf_slot {
 #define RRV__SF_UNIT 0.0, 1.0
 
 static const rrv__sf_key rrv__sf_camera_keys[] = {
-    {"eye", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"look", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    /* The renderer squares distances from the camera in double precision,
+       which overflows beyond about 1e154: farther cameras would see nothing. */
+    {"eye", RRV__SF_NUM, 3, RRV__SF_REQ, -1e150, 1e150, NULL},
+    {"look", RRV__SF_NUM, 3, RRV__SF_REQ, -1e150, 1e150, NULL},
     {"up", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
     {"fov", RRV__SF_NUM, 1, RRV__SF_GT | RRV__SF_LT, 0.0, 180.0, NULL},
     {"resolution", RRV__SF_INT, 2, 0, 1.0, 16384.0, NULL},
@@ -4728,6 +5045,21 @@ static rrv_vec3 rrv__sf_cross3(rrv_vec3 a, rrv_vec3 b)
 
 static int rrv__sf_vec_zero(rrv_vec3 v) { return v.x == 0.0 && v.y == 0.0 && v.z == 0.0; }
 
+/* v divided by its largest absolute component (v itself when that is 0):
+   the direction survives, and squares of the result cannot overflow. */
+static rrv_vec3 rrv__sf_unit_max(rrv_vec3 v)
+{
+    double m = fabs(v.x);
+    if (fabs(v.y) > m) m = fabs(v.y);
+    if (fabs(v.z) > m) m = fabs(v.z);
+    if (m > 0 && m <= DBL_MAX) {
+        v.x /= m;
+        v.y /= m;
+        v.z /= m;
+    }
+    return v;
+}
+
 /* Copies a name or path token into a C string; 0 if it does not fit or
    holds a control character. */
 static int rrv__sf_tok_string(const rrv__sf_tok *t, char *out, size_t cap)
@@ -4890,6 +5222,13 @@ static rrv_result rrv__sf_obj_parse(rrv__sf_parser *p, const char *text, size_t 
             break;
         }
         ++line;
+        {
+            char msg[96];
+            if (rrv__sf_control_byte(s, e, msg, sizeof msg)) {
+                r = rrv__fail(p->err, RRV_ERROR_PARSE, file, line, "%s", msg);
+                break;
+            }
+        }
         tr = rrv__sf_tokenize(&toks, s, e, 0);
         if (tr != 0) {
             r = rrv__fail(p->err, RRV_ERROR_MEMORY, file, line, "out of memory");
@@ -4985,10 +5324,14 @@ static rrv_result rrv__sf_st_camera(rrv__sf_parser *p)
         return rrv__sf_perr(p, RRV_ERROR_PARSE,
                             "camera: eye and look must be distinct finite points");
     {
-        rrv_vec3 x = rrv__sf_cross3(dir, c->up);
+        /* Both vectors scaled to a largest component of 1 first: squaring
+           a far camera's view direction (eye at 1e200) would overflow to
+           inf and make any up look parallel. */
+        rrv_vec3 d = rrv__sf_unit_max(dir), u = rrv__sf_unit_max(c->up), x = rrv__sf_cross3(d, u);
         double n2 = x.x * x.x + x.y * x.y + x.z * x.z;
-        double d2 = (dir.x * dir.x + dir.y * dir.y + dir.z * dir.z) *
-                    (c->up.x * c->up.x + c->up.y * c->up.y + c->up.z * c->up.z);
+        double d2 = (d.x * d.x + d.y * d.y + d.z * d.z) * (u.x * u.x + u.y * u.y + u.z * u.z);
+        if (rrv__sf_vec_zero(c->up) || !rrv__sf_vec_finite(c->up))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "camera: up must be a nonzero finite vector");
         /* sin^2 of the angle below 1e-12: too close to parallel for a frame */
         if (!(n2 > 1e-12 * d2))
             return rrv__sf_perr(p, RRV_ERROR_PARSE, "camera: up is parallel to the view direction");
@@ -5160,6 +5503,7 @@ static rrv_result rrv__sf_st_mesh(rrv__sf_parser *p)
     if (sl[0].given) {
         char written[RRV__SF_PATH_MAX], full[RRV__SF_PATH_MAX];
         const rrv__sf_tok *t = &p->toks.v[sl[0].tok];
+        const char *why;
         void *data;
         size_t size;
         if (!rrv__sf_tok_string(t, written, sizeof written) ||
@@ -5167,11 +5511,16 @@ static rrv_result rrv__sf_st_mesh(rrv__sf_parser *p)
             return rrv__sf_perr(p, RRV_ERROR_PARSE,
                                 "mesh: path \"%.*s\" is too long or has control characters",
                                 RRV__SF_CLIP(t));
-        r = rrv__sf_read_whole(p->opt, full, &data, &size);
+        r = rrv__sf_read_whole(p->opt, full, 1, rrv__sf_max_bytes(p->opt), &data, &size, &why);
         if (r == RRV_ERROR_UNSUPPORTED)
             return rrv__sf_perr(p, r, "cannot read OBJ file \"%s\": " RRV__SF_NO_READER_MESSAGE,
                                 written);
-        if (r != RRV_OK) return rrv__sf_perr(p, r, "cannot read OBJ file \"%s\"", written);
+        if (r != RRV_OK) {
+            char what[RRV__SF_PATH_MAX + 16], message[RRV__SF_PATH_MAX + 96];
+            snprintf(what, sizeof what, "OBJ file \"%s\"", written);
+            rrv__sf_read_message(r, what, why, rrv__sf_max_bytes(p->opt), message, sizeof message);
+            return rrv__sf_perr(p, r, "%s", message);
+        }
         r = rrv__sf_obj_parse(p, (const char *)data, size, full, scale, translate, &proto);
         RRV_FREE(data);
         return r;
@@ -5278,6 +5627,10 @@ static rrv_result rrv__sf_st_medium(rrv__sf_parser *p)
         return rrv__sf_perr(p, RRV_ERROR_PARSE,
                             sl[5].given ? "medium: \"albedo\" needs \"sigma_t\""
                                         : "medium: \"sigma_t\" needs \"albedo\"");
+    /* Checked here, not only by rrv_scene_prepare, so the message names the line. */
+    if (s->medium_count >= RRV__MAX_MEDIA)
+        return rrv__sf_perr(p, RRV_ERROR_LIMIT, "medium: at most %d media are supported",
+                            RRV__MAX_MEDIA);
     if (!rrv__sf_reserve((void **)&s->media, &s->medium_capacity, s->medium_count, sizeof *m))
         return RRV__SF_OOM(p);
     m = &s->media[s->medium_count++];
@@ -5343,6 +5696,7 @@ static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const char *stmt, int wh
                                      const rrv__sf_tok *t, rrv_field *f)
 {
     char written[RRV__SF_PATH_MAX], full[RRV__SF_PATH_MAX];
+    const char *why;
     rrv_error e;
     rrv_result r;
     if (!rrv__sf_tok_string(t, written, sizeof written) ||
@@ -5351,8 +5705,9 @@ static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const char *stmt, int wh
                             "%s: path \"%.*s\" is too long or has control characters", stmt,
                             RRV__SF_CLIP(t));
     rrv__clear_error(&e);
-    r = rrv__sf_grid_load(full, written, p->opt, which == RRV__SF_F_DENSITY, &f->grid, &e);
-    if (r == RRV_ERROR_IO) return rrv__sf_perr(p, r, "cannot read grid file \"%s\"", written);
+    r = rrv__sf_grid_load(full, written, p->opt, which == RRV__SF_F_DENSITY, &f->grid, &e, &why);
+    if (r == RRV_ERROR_IO)
+        return rrv__sf_perr(p, r, "cannot read grid file \"%s\"%s%s", written, why[0] ? ": " : "", why);
     if (r == RRV_ERROR_UNSUPPORTED)
         return rrv__sf_perr(p, r, "cannot read grid file \"%s\": %s", written, e.message);
     if (r != RRV_OK) return rrv__sf_perr(p, r, "grid \"%s\": %s", written, e.message);
@@ -5669,6 +6024,11 @@ static rrv_result rrv__sf_parse_lines(rrv__sf_parser *p, const char *text, size_
         pos = (size_t)(e - text) + 1;
         if (p->line == INT_MAX) return rrv__sf_perr(p, RRV_ERROR_LIMIT, "too many lines");
         ++p->line;
+        {
+            char msg[96];
+            if (rrv__sf_control_byte(s, e, msg, sizeof msg))
+                return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s", msg);
+        }
         tr = rrv__sf_tokenize(&p->toks, s, e, 1);
         if (tr == 1) return rrv__sf_perr(p, RRV_ERROR_PARSE, "unterminated quote");
         if (tr == 2) return RRV__SF_OOM(p);
@@ -5743,7 +6103,7 @@ RRV_DEF rrv_result rrv_scene_load(const char *path, const rrv_load_options *opt,
                                   rrv_error *err)
 {
     char dir[RRV__SF_PATH_MAX];
-    const char *slash = NULL, *c;
+    const char *slash = NULL, *c, *why;
     void *data;
     size_t size;
     rrv_result r;
@@ -5752,16 +6112,24 @@ RRV_DEF rrv_result rrv_scene_load(const char *path, const rrv_load_options *opt,
     if (!path || !out)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_scene_load: NULL argument");
     for (c = path; *c; ++c)
+#ifdef _WIN32
         if (*c == '/' || *c == '\\') slash = c;
+#else
+        if (*c == '/') slash = c;
+#endif
     if (slash) {
         size_t n = slash == path ? 1 : (size_t)(slash - path);
         if (n >= sizeof dir) return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "path is too long");
         memcpy(dir, path, n);
         dir[n] = '\0';
     }
-    r = rrv__sf_read_whole(opt, path, &data, &size);
+    r = rrv__sf_read_whole(opt, path, 1, rrv__sf_max_bytes(opt), &data, &size, &why);
     if (r == RRV_ERROR_UNSUPPORTED) return rrv__fail(err, r, path, 0, RRV__SF_NO_READER_MESSAGE);
-    if (r != RRV_OK) return rrv__fail(err, r, path, 0, "cannot read scene file");
+    if (r != RRV_OK) {
+        char message[128];
+        rrv__sf_read_message(r, "scene file", why, rrv__sf_max_bytes(opt), message, sizeof message);
+        return rrv__fail(err, r, path, 0, "%s", message);
+    }
     r = rrv_scene_parse((const char *)data, size, path, slash ? dir : NULL, opt, out, err);
     RRV_FREE(data);
     return r;

@@ -15,6 +15,7 @@
 #include <sys/stat.h>
 #include <sys/types.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #define PATH_SIZE 1024
 #define OUTPUT_SIZE 65536
@@ -37,9 +38,9 @@ static run_result last_run;
 /* Static storage so a test can build several paths without buffers of its own. */
 static const char *tmp_path(const char *name)
 {
-    static char paths[8][PATH_SIZE];
+    static char paths[32][PATH_SIZE];
     static int next;
-    char *path = paths[next++ % 8];
+    char *path = paths[next++ % 32];
     snprintf(path, PATH_SIZE, "%s/%s", tmp_dir, name);
     return path;
 }
@@ -87,6 +88,9 @@ static int write_text(const char *path, const char *text)
     return write_whole_file(path, text, strlen(text));
 }
 
+/* A hard link, so that two names share one inode. */
+static int link_or_copy(const char *from, const char *to) { return link(from, to) == 0; }
+
 static int file_exists(const char *path)
 {
     struct stat st;
@@ -105,18 +109,50 @@ static void copy_capture(const char *path, char *into)
     free(data);
 }
 
-/* Runs `rrv ARGUMENTS` (a shell fragment) and fills last_run. */
-static int rrv(const char *arguments)
+/* Runs `PREFIX rrv ARGUMENTS` (shell fragments) and fills last_run. */
+static int rrv_prefixed(const char *prefix, const char *arguments)
 {
     char command[4 * PATH_SIZE];
     int status;
-    snprintf(command, sizeof command, "'%s' %s >'%s' 2>'%s' </dev/null", rrv_binary, arguments,
-             captured_stdout, captured_stderr);
+    snprintf(command, sizeof command, "%s '%s' %s >'%s' 2>'%s' </dev/null", prefix, rrv_binary,
+             arguments, captured_stdout, captured_stderr);
     status = system(command);
     last_run.code = status != -1 && WIFEXITED(status) ? WEXITSTATUS(status) : -1;
     copy_capture(captured_stdout, last_run.out);
     copy_capture(captured_stderr, last_run.err);
     return last_run.code;
+}
+
+/* Runs `rrv ARGUMENTS` (a shell fragment) and fills last_run. */
+static int rrv(const char *arguments) { return rrv_prefixed("", arguments); }
+
+/* Files in tmp_dir that look like a writer's temporary file: rrv's (".NAME.XXXXXX")
+   or the library's ("NAME.XXXXXXXX.tmp"), but not `own`, a "<out>.tmp" a test
+   made to see that it survives. */
+static int count_stray_temps(const char *own)
+{
+    DIR *dir = opendir(tmp_dir);
+    struct dirent *entry;
+    int count = 0;
+    if (!dir) return -1;
+    while ((entry = readdir(dir)) != NULL) {
+        const char *name = entry->d_name;
+        size_t n = strlen(name);
+        if (strcmp(name, ".") == 0 || strcmp(name, "..") == 0) continue;
+        if (own && strcmp(name, own) == 0) continue;
+        if (name[0] == '.' || (n > 4 && strcmp(name + n - 4, ".tmp") == 0)) ++count;
+    }
+    closedir(dir);
+    return count;
+}
+
+static int text_file_is(const char *path, const char *text)
+{
+    size_t size = 0;
+    char *data = (char *)read_whole_file(path, &size);
+    int same = data && size == strlen(text) && memcmp(data, text, size) == 0;
+    free(data);
+    return same;
 }
 
 static void strip_trailing_space(char *text)
@@ -254,7 +290,8 @@ static void usage_errors_exit_one(void)
 {
     static const char *const render_flags[] = {
         "--bogus", "--spp 0", "--spp abc", "--spp 3x", "--spp", "--spp -2", "--threads -1",
-        "--threads 0", "--seed -3", "--seed 1.5", "--exposure nan", "--exposure", "--integrator magic",
+        "--threads 0", "--seed -3", "--seed 1.5", "--exposure nan", "--exposure", "--exposure 0x1p1",
+        "--exposure inf", "--integrator magic",
         "--max-grid-mb 0", "--crop 0 0 8", "--crop 0 0 100 100", "--crop 5 5 5 10",
         "--crop 0 0 24 17", "--crop -1 0 4 4", "--crop a 0 4 4", "extra_positional.rrv"};
     const char *out = tmp_path("usage_out.pfm");
@@ -345,12 +382,11 @@ static void corpus_errors_match_expect(void)
 
     if (count > 0) {
         const char *out = tmp_path("corpus_out.pfm");
-        char arguments[2 * PATH_SIZE], tmp_out[PATH_SIZE];
-        snprintf(tmp_out, sizeof tmp_out, "%s.tmp", out);
+        char arguments[2 * PATH_SIZE];
         remove(out);
         snprintf(arguments, sizeof arguments, "render 'test/corpus/%s' -o '%s' -q", names[0], out);
         CHECKF(rrv(arguments) == 2, "rrv %s exited %d, not 2", arguments, last_run.code);
-        CHECKF(!file_exists(out) && !file_exists(tmp_out), "a failed render wrote %s", out);
+        CHECKF(!file_exists(out) && count_stray_temps(NULL) == 0, "a failed render wrote %s", out);
     }
     for (i = 0; i < count; ++i) free(names[i]);
 }
@@ -388,6 +424,185 @@ static void unwritable_output_exits_three(void)
     snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --png '%s' -q", tiny_scene,
              tmp_path("png_dir_missing.pfm"), tmp_path("no_such_dir/out.png"));
     CHECKF(rrv(arguments) == 3, "exit %d, stderr %s", last_run.code, last_run.err);
+}
+
+/* An output that is an input, or the other output, is refused before the
+   render, whatever its spelling; the file is left as it was. */
+static void output_that_is_an_input_is_refused(void)
+{
+    static const char tri[] = "v -1 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    const char *scene = tmp_path("inputs.rrv"), *obj = tmp_path("inputs.obj");
+    const char *grid = tmp_path("inputs.vol"), *link = tmp_path("inputs_link.rrv");
+    const char *same = tmp_path("same.pfm"), *same_link = tmp_path("same_link.png");
+    char scene_text[PATH_SIZE], arguments[4 * PATH_SIZE], *grid_before = NULL;
+    size_t grid_size = 0, after_size = 0;
+    static const char *const spellings[] = {"%s", "%s/./inputs.rrv", "%s/../cli_tmp/inputs.rrv"};
+    size_t i;
+
+    grid_before = (char *)read_whole_file("scenes/assets/tiny.vol", &grid_size);
+    CHECK(grid_before != NULL && write_whole_file(grid, grid_before, grid_size));
+    CHECK(write_text(obj, tri));
+    snprintf(scene_text, sizeof scene_text,
+             "camera eye 0 0 -3 look 0 0 0 resolution 8 8\nrender spp 1\n"
+             "mesh file inputs.obj L 1 1 1\nmedium m box -1 -1 -1 1 1 1 sigma_s 1 1 1\n"
+             "density m grid inputs.vol\n");
+    CHECK(write_text(scene, scene_text));
+    remove(link);
+    CHECK(link_or_copy(scene, link));
+
+    for (i = 0; i < sizeof spellings / sizeof *spellings; ++i) {
+        char out[PATH_SIZE];
+        if (i == 0)
+            snprintf(out, sizeof out, "%s", scene);
+        else
+            snprintf(out, sizeof out, spellings[i], tmp_dir);
+        snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q", scene, out);
+        CHECKF(rrv(arguments) == 1, "-o %s: exit %d, stderr %s", out, last_run.code, last_run.err);
+        CHECKF(strstr(last_run.err, "it is the scene file") != NULL, "%s", last_run.err);
+        snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --png '%s' -q", scene,
+                 tmp_path("inputs_out.pfm"), out);
+        CHECKF(rrv(arguments) == 1, "--png %s: exit %d, stderr %s", out, last_run.code, last_run.err);
+    }
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q", scene, link); /* a hard link */
+    CHECKF(rrv(arguments) == 1, "hard link: exit %d, stderr %s", last_run.code, last_run.err);
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q", scene, obj);
+    CHECKF(rrv(arguments) == 1 && strstr(last_run.err, "the scene reads it") != NULL,
+           "OBJ: exit %d, stderr %s", last_run.code, last_run.err);
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q", scene, grid);
+    CHECKF(rrv(arguments) == 1 && strstr(last_run.err, "the scene reads it") != NULL,
+           "grid: exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(text_file_is(scene, scene_text) && text_file_is(obj, tri));
+    {
+        char *after = (char *)read_whole_file(grid, &after_size);
+        CHECK(after && after_size == grid_size && memcmp(after, grid_before, grid_size) == 0);
+        free(after);
+    }
+
+    /* -o and --png naming one file, existing or not */
+    remove(same);
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --png '%s/./same.pfm' -q", scene,
+             same, tmp_dir);
+    CHECKF(rrv(arguments) == 1 && strstr(last_run.err, "name the same file") != NULL,
+           "a new file twice: exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(!file_exists(same));
+    CHECK(write_text(same, "old"));
+    remove(same_link);
+    CHECK(link_or_copy(same, same_link));
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --png '%s' -q", scene, same,
+             same_link);
+    CHECKF(rrv(arguments) == 1 && strstr(last_run.err, "name the same file") != NULL,
+           "a hard-linked pair: exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(text_file_is(same, "old"));
+    CHECK(count_stray_temps(NULL) == 0);
+
+    /* the scene renders fine to a file of its own */
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q", scene, tmp_path("inputs_out.pfm"));
+    CHECKF(rrv(arguments) == 0, "exit %d, stderr %s", last_run.code, last_run.err);
+    free(grid_before);
+    remove(link);
+    remove(same);
+    remove(same_link);
+}
+
+/* An existing output that is not a regular file is refused, not replaced. */
+static void non_regular_output_is_refused(void)
+{
+    const char *folder = tmp_path("out_folder"), *fifo = tmp_path("out_fifo");
+    const char *sym = tmp_path("out_symlink_to_fifo"), *ok = tmp_path("non_regular_ok.pfm");
+    char arguments[4 * PATH_SIZE];
+    struct stat st;
+
+    mkdir(folder, 0777);
+    remove(fifo);
+    remove(sym);
+    CHECK(mkfifo(fifo, 0666) == 0);
+    CHECK(symlink("out_fifo", sym) == 0);
+
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q", tiny_scene, folder);
+    CHECKF(rrv(arguments) == 3 && strstr(last_run.err, "it is a directory, not a regular file"),
+           "folder: exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(stat(folder, &st) == 0 && S_ISDIR(st.st_mode));
+    /* a FIFO: refused without opening it (opening would block the test) */
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --png '%s' -q", tiny_scene, ok, fifo);
+    CHECKF(rrv(arguments) == 3 && strstr(last_run.err, "it is a FIFO, not a regular file"),
+           "FIFO: exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(stat(fifo, &st) == 0 && S_ISFIFO(st.st_mode));
+    CHECK(!file_exists(ok));
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q", tiny_scene, sym);
+    CHECKF(rrv(arguments) == 3, "symbolic link to a FIFO: exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(lstat(sym, &st) == 0 && S_ISLNK(st.st_mode));
+    CHECK(count_stray_temps(NULL) == 0);
+    rmdir(folder);
+    remove(fifo);
+    remove(sym);
+}
+
+/* The temporary file is new and unique: a file called "<out>.tmp" survives,
+   two renders to one output at once both succeed, the output gets the usual
+   permissions, and a write that fails part way keeps the old outputs. */
+static void temporary_files_are_private(void)
+{
+    const char *out = tmp_path("temp_out.pfm"), *png = tmp_path("temp_out.png");
+    const char *own = tmp_path("temp_out.pfm.tmp"), *single = tmp_path("temp_single.pfm");
+    char arguments[4 * PATH_SIZE];
+    struct stat st;
+    int i;
+
+    remove(out);
+    remove(png);
+    CHECK(write_text(own, "someone else's file"));
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --png '%s' -q", tiny_scene, out, png);
+    CHECKF(rrv_prefixed("umask 022;", arguments) == 0, "exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(text_file_is(own, "someone else's file"));
+    CHECK(count_stray_temps("temp_out.pfm.tmp") == 0);
+    CHECKF(stat(out, &st) == 0 && (st.st_mode & 0777) == 0644, "mode %o", (unsigned)(st.st_mode & 0777));
+
+    /* two at once, three times */
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q --threads 1", tiny_scene, single);
+    CHECK(rrv(arguments) == 0);
+    for (i = 0; i < 3; ++i) {
+        char both[6 * PATH_SIZE];
+        remove(out);
+        snprintf(both, sizeof both,
+                 "render '%s' -o '%s' -q --threads 1 & '%s' render '%s' -o '%s' -q --threads 1; "
+                 "r=$?; wait $! && exit $r",
+                 tiny_scene, out, rrv_binary, tiny_scene, out);
+        CHECKF(rrv(both) == 0, "two renders at once: exit %d, stderr %s", last_run.code, last_run.err);
+        CHECK(files_identical(out, single));
+        CHECK(count_stray_temps("temp_out.pfm.tmp") == 0);
+    }
+
+    /* a file size limit makes the write fail part way: the old files stay */
+    CHECK(write_text(out, "old image"));
+    CHECK(write_text(png, "old preview"));
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --png '%s' -q", tiny_scene, out, png);
+    rrv_prefixed("trap '' XFSZ; ulimit -f 2;", arguments);
+    CHECKF(last_run.code == 3 && strstr(last_run.err, "cannot write") != NULL,
+           "over a file size limit: exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(text_file_is(out, "old image") && text_file_is(png, "old preview"));
+    CHECK(count_stray_temps("temp_out.pfm.tmp") == 0);
+    remove(own);
+    remove(out);
+    remove(png);
+    remove(single);
+}
+
+/* Inputs without end or that are folders get a message, not a hang. */
+static void odd_inputs_get_messages(void)
+{
+    char arguments[2 * PATH_SIZE];
+    CHECKF(rrv("info test/corpus") == 2 &&
+               strcmp(last_run.err, "test/corpus: cannot read scene file: is a directory\n") == 0,
+           "exit %d, stderr %s", last_run.code, last_run.err);
+    CHECKF(rrv("info /dev/zero") == 2 &&
+               strcmp(last_run.err, "/dev/zero:1: NUL byte in column 1: not a text file\n") == 0,
+           "exit %d, stderr %s", last_run.code, last_run.err);
+    snprintf(arguments, sizeof arguments, "diff /dev/zero '%s'", tiny_scene);
+    CHECKF(rrv(arguments) == 2 && strstr(last_run.err, "/dev/zero: not a PFM file") != NULL,
+           "exit %d, stderr %s", last_run.code, last_run.err);
+    CHECKF(rrv("diff test/corpus test/corpus") == 2 &&
+               strstr(last_run.err, "test/corpus: cannot read: is a directory") != NULL,
+           "exit %d, stderr %s", last_run.code, last_run.err);
 }
 
 static void diff_reports_known_errors(void)
@@ -588,6 +803,10 @@ int main(int argc, char **argv)
     RUN(corpus_errors_match_expect);
     RUN(failed_render_keeps_existing_output);
     RUN(unwritable_output_exits_three);
+    RUN(output_that_is_an_input_is_refused);
+    RUN(non_regular_output_is_refused);
+    RUN(temporary_files_are_private);
+    RUN(odd_inputs_get_messages);
     RUN(diff_reports_known_errors);
     RUN(render_is_deterministic);
     RUN(info_describes_scene);

@@ -3,7 +3,8 @@
    writer, whose output is taken apart here chunk by chunk and block by block
    with checksums written independently of the library's. */
 #if defined(__unix__) || defined(__APPLE__)
-/* POSIX only for setrlimit, which lets a test make fwrite fail half way. */
+/* POSIX only for setrlimit, which lets a test make fwrite fail half way,
+   and for a FIFO, /dev/zero and folders as inputs. */
 #define _POSIX_C_SOURCE 200809L
 #endif
 #define RRV_IMPLEMENTATION
@@ -16,8 +17,13 @@
 #include <float.h>
 
 #if defined(__unix__) || defined(__APPLE__)
+#include <dirent.h>
 #include <signal.h>
+#include <unistd.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
+#include <sys/types.h>
+#include <sys/wait.h>
 #define HAVE_FILE_SIZE_LIMIT 1
 #else
 #define HAVE_FILE_SIZE_LIMIT 0
@@ -163,6 +169,58 @@ static int file_exists(const char *path)
 static void make_path(char *out, size_t size, const char *name)
 {
     snprintf(out, size, "%s/%s", build_dir, name);
+}
+
+static int write_bytes_file(const char *path, const void *data, size_t size)
+{
+    FILE *f = fopen(path, "wb");
+    int ok;
+    if (!f) return 0;
+    ok = fwrite(data, 1, size, f) == size;
+    return fclose(f) == 0 && ok;
+}
+
+static int write_text_file(const char *path, const char *text)
+{
+    return write_bytes_file(path, text, strlen(text));
+}
+
+static int text_file_is(const char *path, const char *text)
+{
+    char buf[256];
+    size_t n;
+    FILE *f = fopen(path, "rb");
+    if (!f) return 0;
+    n = fread(buf, 1, sizeof buf, f);
+    fclose(f);
+    return n == strlen(text) && memcmp(buf, text, n) == 0;
+}
+
+/* The writers' temporary files left in the build folder: names that start
+   with prefix and end in ".tmp", except the two "<output>.tmp" files the
+   test made itself to see that they survive. */
+static int count_temp_files(const char *prefix)
+{
+#if HAVE_FILE_SIZE_LIMIT
+    DIR *dir = opendir(build_dir);
+    struct dirent *entry;
+    int count = 0;
+    if (!dir) return -1;
+    while ((entry = readdir(dir)) != NULL) {
+        const char *name = entry->d_name;
+        size_t n = strlen(name);
+        if (strncmp(name, prefix, strlen(prefix)) != 0 || n < 4 || strcmp(name + n - 4, ".tmp") != 0)
+            continue;
+        if (strcmp(name, "test_image_tmp.pfm.tmp") == 0 || strcmp(name, "test_image_tmp.png.tmp") == 0)
+            continue;
+        ++count;
+    }
+    closedir(dir);
+    return count;
+#else
+    (void)prefix;
+    return 0;
+#endif
 }
 
 /* ---- checksums -------------------------------------------------------------- */
@@ -351,6 +409,29 @@ static void expect_format_error(const void *data, size_t size, const char *label
            "%s: no message", label);
     CHECKF(rgb == NULL && w == 0 && h == 0, "%s: outputs not reset", label);
     if (r == RRV_OK) rrv_free(rgb);
+
+    /* The file form reads the header and then the data on its own, and must
+       come to the same verdict with the same words. */
+    {
+        char path[1024];
+        FILE *f;
+        rrv_error file_err;
+        make_path(path, sizeof path, "test_image_malformed.pfm");
+        f = fopen(path, "wb");
+        CHECK(f != NULL);
+        if (f) {
+            CHECK(fwrite(copy, 1, size, f) == size);
+            CHECK(fclose(f) == 0);
+            rgb = &not_reset;
+            r = rrv_read_pfm(path, &rgb, &w, &h, &file_err);
+            CHECKF(r == RRV_ERROR_FORMAT && strcmp(file_err.message, err.message) == 0,
+                   "%s: the file form says %s \"%s\", the memory form \"%s\"", label,
+                   rrv_result_string(r), file_err.message, err.message);
+            CHECKF(rgb == NULL && w == 0 && h == 0, "%s: file form: outputs not reset", label);
+            if (r == RRV_OK) rrv_free(rgb);
+            remove(path);
+        }
+    }
     free(copy);
 }
 
@@ -432,6 +513,29 @@ static void test_pfm_malformed(void)
         }
         r = rrv_read_pfm_memory(copy, good.size, "fuzz.pfm", &rgb, &w, &h, &err);
         CHECKF(r == RRV_OK || r == RRV_ERROR_FORMAT, "trial %d: %s", trial, rrv_result_string(r));
+        if (trial % 10 == 0) { /* the file form agrees, on a sample of the trials */
+            char path[1024];
+            FILE *f;
+            make_path(path, sizeof path, "test_image_damaged.pfm");
+            f = fopen(path, "wb");
+            if (f && fwrite(copy, 1, good.size, f) == good.size && fclose(f) == 0) {
+                float *file_rgb = NULL;
+                int fw = 0, fh = 0;
+                rrv_error file_err;
+                rrv_result fr = rrv_read_pfm(path, &file_rgb, &fw, &fh, &file_err);
+                CHECKF(fr == r && (r != RRV_OK || (fw == w && fh == h &&
+                                                   memcmp(file_rgb, rgb, (size_t)w * h * 3 * sizeof(float)) == 0)) &&
+                           (r == RRV_OK || strcmp(file_err.message, err.message) == 0),
+                       "trial %d: file form %s \"%s\", memory form %s \"%s\"", trial,
+                       rrv_result_string(fr), fr == RRV_OK ? "" : file_err.message,
+                       rrv_result_string(r), r == RRV_OK ? "" : err.message);
+                rrv_free(file_rgb);
+            } else {
+                CHECKF(0, "cannot write %s", path);
+                if (f) fclose(f);
+            }
+            remove(path);
+        }
         if (r == RRV_OK) {
             CHECK(rgb != NULL && w > 0 && h > 0 && (size_t)w * (size_t)h * 4 <= good.size);
             rrv_free(rgb);
@@ -739,29 +843,29 @@ static void test_pfm_png_files(void)
     snprintf(png_temp, sizeof png_temp, "%s.tmp", png_path);
     remove(path);
     remove(png_path);
+    /* A file that happens to be called "<out>.tmp" is not the writer's. */
+    CHECK(write_text_file(temp, "not yours"));
+    CHECK(write_text_file(png_temp, "not yours either"));
 
     r = rrv_write_pfm(path, first, 7, 5, &err);
     CHECKF(r == RRV_OK, "%s", err.message);
     CHECK(err.code == RRV_OK);
-    CHECK(!file_exists(temp));
     expect_pfm_file(path, first, 7, 5, "first write");
     /* replacing an existing file */
     r = rrv_write_pfm(path, second, 9, 2, &err);
     CHECKF(r == RRV_OK, "%s", err.message);
-    CHECK(!file_exists(temp));
     expect_pfm_file(path, second, 9, 2, "overwrite");
 
     /* invalid arguments touch nothing */
     CHECK(rrv_write_pfm(path, NULL, 9, 2, &err) == RRV_ERROR_ARGUMENT);
     CHECK(rrv_write_pfm(path, first, 0, 2, &err) == RRV_ERROR_ARGUMENT);
     CHECK(rrv_write_png(png_path, first, 7, 5, NAN, &err) == RRV_ERROR_ARGUMENT);
-    CHECK(!file_exists(temp) && !file_exists(png_path) && !file_exists(png_temp));
+    CHECK(!file_exists(png_path));
     expect_pfm_file(path, second, 9, 2, "after rejected arguments");
 
     /* the file form writes exactly what the callback form produces */
     r = rrv_write_png(png_path, first, 7, 5, 0.5, &err);
     CHECKF(r == RRV_OK, "%s", err.message);
-    CHECK(!file_exists(png_temp));
     read_file_bytes(png_path, &from_file);
     sink_init(&from_callback, (size_t)-1);
     CHECK(rrv_write_png_to(sink_write, &from_callback, first, 7, 5, 0.5) == RRV_OK);
@@ -778,16 +882,14 @@ static void test_pfm_png_files(void)
     CHECKF(strcmp(err.file, missing) == 0, "file %s", err.file);
     CHECKF(strncmp(err.message, "cannot write", 12) == 0, "message %s", err.message);
     CHECK(err.line == 0);
-    snprintf(temp, sizeof temp, "%s.tmp", missing);
-    CHECK(!file_exists(temp) && !file_exists(missing));
+    CHECK(!file_exists(missing));
     CHECK(rrv_write_png(missing, first, 7, 5, 0.0, &err) == RRV_ERROR_IO);
-    snprintf(temp, sizeof temp, "%s.tmp", path);
 
     /* reading a file that is not there */
     make_path(missing, sizeof missing, "test_image_no_such_file.pfm");
     r = rrv_read_pfm(missing, &rgb, &w, &h, &err);
     CHECKF(r == RRV_ERROR_IO && err.code == RRV_ERROR_IO, "got %s", rrv_result_string(r));
-    CHECKF(strcmp(err.file, missing) == 0 && strcmp(err.message, "cannot open") == 0, "%s: %s", err.file, err.message);
+    CHECKF(strcmp(err.file, missing) == 0 && strcmp(err.message, "cannot open: no such file") == 0, "%s: %s", err.file, err.message);
     CHECK(rgb == NULL && w == 0 && h == 0);
 
     /* a malformed file reports its own path */
@@ -815,7 +917,7 @@ static void test_pfm_png_files(void)
                     CHECKF(png_result == RRV_ERROR_IO, "PNG over the size limit: %s", rrv_result_string(png_result));
                     CHECK(strcmp(pfm_err.file, path) == 0 && strncmp(pfm_err.message, "cannot write", 12) == 0);
                     CHECK(strcmp(png_err.file, png_path) == 0 && strncmp(png_err.message, "cannot write", 12) == 0);
-                    CHECK(!file_exists(temp) && !file_exists(png_temp));
+                    CHECK(count_temp_files("test_image_tmp.p") == 0);
                     expect_pfm_file(path, second, 9, 2, "after a failed write");
                     read_file_bytes(png_path, &from_file);
                     check_png(&from_file, first, 7, 5, 0.5, 1, "PNG after a failed write");
@@ -828,10 +930,101 @@ static void test_pfm_png_files(void)
     }
 #endif
 
+    CHECK(text_file_is(temp, "not yours") && text_file_is(png_temp, "not yours either"));
+    CHECK(count_temp_files("test_image_tmp.p") == 0);
+    remove(temp);
+    remove(png_temp);
     remove(path);
     remove(png_path);
     free(first);
     free(second);
+}
+
+/* The file reader reads the header, then exactly the data it announces. */
+static void test_pfm_file_reader_bounds(void)
+{
+    char path[1024], spaces[1200];
+    float *rgb = &not_reset, pixel[3] = {1.0f, 2.0f, 3.0f};
+    int w = 1, h = 1;
+    rrv_error err;
+    rrv_result r;
+    byte_sink s;
+
+    make_path(path, sizeof path, "test_image_bounds.pfm");
+
+    /* data after the announced pixels is left unread */
+    sink_init(&s, (size_t)-1);
+    CHECK(rrv_write_pfm_to(sink_write, &s, pixel, 1, 1) == RRV_OK);
+    sink_append_text(&s, "trailing bytes that are not pixels");
+    CHECK(write_bytes_file(path, s.data, s.size));
+    sink_free(&s);
+    r = rrv_read_pfm(path, &rgb, &w, &h, &err);
+    CHECKF(r == RRV_OK && w == 1 && h == 1 && rgb[0] == 1.0f && rgb[2] == 3.0f, "%s",
+           r == RRV_OK ? "wrong pixels" : err.message);
+    if (r == RRV_OK) rrv_free(rgb);
+
+    /* a header without end is refused after a bounded read */
+    memset(spaces, ' ', sizeof spaces);
+    memcpy(spaces, "PF", 2);
+    CHECK(write_bytes_file(path, spaces, sizeof spaces));
+    r = rrv_read_pfm(path, &rgb, &w, &h, &err);
+    CHECKF(r == RRV_ERROR_FORMAT && strcmp(err.message, "bad PFM header: longer than 1024 bytes") == 0,
+           "%s: %s", rrv_result_string(r), err.message);
+
+    /* a header announcing far more than the file holds */
+    CHECK(write_text_file(path, "PF\n100000 100000\n-1\nabcd"));
+    r = rrv_read_pfm(path, &rgb, &w, &h, &err);
+    CHECKF(r == RRV_ERROR_FORMAT &&
+               strcmp(err.message, "truncated PFM: 100000x100000 needs 120000000000 bytes of pixel "
+                                   "data but the file has 4") == 0,
+           "%s: %s", rrv_result_string(r), err.message);
+    remove(path);
+
+#if HAVE_FILE_SIZE_LIMIT
+    /* a device without end and a folder: clear messages, no endless read */
+    r = rrv_read_pfm("/dev/zero", &rgb, &w, &h, &err);
+    CHECKF(r == RRV_ERROR_FORMAT &&
+               strcmp(err.message, "not a PFM file (it must start with \"PF\" or \"Pf\")") == 0,
+           "/dev/zero: %s: %s", rrv_result_string(r), err.message);
+    r = rrv_read_pfm(build_dir, &rgb, &w, &h, &err);
+    CHECKF(r == RRV_ERROR_IO && strcmp(err.message, "cannot read: is a directory") == 0,
+           "a folder: %s: %s", rrv_result_string(r), err.message);
+    CHECK(rgb == NULL && w == 0 && h == 0);
+
+    /* a pipe that never ends after a good image: the read stops at the
+       image's end (a reader that read to EOF would hang until the alarm) */
+    make_path(path, sizeof path, "test_image_fifo.pfm");
+    remove(path);
+    if (mkfifo(path, 0600) == 0) {
+        pid_t child = fork();
+        if (child == 0) {
+            FILE *f = fopen(path, "wb");
+            static const unsigned char junk[4096];
+            signal(SIGPIPE, SIG_DFL);
+            alarm(30);
+            if (!f) _exit(1);
+            sink_init(&s, (size_t)-1);
+            if (rrv_write_pfm_to(sink_write, &s, pixel, 1, 1) != RRV_OK) _exit(1);
+            fwrite(s.data, 1, s.size, f);
+            for (;;) fwrite(junk, 1, sizeof junk, f); /* until the reader closes */
+        } else if (child > 0) {
+            int status = 0;
+            alarm(30);
+            r = rrv_read_pfm(path, &rgb, &w, &h, &err);
+            alarm(0);
+            CHECKF(r == RRV_OK && w == 1 && h == 1 && rgb[1] == 2.0f, "FIFO: %s",
+                   r == RRV_OK ? "wrong pixels" : err.message);
+            if (r == RRV_OK) rrv_free(rgb);
+            kill(child, SIGKILL);
+            waitpid(child, &status, 0);
+        } else {
+            CHECKF(0, "fork failed");
+        }
+        remove(path);
+    } else {
+        CHECKF(0, "mkfifo %s failed", path);
+    }
+#endif
 }
 
 int main(int argc, char **argv)
@@ -844,5 +1037,6 @@ int main(int argc, char **argv)
     RUN(test_png_structure);
     RUN(test_writer_failures);
     RUN(test_pfm_png_files);
+    RUN(test_pfm_file_reader_bounds);
     return CHECK_EXIT_CODE();
 }

@@ -12,6 +12,8 @@
 #include <stdlib.h>
 #include <string.h>
 #include <dirent.h>
+#include <float.h>
+#include <locale.h>
 
 static size_t t_largest;     /* largest single request since reset */
 static long t_alloc_count;   /* requests since reset */
@@ -37,6 +39,8 @@ static void *t_realloc(void *p, size_t n)
 #include "check.h"
 
 /* ---- helpers ------------------------------------------------------------ */
+
+static const char *t_build_dir = "build"; /* argv[1]: scratch files go here */
 
 static char *read_text(const char *path, size_t *size)
 {
@@ -262,6 +266,11 @@ static const struct corpus_case {
     {"undefined_material", RRV_ERROR_PARSE}, {"undefined_medium", RRV_ERROR_PARSE},
     {"unknown_key", RRV_ERROR_PARSE},      {"unknown_statement", RRV_ERROR_PARSE},
     {"unterminated_quote", RRV_ERROR_PARSE},
+    {"hex_number", RRV_ERROR_PARSE},       {"nan_number", RRV_ERROR_PARSE},
+    {"nul_byte", RRV_ERROR_PARSE},         {"control_byte", RRV_ERROR_PARSE},
+    {"too_many_media", RRV_ERROR_LIMIT},   {"camera_far", RRV_ERROR_PARSE},
+    {"camera_up_zero", RRV_ERROR_PARSE},   {"grid_is_directory", RRV_ERROR_IO},
+    {"obj_is_directory", RRV_ERROR_IO},    {"obj_nul_byte", RRV_ERROR_PARSE},
 };
 #define CORPUS_COUNT (int)(sizeof corpus_cases / sizeof *corpus_cases)
 
@@ -557,6 +566,205 @@ static void test_lexing(void)
     CHECK(r == RRV_ERROR_ARGUMENT);
     r = rrv_scene_load("test/corpus/no_such_scene.rrv", NULL, &s, &err);
     CHECK(r == RRV_ERROR_IO && s == NULL && strcmp(err.file, "test/corpus/no_such_scene.rrv") == 0 && err.line == 0);
+}
+
+/* Numbers are decimal only, and their values are those of C's strtod in the
+   "C" locale whatever the host's locale. */
+static void test_number_syntax(void)
+{
+    static const char *const good[] = {"1", "-2.5", "+3", ".5", "5.", "1e3", "1E+03", "-0.1",
+                                       "0.1", "2.2250738585072014e-308", "1.7976931348623157e308",
+                                       "4.9e-324", "123456789012345678901234567890"};
+    static const char *const bad[] = {"0x1p3", "0X10", "0x", "1e", "e5", ".", "+", "-", "1.2.3",
+                                      "1,5", "1e+", "infinit", "nanx", "1f", "1d", "--1",
+                                      "1e5.5", "0b1", "nan(1)", "1 "};
+    static const char *const nonfinite[] = {"inf", "-Infinity", "NaN", "+INF", "1e400"};
+    size_t i;
+    for (i = 0; i < sizeof good / sizeof *good; ++i) {
+        rrv__sf_tok t;
+        double v = 0;
+        t.p = good[i];
+        t.n = strlen(good[i]);
+        t.quoted = 0;
+        CHECKF(rrv__sf_tok_number(&t, &v) && v == strtod(good[i], NULL), "\"%s\" gave %.17g",
+               good[i], v);
+    }
+    for (i = 0; i < sizeof bad / sizeof *bad; ++i) {
+        rrv__sf_tok t;
+        double v = 0;
+        t.p = bad[i];
+        t.n = strlen(bad[i]);
+        t.quoted = 0;
+        CHECKF(!rrv__sf_tok_number(&t, &v), "\"%s\" was taken as the number %.17g", bad[i], v);
+    }
+    for (i = 0; i < sizeof nonfinite / sizeof *nonfinite; ++i) {
+        rrv__sf_tok t;
+        double v = 0;
+        t.p = nonfinite[i];
+        t.n = strlen(nonfinite[i]);
+        t.quoted = 0;
+        CHECKF(rrv__sf_tok_number(&t, &v) && !(v >= -DBL_MAX && v <= DBL_MAX),
+               "\"%s\" is not recognised as a non-finite number", nonfinite[i]);
+    }
+    expect_error("camera eye 0 0 0x5 look 0 0 0\n", RRV_ERROR_PARSE, 1,
+                 "camera: expected a number for \"eye\", got \"0x5\"");
+}
+
+/* Selects a decimal-comma LC_NUMERIC: an installed one, or one built with
+   localedef into the build folder (glibc reads it through LOCPATH). */
+static int use_comma_locale(const char *build)
+{
+    static const char *const names[] = {"de_DE.UTF-8", "de_DE.utf8", "de_DE", "fr_FR.UTF-8",
+                                        "fr_FR.utf8", "nl_NL.UTF-8", "ru_RU.UTF-8"};
+    char dir[512], command[2048];
+    size_t i;
+    for (i = 0; i < sizeof names / sizeof *names; ++i)
+        if (setlocale(LC_NUMERIC, names[i]) && strcmp(localeconv()->decimal_point, ",") == 0)
+            return 1;
+    snprintf(dir, sizeof dir, "%s/locale", build);
+    snprintf(command, sizeof command,
+             "mkdir -p '%s' && { [ -d '%s/de_DE.UTF-8' ] || localedef -i de_DE -f UTF-8 "
+             "'%s/de_DE.UTF-8'; } >/dev/null 2>&1",
+             dir, dir, dir);
+    if (system(command) != 0) return 0;
+    setenv("LOCPATH", dir, 1);
+    return setlocale(LC_NUMERIC, "de_DE.UTF-8") && strcmp(localeconv()->decimal_point, ",") == 0;
+}
+
+/* A host program in a decimal-comma locale still loads scenes, to the bit. */
+static void test_locale_independence(void)
+{
+    static const char text[] = "camera eye 0.1 -2.5 1e-3 look 0 0 0 fov 37.5\n"
+                               "sphere center 0.30000000000000004 0 0 radius 1.25e-1\n";
+    rrv_scene *s = NULL;
+    rrv_error err;
+    rrv_result r;
+    if (!use_comma_locale(t_build_dir)) {
+        printf("  no decimal-comma locale and no localedef: only the syntax tests ran\n");
+        return;
+    }
+    CHECKF(strtod("1.5", NULL) == 1.0, "the locale does not change strtod (%g)", strtod("1.5", NULL));
+    r = parse_str(text, NULL, &s, &err);
+    setlocale(LC_NUMERIC, "C");
+    CHECKF(r == RRV_OK, "in a decimal-comma locale: %s", err.message);
+    if (r != RRV_OK) return;
+    CHECK(s->camera.eye.x == 0.1 && s->camera.eye.y == -2.5 && s->camera.eye.z == 1e-3);
+    CHECK(s->camera.fov == 37.5);
+    CHECK(s->shapes[0].center.x == 0.30000000000000004 && s->shapes[0].radius == 0.125);
+    rrv_scene_free(s);
+}
+
+/* Paths, inputs and odd files: "C:" is a drive only on Windows, every file
+   read is reported through on_input, and a folder or an endless device as
+   the scene gets a message after a bounded read. */
+typedef struct seen_inputs {
+    char paths[4][256];
+    int count;
+} seen_inputs;
+
+static void note_input(void *user, const char *path)
+{
+    seen_inputs *seen = (seen_inputs *)user;
+    if (seen->count < 4) snprintf(seen->paths[seen->count], 256, "%s", path);
+    seen->count++;
+}
+
+static void test_paths_and_inputs(void)
+{
+    static const char tri[] = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    static const memfile files[] = {{"dir/C:tri.obj", tri, sizeof tri - 1},
+                                    {"dir/\\tri.obj", tri, sizeof tri - 1}};
+    memfs fs = {files, 2, 0};
+    seen_inputs seen;
+    rrv_load_options opt;
+    rrv_scene *s = NULL;
+    rrv_error err;
+    rrv_result r;
+    char path[600];
+    FILE *f;
+
+    memset(&opt, 0, sizeof opt);
+    memset(&seen, 0, sizeof seen);
+    opt.read_file = memfs_read;
+    opt.read_file_user = &fs;
+    opt.on_input = note_input;
+    opt.on_input_user = &seen;
+    r = parse_str("camera eye 0 0 5 look 0 0 0\nmesh file C:tri.obj\nmesh file \\tri.obj\n", &opt,
+                  &s, &err);
+#ifdef _WIN32
+    CHECK(r == RRV_ERROR_IO);
+#else
+    CHECKF(r == RRV_OK, "%s", err.message);
+    CHECK(seen.count == 2 && strcmp(seen.paths[0], "dir/C:tri.obj") == 0 &&
+          strcmp(seen.paths[1], "dir/\\tri.obj") == 0);
+#endif
+    rrv_scene_free(s);
+    s = NULL;
+
+    /* stdio: the scene, then its grid, spelled as opened */
+    snprintf(path, sizeof path, "%s/t_inputs.rrv", t_build_dir);
+    f = fopen(path, "wb");
+    CHECK(f != NULL);
+    if (f) {
+        fputs("camera eye 0 0 5 look 0 0 0\nmedium m box -1 -1 -1 1 1 1\n"
+              "density m grid ../scenes/assets/tiny.vol\n", f);
+        fclose(f);
+        memset(&opt, 0, sizeof opt);
+        memset(&seen, 0, sizeof seen);
+        opt.on_input = note_input;
+        opt.on_input_user = &seen;
+        r = rrv_scene_load(path, &opt, &s, &err);
+        CHECKF(r == RRV_OK, "%s", err.message);
+        CHECK(seen.count == 2 && strcmp(seen.paths[0], path) == 0);
+        snprintf(path, sizeof path, "%s/../scenes/assets/tiny.vol", t_build_dir);
+        CHECKF(strcmp(seen.paths[1], path) == 0, "grid seen as %s", seen.paths[1]);
+        rrv_scene_free(s);
+        s = NULL;
+
+        /* the file size limit also bounds scene files */
+        snprintf(path, sizeof path, "%s/t_inputs.rrv", t_build_dir);
+        memset(&opt, 0, sizeof opt);
+        opt.max_grid_bytes = 20;
+        r = rrv_scene_load(path, &opt, &s, &err);
+        CHECKF(r == RRV_ERROR_LIMIT && strcmp(err.message, "scene file is larger than the limit of 20 bytes") == 0,
+               "%s: %s", rrv_result_string(r), err.message);
+        remove(path);
+    }
+
+    /* a folder as the scene: a message, and no allocation of its claimed size */
+    t_largest = 0;
+    r = rrv_scene_load("test/corpus", NULL, &s, &err);
+    CHECKF(r == RRV_ERROR_IO && strcmp(err.message, "cannot read scene file: is a directory") == 0,
+           "%s: %s", rrv_result_string(r), err.message);
+    CHECKF(t_largest <= ((size_t)1 << 20), "largest allocation %lu", (unsigned long)t_largest);
+#ifndef _WIN32
+    /* an endless device stops at its first piece, whose NUL is refused */
+    t_largest = 0;
+    r = rrv_scene_load("/dev/zero", NULL, &s, &err);
+    CHECKF(r == RRV_ERROR_PARSE && err.line == 1 &&
+               strcmp(err.message, "NUL byte in column 1: not a text file") == 0,
+           "%s: %s", rrv_result_string(r), err.message);
+    CHECKF(t_largest <= ((size_t)1 << 20), "largest allocation %lu", (unsigned long)t_largest);
+#endif
+    CHECK(s == NULL);
+}
+
+/* The view-up test scales before squaring: a far camera loads, and a truly
+   parallel up is still refused at that distance. */
+static void test_far_camera(void)
+{
+    rrv_scene *s = NULL;
+    rrv_error err;
+    rrv_result r = parse_str("camera eye 0 0 1e150 look 0 0 -1e150\n", NULL, &s, &err);
+    CHECKF(r == RRV_OK, "%s", err.message);
+    rrv_scene_free(s);
+    expect_error("camera eye 0 1e150 0 look 0 0 0\n", RRV_ERROR_PARSE, 1,
+                 "camera: up is parallel to the view direction");
+    expect_error("camera eye 0 1e-150 1e-300 look 0 0 0 up 0 1 0\n", RRV_ERROR_PARSE, 1,
+                 "camera: up is parallel to the view direction");
+    r = parse_str("camera eye 1e-300 0 0 look 0 0 0\n", NULL, &s, &err);
+    CHECKF(r == RRV_OK, "a tiny view vector: %s", err.message);
+    rrv_scene_free(s);
 }
 
 /* ---- (c) the grid reader -------------------------------------------------- */
@@ -929,8 +1137,7 @@ static void test_allocation_failures(void)
 
 int main(int argc, char **argv)
 {
-    (void)argc;
-    (void)argv;
+    if (argc > 1) t_build_dir = argv[1];
     RUN(test_readme_examples);
     RUN(test_corpus);
     RUN(test_corpus_complete);
@@ -938,6 +1145,10 @@ int main(int argc, char **argv)
     RUN(test_render_and_seed);
     RUN(test_statement_errors);
     RUN(test_lexing);
+    RUN(test_number_syntax);
+    RUN(test_locale_independence);
+    RUN(test_paths_and_inputs);
+    RUN(test_far_camera);
     RUN(test_grid_valid);
     RUN(test_grid_rejections);
     RUN(test_grid_limits);
