@@ -90,6 +90,36 @@
      same in any locale. The file writers replace their target through a new
      temporary file; rrv_write_pfm says what plain C cannot promise there.
 
+   CONVENTIONS (the contract between scene files, the library and tests)
+     Units: metres, kelvin, pascal; extinction in 1/m. Colour is linear RGB,
+     three channels; the IOR is achromatic.
+     Grids ("gridvol", as defined by Mitsuba 0.6), all little endian:
+       3 bytes "VOL", 1 byte version 3, int32 encoding 1 (float32),
+       int32 xres yres zres (each >= 2), int32 channels (1 or 3),
+       float32 box xmin ymin zmin xmax ymax zmax, then float32 samples at
+       index ((z*yres + y)*xres + x)*channels + c.
+       Samples sit on corners: sample i along x is at xmin + i*(xmax-xmin)/
+       (xres-1), so the first and last lie on the box faces. Outside the box
+       a field takes its ambient value. A file is refused (with the reason)
+       for a wrong magic or version, a resolution < 2 or an overflowing
+       size, a byte count that does not match, an empty or non-finite box, a
+       NaN or infinite sample, or a negative density.
+     Gas IOR (Hauf-Grigull; Gladstone-Dale for an ideal gas):
+       eta - 1 = (eta_ref - 1) (P / P_ref) (T_ref / T), defaults eta_ref =
+       1.000292, P_ref = 101325 Pa, T_ref = 300 K; its gradient is
+       (eta - 1)(grad P / P - grad T / T); the artist scale k makes it
+       1 + k (eta - 1).
+     Precision: air's eta - 1 is ~3e-4 and a fire moves it by ~2e-4, about
+       2000 float ulps of 1, so rays carry the refractivity r = eta - 1 in
+       double, and IOR ratios are formed as 1 + (r_i - r_o) / (1 + r_o).
+     Snell at a null event: ratio m = eta_i / eta_o, normal n = grad eta / |
+       grad eta| facing the incoming ray, c = -n.d, k = 1 - m^2 (1 - c^2);
+       k < 0 reflects (d + 2 c n), else d' = m d + (m c - sqrt(k)) n, written
+       as a change of d so that m ~ 1 does not cancel.
+     Radiance: L / eta^2 is invariant along a ray (Ament et al. 2014), so a
+       path from an emitter at eta_e to the camera at eta_c scales by
+       (eta_c / eta_e)^2; thermal emission follows Kirchhoff (above).
+
    HISTORY
      0.2.0  refraction: IOR fields (gas state, profiles, grids), refractive
             and eikonal integrators, rrv_trace_ray
@@ -330,7 +360,7 @@ typedef struct rrv_medium {
     double Le[3];           /* emitted radiance: adds sigma_a * Le * Lescale */
     double Lescale;
     rrv_field density;      /* extinction = density * scale * (sigma_a + sigma_s) */
-    /* Gas state and IOR (see PHYSICS: Hauf-Grigull). temperature_field gives
+    /* Gas state and IOR (CONVENTIONS: Hauf-Grigull). temperature_field gives
        T = (f - temperatureoffset) * temperaturescale in kelvin; with
        blackbody_emission the medium also emits sigma_a * Lescale * B(T). */
     rrv_field temperature;
@@ -400,7 +430,7 @@ RRV_DEF rrv_result rrv_scene_parse(const char *text, size_t size, const char *na
 RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err);
 RRV_DEF void rrv_scene_free(rrv_scene *scene);
 
-/* Reads and validates a gridvol file (see PHYSICS.md). `nonnegative` rejects
+/* Reads and validates a gridvol file (CONVENTIONS in the manual above). `nonnegative` rejects
    negative values (densities). On success grid->data is owned by the caller
    and freed with rrv_free. */
 RRV_DEF rrv_result rrv_grid_read(const char *path, const rrv_load_options *opt,
@@ -1025,7 +1055,7 @@ static double rrv__grid_blend(const rrv_grid *g, const rrv__grid_cell *cell, int
     return c00 + cell->t[2] * (c01 - c00);
 }
 
-/* Trilinear interpolation between corner-placed samples (PHYSICS.md):
+/* Trilinear interpolation between corner-placed samples (CONVENTIONS):
    sample i along x sits at lo.x + i (hi.x - lo.x)/(nx - 1). Outside the
    grid's box the caller's ambient value applies. */
 static double rrv__grid_sample(const rrv_grid *g, rrv_vec3 p, int channel, double outside)
@@ -1504,7 +1534,7 @@ static rrv_vec3 rrv__profile_gradient(const rrv_field *f, rrv_vec3 p, double amb
 }
 
 /* Refractivity and its gradient for one refractive medium at p. For a gas,
-   grad r = r (grad P / P - grad T / T) (PHYSICS.md). */
+   grad r = r (grad P / P - grad T / T) (CONVENTIONS). */
 static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double ambient_r, rrv_vec3 *grad)
 {
     double r;
@@ -1541,7 +1571,7 @@ static double rrv__scene_refractivity(const rrv_scene *scene, rrv_vec3 p, rrv_ve
     return ambient_r;
 }
 
-/* Snell's law at a null event (seed Algorithm 1, PHYSICS.md). r_in is the
+/* Snell's law at a null event (seed Algorithm 1, CONVENTIONS). r_in is the
    refractivity the ray carries, r_out the one at the event, grad its
    gradient. The change of direction is formed directly, because m = eta_in /
    eta_out differs from 1 by ~1e-4 in air and m d - sqrt(k) n would cancel. */
@@ -1615,7 +1645,7 @@ static double rrv__cell_gradient_bound(const rrv_medium *m, rrv_vec3 lo, rrv_vec
 }
 
 /* The position of sample (x, y, z) of an n[0] x n[1] x n[2] lattice whose
-   corner samples lie on the faces of the box [lo, hi] (PHYSICS.md). */
+   corner samples lie on the faces of the box [lo, hi] (CONVENTIONS). */
 static rrv_vec3 rrv__lattice_point(rrv_vec3 lo, rrv_vec3 hi, const int n[3], int x, int y, int z)
 {
     return rrv__v3(lo.x + (hi.x - lo.x) * x / (n[0] - 1), lo.y + (hi.y - lo.y) * y / (n[1] - 1),

@@ -273,7 +273,7 @@ static void sweep(int which, const char *title, const int *method_ids, int nmeth
 /* The same comb-like kick-drift loop in three precisions. The field is air at
    r0 = 3e-4 with a hot blob of -2e-4 (sigma 0.3 m): the kicks between
    neighbouring points change r by ~1e-9, far below float's 6e-8 half-ulp of
-   1.0, which is the case PHYSICS.md worries about. */
+   1.0, where float refractivity would lose the deflection. */
 #define PREC_R0 3e-4
 #define PREC_A (-2e-4)
 #define PREC_S 0.3

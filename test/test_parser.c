@@ -1,6 +1,6 @@
 /* Tests of the scene file section: every example in scenes/README.md parses,
    every malformed input in test/corpus/ fails with its exact message, the
-   gridvol reader applies every rule of PHYSICS.md, and the OBJ loader
+   gridvol reader applies every rule of the gridvol format (rrv.h, CONVENTIONS), and the OBJ loader
    triangulates and reports errors by OBJ line. Run from the repository root
    with the build folder as the only argument.
 

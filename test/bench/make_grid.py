@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes a gridvol file (PHYSICS.md: 'VOL', version 3, float32, corner-placed
+"""Writes a gridvol file (rrv.h, CONVENTIONS: 'VOL', version 3, float32, corner-placed
 samples) holding a smoke-like density: a sum of Gaussian puffs along a rising,
 drifting column. Used by the benchmarks; the grid is generated, not stored.
 

@@ -3,7 +3,7 @@
 
 Run from the repository root: python3 test/corpus/make_grids.py
 The outputs are committed too; rerun this only to change them.
-gridvol layout (PHYSICS.md): "VOL", version byte, int32 encoding, int32
+gridvol layout (rrv.h manual, CONVENTIONS): "VOL", version byte, int32 encoding, int32
 xres yres zres, int32 channels, float32 box (xmin ymin zmin xmax ymax zmax),
 then float32 samples, index ((z*yres + y)*xres + x)*channels + c, all
 little endian.
