@@ -465,6 +465,8 @@ static void add_stats(rrv_render_stats *into, const rrv_render_stats *from)
     into->paths += from->paths;
     into->events += from->events;
     into->nonfinite += from->nonfinite;
+    into->paths_cut += from->paths_cut;
+    into->cut_tracking += from->cut_tracking;
 }
 
 static void *render_worker(void *arg)
@@ -714,6 +716,10 @@ static void print_render_summary(int width, int height, int spp, double seconds,
             height, spp, seconds, samples_rate, paths_rate);
     if (stats->nonfinite > 0)
         fprintf(stderr, " (%" PRIu64 " non-finite samples discarded)", stats->nonfinite);
+    /* A cut path is a biased sample: never leave it unsaid. */
+    if (stats->paths_cut > 0)
+        fprintf(stderr, " (%" PRIu64 " paths cut at a work bound, %" PRIu64 " of them in tracking)",
+                stats->paths_cut, stats->cut_tracking);
     fputc('\n', stderr);
 }
 

@@ -356,11 +356,28 @@ RRV_DEF rrv_result rrv_grid_read_memory(const void *data, size_t size, const cha
 
 /* ---- rendering -------------------------------------------------------------- */
 
+/* The limits of BOUNDS (see the manual at the top). Scenes beyond the first
+   four are refused at load; the last two cut a walk and count it. */
+#define RRV_MIN_IOR 0.1             /* refractive index, everywhere */
+#define RRV_MAX_IOR 10.0
+#define RRV_MAX_OPTICAL_DEPTH 1e12  /* peak extinction times a medium's size */
+#define RRV_MAX_RADIANCE 1e20       /* any emission times its scale */
+#define RRV_MAX_SAMPLE 1e30         /* a sample above it is discarded as non-finite */
+#define RRV_MAX_SEGMENT_EVENTS 4194304L /* collisions of one tracking walk */
+#define RRV_MAX_SEGMENT_STEPS 10000000L /* refraction steps between real vertices */
+
 typedef struct rrv_render_stats {
     uint64_t samples;   /* pixel samples taken */
     uint64_t paths;     /* camera paths plus shadow connections traced */
     uint64_t events;    /* tentative collisions (real and null) sampled */
-    uint64_t nonfinite; /* samples discarded because they were NaN or infinite */
+    uint64_t nonfinite; /* samples discarded because they were NaN, infinite
+                           or above RRV_MAX_SAMPLE (see BOUNDS) */
+    uint64_t paths_cut; /* camera paths and shadow rays cut short at a work
+                           bound (see BOUNDS): what they gathered before the
+                           cut is kept, nothing after it */
+    uint64_t cut_tracking; /* of which a delta or ratio tracking walk hit its
+                              collision bound; the rest hit the bound on
+                              refraction events, kicks or eikonal steps */
 } rrv_render_stats;
 
 /* Renders pixels [x0,x1) x [y0,y1) of the image (row 0 at the top) for
@@ -976,17 +993,28 @@ static double rrv__grid_sample(const rrv_grid *g, rrv_vec3 p, int channel, doubl
 
 /* Value noise on an integer lattice hashed from the seed: cheap, bounded in
    [0,1] by construction, which is what lets the majorant be a true bound. */
-static double rrv__lattice(int x, int y, int z, uint32_t seed)
+static double rrv__lattice(uint32_t x, uint32_t y, uint32_t z, uint32_t seed)
 {
-    uint64_t h = rrv__mix64(((uint64_t)(uint32_t)x * 73856093u) ^ ((uint64_t)(uint32_t)y * 19349663u << 20) ^
-                            ((uint64_t)(uint32_t)z * 83492791u << 40) ^ ((uint64_t)seed << 12));
+    uint64_t h = rrv__mix64(((uint64_t)x * 73856093u) ^ ((uint64_t)y * 19349663u << 20) ^
+                            ((uint64_t)z * 83492791u << 40) ^ ((uint64_t)seed << 12));
     return (double)(h >> 11) * (1.0 / 9007199254740992.0);
+}
+
+/* A lattice coordinate reduced modulo 2^32 in double before the cast: in a
+   huge medium box floor(p) lies beyond int, where the conversion is
+   undefined, and the hash only sees the low 32 bits anyway (the same bits
+   the old int-then-unsigned conversion gave, so images did not change). */
+static uint32_t rrv__lattice_coord(double f)
+{
+    double m = fmod(f, 4294967296.0);
+    if (m < 0) m += 4294967296.0;
+    return m >= 0 && m < 4294967296.0 ? (uint32_t)m : 0u;
 }
 
 static double rrv__value_noise(rrv_vec3 p, uint32_t seed)
 {
     double fx = floor(p.x), fy = floor(p.y), fz = floor(p.z);
-    int x = (int)fx, y = (int)fy, z = (int)fz;
+    uint32_t x = rrv__lattice_coord(fx), y = rrv__lattice_coord(fy), z = rrv__lattice_coord(fz);
     double tx = p.x - fx, ty = p.y - fy, tz = p.z - fz;
     double sx = tx * tx * (3 - 2 * tx), sy = ty * ty * (3 - 2 * ty), sz = tz * tz * (3 - 2 * tz);
     double a = rrv__lattice(x, y, z, seed), b = rrv__lattice(x + 1, y, z, seed);
@@ -1179,6 +1207,9 @@ struct rrv__majorant_grid {
     double sigma_t_max;    /* max over channels of (sigma_a + sigma_s) * scale */
     float *density_max;    /* per cell */
     float *grad_max;       /* per cell max |grad r|, NULL if the medium does not refract */
+    float density_peak;    /* max of density_max: sizes the work bounds */
+    float grad_peak;       /* max of grad_max, 0 if the medium does not refract */
+    size_t bytes;          /* heap bytes built for this medium (grids, bakes) */
     int empty;             /* no extinction anywhere: density tracking can skip it */
     int surface_free;      /* no surface reaches into the box: chords inside need no ray cast */
     rrv_field baked[RRV__FIELD_KINDS]; /* kind GRID where a noise field was baked */
@@ -1614,8 +1645,11 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
                 float df = (float)d;
                 if ((double)df < d) df = nextafterf(df, FLT_MAX);
                 g->density_max[c] = df > 0 ? df : 0.0f;
-                if (refracts)
+                g->density_peak = g->density_max[c] > g->density_peak ? g->density_max[c] : g->density_peak;
+                if (refracts) {
                     g->grad_max[c] = (float)rrv__cell_gradient_bound(m, lo, hi, scene->settings.ambient_ior - 1.0);
+                    g->grad_peak = g->grad_max[c] > g->grad_peak ? g->grad_max[c] : g->grad_peak;
+                }
             }
     g->empty = 1;
     for (c = 0; c < cells; ++c)
@@ -1713,10 +1747,6 @@ static void rrv__medium_Le(const rrv_medium *m, rrv_vec3 p, double Le[3])
 /* ---- tracking: a DDA walker over one medium's majorant grid ------------------ */
 
 #define RRV__MAX_MEDIA 64
-/* A path that has not ended after this many segments (refraction events or
-   eikonal steps) is cut: it can only be a ray trapped by total internal
-   reflection or an absurd event rate, and stalling a render is worse. */
-#define RRV__MAX_PATH_STEPS 10000000L
 
 typedef struct rrv__walker {
     const rrv_medium *medium;
@@ -1728,6 +1758,9 @@ typedef struct rrv__walker {
     int cell[3], step[3];
     double t_next[3], t_delta[3];
     double t_event, majorant; /* pending tentative collision and its majorant */
+    long budget;          /* tentative collisions left before the walk is cut */
+    int cut;              /* the budget ran out: t_event is DBL_MAX, yet the walk
+                             did not leave the box */
 } rrv__walker;
 
 /* The majorant cell holding p (clamped into the grid), per axis and as an
@@ -1767,6 +1800,17 @@ static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refra
     w->inv_tolerance = 1.0 / s->bend_tolerance;
     w->t = t0;
     w->t_end = t1;
+    w->cut = 0;
+    {
+        /* The count of tentative collisions on the chord is Poisson with a
+           mean of at most the peak majorant times the chord, so 64 plus four
+           times that mean is never reached by a correct walk (probability
+           below 1e-30); only a hostile scene reaches the fixed cap. */
+        double mu = (double)g->density_peak * g->sigma_t_max, bound;
+        if (w->with_refraction) mu += s->mu_eta > 0 ? s->mu_eta : g->grad_peak / s->bend_tolerance;
+        bound = 64.0 + 4.0 * mu * (t1 - t0);
+        w->budget = bound < (double)RRV_MAX_SEGMENT_EVENTS ? (long)bound : RRV_MAX_SEGMENT_EVENTS;
+    }
     p = rrv__madd(o, d, t0);
     rrv__majorant_cell(g, p, w->cell);
     for (a = 0; a < 3; ++a) {
@@ -1815,6 +1859,10 @@ static void rrv__walker_advance(rrv__walker *w, rrv__rng *rng, uint64_t *events)
         if (mu > 0) {
             double t = w->t + rrv__sample_free_flight(mu, rng);
             if (t < cell_end) {
+                if (--w->budget < 0) {
+                    w->cut = 1;
+                    break;
+                }
                 w->t = t;
                 w->t_event = t;
                 w->majorant = mu;
@@ -2142,6 +2190,7 @@ typedef struct rrv__context {
     int eikonal;             /* march the ray equation through refractive media */
     int bends;               /* any of the three: radiance scales with eta^2 */
     double eta_camera2;      /* (1 + r at the camera)^2: radiance scales as eta^2 */
+    long step_bound;         /* rrv__step_bound: loop iterations between real vertices */
     rrv_render_stats stats;
 } rrv__context;
 
@@ -2219,7 +2268,14 @@ static void rrv__ratio_tracking_transmittance(rrv__context *ctx, rrv_vec3 o, rrv
             int ch;
             double tmaxc;
             rrv__walker_advance(&w, rng, &ctx->stats.events);
-            if (w.t_event == DBL_MAX) break;
+            if (w.t_event == DBL_MAX) {
+                if (!w.cut) break;
+                /* Cut: dark is the one answer that cannot blow up. */
+                ++ctx->stats.paths_cut;
+                ++ctx->stats.cut_tracking;
+                T[0] = T[1] = T[2] = 0;
+                return;
+            }
             rrv__medium_coeffs(m, rrv__madd(o, d, w.t_event), &c);
             for (ch = 0; ch < 3; ++ch) T[ch] *= 1.0 - (c.sigma_a[ch] + c.sigma_s[ch]) / w.majorant;
             tmaxc = rrv__max3(T);
@@ -2232,7 +2288,7 @@ static void rrv__ratio_tracking_transmittance(rrv__context *ctx, rrv_vec3 o, rrv
     }
 }
 
-enum { RRV__FLIGHT_PASSED, RRV__FLIGHT_SCATTERED, RRV__FLIGHT_ABSORBED, RRV__FLIGHT_BENT };
+enum { RRV__FLIGHT_PASSED, RRV__FLIGHT_SCATTERED, RRV__FLIGHT_ABSORBED, RRV__FLIGHT_BENT, RRV__FLIGHT_CUT };
 
 typedef struct rrv__flight {
     double t;                /* where it scattered or bent */
@@ -2299,7 +2355,10 @@ static int rrv__sample_free_flight_path(rrv__context *ctx, rrv__path *path, rrv_
             }
         }
         rrv__walker_advance(w, rng, &ctx->stats.events);
-        if (w->t_event == DBL_MAX) walkers[best] = walkers[--n];
+        if (w->t_event == DBL_MAX) {
+            if (w->cut) return RRV__FLIGHT_CUT;
+            walkers[best] = walkers[--n];
+        }
     }
     return RRV__FLIGHT_PASSED;
 }
@@ -2432,8 +2491,11 @@ static void rrv__material_albedo(const rrv_material *mat, rrv_vec3 p, rrv_vec3 n
         /* Evaluated just below the surface so a plane lying on a lattice
            plane (y = 0) does not flicker between two rows of squares. */
         rrv_vec3 q = rrv__madd(p, n, -1e-4 * mat->checker_scale);
-        long parity = (long)floor(q.x / mat->checker_scale) + (long)floor(q.y / mat->checker_scale) +
-                      (long)floor(q.z / mat->checker_scale);
+        /* Only the low bit matters; reduced in double first, since a far
+           point's floor overflows a long (undefined behaviour). */
+        uint32_t parity = rrv__lattice_coord(floor(q.x / mat->checker_scale)) +
+                          rrv__lattice_coord(floor(q.y / mat->checker_scale)) +
+                          rrv__lattice_coord(floor(q.z / mat->checker_scale));
         const double *a = (parity & 1) ? mat->albedo2 : mat->albedo;
         for (c = 0; c < 3; ++c) albedo[c] = a[c];
     } else {
@@ -2456,6 +2518,41 @@ static double rrv__eta_scale(const rrv__context *ctx, rrv_vec3 p_emit)
     return ctx->eta_camera2 / (eta * eta);
 }
 
+/* The most iterations of the path loop (refraction events, comb kicks,
+   eikonal steps, box entries) between two real vertices: 16 straight
+   crossings of every medium at its densest rate (a curved ray may run
+   longer than a straight one, but not 16 times through everything), 4
+   times the nominal eikonal rate for halved steps, at most
+   RRV_MAX_SEGMENT_STEPS. Beyond it a ray can only be trapped (total
+   internal reflection, an integrator error that closed an orbit) or the
+   settings absurd; the path is cut and counted. */
+static long rrv__step_bound(const rrv_scene *scene, rrv_integrator integrator)
+{
+    const rrv_settings *st = &scene->settings;
+    int comb = rrv__resolve_scheme(st->refraction) == RRV_REFRACTION_COMB, i;
+    double crossing = 0, bound;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        const struct rrv__majorant_grid *g = m->majorant;
+        double diag = rrv__length(rrv__sub(m->hi, m->lo)), rate = 0;
+        if (!g) continue;
+        if (!rrv__medium_refracts(m) || integrator == RRV_INTEGRATOR_CLASSIC) {
+            rate = 0;
+        } else if (integrator == RRV_INTEGRATOR_EIKONAL) {
+            rate = 4.0 / st->step;
+        } else {
+            double mu_eta = st->mu_eta > 0 ? st->mu_eta : g->grad_peak / st->bend_tolerance;
+            if (comb)
+                rate = rrv__maxd(mu_eta, 1.0 / rrv__mind(g->cell.x, rrv__mind(g->cell.y, g->cell.z)));
+            else
+                rate = mu_eta + (double)g->density_peak * g->sigma_t_max;
+        }
+        crossing += 2.0 + rate * diag;
+    }
+    bound = 64.0 + 16.0 * crossing;
+    return bound < (double)RRV_MAX_SEGMENT_STEPS ? (long)bound : RRV_MAX_SEGMENT_STEPS;
+}
+
 /* One camera path: classic and refractive null-scattering path tracing with
    NEE + MIS at every real scattering event and surface bounce. */
 static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng *rng, double L[3])
@@ -2475,7 +2572,10 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
         double segment = DBL_MAX; /* eikonal: a chord of the curved ray, or up to a refractive box */
         rrv_vec3 x, next_d = d;
         int has_hit, outcome;
-        if (++steps > RRV__MAX_PATH_STEPS) break;
+        if (++steps > ctx->step_bound) {
+            ++ctx->stats.paths_cut;
+            break;
+        }
         if (ctx->eikonal) {
             int inside;
             double t_in = rrv__distance_to_refraction(scene, o, d, &inside);
@@ -2497,6 +2597,11 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                       ? 0 : rrv__intersect_scene(scene, o, d, segment, &hit);
         outcome = rrv__sample_free_flight_path(ctx, &path, o, d, has_hit ? hit.t : segment, rng, &flight);
         if (outcome == RRV__FLIGHT_ABSORBED) break;
+        if (outcome == RRV__FLIGHT_CUT) {
+            ++ctx->stats.paths_cut;
+            ++ctx->stats.cut_tracking;
+            break;
+        }
         if (outcome == RRV__FLIGHT_PASSED && !has_hit && segment < DBL_MAX) {
             o = rrv__madd(o, d, segment);
             if (ctx->eikonal) {
@@ -2534,6 +2639,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                 prev_pdf = rrv__hg_eval(g, rrv__dot(d_in, d));
             }
             o = vertex = x;
+            steps = 0;
             if (ctx->bends) rrv__bender_restart(&path.bender, scene, x);
         } else if (!has_hit) {
             double Le[3], w = 1.0;
@@ -2581,6 +2687,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             if (!(prev_pdf > 0)) break;
             for (c = 0; c < 3; ++c) path.beta[c] *= albedo[c];
             o = vertex = p;
+            steps = 0;
             if (ctx->bends) rrv__bender_restart(&path.bender, scene, p);
         }
         if (depth >= 3) {
@@ -2598,14 +2705,21 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
 
 /* ---- preparing a scene and rendering rectangles --------------------------------- */
 
+/* Frees what rrv_scene_prepare built and takes its bytes back out of
+   scene->bytes, so that preparing again accounts only once. */
 static void rrv__scene_release_prepared(rrv_scene *scene)
 {
     int i;
     if (!scene) return;
+    if (scene->bvh)
+        scene->bytes -= (size_t)(2 * scene->shape_count) * sizeof(rrv__bvh_node) +
+                        (size_t)scene->shape_count * sizeof(int);
+    if (scene->lights) scene->bytes -= (size_t)scene->light_count * sizeof(int);
     for (i = 0; i < scene->medium_count; ++i) {
         struct rrv__majorant_grid *g = scene->media[i].majorant;
         if (g) {
             int k;
+            scene->bytes -= g->bytes;
             for (k = 0; k < RRV__FIELD_KINDS; ++k) RRV_FREE(g->baked[k].grid.data);
             RRV_FREE(g->refraction.data);
             RRV_FREE(g->density_max);
@@ -2626,7 +2740,6 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
 {
     rrv_result res;
     int i, n = 0;
-    size_t prepared_bytes = 0;
     rrv__clear_error(err);
     if (!scene) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "no scene");
     rrv__scene_release_prepared(scene);
@@ -2647,18 +2760,23 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
             const double *L = scene->shapes[i].L;
             if (L[0] > 0 || L[1] > 0 || L[2] > 0) scene->lights[scene->light_count++] = i;
         }
-        prepared_bytes += (size_t)n * sizeof(int);
+        scene->bytes += (size_t)n * sizeof(int);
     }
     res = rrv__build_bvh(scene, err);
     if (res != RRV_OK) return res;
     for (i = 0; i < scene->medium_count; ++i) {
-        const struct rrv__majorant_grid *g;
-        res = rrv__build_majorant(scene, &scene->media[i], &prepared_bytes, err);
-        if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
+        struct rrv__majorant_grid *g;
+        size_t baked = 0;
+        res = rrv__build_majorant(scene, &scene->media[i], &baked, err);
         g = scene->media[i].majorant;
-        prepared_bytes += sizeof *g + (size_t)g->n[0] * g->n[1] * g->n[2] * sizeof(float) * (g->grad_max ? 2 : 1);
+        if (g) {
+            g->bytes = baked + sizeof *g;
+            if (g->density_max)
+                g->bytes += (size_t)g->n[0] * g->n[1] * g->n[2] * sizeof(float) * (g->grad_max ? 2 : 1);
+            scene->bytes += g->bytes;
+        }
+        if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
     }
-    scene->bytes += prepared_bytes;
     return RRV_OK;
 }
 
@@ -2705,6 +2823,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     }
     ctx.eikonal = scene->settings.integrator == RRV_INTEGRATOR_EIKONAL;
     ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
+    ctx.step_bound = rrv__step_bound(scene, scene->settings.integrator);
     rrv__camera_setup(&scene->camera, &frame);
     r_camera = ctx.bends ? rrv__scene_refractivity(scene, frame.eye, NULL) : 0.0;
     ctx.eta_camera2 = (1.0 + r_camera) * (1.0 + r_camera);
@@ -2739,6 +2858,8 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
         stats->paths += ctx.stats.paths;
         stats->events += ctx.stats.events;
         stats->nonfinite += ctx.stats.nonfinite;
+        stats->paths_cut += ctx.stats.paths_cut;
+        stats->cut_tracking += ctx.stats.cut_tracking;
     }
     return RRV_OK;
 }
@@ -2750,17 +2871,19 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
     rrv__rng rng;
     rrv__bender bender;
     rrv_vec3 o = origin, d;
-    uint64_t events = 0, unused = 0;
+    uint64_t events = 0, unused = 0, bound;
     rrv__clear_error(err);
     if (!scene || !result) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "no scene or result");
     if (!(rrv__length(direction) > 0) || rrv__length(direction) > DBL_MAX)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "the ray direction must be finite and nonzero");
     d = rrv__normalize(direction);
+    bound = (uint64_t)rrv__step_bound(scene, integrator == RRV_INTEGRATOR_EIKONAL ? integrator
+                                                                             : RRV_INTEGRATOR_REFRACTIVE);
     rrv__rng_seed(&rng, seed, walk, 0x7261797472616365ULL);
     rrv__bender_start(&bender, scene, o);
     if (visit) visit(user, o, d);
     for (;;) {
-        if (events > 10000000u)
+        if (events > bound)
             return rrv__fail(err, RRV_ERROR_LIMIT, scene->path, 0,
                              "the ray did not leave the refractive media after %llu events",
                              (unsigned long long)events);
