@@ -1422,6 +1422,139 @@ static double rrv__scene_refractivity(const rrv_scene *scene, rrv_vec3 p, rrv_ve
     return ambient_r;
 }
 
+/* ---- the limits a medium must respect (BOUNDS) --------------------------------
+   Checked by the parser after every statement that changes a medium (so the
+   message names the line that broke it) and again by rrv_scene_prepare, for
+   scenes built in code. */
+
+/* The range [*lo, *hi] of a scalar field over a box (conservative: a grid
+   reports all its samples, blobs the sums of their signed weights). */
+static void rrv__field_range(const rrv_field *f, double ambient, double *lo, double *hi)
+{
+    int i;
+    switch (f->kind) {
+    case RRV_FIELD_CONSTANT: *lo = *hi = f->value; return;
+    case RRV_FIELD_BLOBS:
+        *lo = *hi = f->base;
+        for (i = 0; i < f->blob_count; ++i) {
+            if (f->blobs[i].weight < 0) *lo += f->blobs[i].weight;
+            else *hi += f->blobs[i].weight;
+        }
+        return;
+    case RRV_FIELD_NOISE: /* fbm and falloff are in [0, 1] */
+        *lo = f->base + rrv__mind(0.0, f->amplitude);
+        *hi = f->base + rrv__maxd(0.0, f->amplitude);
+        return;
+    case RRV_FIELD_GRID: {
+        size_t n = (size_t)f->grid.nx * (size_t)f->grid.ny * (size_t)f->grid.nz * (size_t)f->grid.channels, k;
+        *lo = DBL_MAX;
+        *hi = -DBL_MAX;
+        for (k = 0; k < n; ++k) {
+            *lo = rrv__mind(*lo, f->grid.data[k]);
+            *hi = rrv__maxd(*hi, f->grid.data[k]);
+        }
+        /* the ambient value holds between the grid's box and the medium's */
+        *lo = rrv__mind(*lo, ambient);
+        *hi = rrv__maxd(*hi, ambient);
+        return;
+    }
+    default: *lo = *hi = ambient; return;
+    }
+}
+
+/* The range of the refractivity r = eta - 1 (artist scale included) that a
+   refractive medium's fields can produce inside its box. */
+static void rrv__medium_refractivity_range(const rrv_medium *m, double *lo, double *hi)
+{
+    const rrv_field *f = &m->ior;
+    double a, b;
+    if (m->ior_from_gas) {
+        /* r = r_ref (P / P_ref) (T_ref / T) is monotone in P and in 1/T: its
+           extremes sit at the corners of the (P, T) ranges. T is clamped as
+           rrv__refractivity clamps it. */
+        double t0, t1, p0, p1, r[4];
+        int k;
+        rrv__field_range(&m->temperature, m->temperatureoffset + m->T_ref / m->temperaturescale, &t0, &t1);
+        t0 = rrv__maxd((t0 - m->temperatureoffset) * m->temperaturescale, 1e-3);
+        t1 = rrv__maxd((t1 - m->temperatureoffset) * m->temperaturescale, 1e-3);
+        rrv__field_range(&m->pressure, m->P_ref, &p0, &p1);
+        for (k = 0; k < 4; ++k)
+            r[k] = (m->eta_ref - 1.0) * ((k & 1 ? p1 : p0) / m->P_ref) * (m->T_ref / (k & 2 ? t1 : t0));
+        a = rrv__mind(rrv__mind(r[0], r[1]), rrv__mind(r[2], r[3]));
+        b = rrv__maxd(rrv__maxd(r[0], r[1]), rrv__maxd(r[2], r[3]));
+    } else {
+        switch (f->kind) {
+        case RRV_FIELD_LUNEBURG: a = 0; b = sqrt(2.0) - 1.0; break;
+        case RRV_FIELD_FISHEYE: a = 0.5 * f->n0 - 1.0; b = f->n0 - 1.0; break;
+        case RRV_FIELD_SLAB: {
+            int k;
+            a = DBL_MAX;
+            b = -DBL_MAX;
+            for (k = 0; k < 8; ++k) {
+                rrv_vec3 c = rrv__v3(k & 1 ? m->hi.x : m->lo.x, k & 2 ? m->hi.y : m->lo.y, k & 4 ? m->hi.z : m->lo.z);
+                double r = f->base + f->gradient * rrv__dot(rrv__sub(c, f->center), f->normal);
+                a = rrv__mind(a, r);
+                b = rrv__maxd(b, r);
+            }
+            break;
+        }
+        case RRV_FIELD_SHELL: {
+            /* the tanh pair peaks mid-shell at tanh(thickness / (2 edge)) */
+            double peak = tanh(0.5 * f->thickness / f->edge);
+            a = f->base + rrv__mind(0.0, f->amplitude * peak);
+            b = f->base + rrv__maxd(0.0, f->amplitude * peak);
+            break;
+        }
+        default: rrv__field_range(f, 0.0, &a, &b); break;
+        }
+    }
+    *lo = m->ior_scale * a;
+    *hi = m->ior_scale * b;
+    if (!(*lo == *lo) || !(*hi == *hi)) *lo = *hi = DBL_MAX; /* NaN: refuse */
+}
+
+/* Whether a medium's IOR stays in [RRV_MIN_IOR, RRV_MAX_IOR]; fills the
+   range of eta for the message. Outside it a ray is trapped or its radiance
+   scale (eta_camera / eta)^2 overflows. */
+static int rrv__medium_ior_ok(const rrv_medium *m, double *eta_lo, double *eta_hi)
+{
+    double lo, hi;
+    if (!rrv__medium_refracts(m)) return 1;
+    rrv__medium_refractivity_range(m, &lo, &hi);
+    *eta_lo = 1.0 + lo;
+    *eta_hi = 1.0 + hi;
+    return *eta_lo >= RRV_MIN_IOR && *eta_hi <= RRV_MAX_IOR;
+}
+
+/* The length over which extinction is compared with RRV_MAX_OPTICAL_DEPTH:
+   the box diagonal, or the box's distance from the origin if larger, since
+   free flights must stay long against the rounding of the coordinates. */
+static double rrv__medium_size(const rrv_medium *m)
+{
+    double size = rrv__length(rrv__sub(m->hi, m->lo));
+    size = rrv__maxd(size, rrv__maxd(fabs(m->lo.x), rrv__maxd(fabs(m->lo.y), fabs(m->lo.z))));
+    return rrv__maxd(size, rrv__maxd(fabs(m->hi.x), rrv__maxd(fabs(m->hi.y), fabs(m->hi.z))));
+}
+
+/* Peak extinction of a medium (1/m) and whether it times the medium's size
+   stays below RRV_MAX_OPTICAL_DEPTH: beyond it the mean free flight shrinks
+   toward the rounding step of the coordinates and tracking stalls. */
+static int rrv__medium_extinction_ok(const rrv_medium *m, double *peak)
+{
+    double sigma_t = 0;
+    int c;
+    for (c = 0; c < 3; ++c) sigma_t = rrv__maxd(sigma_t, (m->sigma_a[c] + m->sigma_s[c]) * m->scale);
+    *peak = m->density.kind == RRV_FIELD_NONE ? 0.0 : rrv__maxd(0.0, rrv__field_bound(&m->density, m->lo, m->hi)) * sigma_t;
+    if (*peak == 0) return 1; /* also when sigma_t is infinite and the density 0 */
+    return *peak * rrv__medium_size(m) <= RRV_MAX_OPTICAL_DEPTH;
+}
+
+/* Whether every emission a medium can make stays at most RRV_MAX_RADIANCE. */
+static int rrv__medium_emission_ok(const rrv_medium *m)
+{
+    return m->Lescale <= RRV_MAX_RADIANCE && rrv__max3(m->Le) * m->Lescale <= RRV_MAX_RADIANCE;
+}
+
 /* Snell's law at a null event (seed Algorithm 1, PHYSICS.md). r_in is the
    refractivity the ray carries, r_out the one at the event, grad its
    gradient. The change of direction is formed directly, because m = eta_in /
@@ -2749,8 +2882,34 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
     if (scene->settings.bend_tolerance <= 0) scene->settings.bend_tolerance = 0.01;
     if (scene->settings.step <= 0) scene->settings.step = 0.01;
     if (scene->settings.ambient_ior < 1.0) scene->settings.ambient_ior = 1.0;
+    /* The parser refused all of this with a line; scenes built in code get
+       the same refusals here (BOUNDS). */
+    if (!(scene->settings.ambient_ior <= RRV_MAX_IOR))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "ambient IOR %g is above %g",
+                         scene->settings.ambient_ior, RRV_MAX_IOR);
+    if (!(rrv__maxd(rrv__max3(scene->environment.L), rrv__max3(scene->environment.L2)) <= RRV_MAX_RADIANCE))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "environment radiance above %g",
+                         RRV_MAX_RADIANCE);
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        double a, b;
+        if (!rrv__medium_extinction_ok(m, &a))
+            return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
+                             "medium \"%s\" reaches an extinction of %g /m, over its %g m an optical depth "
+                             "above %g", m->name, a, rrv__medium_size(m), RRV_MAX_OPTICAL_DEPTH);
+        if (!rrv__medium_ior_ok(m, &a, &b))
+            return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
+                             "medium \"%s\" gets an IOR from %g to %g; it must stay within [%g, %g]", m->name,
+                             a, b, RRV_MIN_IOR, RRV_MAX_IOR);
+        if (!rrv__medium_emission_ok(m))
+            return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "medium \"%s\": emission above %g",
+                             m->name, RRV_MAX_RADIANCE);
+    }
     for (i = 0; i < scene->shape_count; ++i) {
         const double *L = scene->shapes[i].L;
+        if (!(rrv__max3(L) <= RRV_MAX_RADIANCE))
+            return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "shape %d emits above %g", i,
+                             RRV_MAX_RADIANCE);
         if (L[0] > 0 || L[1] > 0 || L[2] > 0) ++n;
     }
     if (n) {
@@ -4162,9 +4321,10 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"maxdepth", RRV__SF_INT, 1, 0, 1.0, 1024.0, NULL},
     {"seed", RRV__SF_U64, 1, 0, RRV__SF_NN, NULL},
     {"integrator", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "classic|refractive|eikonal"},
-    {"bendtolerance", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_UNIT, NULL},
-    {"mueta", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
-    {"step", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    /* bounded so one event or step cannot be absurdly small (BOUNDS) */
+    {"bendtolerance", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_UNIT, NULL}, /* and >= 1e-4 */
+    {"mueta", RRV__SF_NUM, 1, 0, 0.0, 1e6, NULL},
+    {"step", RRV__SF_NUM, 1, 0, 1e-6, 1e6, NULL},
     {"stepper", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|leapfrog|rk4"},
     {"refraction", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|poisson|midpoint|comb"},
     {"majorantcells", RRV__SF_INT, 1, 0, 0.0, 256.0, NULL},
@@ -4611,6 +4771,9 @@ static rrv_result rrv__sf_emission(rrv__sf_parser *p, const char *stmt, const rr
         out[c] = L->given ? L->v[c] * k : 0.0;
     if (!rrv__sf_finite3(out))
         return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: L times scale is not finite", stmt);
+    if (rrv__max3(out) > RRV_MAX_RADIANCE)
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: L times scale must be at most %g, got %g", stmt,
+                            RRV_MAX_RADIANCE, rrv__max3(out));
     return RRV_OK;
 }
 
@@ -4804,6 +4967,9 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[2].given) s->seed = sl[2].u;
     if (sl[3].given) s->integrator = rrv__sf_integrators[sl[3].choice];
     if (sl[4].given) s->bend_tolerance = sl[4].v[0];
+    if (sl[4].given && sl[4].v[0] < 1e-4)
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "render: bendtolerance must be at least 0.0001, got %.*s",
+                            RRV__SF_CLIP(&p->toks.v[sl[4].tok]));
     if (sl[5].given) s->mu_eta = sl[5].v[0];
     if (sl[6].given) s->step = sl[6].v[0];
     if (sl[7].given) s->stepper = rrv__sf_steppers[sl[7].choice];
@@ -4821,6 +4987,9 @@ static rrv_result rrv__sf_st_ambient(rrv__sf_parser *p)
     r = rrv__sf_parse_keys(p, "ambient", 1, rrv__sf_ambient_keys, 1, sl);
     if (r != RRV_OK) return r;
     p->scene->settings.ambient_ior = sl[0].v[0];
+    if (sl[0].v[0] > RRV_MAX_IOR)
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "ambient: ior must be at most %g, got %.*s", RRV_MAX_IOR,
+                            RRV__SF_CLIP(&p->toks.v[sl[0].tok]));
     return RRV_OK;
 }
 
@@ -5041,6 +5210,9 @@ static rrv_result rrv__sf_st_environment(rrv__sf_parser *p)
     }
     if (!rrv__sf_finite3(env->L) || !rrv__sf_finite3(env->L2))
         return rrv__sf_perr(p, RRV_ERROR_PARSE, "environment: radiance times scale is not finite");
+    if (rrv__maxd(rrv__max3(env->L), rrv__max3(env->L2)) > RRV_MAX_RADIANCE)
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "environment: radiance times scale must be at most %g",
+                            RRV_MAX_RADIANCE);
     return RRV_OK;
 }
 
@@ -5387,6 +5559,47 @@ static rrv_result rrv__sf_st_field(rrv__sf_parser *p)
     }
 }
 
+/* ---- limits (BOUNDS), checked after each statement that changes a medium -- */
+
+static rrv_result rrv__sf_check_medium(rrv__sf_parser *p, const char *stmt, const rrv_medium *m)
+{
+    double a, b;
+    int c;
+    for (c = 0; c < 3; ++c)
+        if (!((m->sigma_a[c] + m->sigma_s[c]) * m->scale <= DBL_MAX))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: (sigma_a + sigma_s) times scale is not finite", stmt);
+    if (!rrv__medium_extinction_ok(m, &a))
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            "%s: medium \"%s\" reaches an extinction of %g /m, over its %g m an optical "
+                            "depth above the %g rrv accepts",
+                            stmt, m->name, a, rrv__medium_size(m), RRV_MAX_OPTICAL_DEPTH);
+    if (!rrv__medium_ior_ok(m, &a, &b))
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            "%s: medium \"%s\" gets an IOR from %g to %g; it must stay within [%g, %g]",
+                            stmt, m->name, a, b, RRV_MIN_IOR, RRV_MAX_IOR);
+    if (!rrv__medium_emission_ok(m))
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: Le times Lescale must be at most %g", stmt,
+                            RRV_MAX_RADIANCE);
+    return RRV_OK;
+}
+
+static rrv_result rrv__sf_st_medium_checked(rrv__sf_parser *p)
+{
+    rrv_result r = rrv__sf_st_medium(p);
+    if (r != RRV_OK) return r;
+    return rrv__sf_check_medium(p, "medium", &p->scene->media[p->scene->medium_count - 1]);
+}
+
+static rrv_result rrv__sf_st_field_checked(rrv__sf_parser *p)
+{
+    static const char *const names[4] = {"density", "temperature", "pressure", "ior"};
+    rrv_result r = rrv__sf_st_field(p);
+    int which = 0;
+    if (r != RRV_OK) return r;
+    while (which < 3 && !rrv__sf_tok_is(&p->toks.v[0], names[which])) ++which;
+    return rrv__sf_check_medium(p, names[which], &p->scene->media[rrv__sf_find_medium(p->scene, &p->toks.v[1])]);
+}
+
 typedef rrv_result (*rrv__sf_statement_func)(rrv__sf_parser *p);
 static const struct rrv__sf_statement {
     const char *name;
@@ -5396,9 +5609,9 @@ static const struct rrv__sf_statement {
     {"ambient", rrv__sf_st_ambient},         {"material", rrv__sf_st_material},
     {"sphere", rrv__sf_st_primitive},        {"quad", rrv__sf_st_primitive},
     {"triangle", rrv__sf_st_primitive},      {"mesh", rrv__sf_st_mesh},
-    {"environment", rrv__sf_st_environment}, {"medium", rrv__sf_st_medium},
-    {"density", rrv__sf_st_field},           {"temperature", rrv__sf_st_field},
-    {"pressure", rrv__sf_st_field},          {"ior", rrv__sf_st_field},
+    {"environment", rrv__sf_st_environment}, {"medium", rrv__sf_st_medium_checked},
+    {"density", rrv__sf_st_field_checked},   {"temperature", rrv__sf_st_field_checked},
+    {"pressure", rrv__sf_st_field_checked},  {"ior", rrv__sf_st_field_checked},
 };
 
 /* ---- scene ---------------------------------------------------------------------- */
