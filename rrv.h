@@ -313,6 +313,10 @@ typedef struct rrv_scene {
     int *bvh_prims;                        /* shape indices in leaf order */
     size_t bytes;                          /* heap bytes the scene holds */
     size_t grid_bytes;                     /* of which grid samples */
+    size_t max_grid_bytes;                 /* the largest grid rrv_scene_prepare may
+                                              build (majorant, bakes); set by the
+                                              loader from rrv_load_options, 0 =
+                                              RRV_DEFAULT_MAX_GRID_BYTES */
     char path[256];                        /* the file it came from, for messages */
 } rrv_scene;
 
@@ -324,7 +328,8 @@ typedef int (*rrv_read_file_func)(void *user, const char *path, void **data, siz
 
 typedef struct rrv_load_options {
     size_t max_grid_bytes;       /* refuse a grid larger than this before
-                                    allocating; 0 = RRV_DEFAULT_MAX_GRID_BYTES */
+                                    allocating, read or built by prepare;
+                                    0 = RRV_DEFAULT_MAX_GRID_BYTES */
     rrv_read_file_func read_file;/* NULL: stdio (unavailable with RRV_NO_STDIO) */
     void *read_file_user;
 } rrv_load_options;
@@ -1115,6 +1120,33 @@ static double rrv__field_eval(const rrv_field *f, rrv_vec3 p, int channel, doubl
     }
 }
 
+/* The samples [a, b] (per axis, inclusive) of a grid whose cells touch the
+   box [lo, hi]; 0 if the box misses the grid. Trilinear values never exceed
+   those samples, so their max bounds the field over the box. A box that
+   reaches into a cell by less than 1e-9 of it is taken not to: majorant
+   cells aligned with the voxels otherwise pick up their neighbours' samples
+   through the rounding of their corners (a single voxel of 1e8 then spread
+   its majorant over 4^3 voxels of nothing), and what the sliver misses is
+   at most 1e-9 of a voxel's optical depth. */
+static int rrv__grid_span(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, int a[3], int b[3])
+{
+    int dim[3], c;
+    double glo[3], ghi[3], blo[3], bhi[3];
+    dim[0] = g->nx; dim[1] = g->ny; dim[2] = g->nz;
+    glo[0] = g->lo.x; glo[1] = g->lo.y; glo[2] = g->lo.z;
+    ghi[0] = g->hi.x; ghi[1] = g->hi.y; ghi[2] = g->hi.z;
+    blo[0] = lo.x; blo[1] = lo.y; blo[2] = lo.z;
+    bhi[0] = hi.x; bhi[1] = hi.y; bhi[2] = hi.z;
+    for (c = 0; c < 3; ++c) {
+        double s = (dim[c] - 1) / (ghi[c] - glo[c]);
+        double fa = floor((blo[c] - glo[c]) * s + 1e-9), fb = ceil((bhi[c] - glo[c]) * s - 1e-9);
+        if (!(fb >= 0) || !(fa <= dim[c] - 1)) return 0;
+        a[c] = fa < 0 ? 0 : (int)fa;
+        b[c] = fb > dim[c] - 1 ? dim[c] - 1 : (int)fb;
+    }
+    return 1;
+}
+
 /* An upper bound of a non-negative field over a box (the majorant grid's cell). */
 static double rrv__field_bound(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
 {
@@ -1133,25 +1165,11 @@ static double rrv__field_bound(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
     case RRV_FIELD_NOISE:
         return f->base + fmax(0.0, f->amplitude) * rrv__falloff_bound(&f->noise, lo, hi);
     case RRV_FIELD_GRID: {
-        /* Trilinear values never exceed the samples around them, so the max
-           over the samples whose cells touch the box bounds the field. */
         const rrv_grid *g = &f->grid;
         double best = 0;
-        int a[3], b[3], x, y, z, c, dim[3];
-        double glo[3], ghi[3], blo[3], bhi[3];
+        int a[3], b[3], x, y, z, c;
         size_t n;
-        dim[0] = g->nx; dim[1] = g->ny; dim[2] = g->nz;
-        glo[0] = g->lo.x; glo[1] = g->lo.y; glo[2] = g->lo.z;
-        ghi[0] = g->hi.x; ghi[1] = g->hi.y; ghi[2] = g->hi.z;
-        blo[0] = lo.x; blo[1] = lo.y; blo[2] = lo.z;
-        bhi[0] = hi.x; bhi[1] = hi.y; bhi[2] = hi.z;
-        for (c = 0; c < 3; ++c) {
-            double s = (dim[c] - 1) / (ghi[c] - glo[c]);
-            double fa = floor((blo[c] - glo[c]) * s), fb = ceil((bhi[c] - glo[c]) * s);
-            if (fb < 0 || fa > dim[c] - 1) return 0;
-            a[c] = fa < 0 ? 0 : (int)fa;
-            b[c] = fb > dim[c] - 1 ? dim[c] - 1 : (int)fb;
-        }
+        if (!rrv__grid_span(g, lo, hi, a, b)) return 0;
         for (z = a[2]; z <= b[2]; ++z)
             for (y = a[1]; y <= b[1]; ++y)
                 for (x = a[0]; x <= b[0]; ++x) {
@@ -1544,7 +1562,10 @@ static int rrv__medium_extinction_ok(const rrv_medium *m, double *peak)
     double sigma_t = 0;
     int c;
     for (c = 0; c < 3; ++c) sigma_t = rrv__maxd(sigma_t, (m->sigma_a[c] + m->sigma_s[c]) * m->scale);
-    *peak = m->density.kind == RRV_FIELD_NONE ? 0.0 : rrv__maxd(0.0, rrv__field_bound(&m->density, m->lo, m->hi)) * sigma_t;
+    double density = m->density.kind == RRV_FIELD_NONE ? 0.0 : rrv__maxd(0.0, rrv__field_bound(&m->density, m->lo, m->hi));
+    *peak = density * sigma_t;
+    /* majorant cells hold the density bound as a float */
+    if (!(density <= FLT_MAX)) return 0;
     if (*peak == 0) return 1; /* also when sigma_t is infinite and the density 0 */
     return *peak * rrv__medium_size(m) <= RRV_MAX_OPTICAL_DEPTH;
 }
@@ -1610,12 +1631,112 @@ static int rrv__auto_cells(const rrv_medium *m, int axis)
     return 16;
 }
 
-/* max |grad r| over a cell, estimated on a 4^3 lattice with a safety factor:
-   it sets an event rate, not a bound that correctness depends on. */
+/* The distances from c to the nearest and farthest points of a box. */
+static void rrv__box_distances(rrv_vec3 c, rrv_vec3 lo, rrv_vec3 hi, double *dmin, double *dmax)
+{
+    rrv_vec3 far = rrv__v3(rrv__maxd(c.x - lo.x, hi.x - c.x), rrv__maxd(c.y - lo.y, hi.y - c.y),
+                           rrv__maxd(c.z - lo.z, hi.z - c.z));
+    *dmin = rrv__length(rrv__sub(rrv__vmax(lo, rrv__vmin(hi, c)), c));
+    *dmax = rrv__length(far);
+}
+
+/* The distance from x to the interval [a, b]. */
+static double rrv__interval_distance(double x, double a, double b)
+{
+    return x < a ? a - x : x > b ? x - b : 0.0;
+}
+
+/* max |grad r| of an IOR profile (unscaled) over a box, in closed form;
+   returns 0 in *known for the kinds without one. Each profile's gradient is
+   radial (slab: constant) with a magnitude that is monotone or unimodal in
+   the distance d from its centre, so its max over [dmin, dmax] follows. */
+static double rrv__profile_gradient_bound(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi, int *known)
+{
+    double dmin, dmax, R = f->radius, d, q;
+    *known = 1;
+    rrv__box_distances(f->center, lo, hi, &dmin, &dmax);
+    switch (f->kind) {
+    case RRV_FIELD_NONE:
+    case RRV_FIELD_CONSTANT: return 0;
+    case RRV_FIELD_SLAB: return fabs(f->gradient);
+    case RRV_FIELD_LUNEBURG: /* d / (R^2 sqrt(2 - d^2/R^2)), rising in d */
+        if (dmin >= R) return 0;
+        d = rrv__mind(dmax, R);
+        return d / (R * R * sqrt(2.0 - d * d / (R * R)));
+    case RRV_FIELD_FISHEYE: /* 2 n0 d / (R^2 (1 + d^2/R^2)^2), peak at R / sqrt(3) */
+        if (dmin >= R) return 0;
+        d = rrv__clamp(R / sqrt(3.0), dmin, rrv__mind(dmax, R));
+        q = 1.0 + d * d / (R * R);
+        return 2.0 * f->n0 * d / (R * R * q * q);
+    case RRV_FIELD_SHELL: { /* |A| / (2 e) |sech^2 at the inner edge - sech^2 at the outer| */
+        double e = f->edge, ci = cosh(rrv__interval_distance(f->radius - f->thickness, dmin, dmax) / e);
+        double co = cosh(rrv__interval_distance(f->radius, dmin, dmax) / e);
+        return fabs(f->amplitude) / (2.0 * e) * rrv__maxd(1.0 / (ci * ci), 1.0 / (co * co));
+    }
+    case RRV_FIELD_BLOBS: { /* each |w| d / s^2 exp(-d^2 / (2 s^2)), peak at d = s */
+        double sum = 0;
+        int i;
+        for (i = 0; i < f->blob_count; ++i) {
+            const rrv_blob *b = &f->blobs[i];
+            double s2 = b->radius * b->radius;
+            rrv__box_distances(b->center, lo, hi, &dmin, &dmax);
+            d = rrv__clamp(b->radius, dmin, dmax);
+            sum += fabs(b->weight) * d / s2 * exp(-0.5 * d * d / s2);
+        }
+        return sum;
+    }
+    default: *known = 0; return 0;
+    }
+}
+
+/* Whether the refractivity is flat wherever the baked refraction grid does
+   not reach: then its gradient samples bound |grad r| over any cell. True
+   for an IOR grid (ambient outside it) and for a gas whose other field is
+   constant or absent. */
+static int rrv__flat_beyond_bake(const rrv_medium *m)
+{
+    const rrv_field *t, *p;
+    if (!m->ior_from_gas) return rrv__field_of(m, RRV__IOR)->kind == RRV_FIELD_GRID;
+    t = rrv__field_of(m, RRV__TEMPERATURE);
+    p = rrv__field_of(m, RRV__PRESSURE);
+    return (t->kind == RRV_FIELD_GRID && (p->kind == RRV_FIELD_NONE || p->kind == RRV_FIELD_CONSTANT)) ||
+           (p->kind == RRV_FIELD_GRID && (t->kind == RRV_FIELD_NONE || t->kind == RRV_FIELD_CONSTANT));
+}
+
+/* max |grad r| over a cell, times a margin of 1.5. It sets an event rate,
+   not a bound that correctness depends on; the margin is the one the
+   sampled estimate (below) always carried, so rates stayed where the
+   measured tables put them. Closed forms and the baked grid's gradient
+   samples make it cheap (it used to cost 64 gradient lookups a cell even
+   for a constant IOR: minutes at 256^3 cells); only a gas with fields that
+   are neither grids nor constant is still sampled, on a 4^3 lattice. */
 static double rrv__cell_gradient_bound(const rrv_medium *m, rrv_vec3 lo, rrv_vec3 hi, double ambient_r)
 {
     double best = 0;
     int i, j, k;
+    const rrv_grid *baked = m->majorant ? &m->majorant->refraction : NULL;
+    if (baked && baked->data && rrv__flat_beyond_bake(m)) {
+        int a[3], b[3], x, y, z;
+        if (!rrv__grid_span(baked, lo, hi, a, b)) return 0;
+        for (z = a[2]; z <= b[2]; ++z)
+            for (y = a[1]; y <= b[1]; ++y)
+                for (x = a[0]; x <= b[0]; ++x) {
+                    const float *v = baked->data + 4 * (((size_t)z * (size_t)baked->ny + (size_t)y) *
+                                                            (size_t)baked->nx + (size_t)x);
+                    best = rrv__maxd(best, sqrt((double)v[1] * v[1] + (double)v[2] * v[2] + (double)v[3] * v[3]));
+                }
+        return 1.5 * best;
+    }
+    if (!m->ior_from_gas) {
+        int known;
+        double bound = rrv__profile_gradient_bound(rrv__field_of(m, RRV__IOR), lo, hi, &known);
+        if (known) return 1.5 * m->ior_scale * bound;
+    } else {
+        const rrv_field *t = rrv__field_of(m, RRV__TEMPERATURE), *p = rrv__field_of(m, RRV__PRESSURE);
+        if ((t->kind == RRV_FIELD_NONE || t->kind == RRV_FIELD_CONSTANT) &&
+            (p->kind == RRV_FIELD_NONE || p->kind == RRV_FIELD_CONSTANT))
+            return 0;
+    }
     for (k = 0; k < 4; ++k)
         for (j = 0; j < 4; ++j)
             for (i = 0; i < 4; ++i) {
@@ -1626,6 +1747,20 @@ static double rrv__cell_gradient_bound(const rrv_medium *m, rrv_vec3 lo, rrv_vec
                 best = fmax(best, rrv__length(g));
             }
     return 1.5 * best;
+}
+
+/* Refuses a grid rrv_scene_prepare would build (majorant, bake) of `count`
+   entries of `size` bytes above the scene's grid limit: the limit that keeps
+   a hostile file from exhausting memory holds for what it makes us build. */
+static rrv_result rrv__check_built_grid(const rrv_scene *scene, const rrv_medium *m, const char *what,
+                                        size_t count, size_t size, rrv_error *err)
+{
+    size_t limit = scene->max_grid_bytes ? scene->max_grid_bytes : RRV_DEFAULT_MAX_GRID_BYTES;
+    if (count > limit / size)
+        return rrv__fail(err, RRV_ERROR_LIMIT, scene->path, 0,
+                         "medium \"%s\": its %s would need %.1f MiB, above the grid limit of %.1f MiB", m->name,
+                         what, (double)count * (double)size / 1048576.0, (double)limit / 1048576.0);
+    return RRV_OK;
 }
 
 /* The position of sample (x, y, z) of an n[0] x n[1] x n[2] lattice whose
@@ -1656,6 +1791,10 @@ static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, c
         n[a] = cells < 1 ? 2 : cells > 127 ? 128 : (int)cells + 1;
     }
     count = (size_t)n[0] * (size_t)n[1] * (size_t)n[2];
+    {
+        rrv_result res = rrv__check_built_grid(scene, m, "baked noise", count, sizeof(float), err);
+        if (res != RRV_OK) return res;
+    }
     data = (float *)RRV_MALLOC(count * sizeof(float));
     if (!data) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory baking a noise field");
     for (z = 0; z < n[2]; ++z)
@@ -1700,6 +1839,10 @@ static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, si
     if (!lattice) return RRV_OK;
     n[0] = lattice->nx; n[1] = lattice->ny; n[2] = lattice->nz;
     count = (size_t)n[0] * (size_t)n[1] * (size_t)n[2];
+    {
+        rrv_result res = rrv__check_built_grid(scene, m, "baked refractivity grid", count, 4 * sizeof(float), err);
+        if (res != RRV_OK) return res;
+    }
     data = (float *)RRV_MALLOC(count * 4 * sizeof(float));
     if (!data) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory baking a refractivity grid");
     i = 0;
@@ -1759,11 +1902,34 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
         if (res != RRV_OK) return res;
     }
     for (x = 0; x < 3; ++x) g->n[x] = forced > 0 ? (forced > 256 ? 256 : forced) : rrv__auto_cells(m, x);
+    for (x = 0; x < 3; ++x) g->sigma_t_max = rrv__maxd(g->sigma_t_max, (m->sigma_a[x] + m->sigma_s[x]) * m->scale);
+    if (forced <= 0) {
+        /* Where one cell could hold an optical depth above 64 (a voxel of
+           1e8 in an empty grid), null collisions around the large values
+           swamp every walk through the cell: the cells then follow the
+           density grid's voxels, where the bound is exact (at most 256 an
+           axis; a field without voxels gets 4 times the cells). */
+        const rrv_field *density = rrv__field_of(m, RRV__DENSITY);
+        rrv_vec3 ext = rrv__sub(m->hi, m->lo);
+        double cell = rrv__length(rrv__v3(ext.x / g->n[0], ext.y / g->n[1], ext.z / g->n[2]));
+        double peak = rrv__field_bound(density, m->lo, m->hi) * g->sigma_t_max;
+        if (peak * cell > 64.0) {
+            for (x = 0; x < 3; ++x) {
+                int voxels = density->kind != RRV_FIELD_GRID ? 4 * g->n[x]
+                           : (x == 0 ? density->grid.nx : x == 1 ? density->grid.ny : density->grid.nz) - 1;
+                voxels = voxels > 256 ? 256 : voxels;
+                if (voxels > g->n[x]) g->n[x] = voxels;
+            }
+        }
+    }
     cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
     g->lo = m->lo;
     g->hi = m->hi;
     g->cell = rrv__v3((m->hi.x - m->lo.x) / g->n[0], (m->hi.y - m->lo.y) / g->n[1], (m->hi.z - m->lo.z) / g->n[2]);
-    for (x = 0; x < 3; ++x) g->sigma_t_max = rrv__maxd(g->sigma_t_max, (m->sigma_a[x] + m->sigma_s[x]) * m->scale);
+    {
+        rrv_result res = rrv__check_built_grid(scene, m, "majorant grid", cells, sizeof(float) * (refracts ? 2 : 1), err);
+        if (res != RRV_OK) return res;
+    }
     g->density_max = (float *)RRV_MALLOC(cells * sizeof(float) * (refracts ? 2 : 1));
     if (!g->density_max) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
     g->grad_max = refracts ? g->density_max + cells : NULL;
@@ -1773,14 +1939,16 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
             for (x = 0; x < g->n[0]; ++x, ++c) {
                 rrv_vec3 lo = rrv__v3(m->lo.x + x * g->cell.x, m->lo.y + y * g->cell.y, m->lo.z + z * g->cell.z);
                 rrv_vec3 hi = rrv__add(lo, g->cell);
-                double d = rrv__field_bound(rrv__field_of(m, RRV__DENSITY), lo, hi);
-                /* Round the float bound up so it stays a bound. */
+                double d = rrv__mind(rrv__field_bound(rrv__field_of(m, RRV__DENSITY), lo, hi), FLT_MAX);
+                /* Round the float bound up so it stays a bound (the loader
+                   refused densities beyond float). */
                 float df = (float)d;
                 if ((double)df < d) df = nextafterf(df, FLT_MAX);
                 g->density_max[c] = df > 0 ? df : 0.0f;
                 g->density_peak = g->density_max[c] > g->density_peak ? g->density_max[c] : g->density_peak;
                 if (refracts) {
-                    g->grad_max[c] = (float)rrv__cell_gradient_bound(m, lo, hi, scene->settings.ambient_ior - 1.0);
+                    g->grad_max[c] = (float)rrv__mind(
+                        rrv__cell_gradient_bound(m, lo, hi, scene->settings.ambient_ior - 1.0), FLT_MAX);
                     g->grad_peak = g->grad_max[c] > g->grad_peak ? g->grad_max[c] : g->grad_peak;
                 }
             }
@@ -2968,7 +3136,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     rrv__context ctx;
     rrv__camera_frame frame;
     double r_camera;
-    int x, y, s;
+    int x, y, s, c;
     if (!scene || !sum) return RRV_ERROR_ARGUMENT;
     if (x0 < 0 || y0 < 0 || x1 > scene->camera.width || y1 > scene->camera.height || x0 > x1 || y0 > y1 ||
         stride < x1 - x0 || sample_begin < 0 || sample_begin > sample_end)
@@ -2999,7 +3167,9 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
                 d = rrv__camera_ray(&frame, &scene->camera, x + rrv__uniform(&rng), y + rrv__uniform(&rng));
                 rrv__trace_path(&ctx, frame.eye, d, &rng, L);
                 ++ctx.stats.samples;
-                if (L[0] - L[0] != 0 || L[1] - L[1] != 0 || L[2] - L[2] != 0) {
+                /* NaN fails the comparison too */
+                if (!(fabs(L[0]) <= RRV_MAX_SAMPLE && fabs(L[1]) <= RRV_MAX_SAMPLE &&
+                      fabs(L[2]) <= RRV_MAX_SAMPLE)) {
                     ++ctx.stats.nonfinite;
                     continue;
                 }
@@ -3007,9 +3177,12 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
                 acc[1] += L[1];
                 acc[2] += L[2];
             }
-            out[0] += (float)acc[0];
-            out[1] += (float)acc[1];
-            out[2] += (float)acc[2];
+            /* Saturate: sums the caller keeps adding to must never reach Inf
+               (and a double beyond float's range must not be converted). */
+            for (c = 0; c < 3; ++c) {
+                float v = out[c] + (float)rrv__clamp(acc[c], -FLT_MAX, FLT_MAX);
+                out[c] = v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : v;
+            }
         }
     }
     if (stats) {
@@ -5724,6 +5897,7 @@ RRV_DEF rrv_result rrv_scene_parse(const char *text, size_t size, const char *na
     s->settings.refraction = RRV_REFRACTION_DEFAULT;
     s->settings.majorant_cells = 0;
     s->settings.ambient_ior = 1.0;
+    s->max_grid_bytes = opt ? opt->max_grid_bytes : 0;
     memset(&p, 0, sizeof p);
     p.scene = s;
     p.name = s->path;
