@@ -22,6 +22,41 @@
                  (default) or a symplectic leapfrog, step rrv_settings.step.
    Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2.
 
+   BOUNDS
+     No input may hang a render, overflow a pixel or exhaust memory. Refused
+     at load with file:line: message (and by rrv_scene_prepare, line 0, for
+     scenes built in code):
+       - an IOR outside [RRV_MIN_IOR, RRV_MAX_IOR] = [0.1, 10] anywhere in a
+         medium's box, from any field kind or the gas state: beyond it rays
+         are trapped or the radiance scale (eta_camera / eta)^2 explodes, and
+         no transparent material comes near 10;
+       - a peak extinction times the medium's size (its diagonal, or its
+         distance from the origin if larger) above RRV_MAX_OPTICAL_DEPTH =
+         1e12, or a density beyond float: the mean free flight must stay
+         thousands of rounding steps of the coordinates long, or tracking
+         stalls (an extinction of 3e38 gave flights of length 0);
+       - emission (L x scale, Le x Lescale) above RRV_MAX_RADIANCE = 1e20:
+         2^24 samples of it stay 1e11 below float's range;
+       - an ambient IOR above 10, a bend tolerance below 1e-4, mu_eta above
+         1e6 /m, an eikonal step outside [1e-6, 1e6] m (scene and CLI);
+       - a majorant or baked grid above the grid limit (max_grid_bytes).
+     Cut and counted (rrv_render_stats.paths_cut, of them cut_tracking):
+       - a tracking walk (one medium along one straight segment) after
+         64 + 4 (peak majorant x chord) tentative collisions, at most
+         RRV_MAX_SEGMENT_EVENTS = 2^22: the count is Poisson with a mean of at
+         most the second term, so a correct walk never gets there (P < 1e-30);
+       - a leg of a path (between two real vertices) after 64 + 16 times the
+         loop iterations of one straight crossing of every medium at its
+         densest rate (comb kicks, null events, or 4 / step eikonal steps),
+         at most RRV_MAX_SEGMENT_STEPS = 1e7: only trapped rays get there.
+     A cut camera path keeps the light it gathered before the cut; a cut
+     shadow ray is dark. That is biased, so it is never silent: the CLI's
+     summary line prints the count. A sample above RRV_MAX_SAMPLE = 1e30 is
+     discarded as non-finite; pixel sums saturate at FLT_MAX. To keep cuts
+     rare, majorant cells follow the density voxels where a cell would hold
+     an optical depth above 64, and RK4 halves steps that span a feature of
+     the IOR.
+
    USAGE
      In exactly one C file:
          #define RRV_IMPLEMENTATION
