@@ -2105,8 +2105,9 @@ static size_t rrv__majorant_cell(const struct rrv__majorant_grid *g, rrv_vec3 p,
 {
     int a;
     for (a = 0; a < 3; ++a) {
-        int c = (int)floor((rrv__axis(p, a) - rrv__axis(g->lo, a)) / rrv__axis(g->cell, a));
-        cell[a] = c < 0 ? 0 : c > g->n[a] - 1 ? g->n[a] - 1 : c;
+        /* clamped before the cast: a far point must not overflow the int */
+        double c = floor((rrv__axis(p, a) - rrv__axis(g->lo, a)) / rrv__axis(g->cell, a));
+        cell[a] = !(c >= 0) ? 0 : c > g->n[a] - 1 ? g->n[a] - 1 : (int)c;
     }
     return ((size_t)cell[2] * (size_t)g->n[1] + (size_t)cell[1]) * (size_t)g->n[0] + (size_t)cell[0];
 }
@@ -3278,7 +3279,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
     rrv__rng rng;
     rrv__bender bender;
     rrv_vec3 o = origin, d;
-    uint64_t events = 0, unused = 0, bound;
+    uint64_t events = 0, unused = 0, bound, iterations = 0;
     rrv__clear_error(err);
     if (!scene || !result) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "no scene or result");
     if (!(rrv__length(direction) > 0) || rrv__length(direction) > DBL_MAX)
@@ -3290,7 +3291,8 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
     rrv__bender_start(&bender, scene, o);
     if (visit) visit(user, o, d);
     for (;;) {
-        if (events > bound)
+        /* entering a support is no event, but it is work */
+        if (events > bound || ++iterations > 2 * bound)
             return rrv__fail(err, RRV_ERROR_LIMIT, scene->path, 0,
                              "the ray did not leave the refractive media after %llu events",
                              (unsigned long long)events);
