@@ -39,7 +39,9 @@
          2^24 samples of it stay 1e11 below float's range;
        - an ambient IOR above 10, a bend tolerance below 1e-4, mu_eta above
          1e6 /m, an eikonal step outside [1e-6, 1e6] m (scene and CLI);
-       - a majorant or baked grid above the grid limit (max_grid_bytes).
+       - a majorant or baked grid above the grid limit (max_grid_bytes);
+       - more than RRV_MAX_BLOBS = 4096 blobs in one field (every lookup
+         sums them all: a grid is the tool for more).
      Cut and counted (rrv_render_stats.paths_cut, of them cut_tracking):
        - a tracking walk (one medium along one straight segment) after
          64 + 4 (peak majorant x chord) tentative collisions, at most
@@ -405,6 +407,7 @@ RRV_DEF rrv_result rrv_grid_read_memory(const void *data, size_t size, const cha
 #define RRV_MAX_SAMPLE 1e30         /* a sample above it is discarded as non-finite */
 #define RRV_MAX_SEGMENT_EVENTS 4194304L /* collisions of one tracking walk */
 #define RRV_MAX_SEGMENT_STEPS 10000000L /* refraction steps between real vertices */
+#define RRV_MAX_BLOBS 4096          /* blobs in one field: each lookup sums them all */
 
 typedef struct rrv_render_stats {
     uint64_t samples;   /* pixel samples taken */
@@ -5844,10 +5847,21 @@ static rrv_result rrv__sf_st_medium_checked(rrv__sf_parser *p)
 static rrv_result rrv__sf_st_field_checked(rrv__sf_parser *p)
 {
     static const char *const names[4] = {"density", "temperature", "pressure", "ior"};
-    rrv_result r = rrv__sf_st_field(p);
-    int which = 0;
-    if (r != RRV_OK) return r;
+    rrv_result r;
+    int which = 0, mi = p->toks.n >= 2 ? rrv__sf_find_medium(p->scene, &p->toks.v[1]) : -1;
     while (which < 3 && !rrv__sf_tok_is(&p->toks.v[0], names[which])) ++which;
+    /* Each lookup sums every blob, and each statement's check below does
+       too: without a cap a file of blob lines would cost their square. */
+    if (mi >= 0 && p->toks.n >= 3 && rrv__sf_tok_is(&p->toks.v[2], "blob")) {
+        const rrv_medium *m = &p->scene->media[mi];
+        const rrv_field *f = which == 0 ? &m->density : which == 1 ? &m->temperature
+                           : which == 2 ? &m->pressure : &m->ior;
+        if (f->kind == RRV_FIELD_BLOBS && f->blob_count >= RRV_MAX_BLOBS)
+            return rrv__sf_perr(p, RRV_ERROR_LIMIT, "%s: more than %d blobs in one field (a grid holds more)",
+                                names[which], RRV_MAX_BLOBS);
+    }
+    r = rrv__sf_st_field(p);
+    if (r != RRV_OK) return r;
     return rrv__sf_check_medium(p, names[which], &p->scene->media[rrv__sf_find_medium(p->scene, &p->toks.v[1])]);
 }
 

@@ -636,6 +636,27 @@ static void test_hostile_numbers_stay_finite(void)
     rrv_scene_free(s);
 }
 
+static void test_blob_count_is_capped(void)
+{
+    /* Each blob statement is checked against the limits by summing the
+       field; uncapped, a file of blob lines cost the square of its length. */
+    const char *head = "camera eye 0 0 5 look 0 0 0\nmedium m box -1 -1 -1 1 1 1\n";
+    const char *line = "density m blob center 0 0 0 radius 0.1 weight 0.001\n";
+    size_t hn = strlen(head), ln = strlen(line), i, n = RRV_MAX_BLOBS + 1;
+    char *text = (char *)malloc(hn + n * ln + 1);
+    rrv_scene *s = NULL;
+    rrv_error err;
+    memcpy(text, head, hn);
+    for (i = 0; i < n; ++i) memcpy(text + hn + i * ln, line, ln);
+    CHECK(rrv_scene_parse(text, hn + n * ln, "blobs.rrv", NULL, NULL, &s, &err) == RRV_ERROR_LIMIT);
+    CHECKF(err.line == 2 + RRV_MAX_BLOBS + 1 && strcmp(err.message, "density: more than 4096 blobs in one field (a grid holds more)") == 0,
+           "%d: %s", err.line, err.message);
+    CHECK(rrv_scene_parse(text, hn + (n - 1) * ln, "blobs.rrv", NULL, NULL, &s, &err) == RRV_OK);
+    CHECK(s && s->media[0].density.blob_count == RRV_MAX_BLOBS);
+    rrv_scene_free(s);
+    free(text);
+}
+
 int main(int argc, char **argv)
 {
     (void)argc; (void)argv;
@@ -657,5 +678,6 @@ int main(int argc, char **argv)
     RUN(test_prepare_accounting_and_limits);
     RUN(test_gradient_bounds_in_closed_form);
     RUN(test_hostile_numbers_stay_finite);
+    RUN(test_blob_count_is_capped);
     return CHECK_EXIT_CODE();
 }
