@@ -24,7 +24,8 @@
 
    BOUNDS
      No input may hang a render, overflow a pixel or exhaust memory. Refused
-     at load with file:line: message (and by rrv_scene_prepare, line 0, for
+     at load with file:line: message (rrv_scene_prepare checks the media once
+     they are complete and names the statement that broke a limit; line 0 for
      scenes built in code):
        - an IOR outside [RRV_MIN_IOR, RRV_MAX_IOR] = [0.1, 10] anywhere in a
          medium's box, from any field kind or the gas state: beyond it rays
@@ -331,6 +332,10 @@ typedef struct rrv_medium {
     int ior_from_gas;       /* 1: eta from temperature and pressure */
     double eta_ref, P_ref, T_ref; /* Hauf-Grigull reference state */
     double ior_scale;       /* artist scale k on the refractivity eta - 1 */
+    /* Scene lines of its medium statement and of the last density,
+       temperature, pressure and ior statements, so that the limit checks of
+       rrv_scene_prepare name the line that broke one; 0 = built in code. */
+    int line[5];
     /* Built by rrv_scene_prepare; NULL before. */
     struct rrv__majorant_grid *majorant;
 } rrv_medium;
@@ -1479,9 +1484,8 @@ static double rrv__scene_refractivity(const rrv_scene *scene, rrv_vec3 p, rrv_ve
 }
 
 /* ---- the limits a medium must respect (BOUNDS) --------------------------------
-   Checked by the parser after every statement that changes a medium (so the
-   message names the line that broke it) and again by rrv_scene_prepare, for
-   scenes built in code. */
+   Checked by rrv_scene_prepare (rrv__check_medium) once a medium is
+   complete, with the lines the parser recorded in rrv_medium.line. */
 
 /* The range [*lo, *hi] of a scalar field over a box (conservative: a grid
    reports all its samples, blobs the sums of their signed weights). */
@@ -3117,6 +3121,40 @@ static void rrv__scene_release_prepared(rrv_scene *scene)
     scene->bvh_node_count = scene->light_count = 0;
 }
 
+/* The limits of BOUNDS for one medium, with the scene line of the statement
+   that broke each (the later of the lines involved). */
+static rrv_result rrv__check_medium(const rrv_scene *scene, const rrv_medium *m, rrv_error *err)
+{
+    static const char *const stmt[5] = {"medium", "density", "temperature", "pressure", "ior"};
+    double a, b;
+    int c, at;
+    for (c = 0; c < 3; ++c)
+        if (!((m->sigma_a[c] + m->sigma_s[c]) * m->scale <= DBL_MAX))
+            return rrv__fail(err, m->line[0] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[0],
+                             "medium: (sigma_a + sigma_s) times scale is not finite");
+    if (!rrv__medium_emission_ok(m))
+        return rrv__fail(err, m->line[0] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[0], "medium: Le times Lescale must be at most %g",
+                         RRV_MAX_RADIANCE);
+    if (!rrv__medium_extinction_ok(m, &a)) {
+        at = m->line[1] > m->line[0] ? 1 : 0;
+        return rrv__fail(err, m->line[at] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[at],
+                         "%s: medium \"%s\" reaches an extinction of %g /m, over its %g m an optical depth "
+                         "above the %g rrv accepts",
+                         stmt[at], m->name, a, rrv__medium_size(m), RRV_MAX_OPTICAL_DEPTH);
+    }
+    if (!rrv__medium_ior_ok(m, &a, &b)) {
+        at = 4;
+        if (m->ior_from_gas) {
+            if (m->line[2] > m->line[at]) at = 2;
+            if (m->line[3] > m->line[at]) at = 3;
+        }
+        return rrv__fail(err, m->line[at] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[at],
+                         "%s: medium \"%s\" gets an IOR from %g to %g; it must stay within [%g, %g]", stmt[at],
+                         m->name, a, b, RRV_MIN_IOR, RRV_MAX_IOR);
+    }
+    return RRV_OK;
+}
+
 RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
 {
     rrv_result res;
@@ -3139,19 +3177,8 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "environment radiance above %g",
                          RRV_MAX_RADIANCE);
     for (i = 0; i < scene->medium_count; ++i) {
-        const rrv_medium *m = &scene->media[i];
-        double a, b;
-        if (!rrv__medium_extinction_ok(m, &a))
-            return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
-                             "medium \"%s\" reaches an extinction of %g /m, over its %g m an optical depth "
-                             "above %g", m->name, a, rrv__medium_size(m), RRV_MAX_OPTICAL_DEPTH);
-        if (!rrv__medium_ior_ok(m, &a, &b))
-            return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
-                             "medium \"%s\" gets an IOR from %g to %g; it must stay within [%g, %g]", m->name,
-                             a, b, RRV_MIN_IOR, RRV_MAX_IOR);
-        if (!rrv__medium_emission_ok(m))
-            return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "medium \"%s\": emission above %g",
-                             m->name, RRV_MAX_RADIANCE);
+        res = rrv__check_medium(scene, &scene->media[i], err);
+        if (res != RRV_OK) return res;
     }
     for (i = 0; i < scene->shape_count; ++i) {
         const double *L = scene->shapes[i].L;
@@ -5813,35 +5840,14 @@ static rrv_result rrv__sf_st_field(rrv__sf_parser *p)
     }
 }
 
-/* ---- limits (BOUNDS), checked after each statement that changes a medium -- */
-
-static rrv_result rrv__sf_check_medium(rrv__sf_parser *p, const char *stmt, const rrv_medium *m)
-{
-    double a, b;
-    int c;
-    for (c = 0; c < 3; ++c)
-        if (!((m->sigma_a[c] + m->sigma_s[c]) * m->scale <= DBL_MAX))
-            return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: (sigma_a + sigma_s) times scale is not finite", stmt);
-    if (!rrv__medium_extinction_ok(m, &a))
-        return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                            "%s: medium \"%s\" reaches an extinction of %g /m, over its %g m an optical "
-                            "depth above the %g rrv accepts",
-                            stmt, m->name, a, rrv__medium_size(m), RRV_MAX_OPTICAL_DEPTH);
-    if (!rrv__medium_ior_ok(m, &a, &b))
-        return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                            "%s: medium \"%s\" gets an IOR from %g to %g; it must stay within [%g, %g]",
-                            stmt, m->name, a, b, RRV_MIN_IOR, RRV_MAX_IOR);
-    if (!rrv__medium_emission_ok(m))
-        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: Le times Lescale must be at most %g", stmt,
-                            RRV_MAX_RADIANCE);
-    return RRV_OK;
-}
+/* ---- limits (BOUNDS): the statements record their lines, rrv_scene_prepare
+   checks the limits once the whole medium is known and names the line ---- */
 
 static rrv_result rrv__sf_st_medium_checked(rrv__sf_parser *p)
 {
     rrv_result r = rrv__sf_st_medium(p);
-    if (r != RRV_OK) return r;
-    return rrv__sf_check_medium(p, "medium", &p->scene->media[p->scene->medium_count - 1]);
+    if (r == RRV_OK) p->scene->media[p->scene->medium_count - 1].line[0] = p->line;
+    return r;
 }
 
 static rrv_result rrv__sf_st_field_checked(rrv__sf_parser *p)
@@ -5850,8 +5856,8 @@ static rrv_result rrv__sf_st_field_checked(rrv__sf_parser *p)
     rrv_result r;
     int which = 0, mi = p->toks.n >= 2 ? rrv__sf_find_medium(p->scene, &p->toks.v[1]) : -1;
     while (which < 3 && !rrv__sf_tok_is(&p->toks.v[0], names[which])) ++which;
-    /* Each lookup sums every blob, and each statement's check below does
-       too: without a cap a file of blob lines would cost their square. */
+    /* Each lookup sums every blob, and so does every majorant cell's bound:
+       a file of blob lines must not make every lookup cost its length. */
     if (mi >= 0 && p->toks.n >= 3 && rrv__sf_tok_is(&p->toks.v[2], "blob")) {
         const rrv_medium *m = &p->scene->media[mi];
         const rrv_field *f = which == 0 ? &m->density : which == 1 ? &m->temperature
@@ -5861,8 +5867,8 @@ static rrv_result rrv__sf_st_field_checked(rrv__sf_parser *p)
                                 names[which], RRV_MAX_BLOBS);
     }
     r = rrv__sf_st_field(p);
-    if (r != RRV_OK) return r;
-    return rrv__sf_check_medium(p, names[which], &p->scene->media[rrv__sf_find_medium(p->scene, &p->toks.v[1])]);
+    if (r == RRV_OK) p->scene->media[rrv__sf_find_medium(p->scene, &p->toks.v[1])].line[1 + which] = p->line;
+    return r;
 }
 
 typedef rrv_result (*rrv__sf_statement_func)(rrv__sf_parser *p);
