@@ -975,7 +975,9 @@ static void rrv__bvh_split(rrv__bvh_build *b, int node_index, int first, int cou
         double cmin = rrv__axis(clo, axis), extent = rrv__axis(chi, axis) - cmin;
         rrv_vec3 blo[RRV__BVH_BINS], bhi[RRV__BVH_BINS];
         int bcount[RRV__BVH_BINS], k;
-        if (extent <= 0) continue;
+        /* An extent that overflows (centroids near +-DBL_MAX) cannot bin:
+           its fractions would be NaN, and a NaN cast to int is undefined. */
+        if (!(extent > 0) || extent > DBL_MAX) continue;
         for (k = 0; k < RRV__BVH_BINS; ++k) {
             blo[k] = rrv__v3(DBL_MAX, DBL_MAX, DBL_MAX);
             bhi[k] = rrv__v3(-DBL_MAX, -DBL_MAX, -DBL_MAX);
@@ -983,8 +985,8 @@ static void rrv__bvh_split(rrv__bvh_build *b, int node_index, int first, int cou
         }
         for (i = first; i < first + count; ++i) {
             int p = b->prims[i];
-            int bin = (int)(RRV__BVH_BINS * (rrv__axis(b->centroids[p], axis) - cmin) / extent);
-            if (bin >= RRV__BVH_BINS) bin = RRV__BVH_BINS - 1;
+            double f = RRV__BVH_BINS * ((rrv__axis(b->centroids[p], axis) - cmin) / extent);
+            int bin = !(f > 0) ? 0 : f >= RRV__BVH_BINS ? RRV__BVH_BINS - 1 : (int)f;
             blo[bin] = rrv__vmin(blo[bin], b->los[p]);
             bhi[bin] = rrv__vmax(bhi[bin], b->his[p]);
             bcount[bin]++;
@@ -2361,24 +2363,30 @@ static void rrv__medium_Le(const rrv_medium *m, rrv_vec3 p, double given_scale, 
 /* ==== integrators: delta and ratio tracking, refraction, eikonal marching, =====
    lights, the path tracer, and the public render and trace calls. */
 
-/* ---- tracking: a DDA walker over one medium's majorant grid ------------------ */
+/* ---- majorant traversal: a DDA over one medium's majorant grid ----------------
+   Like pbrt-v4's DDAMajorantIterator: the part of a ray inside a medium's
+   box, cell by cell, each piece with the majorant that bounds the medium's
+   extinction there, plus the refraction event rate when null events must
+   also refract (the seed's Poisson scheme). Delta tracking, ratio tracking
+   and the refraction events of rrv_trace_ray all walk it. */
 
 #define RRV__MAX_MEDIA 64
 
-typedef struct rrv__walker {
-    const rrv_medium *medium;
+typedef struct rrv__majorant_segment {
+    double t0, t1;   /* the piece of the ray o + t d inside one cell */
+    double majorant; /* 1/m, bounds the extinction (plus refraction rate) there */
+} rrv__majorant_segment;
+
+typedef struct rrv__majorant_iterator {
     const struct rrv__majorant_grid *grid;
     int with_refraction;  /* add the refraction event rate to the majorant */
-    double density_weight;/* 1, or 0 to sample refraction events only (rrv trace) */
+    double density_weight;/* 1, or 0 to see refraction events only (rrv trace) */
     double mu_eta_fixed, inv_tolerance;
-    double t, t_end;      /* current and last parameter inside the box */
+    double t, t_end;      /* where the next segment starts; where the ray leaves the box */
     int cell[3], step[3];
     double t_next[3], t_delta[3];
-    double t_event, majorant; /* pending tentative collision and its majorant */
-    long budget;          /* tentative collisions left before the walk is cut */
-    int cut;              /* the budget ran out: t_event is DBL_MAX, yet the walk
-                             did not leave the box */
-} rrv__walker;
+    int done;
+} rrv__majorant_iterator;
 
 /* The majorant cell holding p (clamped into the grid), per axis and as an
    index into the per-cell arrays. */
@@ -2393,14 +2401,15 @@ static size_t rrv__majorant_cell(const struct rrv__majorant_grid *g, rrv_vec3 p,
     return ((size_t)cell[2] * (size_t)g->n[1] + (size_t)cell[1]) * (size_t)g->n[0] + (size_t)cell[0];
 }
 
-static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
-                             rrv_vec3 o, rrv_vec3 d, double tmax)
+/* Sets the iterator on the ray o + t d, t in [0, tmax). Returns 0 if the
+   ray misses the box or the medium has nothing to collide with. */
+static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_medium *m, int with_refraction,
+                                        const rrv_settings *s, rrv_vec3 o, rrv_vec3 d, double tmax)
 {
     const struct rrv__majorant_grid *g = m->majorant;
     rrv_vec3 inv = rrv__v3(1.0 / d.x, 1.0 / d.y, 1.0 / d.z), p;
     double t0 = 0, t1 = tmax;
     int a;
-    /* A medium with nothing to collide with has no events to walk. */
     if (g->empty && !(with_refraction && g->grad_max)) return 0;
     for (a = 0; a < 3; ++a) {
         double ia = rrv__axis(inv, a), oa = rrv__axis(o, a);
@@ -2410,14 +2419,85 @@ static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refra
         t1 = rrv__mind(t1, tb);
     }
     if (!(t0 < t1)) return 0;
+    it->grid = g;
+    it->with_refraction = with_refraction && g->grad_max != NULL;
+    it->density_weight = 1.0;
+    it->mu_eta_fixed = s->mu_eta;
+    it->inv_tolerance = 1.0 / s->bend_tolerance;
+    it->t = t0;
+    it->t_end = t1;
+    it->done = 0;
+    p = rrv__madd(o, d, t0);
+    rrv__majorant_cell(g, p, it->cell);
+    for (a = 0; a < 3; ++a) {
+        double lo = rrv__axis(g->lo, a), cs = rrv__axis(g->cell, a), da = rrv__axis(d, a);
+        int c = it->cell[a];
+        if (da > 0) {
+            it->step[a] = 1;
+            it->t_next[a] = (lo + (c + 1) * cs - rrv__axis(o, a)) / da;
+            it->t_delta[a] = cs / da;
+        } else if (da < 0) {
+            it->step[a] = -1;
+            it->t_next[a] = (lo + c * cs - rrv__axis(o, a)) / da;
+            it->t_delta[a] = -cs / da;
+        } else {
+            it->step[a] = 0;
+            it->t_next[a] = DBL_MAX;
+            it->t_delta[a] = DBL_MAX;
+        }
+    }
+    return 1;
+}
+
+/* The next cell's segment; 0 once the ray has left the box. */
+static int rrv__majorant_iterator_next(rrv__majorant_iterator *it, rrv__majorant_segment *seg)
+{
+    const struct rrv__majorant_grid *g = it->grid;
+    int a = it->t_next[0] < it->t_next[1] ? (it->t_next[0] < it->t_next[2] ? 0 : 2)
+                                          : (it->t_next[1] < it->t_next[2] ? 1 : 2);
+    size_t c = ((size_t)it->cell[2] * (size_t)g->n[1] + (size_t)it->cell[1]) * (size_t)g->n[0] + (size_t)it->cell[0];
+    if (it->done) return 0;
+    seg->t0 = it->t;
+    seg->t1 = rrv__mind(it->t_next[a], it->t_end);
+    seg->majorant = g->density_max[c] * g->sigma_t_max * it->density_weight;
+    if (it->with_refraction)
+        seg->majorant += it->mu_eta_fixed > 0 ? it->mu_eta_fixed : g->grad_max[c] * it->inv_tolerance;
+    it->t = seg->t1;
+    if (seg->t1 >= it->t_end) {
+        it->done = 1;
+    } else {
+        it->cell[a] += it->step[a];
+        if (it->cell[a] < 0 || it->cell[a] >= g->n[a]) it->done = 1;
+        it->t_next[a] += it->t_delta[a];
+    }
+    return 1;
+}
+
+/* ---- tracking: tentative collisions along one medium's majorant segments ---- */
+
+typedef struct rrv__walker {
+    const rrv_medium *medium;
+    rrv__majorant_iterator cells;
+    rrv__majorant_segment cell;  /* the segment the walk is in */
+    int in_cell;                 /* cell is valid */
+    double t;                    /* the walk's position along the ray */
+    double t_event, majorant;    /* pending tentative collision and its majorant */
+    long budget;                 /* tentative collisions left before the walk is cut */
+    int cut;                     /* the budget ran out: t_event is DBL_MAX, yet the
+                                    walk did not leave the box */
+} rrv__walker;
+
+static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
+                             rrv_vec3 o, rrv_vec3 d, double tmax)
+{
+    const struct rrv__majorant_grid *g = m->majorant;
+    double t0, t1;
+    if (!rrv__majorant_iterator_start(&w->cells, m, with_refraction, s, o, d, tmax)) return 0;
+    t0 = w->cells.t;
+    t1 = w->cells.t_end;
     w->medium = m;
-    w->grid = g;
-    w->with_refraction = with_refraction && g->grad_max != NULL;
-    w->density_weight = 1.0;
-    w->mu_eta_fixed = s->mu_eta;
-    w->inv_tolerance = 1.0 / s->bend_tolerance;
+    w->in_cell = 0;
     w->t = t0;
-    w->t_end = t1;
     w->cut = 0;
     {
         /* The count of tentative collisions on the chord is Poisson with a
@@ -2425,74 +2505,43 @@ static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refra
            times that mean is never reached by a correct walk (probability
            below 1e-30); only a hostile scene reaches the fixed cap. */
         double mu = (double)g->density_peak * g->sigma_t_max, bound;
-        if (w->with_refraction) mu += s->mu_eta > 0 ? s->mu_eta : g->grad_peak / s->bend_tolerance;
+        if (w->cells.with_refraction) mu += s->mu_eta > 0 ? s->mu_eta : g->grad_peak / s->bend_tolerance;
         bound = 64.0 + 4.0 * mu * (t1 - t0);
         w->budget = bound < (double)RRV_MAX_SEGMENT_EVENTS ? (long)bound : RRV_MAX_SEGMENT_EVENTS;
-    }
-    p = rrv__madd(o, d, t0);
-    rrv__majorant_cell(g, p, w->cell);
-    for (a = 0; a < 3; ++a) {
-        double lo = rrv__axis(g->lo, a), cs = rrv__axis(g->cell, a), da = rrv__axis(d, a);
-        int c = w->cell[a];
-        if (da > 0) {
-            w->step[a] = 1;
-            w->t_next[a] = (lo + (c + 1) * cs - rrv__axis(o, a)) / da;
-            w->t_delta[a] = cs / da;
-        } else if (da < 0) {
-            w->step[a] = -1;
-            w->t_next[a] = (lo + c * cs - rrv__axis(o, a)) / da;
-            w->t_delta[a] = -cs / da;
-        } else {
-            w->step[a] = 0;
-            w->t_next[a] = DBL_MAX;
-            w->t_delta[a] = DBL_MAX;
-        }
     }
     w->t_event = DBL_MAX;
     return 1;
 }
 
-static void rrv__walker_refraction_only(rrv__walker *w) { w->density_weight = 0.0; }
-
-static double rrv__walker_cell_majorant(const rrv__walker *w)
-{
-    const struct rrv__majorant_grid *g = w->grid;
-    size_t c = ((size_t)w->cell[2] * (size_t)g->n[1] + (size_t)w->cell[1]) * (size_t)g->n[0] + (size_t)w->cell[0];
-    double mu = g->density_max[c] * g->sigma_t_max * w->density_weight;
-    if (w->with_refraction)
-        mu += w->mu_eta_fixed > 0 ? w->mu_eta_fixed : g->grad_max[c] * w->inv_tolerance;
-    return mu;
-}
+static void rrv__walker_refraction_only(rrv__walker *w) { w->cells.density_weight = 0.0; }
 
 /* Moves the walker to its next tentative collision (t_event), or sets
-   t_event = DBL_MAX when it leaves the box first. Free flights restart at
-   each cell boundary, which the memorylessness of the exponential allows. */
+   t_event = DBL_MAX when it leaves the box first. A free flight that
+   crosses into the next cell restarts there with that cell's majorant,
+   which the memorylessness of the exponential allows. */
 static void rrv__walker_advance(rrv__walker *w, rrv__rng *rng, uint64_t *events)
 {
     for (;;) {
-        int a = w->t_next[0] < w->t_next[1] ? (w->t_next[0] < w->t_next[2] ? 0 : 2)
-                                            : (w->t_next[1] < w->t_next[2] ? 1 : 2);
-        double cell_end = rrv__mind(w->t_next[a], w->t_end);
-        double mu = rrv__walker_cell_majorant(w);
-        if (mu > 0) {
-            double t = w->t + rrv__sample_free_flight(mu, rng);
-            if (t < cell_end) {
+        if (!w->in_cell) {
+            if (!rrv__majorant_iterator_next(&w->cells, &w->cell)) break;
+            w->in_cell = 1;
+        }
+        if (w->cell.majorant > 0) {
+            double t = w->t + rrv__sample_free_flight(w->cell.majorant, rng);
+            if (t < w->cell.t1) {
                 if (--w->budget < 0) {
                     w->cut = 1;
                     break;
                 }
                 w->t = t;
                 w->t_event = t;
-                w->majorant = mu;
+                w->majorant = w->cell.majorant;
                 ++*events;
                 return;
             }
         }
-        w->t = cell_end;
-        if (cell_end >= w->t_end) break;
-        w->cell[a] += w->step[a];
-        if (w->cell[a] < 0 || w->cell[a] >= w->grid->n[a]) break;
-        w->t_next[a] += w->t_delta[a];
+        w->t = w->cell.t1;
+        w->in_cell = 0;
     }
     w->t_event = DBL_MAX;
 }
@@ -3412,7 +3461,10 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             }
             {
                 rrv_vec3 d_in = d;
-                d = rrv__hg_sample(g, d_in, rrv__uniform(rng), rrv__uniform(rng));
+                /* two statements: C leaves the order of arguments unspecified,
+                   and gcc and clang once drew these in opposite orders */
+                double u2 = rrv__uniform(rng), u1 = rrv__uniform(rng);
+                d = rrv__hg_sample(g, d_in, u1, u2);
                 prev_pdf = rrv__hg_eval(g, rrv__dot(d_in, d));
             }
             o = vertex = x;
@@ -3459,7 +3511,10 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                     }
                 }
             }
-            d = rrv__sample_cosine_hemisphere(n, rrv__uniform(rng), rrv__uniform(rng));
+            {
+                double u2 = rrv__uniform(rng), u1 = rrv__uniform(rng); /* in this order on every compiler */
+                d = rrv__sample_cosine_hemisphere(n, u1, u2);
+            }
             prev_pdf = fmax(rrv__dot(n, d), 0.0) * RRV__INV_PI;
             if (!(prev_pdf > 0)) break;
             for (c = 0; c < 3; ++c) path.beta[c] *= albedo[c];
@@ -3667,7 +3722,8 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
                 double L[3];
                 rrv_vec3 d;
                 rrv__rng_seed(&rng, scene->settings.seed, pixel, (uint64_t)s);
-                d = rrv__camera_ray(&frame, &scene->camera, x + rrv__uniform(&rng), y + rrv__uniform(&rng));
+                double jy = rrv__uniform(&rng), jx = rrv__uniform(&rng); /* in this order on every compiler */
+                d = rrv__camera_ray(&frame, &scene->camera, x + jx, y + jy);
                 rrv__trace_path(&ctx, frame.eye, d, &rng, L);
                 ++ctx.stats.samples;
                 /* NaN fails the comparison too */
