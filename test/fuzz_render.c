@@ -1,0 +1,60 @@
+/* libFuzzer harness that renders: each input is loaded as a scene (as in
+   fuzz_scene.c, see test/fuzz_files.h) and rendered at 4x4 pixels, one
+   sample each, with the scene's integrator and at most 8 bounces. Flagged
+   (__builtin_trap, so libFuzzer saves the input):
+   - a pixel that is not finite: finite inputs must give finite images;
+   - rrv_render_rect refusing a scene that loaded;
+   - a render past FUZZ_RENDER_SECONDS of CPU time (default 2 s, checked
+     after every pixel), which is ~1000x what any scene in scenes/ takes
+     here under ASan: so much work for 16 samples means a loop without a
+     sane bound. A sample that never returns is caught by libFuzzer's
+     -timeout instead (`make fuzz-run` passes 20 s).
+   `make fuzz`, then `make fuzz-run`, or by hand:
+       rm -rf /tmp/render-seeds && cp -r scenes /tmp/render-seeds
+       ./build-fuzz/fuzz_render -max_total_time=60 -timeout=20 /tmp/render-seeds */
+#define RRV_IMPLEMENTATION
+#include "../rrv.h"
+#include "fuzz_files.h"
+#include <time.h>
+
+#ifndef FUZZ_RENDER_SECONDS
+#define FUZZ_RENDER_SECONDS 2.0
+#endif
+#define FUZZ_SIZE 4
+#define FUZZ_MAX_DEPTH 8
+
+int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size);
+int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size)
+{
+    fuzz_files files;
+    rrv_load_options opt;
+    rrv_scene *scene = NULL;
+    rrv_error err;
+    rrv_render_stats stats;
+    clock_t start;
+    int x, y, c;
+    size_t text_size = fuzz_split(data, size, &files, &opt);
+    rrv_result r = rrv_scene_parse((const char *)data, text_size, "fuzz.rrv", "dir", &opt, &scene, &err);
+    if (r != RRV_OK) {
+        if (!fuzz_error_ok(r, scene, &err)) __builtin_trap();
+        return 0;
+    }
+    /* Only the image shrinks: preparation does not depend on the camera's
+       resolution, and fewer bounces bound the work of honest scenes. */
+    scene->camera.width = FUZZ_SIZE;
+    scene->camera.height = FUZZ_SIZE;
+    if (scene->settings.max_depth > FUZZ_MAX_DEPTH) scene->settings.max_depth = FUZZ_MAX_DEPTH;
+    memset(&stats, 0, sizeof stats);
+    start = clock();
+    for (y = 0; y < FUZZ_SIZE; ++y)
+        for (x = 0; x < FUZZ_SIZE; ++x) {
+            float pixel[3] = {0, 0, 0};
+            if (rrv_render_rect(scene, x, y, x + 1, y + 1, 0, 1, pixel, 1, &stats) != RRV_OK) __builtin_trap();
+            for (c = 0; c < 3; ++c)
+                if (!isfinite(pixel[c])) __builtin_trap();
+            if ((double)(clock() - start) > FUZZ_RENDER_SECONDS * CLOCKS_PER_SEC) __builtin_trap();
+        }
+    if (stats.samples != FUZZ_SIZE * FUZZ_SIZE) __builtin_trap();
+    rrv_scene_free(scene);
+    return 0;
+}
