@@ -1,7 +1,9 @@
 # rrv build. `make` builds ./rrv; `make test` builds and runs every test;
-# `make test SAN=1` does the same under AddressSanitizer + UBSan;
+# `make test SAN=1` does the same under AddressSanitizer + UBSan (with
+# CC=clang also float-to-int overflow checks, as CI runs it);
 # `make THREADS=0` builds without POSIX threads; `make fuzz` builds the
-# libFuzzer harnesses (clang); `make bench` runs the benchmarks.
+# libFuzzer harnesses (clang) and `make fuzz-run` runs each for a while;
+# `make bench` runs the benchmarks.
 CC      ?= cc
 OPT     ?= -O2 -g
 WARN    := -std=c99 -Wall -Wextra -pedantic
@@ -17,6 +19,11 @@ endif
 ifeq ($(SAN),1)
 BUILD   := build-san
 SANFLAGS := -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer
+# gcc's UBSan does not check float-to-int conversions that overflow; clang's
+# does, so CI runs `make test SAN=1 CC=clang`.
+ifneq ($(findstring clang,$(shell $(CC) --version 2>/dev/null)),)
+SANFLAGS += -fsanitize=float-cast-overflow
+endif
 else
 BUILD   := build
 SANFLAGS :=

@@ -6,7 +6,7 @@
 # written), in fork mode so that one finding does not end the run: every
 # crash, sanitizer report and timeout is saved under build-fuzz/findings/
 # as HARNESS-crash-*, HARNESS-timeout-*, ... and the first line of its
-# report is printed. Exit status: 1 if a harness listed in FUZZ_GATING
+# report is printed, with the input itself (base64) when it is small. Exit status: 1 if a harness listed in FUZZ_GATING
 # (default: all given) found something or could not run, else 0.
 set -u
 seconds=$1
@@ -111,6 +111,10 @@ for h in "$@"; do
                  sed 's/^.*rrv\.h/rrv.h/') ;;
         esac
         echo "  $findings/$h-$(basename "$a"): ${why:-see its report with $bin FILE}"
+        # CI logs outlive the build folder: small inputs are printed whole
+        if [ "$(wc -c < "$a")" -le 2048 ]; then
+            echo "    base64 (decode with base64 -d): $(base64 < "$a" | tr -d '\n')"
+        fi
     done
     [ $found -gt 0 ] && [ $gates = yes ] && status=1
 done
