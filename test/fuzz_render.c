@@ -8,10 +8,10 @@
      after every pixel), which is ~1000x what any scene in scenes/ takes
      here under ASan: so much work for 16 samples means a loop without a
      sane bound. A sample that never returns is caught by libFuzzer's
-     -timeout instead (`make fuzz-run` passes 20 s).
+     -timeout instead (`make fuzz-run` passes 10 s).
    `make fuzz`, then `make fuzz-run`, or by hand:
        rm -rf /tmp/render-seeds && cp -r scenes /tmp/render-seeds
-       ./build-fuzz/fuzz_render -max_total_time=60 -timeout=20 /tmp/render-seeds */
+       ./build-fuzz/fuzz_render -max_total_time=60 -timeout=10 /tmp/render-seeds */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "fuzz_files.h"
