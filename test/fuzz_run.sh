@@ -79,13 +79,12 @@ for h in "$@"; do
     dict=
     case $h in scene|render) dict=-dict=test/fuzz_scene.dict ;; obj) dict=-dict=test/fuzz_obj.dict ;;
     pfm) dict=-dict=test/fuzz_pfm.dict ;; esac
-    # -timeout (wall clock): an input running this long hangs. fuzz_render
-    # flags renders past 2 s of CPU itself, so its 10 s only catch a sample
-    # that never returns, with room for a busy machine, and cost little
-    # while such hangs are still found. -rss_limit_mb: grids are capped at
-    # 64 KiB, so honest inputs stay far below it.
+    # -timeout (wall clock): an input running this long hangs (fuzz_render
+    # flags runaway work itself, after 2e6 events or 10 s of CPU, so this
+    # only catches a sample that never returns, with room for a busy
+    # machine). -rss_limit_mb: grids are capped at 64 KiB, so honest
+    # inputs stay far below it.
     timeout=20
-    [ "$h" = render ] && timeout=10
     "$bin" $dict -fork=1 -ignore_crashes=1 -ignore_timeouts=1 -ignore_ooms=1 \
         -max_total_time="$seconds" -timeout=$timeout -rss_limit_mb=2048 \
         -artifact_prefix="$work/artifacts/" "$work/seeds" > "$work/log" 2>&1
@@ -111,8 +110,16 @@ for h in "$@"; do
         shown=$((shown + 1))
         case $(basename "$a") in
         timeout-*) why="runs past -timeout ($timeout s)" ;;
-        *) why=$("$bin" -timeout=$timeout "$a" 2>&1 | grep -m 1 -E 'runtime error|ERROR: (AddressSanitizer|libFuzzer)' |
-                 sed 's/^.*rrv\.h/rrv.h/') ;;
+        *)
+            report=$("$bin" -timeout=$timeout "$a" 2>&1)
+            why=$(printf '%s\n' "$report" | grep -m 1 -E 'runtime error|ERROR: AddressSanitizer' |
+                  sed 's/^.*rrv\.h/rrv.h/')
+            # a harness check (abort or trap): name it by its source line
+            at=$(printf '%s\n' "$report" | grep -m 1 -o "fuzz_$h\.c:[0-9]*")
+            if [ -z "$why" ] && [ -n "$at" ]; then
+                why="check at test/$at failed: $(sed -n "${at#*:}p" "test/fuzz_$h.c" | sed 's/^ *//')"
+            fi
+            ;;
         esac
         echo "  $findings/$h-$(basename "$a"): ${why:-see its report with $bin FILE}"
         # CI logs outlive the build folder: small inputs are printed whole
