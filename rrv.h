@@ -384,6 +384,8 @@ typedef struct rrv_settings {
     int majorant_cells;   /* majorant grid cells per axis; 0 = automatic, 1 = one
                              global majorant (for comparisons). Used by prepare. */
     rrv_ior_interpolation ior_interpolation; /* grid refractivity; used by prepare */
+    int max_bake_samples; /* caps what prepare builds per axis (see rrv_load_options);
+                             0 = no cap beyond the defaults */
 } rrv_settings;
 
 struct rrv__majorant_grid;
@@ -459,6 +461,15 @@ typedef struct rrv_load_options {
     void *read_file_user;
     rrv_input_func on_input;     /* NULL: not called */
     void *on_input_user;
+    int max_bake_samples;        /* 0 = default. Otherwise at most this many samples
+                                    per axis (at least 2) in the noise fields prepare
+                                    bakes (default at most 128) and at most this many
+                                    majorant cells per axis (default up to 64, or
+                                    render majorant_cells). For fuzzers and quick
+                                    previews: prepare gets cheap, the noise renders
+                                    smoother and the majorants looser (still bounds).
+                                    Kept in scene->settings.max_bake_samples, so a
+                                    later rrv_scene_prepare keeps it. */
 } rrv_load_options;
 
 #define RRV_DEFAULT_MAX_GRID_BYTES ((size_t)2 << 30)
@@ -1998,7 +2009,7 @@ static rrv_vec3 rrv__lattice_point(rrv_vec3 lo, rrv_vec3 hi, const int n[3], int
 /* Bakes a noise field over the medium box: four samples to the finest
    octave's wavelength (at two, trilinear interpolation of T and of r = k/T
    already disagreed by 10% in the bending of heat haze), at most 128
-   samples an axis (8 MiB a field). */
+   samples an axis (8 MiB a field) or settings.max_bake_samples. */
 static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, const rrv_field *f, rrv_field *out,
                                   size_t *bytes, rrv_error *err)
 {
@@ -2006,13 +2017,15 @@ static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, c
     double finest = nz->frequency * pow(nz->lacunarity, nz->octaves - 1);
     rrv_vec3 ext = rrv__sub(m->hi, m->lo);
     double longest = rrv__maxd(ext.x, rrv__maxd(ext.y, ext.z));
-    double voxel = rrv__maxd(0.25 / finest, longest / 127.0);
-    int n[3], a, x, y, z;
+    int cap = scene->settings.max_bake_samples, n[3], a, x, y, z;
+    double voxel;
     size_t count, i = 0;
     float *data;
+    cap = cap <= 0 || cap > 128 ? 128 : cap < 2 ? 2 : cap;
+    voxel = rrv__maxd(0.25 / finest, longest / (cap - 1));
     for (a = 0; a < 3; ++a) {
         double cells = ceil(rrv__axis(ext, a) / voxel);
-        n[a] = cells < 1 ? 2 : cells > 127 ? 128 : (int)cells + 1;
+        n[a] = cells < 1 ? 2 : cells > cap - 1 ? cap : (int)cells + 1;
     }
     count = (size_t)n[0] * (size_t)n[1] * (size_t)n[2];
     {
@@ -2237,6 +2250,9 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
             }
         }
     }
+    for (x = 0; x < 3; ++x)
+        if (scene->settings.max_bake_samples > 0 && g->n[x] > scene->settings.max_bake_samples)
+            g->n[x] = scene->settings.max_bake_samples;
     cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
     g->lo = m->lo;
     g->hi = m->hi;
@@ -6769,6 +6785,7 @@ RRV_DEF rrv_result rrv_scene_parse(const char *text, size_t size, const char *na
     s->settings.majorant_cells = 0;
     s->settings.ambient_ior = 1.0;
     s->max_grid_bytes = opt ? opt->max_grid_bytes : 0;
+    if (opt && opt->max_bake_samples > 0) s->settings.max_bake_samples = opt->max_bake_samples;
     memset(&p, 0, sizeof p);
     p.scene = s;
     p.name = s->path;
