@@ -3149,14 +3149,39 @@ typedef struct rrv__flight {
     rrv_vec3 direction;      /* after bending */
 } rrv__flight;
 
-/* Delta tracking along o + t d for t < tmax through every medium at once:
-   each medium's tentative collisions form an independent Poisson process,
-   so the earliest pending one across media is the next collision. Emission
-   is gathered at every tentative collision (the collision estimator, as in
-   pbrt-v4's volpath). The hero channel picks absorption, scattering or null;
-   the other channels are reweighted by spectral MIS. */
-static int rrv__sample_free_flight_path(rrv__context *ctx, rrv__path *path, rrv_vec3 o, rrv_vec3 d,
-                                        double tmax, rrv__rng *rng, rrv__flight *out)
+/* Absorb: emission. The collision estimator (as pbrt-v4's volpath) adds
+   sigma_a Le / mu at every tentative collision, not only at absorptions, so
+   emission converges without waiting for the rare absorption event. */
+static void rrv__gather_emission(const rrv__context *ctx, rrv__path *path, const rrv_medium *m, rrv_vec3 x,
+                                 const rrv__coeffs *c, double mu)
+{
+    double Le[3], k = rrv__path_mis(path) / mu, given = 1.0;
+    int ch;
+    if (ctx->bends) {
+        double eta = 1.0 + rrv__scene_refractivity(ctx->scene, x, NULL);
+        given = ctx->eta_camera2 / (eta * eta);
+    }
+    rrv__medium_Le(m, x, given, ctx->thermal_scale, Le);
+    for (ch = 0; ch < 3; ++ch) path->L[ch] += path->beta[ch] * c->sigma_a[ch] * Le[ch] * k;
+}
+
+/* Refractive delta tracking: the seed paper's Algorithm 1, along one straight
+   segment o + t d, t < tmax. With refract_nulls off (classic, and the comb
+   and eikonal integrators, which bend only at segment ends) it is classic
+   null-scattering delta tracking (Miller et al. 2019).
+   Every medium's tentative collisions form an independent Poisson process
+   with its majorant, so the earliest pending one across media is the next
+   collision. The hero channel chooses the event; the other channels are
+   reweighted by spectral MIS. Returns at the first real event (the path
+   tracer takes it from there) or when the ray bends, so that the next
+   segment starts straight from the bend.
+   The comb (the default refractive scheme) is this loop with its
+   refraction taken out of the null events: the walk pauses at regularly
+   spaced points (rrv__comb_step), which free-flight sampling allows since
+   it is memoryless. Measured: second order where Algorithm 1 is first
+   (README, "Accuracy against closed forms"). */
+static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rrv_vec3 o, rrv_vec3 d, double tmax,
+                                          rrv__rng *rng, rrv__flight *out)
 {
     rrv__walker walkers[RRV__MAX_MEDIA];
     int n = rrv__start_walkers(ctx, walkers, ctx->refract_nulls, o, d, tmax, rng, &ctx->stats.events);
@@ -3167,6 +3192,8 @@ static int rrv__sample_free_flight_path(rrv__context *ctx, rrv__path *path, rrv_
         rrv_vec3 x;
         rrv__coeffs c;
         double mu, pa, ps, u;
+        /* 1. sample a distance with the majorant: the earliest tentative
+              collision of all media (each walker has drawn its own) */
         for (i = 1; i < n; ++i)
             if (walkers[i].t_event < walkers[best].t_event) best = i;
         w = &walkers[best];
@@ -3175,20 +3202,16 @@ static int rrv__sample_free_flight_path(rrv__context *ctx, rrv__path *path, rrv_
         mu = w->majorant;
         x = rrv__madd(o, d, w->t_event);
         rrv__medium_coeffs(m, x, &c);
-        if (rrv__medium_emits(m)) {
-            double Le[3], k = rrv__path_mis(path) / mu, given = 1.0;
-            if (ctx->bends) {
-                double eta = 1.0 + rrv__scene_refractivity(ctx->scene, x, NULL);
-                given = ctx->eta_camera2 / (eta * eta);
-            }
-            rrv__medium_Le(m, x, given, ctx->thermal_scale, Le);
-            for (ch = 0; ch < 3; ++ch) path->L[ch] += path->beta[ch] * c.sigma_a[ch] * Le[ch] * k;
-        }
+        /* 2. absorb: emission (gathered at every collision, see above) */
+        if (rrv__medium_emits(m)) rrv__gather_emission(ctx, path, m, x, &c, mu);
+        /* 3. sample the event A, S or N with probabilities sigma_a / mu,
+              sigma_s / mu and sigma_n / mu */
         pa = c.sigma_a[path->hero] / mu;
         ps = c.sigma_s[path->hero] / mu;
         u = rrv__uniform(rng);
         if (u < pa) return RRV__FLIGHT_ABSORBED;
         if (u < pa + ps) {
+            /* scatter: the path tracer samples the phase function here */
             rrv__path_reweight(path, c.sigma_s);
             out->t = w->t_event;
             out->medium = m;
@@ -3199,6 +3222,8 @@ static int rrv__sample_free_flight_path(rrv__context *ctx, rrv__path *path, rrv_
             for (ch = 0; ch < 3; ++ch) sigma_n[ch] = mu - c.sigma_a[ch] - c.sigma_s[ch];
             if (sigma_n[0] != sigma_n[1] || sigma_n[1] != sigma_n[2]) rrv__path_reweight(path, sigma_n);
         }
+        /* 4. null: refract by Snell's law with the ratio of the IOR the ray
+              carries to the IOR here and the normal grad eta here */
         if (ctx->refract_nulls) {
             rrv_vec3 nd = rrv__bend_at_null_event(&path->bender, ctx->scene, x, d);
             if (nd.x != d.x || nd.y != d.y || nd.z != d.z) {
@@ -3207,6 +3232,7 @@ static int rrv__sample_free_flight_path(rrv__context *ctx, rrv__path *path, rrv_
                 return RRV__FLIGHT_BENT;
             }
         }
+        /* and go on: this medium's next tentative collision */
         rrv__walker_advance(w, rng, &ctx->stats.events);
         if (w->t_event == DBL_MAX) {
             if (w->cut) return RRV__FLIGHT_CUT;
@@ -3439,7 +3465,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
         has_hit = ctx->bends && path.bender.surface_free
                       ? 0 : rrv__intersect_scene(
                             scene, o, d, segment < DBL_MAX ? segment + rrv__face_gap(rrv__madd(o, d, segment)) : DBL_MAX, &hit);
-        outcome = rrv__sample_free_flight_path(ctx, &path, o, d, has_hit ? hit.t : segment, rng, &flight);
+        outcome = rrv__refractive_delta_tracking(ctx, &path, o, d, has_hit ? hit.t : segment, rng, &flight);
         if (outcome == RRV__FLIGHT_ABSORBED) break;
         if (outcome == RRV__FLIGHT_CUT) {
             ++ctx->stats.paths_cut;
