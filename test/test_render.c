@@ -150,7 +150,7 @@ static void check_transmittance(rrv_scene *s, rrv_vec3 o, rrv_vec3 d, double tma
         rrv__ratio_tracking_transmittance(&ctx, o, d, tmax, &rng, T);
         stats_add(&ratio, T[1]);
         rrv__path_start(&path, &rng);
-        outcome = rrv__sample_free_flight_path(&ctx, &path, o, d, tmax, &rng, &flight);
+        outcome = rrv__refractive_delta_tracking(&ctx, &path, o, d, tmax, &rng, &flight);
         stats_add(&delta, outcome == RRV__FLIGHT_PASSED ? path.beta[1] * rrv__path_mis(&path) : 0.0);
     }
     CHECKF(fabs(stats_mean(&ratio) - expected) < 4 * stats_se(&ratio), "%s: ratio tracking %g +- %g, exp(-tau) %g",
@@ -445,7 +445,7 @@ static void test_tracking_walks_are_bounded(void)
     CHECKF(ctx.stats.paths_cut == 1 && ctx.stats.cut_tracking == 1 && ctx.stats.events == RRV_MAX_SEGMENT_EVENTS,
            "cut %lu, events %lu", (unsigned long)ctx.stats.paths_cut, (unsigned long)ctx.stats.events);
     rrv__path_start(&path, &rng);
-    outcome = rrv__sample_free_flight_path(&ctx, &path, rrv__v3(-2, 0.1, 0.2), rrv__v3(1, 0, 0), DBL_MAX, &rng,
+    outcome = rrv__refractive_delta_tracking(&ctx, &path, rrv__v3(-2, 0.1, 0.2), rrv__v3(1, 0, 0), DBL_MAX, &rng,
                                            &flight);
     CHECK(outcome == RRV__FLIGHT_CUT && ctx.stats.events == 2 * RRV_MAX_SEGMENT_EVENTS);
     rrv_scene_free(s);
