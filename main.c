@@ -75,6 +75,10 @@ static const char render_help[] =
     "  --spp N                samples per pixel (default: the scene's)\n"
     "  --seed S               random seed, an integer >= 0 (default: the scene's)\n"
     "  --integrator NAME      classic, refractive or eikonal (default: the scene's)\n"
+    "  --nee MODE             refractive, eikonal: light sampling, straight (the\n"
+    "                         default: straight shadow rays, biased near\n"
+    "                         refracting media) or none (lights count only where\n"
+    "                         the bent path hits them: unbiased, noisier)\n"
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop\n"
@@ -899,6 +903,8 @@ typedef struct render_options {
     int has_seed;
     rrv_integrator integrator;
     int has_integrator;
+    rrv_nee nee;
+    int has_nee;
     int threads;
     double exposure;
     int crop[4], has_crop;
@@ -935,6 +941,13 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
         } else if (strcmp(arg, "--integrator") == 0) {
             if (!take_integrator(&args, 1, &opt->integrator)) return EXIT_USAGE;
             opt->has_integrator = 1;
+        } else if (strcmp(arg, "--nee") == 0) {
+            const char *mode;
+            if (!take_value(&args, arg, "none or straight", &mode)) return EXIT_USAGE;
+            if (strcmp(mode, "none") == 0) opt->nee = RRV_NEE_NONE;
+            else if (strcmp(mode, "straight") == 0) opt->nee = RRV_NEE_STRAIGHT;
+            else return usage_error(&args, "--nee needs none or straight, got \"%s\"", mode);
+            opt->has_nee = 1;
         } else if (strcmp(arg, "--threads") == 0) {
             if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer",
                           &opt->threads))
@@ -1023,6 +1036,7 @@ static int command_render(int argc, char **argv)
     if (opt.has_spp) scene->settings.spp = opt.spp;
     if (opt.has_seed) scene->settings.seed = opt.seed;
     if (opt.has_integrator) scene->settings.integrator = opt.integrator;
+    if (opt.has_nee) scene->settings.nee = opt.nee;
     if (!apply_refraction_options(scene, &opt.refraction)) {
         rrv_scene_free(scene);
         return EXIT_INPUT;

@@ -16,8 +16,7 @@
                  kick d(eta d) = grad eta h (second order); POISSON is the
                  seed paper's Snell refraction at every null event and
                  MIDPOINT its variant with the normal at the chord midpoint
-                 (both first order). NEE rays stay straight: near refractive
-                 media direct light is biased until manifold NEE lands.
+                 (both first order).
      eikonal     marches the ray equation d/ds(eta dx/ds) = grad eta with RK4
                  (default) or a symplectic leapfrog, step rrv_settings.step.
    Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2;
@@ -302,6 +301,20 @@ typedef enum rrv_ior_interpolation {
                                      gradient from one C2 function */
 } rrv_ior_interpolation;
 
+/* Next-event estimation (light sampling) in the refractive and eikonal
+   integrators; the classic integrator always uses straight NEE, which is
+   exact there (its rays are straight). */
+typedef enum rrv_nee {
+    RRV_NEE_DEFAULT = 0, /* STRAIGHT for now */
+    RRV_NEE_NONE,        /* no light sampling: lights, emitters and the sky
+                            count only where a (bent) path hits them, MIS
+                            weight 1. Unbiased; the reference. */
+    RRV_NEE_STRAIGHT     /* straight shadow rays, MIS against phase/BSDF
+                            sampling as if both sampled the same path: biased
+                            wherever a connection or the sampled continuation
+                            crosses a refracting medium */
+} rrv_nee;
+
 typedef struct rrv_settings {
     int spp;              /* samples per pixel, >= 1 */
     int max_depth;        /* scattering/bounce vertices per path, >= 1 */
@@ -316,6 +329,7 @@ typedef struct rrv_settings {
     int majorant_cells;   /* majorant grid cells per axis; 0 = automatic, 1 = one
                              global majorant (for comparisons). Used by prepare. */
     rrv_ior_interpolation ior_interpolation; /* grid refractivity; used by prepare */
+    rrv_nee nee;          /* refractive and eikonal: light sampling */
 } rrv_settings;
 
 struct rrv__majorant_grid;
@@ -2514,6 +2528,8 @@ typedef struct rrv__context {
     int comb;                /* refract at comb points */
     int eikonal;             /* march the ray equation through refractive media */
     int bends;               /* any of the three: radiance scales with eta^2 */
+    int sample_lights;       /* NEE on; off (nee none) every emitter found by
+                                the path itself counts with MIS weight 1 */
     double eta_camera2;      /* (1 + r at the camera)^2: radiance scales as eta^2 */
     double thermal_scale;    /* blackbody radiance at the camera over that in
                                 ambient air: (eta_camera / eta_ambient)^2 */
@@ -2883,7 +2899,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             double g = flight.medium->g;
             x = rrv__madd(o, d, flight.t);
             if (++depth > scene->settings.max_depth) break;
-            if (rrv__sample_light(scene, x, rng, &ls)) {
+            if (ctx->sample_lights && rrv__sample_light(scene, x, rng, &ls)) {
                 double phase = rrv__hg_eval(g, rrv__dot(d, ls.wi)), T[3];
                 rrv__light_transmittance(ctx, x, &ls, rng, T);
                 if (T[0] > 0 || T[1] > 0 || T[2] > 0) {
@@ -2903,7 +2919,8 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             double Le[3], w = 1.0;
             if (scene->environment.kind == RRV_ENV_NONE) break;
             rrv__environment_L(&scene->environment, d, Le);
-            if (prev_pdf > 0) w = rrv__power_heuristic(prev_pdf, RRV__INV_4PI / rrv__light_choices(scene));
+            if (prev_pdf > 0 && ctx->sample_lights)
+                w = rrv__power_heuristic(prev_pdf, RRV__INV_4PI / rrv__light_choices(scene));
             {
                 double k = w * rrv__eta_scale(ctx, rrv__madd(o, d, 1e30)) * rrv__path_mis(&path);
                 for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * Le[c] * k;
@@ -2918,7 +2935,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             x = hit.p;
             if ((s->L[0] > 0 || s->L[1] > 0 || s->L[2] > 0) && front) {
                 double w = 1.0;
-                if (prev_pdf > 0)
+                if (prev_pdf > 0 && ctx->sample_lights)
                     w = rrv__power_heuristic(prev_pdf, rrv__emitter_pdf(s, vertex, x, n) / rrv__light_choices(scene));
                 w *= rrv__eta_scale(ctx, x) * rrv__path_mis(&path);
                 for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * s->L[c] * w;
@@ -2927,7 +2944,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             if (!front) n = rrv__scale(n, -1.0);
             p = rrv__madd(x, n, rrv__offset_scale(x));
             rrv__material_albedo(&scene->materials[s->material], x, n, albedo);
-            if (rrv__sample_light(scene, p, rng, &ls)) {
+            if (ctx->sample_lights && rrv__sample_light(scene, p, rng, &ls)) {
                 double cosi = rrv__dot(n, ls.wi);
                 if (cosi > 0) {
                     double T[3];
@@ -3070,6 +3087,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     }
     ctx.eikonal = scene->settings.integrator == RRV_INTEGRATOR_EIKONAL;
     ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
+    ctx.sample_lights = !ctx.bends || scene->settings.nee != RRV_NEE_NONE;
     rrv__camera_setup(&scene->camera, &frame);
     r_camera = ctx.bends ? rrv__scene_refractivity(scene, frame.eye, NULL) : 0.0;
     ctx.eta_camera2 = (1.0 + r_camera) * (1.0 + r_camera);
@@ -4692,6 +4710,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"refraction", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|poisson|midpoint|comb"},
     {"majorantcells", RRV__SF_INT, 1, 0, 0.0, 256.0, NULL},
     {"iorinterp", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "trilinear|cubic"},
+    {"nee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "none|straight"},
 };
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
@@ -5360,6 +5379,7 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[8].given) s->refraction = rrv__sf_schemes[sl[8].choice];
     if (sl[9].given) s->majorant_cells = (int)sl[9].v[0];
     if (sl[10].given) s->ior_interpolation = sl[10].choice ? RRV_IOR_INTERP_CUBIC : RRV_IOR_INTERP_TRILINEAR;
+    if (sl[11].given) s->nee = sl[11].choice ? RRV_NEE_STRAIGHT : RRV_NEE_NONE;
     return RRV_OK;
 }
 
