@@ -19,6 +19,20 @@
                  (both first order).
      eikonal     marches the ray equation d/ds(eta dx/ds) = grad eta with RK4
                  (default) or a symplectic leapfrog, step rrv_settings.step.
+   NEXT-EVENT ESTIMATION (rrv_settings.nee, scene `render nee`, CLI --nee)
+     Refractive and eikonal integrators only; classic always samples lights
+     with straight shadow rays, which is exact for straight rays.
+     STRAIGHT    (the default for now) a straight shadow ray, ratio-tracked,
+                 combined by the power heuristic with the phase/BSDF-sampled
+                 continuation as though both sampled the same path. They do
+                 not: the continuation bends and the shadow ray does not, so
+                 wherever either crosses a refracting medium the sum is
+                 biased: a lens caustic comes out at half its radiance and
+                 white furnaces with refraction above 1 (test/test_nee.c).
+     NONE        no light sampling: lights, emitters and the sky count only
+                 where the bent path hits them, with MIS weight 1. Unbiased
+                 (furnaces give exactly 1), but noisy for small lights.
+     Curved NEE (connections along bent rays) is to become the default.
    Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2;
    blackbody emission is n^2 B where the IOR is n (Kirchhoff), so a fire does
    not dim by 1/n^2 on leaving a dense medium.
@@ -2848,7 +2862,9 @@ static double rrv__eta_scale(const rrv__context *ctx, rrv_vec3 p_emit)
 }
 
 /* One camera path: classic and refractive null-scattering path tracing with
-   NEE + MIS at every real scattering event and surface bounce. */
+   NEE + MIS at every real scattering event and surface bounce, or with no
+   NEE at all (nee none, bending integrators): then the path alone finds the
+   lights and every hit counts in full. */
 static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng *rng, double L[3])
 {
     const rrv_scene *scene = ctx->scene;

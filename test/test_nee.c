@@ -240,6 +240,18 @@ static void test_nee_key(void)
     }
 }
 
+static void test_nee_key_rejects_unknown_mode(void)
+{
+    static const char text[] = "camera eye 0 0 5 look 0 0 0\nrender integrator eikonal nee manifold\n";
+    rrv_scene *s = NULL;
+    rrv_error err;
+    rrv_result r = rrv_scene_parse(text, sizeof text - 1, "bad_nee.rrv", NULL, NULL, &s, &err);
+    CHECK(r == RRV_ERROR_PARSE && s == NULL);
+    CHECKF(err.line == 2 && strcmp(err.file, "bad_nee.rrv") == 0 &&
+               strcmp(err.message, "render: nee must be one of none|straight, got \"manifold\"") == 0,
+           "%s:%d: %s", err.file, err.line, err.message);
+}
+
 /* The classic integrator keeps its (exact) straight NEE whatever `nee` says:
    the same image bit for bit. */
 static void test_classic_ignores_nee(void)
@@ -277,6 +289,7 @@ int main(void)
     verbose = v && *v && *v != '0';
     (void)tb_shape; /* the caustic scene is parsed, not built */
     RUN(test_nee_key);
+    RUN(test_nee_key_rejects_unknown_mode);
     RUN(test_classic_ignores_nee);
     RUN(test_furnace_luneburg);
     RUN(test_furnace_blob);
