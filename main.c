@@ -77,8 +77,9 @@ static const char render_help[] =
     "  --integrator NAME      classic, refractive or eikonal (default: the scene's)\n"
     "  --nee MODE             refractive, eikonal: light sampling, straight (the\n"
     "                         default: straight shadow rays, biased near\n"
-    "                         refracting media) or none (lights count only where\n"
-    "                         the bent path hits them: unbiased, noisier)\n"
+    "                         refracting media), none (lights count only where\n"
+    "                         the bent path hits them: unbiased, noisier) or\n"
+    "                         shoot (eikonal: connections along bent rays)\n"
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop\n"
@@ -723,6 +724,13 @@ static void add_stats(rrv_render_stats *into, const rrv_render_stats *from)
     into->paths += from->paths;
     into->events += from->events;
     into->nonfinite += from->nonfinite;
+    into->solves += from->solves;
+    into->solves_converged += from->solves_converged;
+    into->solve_iterations += from->solve_iterations;
+    into->solve_segments += from->solve_segments;
+    into->solve_connections += from->solve_connections;
+    into->solve_trials += from->solve_trials;
+    into->solves_unsupported += from->solves_unsupported;
 }
 
 static void *render_worker(void *arg)
@@ -943,10 +951,11 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
             opt->has_integrator = 1;
         } else if (strcmp(arg, "--nee") == 0) {
             const char *mode;
-            if (!take_value(&args, arg, "none or straight", &mode)) return EXIT_USAGE;
+            if (!take_value(&args, arg, "none, straight or shoot", &mode)) return EXIT_USAGE;
             if (strcmp(mode, "none") == 0) opt->nee = RRV_NEE_NONE;
             else if (strcmp(mode, "straight") == 0) opt->nee = RRV_NEE_STRAIGHT;
-            else return usage_error(&args, "--nee needs none or straight, got \"%s\"", mode);
+            else if (strcmp(mode, "shoot") == 0) opt->nee = RRV_NEE_SHOOT;
+            else return usage_error(&args, "--nee needs none, straight or shoot, got \"%s\"", mode);
             opt->has_nee = 1;
         } else if (strcmp(arg, "--threads") == 0) {
             if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer",
@@ -992,6 +1001,16 @@ static void print_render_summary(int width, int height, int spp, double seconds,
             height, spp, seconds, samples_rate, paths_rate);
     if (stats->nonfinite > 0)
         fprintf(stderr, " (%" PRIu64 " non-finite samples discarded)", stats->nonfinite);
+    if (stats->solves > 0) {
+        double n = (double)stats->solves, conv = (double)stats->solves_converged;
+        fprintf(stderr, "; shoot: %" PRIu64 " solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, "
+                "%.0f segments a chain", stats->solves, 100.0 * conv / n, (double)stats->solve_iterations / n,
+                stats->solve_connections ? (double)stats->solve_trials / (double)stats->solve_connections : 0.0,
+                conv > 0 ? (double)stats->solve_segments / conv : 0.0);
+    }
+    if (stats->solves_unsupported > 0)
+        fprintf(stderr, "; %" PRIu64 " vertices could not shoot (not eikonal, or an IOR without a closed-form "
+                "Hessian): their curved connections were left to forward paths", stats->solves_unsupported);
     fputc('\n', stderr);
 }
 
