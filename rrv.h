@@ -3484,6 +3484,40 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
     }
 }
 
+/* An eikonal step that a face cut short (h < step) has a length that
+   depends on where it starts, and so does where the curve hands over to
+   the straight segment behind it: dh enters as x1 += d1 dh, d1 += kappa1 dh
+   (kappa1 = dd/ds at x1). Two cuts, as in rrv__eikonal_plan: h = t_face(x,
+   d) - nudge along the straight line, differentiated exactly; or, when the
+   chord itself reaches a face, the step's end held on that face (the
+   nudge neglected). J holds the field at the step's start, J1 the field at
+   its end for fixed h, updated here. Returns 0 at a grazing face. */
+static int rrv__clipped_step_jacobi(const rrv_scene *scene, const rrv__bender *b, rrv_vec3 x, rrv_vec3 d_start,
+                                    rrv_vec3 chord, double len, const rrv__jacobi *J, rrv__jacobi *J1)
+{
+    rrv__support_view view;
+    rrv_vec3 x1 = rrv__madd(x, chord, len), d1 = b->next_d, g1, kappa;
+    double eta1 = rrv__eta_gradient(scene, x1, &g1), dh[2], nd;
+    int j;
+    kappa = rrv__scale(rrv__madd(g1, d1, -rrv__dot(d1, g1)), 1.0 / eta1);
+    rrv__look_along(scene, x, d_start, &view);
+    if (fabs(b->h - (view.t_face - RRV__EDGE_NUDGE)) <= 1e-12 * (1.0 + view.t_face)) {
+        nd = rrv__dot(view.normal, d_start);
+        if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
+        for (j = 0; j < 2; ++j) dh[j] = -rrv__dot(view.normal, rrv__madd(J->x[j], J->d[j], view.t_face)) / nd;
+    } else {
+        rrv__look_along(scene, x, chord, &view);
+        nd = rrv__dot(view.normal, d1);
+        if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
+        for (j = 0; j < 2; ++j) dh[j] = -rrv__dot(view.normal, J1->x[j]) / nd;
+    }
+    for (j = 0; j < 2; ++j) {
+        J1->x[j] = rrv__madd(J1->x[j], d1, dh[j]);
+        J1->d[j] = rrv__madd(J1->d[j], kappa, dh[j]);
+    }
+    return 1;
+}
+
 /* Does the refractivity jump across the face the ray along d meets at x? */
 static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
 {
@@ -3541,15 +3575,14 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
         len = b.segment;
         if (b.end == RRV__END_STEP) {
             rrv__eikonal_step_jacobi(scene, scene->settings.stepper, b.h, x, d_start, &J1);
+            if (b.h < scene->settings.step && !rrv__clipped_step_jacobi(scene, &b, x, d_start, d, len, &J, &J1))
+                break;
             for (j = 0; j < 2; ++j) {
                 rrv_vec3 w = rrv__scale(rrv__sub(J1.x[j], J.x[j]), 1.0 / len);
                 dc[j] = rrv__madd(w, d, -rrv__dot(w, d));
             }
         } else {
-            for (j = 0; j < 2; ++j) {
-                dc[j] = J.d[j];
-                if (len < DBL_MAX) J1.x[j] = rrv__madd(J.x[j], J.d[j], len);
-            }
+            for (j = 0; j < 2; ++j) dc[j] = J.d[j];
         }
         s = rrv__dot(rrv__sub(y, x), d);
         if (s <= len) {
@@ -3579,6 +3612,19 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
         if (b.end == RRV__END_FACE && rrv__face_jumps(scene, rrv__madd(x, d, len), d)) {
             out->status = RRV__SHOT_INTERFACE;
             return;
+        }
+        if (b.end == RRV__END_FACE) {
+            /* The face point x + L d, L(x, d) its distance, moves on the face:
+               dL = -N.(dx + L dd) / N.d. Not a small term: where the face
+               ends a gradient (a Luneburg sphere), entering earlier or later
+               bends the ray by a finite amount (the saltation of the
+               variational equations across a jump of grad eta). */
+            double nd = rrv__dot(b.normal, d);
+            if (!(fabs(nd) > 1e-9 * rrv__length(b.normal))) break; /* grazing */
+            for (j = 0; j < 2; ++j) {
+                rrv_vec3 moved = rrv__madd(J.x[j], J.d[j], len);
+                J1.x[j] = rrv__madd(moved, d, -rrv__dot(b.normal, moved) / nd);
+            }
         }
         out->curved = 1;
         rrv__finish_segment(&b, scene, &x, &d, &fixed);

@@ -248,7 +248,7 @@ static void test_nee_key_rejects_unknown_mode(void)
     rrv_result r = rrv_scene_parse(text, sizeof text - 1, "bad_nee.rrv", NULL, NULL, &s, &err);
     CHECK(r == RRV_ERROR_PARSE && s == NULL);
     CHECKF(err.line == 2 && strcmp(err.file, "bad_nee.rrv") == 0 &&
-               strcmp(err.message, "render: nee must be one of none|straight, got \"manifold\"") == 0,
+               strcmp(err.message, "render: nee must be one of none|straight|shoot, got \"manifold\"") == 0,
            "%s:%d: %s", err.file, err.line, err.message);
 }
 
@@ -375,8 +375,10 @@ static void test_luneburg_two_point(void)
                         i, err_w0, err_w1, fabs(got.det), want.det, err_det, got.iterations, got.segments);
                 ++found;
                 /* RK4 at h = 0.002 is exact to ~1e-11; the endpoint lies on a
-                   chord, off the curve by at most kappa h^2 / 8 = 5e-7 */
-                CHECKF(err_w0 < 2e-6 && err_w1 < 2e-6 && err_det < 1e-5, "point %d: w0 %.1e w1 %.1e det %.1e", i,
+                   chord, off the curve by at most kappa h^2 / 8 = 5e-7 (kappa
+                   = |grad eta| / eta <= 1), and the arriving direction is the
+                   chord's, off the tangent by up to kappa h / 2 = 1e-3 */
+                CHECKF(err_w0 < 2e-6 && err_w1 < 1e-3 && err_det < 1e-5, "point %d: w0 %.1e w1 %.1e det %.1e", i,
                        err_w0, err_w1, err_det);
                 CHECK(got.curved);
             }
@@ -388,12 +390,12 @@ static void test_luneburg_two_point(void)
     rrv_scene_free(s);
 }
 
-/* A strong Gaussian blob of IOR in a box, no density (shots through it bend
-   by tens of degrees). */
+/* Two Gaussian blobs of IOR (eta up to 1.5) in a box, no density; at the
+   box faces they are below 1e-10, no interface. */
 static rrv_scene *blob_scene(double step, rrv_stepper stepper)
 {
     rrv_scene *s = tb_scene(4, 4);
-    rrv_medium *m = tb_medium(s, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 0.0, 0.0);
+    rrv_medium *m = tb_medium(s, rrv__v3(-2, -2, -2), rrv__v3(2, 2, 2), 0.0, 0.0);
     rrv_blob *b;
     rrv_error err;
     m->density.kind = RRV_FIELD_NONE;
@@ -461,8 +463,17 @@ static void test_jacobian_against_differences(void)
     rrv_scene_free(c);
 }
 
-/* Reciprocity of the connection density:
-   eta0^2 |det J_perp(x0 -> y)| = eta1^2 |det J_perp(y -> x0)|. */
+/* Reciprocity of the connection density. Etendue n^2 dA dw is conserved:
+   a pencil from dA0 at x0 (index n0) to dA1 at y (n1) has n0^2 dA0 dw0 =
+   n1^2 dA1 dw1 with dw0 = dA1 / |det J(x0 -> y)|, dw1 = dA0 / |det J(y ->
+   x0)|, so n1^2 |det J_perp(x0 -> y)| = n0^2 |det J_perp(y -> x0)|. (The
+   closed form above agrees: det J = eta_start^2 sin^2(sigma_1) |w0.w1|.)
+   The paths there and back agree to the chord's deviation from the curve's
+   tangent (kappa h / 2, 1e-3 at h = 0.002), and the densities to 5e-4: the
+   two directions are different discretisations of the ray, each ending on
+   a chord, whose linear interpolation of the Jacobi field errs by
+   O(h^2 |K|), and with the faces cutting different last steps (measured
+   from 2e-8 to 2e-4 at h = 0.001 to 0.004, not monotone in h). */
 static void reciprocity(rrv_scene *s, rrv_vec3 x0, rrv_vec3 y, const char *name)
 {
     rrv__context ctx;
@@ -478,12 +489,12 @@ static void reciprocity(rrv_scene *s, rrv_vec3 x0, rrv_vec3 y, const char *name)
         CHECKF(0, "%s: no root back from y to x0", name);
         return;
     }
-    lhs = eta0 * eta0 * fabs(there.det);
-    rhs = eta1 * eta1 * fabs(back.det);
+    lhs = eta1 * eta1 * fabs(there.det);
+    rhs = eta0 * eta0 * fabs(back.det);
     SAY("  reciprocity %-10s eta0 %.4f eta1 %.4f: %.7f vs %.7f (%.1e), paths %.1e apart\n", name, eta0, eta1, lhs, rhs,
         fabs(lhs / rhs - 1.0), rrv__length(rrv__add(back.w0, there.dir)));
-    CHECK(rrv__length(rrv__add(back.w0, there.dir)) < 1e-5 && rrv__length(rrv__add(back.dir, there.w0)) < 1e-5);
-    CHECKF(fabs(lhs / rhs - 1.0) < 1e-5, "%s: %g vs %g", name, lhs, rhs);
+    CHECK(rrv__length(rrv__add(back.w0, there.dir)) < 1e-3 && rrv__length(rrv__add(back.dir, there.w0)) < 1e-3);
+    CHECKF(fabs(lhs / rhs - 1.0) < 5e-4, "%s: %g vs %g", name, lhs, rhs);
 }
 
 static void test_reciprocity(void)
