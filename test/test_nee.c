@@ -51,19 +51,27 @@ static double stats_se(const stats *s)
     return s->n > 1 ? sqrt(fmax(0.0, s->sum2 / s->n - m * m) / (s->n - 1)) : 0.0;
 }
 
-/* Renders one sample index at a time and files each pixel sample of the
-   green channel into the stats of its block (bw x bh pixels). */
-static void block_samples(const rrv_scene *s, int spp, int bw, int bh, stats *blocks)
+/* Renders pixels [x0,x1) x [y0,y1) one sample index at a time and files
+   each pixel sample of the green channel into the stats of its block (bw x
+   bh pixels, numbered over the whole image). */
+static void block_samples_rect(const rrv_scene *s, int spp, int x0, int y0, int x1, int y1, int bw, int bh,
+                               stats *blocks, rrv_render_stats *rs)
 {
-    int w = s->camera.width, h = s->camera.height, k, x, y;
+    int w = x1 - x0, h = y1 - y0, k, x, y, per_row = s->camera.width / bw;
     float *img = (float *)malloc((size_t)w * h * 3 * sizeof(float));
     for (k = 0; k < spp; ++k) {
         memset(img, 0, (size_t)w * h * 3 * sizeof(float));
-        rrv_render_rect(s, 0, 0, w, h, k, k + 1, img, w, NULL);
+        rrv_render_rect(s, x0, y0, x1, y1, k, k + 1, img, w, rs);
         for (y = 0; y < h; ++y)
-            for (x = 0; x < w; ++x) stats_add(&blocks[(y / bh) * (w / bw) + x / bw], img[3 * (y * w + x) + 1]);
+            for (x = 0; x < w; ++x)
+                stats_add(&blocks[((y + y0) / bh) * per_row + (x + x0) / bw], img[3 * (y * w + x) + 1]);
     }
     free(img);
+}
+
+static void block_samples(const rrv_scene *s, int spp, int bw, int bh, stats *blocks)
+{
+    block_samples_rect(s, spp, 0, 0, s->camera.width, s->camera.height, bw, bh, blocks, NULL);
 }
 
 /* ---- white furnaces with refraction ------------------------------------------ */
@@ -129,6 +137,13 @@ static void furnace_case(int ior_kind, const char *name, int straight_spp)
         CHECKF(fabs(mean - 1.0) < 4 * se + 1e-6, "%s, %s, nee none: %.7f +- %.1e, expected 1", name,
                unbiased[i]->name, mean, se);
     }
+    /* shoot: the sky is left to forward paths wherever a connection would
+       touch a refraction support, straight NEE (with MIS) elsewhere */
+    st = furnace_run(s, &eikonal, RRV_NEE_SHOOT, 8, 27);
+    mean = stats_mean(&st);
+    se = stats_se(&st);
+    SAY("  %-8s furnace eikonal  nee shoot:    %.7f se %.1e\n", name, mean, se);
+    CHECKF(fabs(mean - 1.0) < 4 * se + 1e-6, "%s, eikonal, nee shoot: %.7f +- %.1e, expected 1", name, mean, se);
     st = furnace_run(s, &comb, RRV_NEE_STRAIGHT, straight_spp, 31);
     mean = stats_mean(&st);
     se = stats_se(&st);
@@ -217,6 +232,59 @@ static void test_lens_caustic(void)
         CHECKF(stats_se(&a[peak]) < 0.1 * none, "caustic block too noisy: %.4f +- %.4f", none, stats_se(&a[peak]));
         CHECKF(fabs(none - straight) > 4 * se && straight < 0.7 * none,
                "straight NEE %.4f should miss the caustic %.4f by far (se %.4f)", straight, none, se);
+    }
+    rrv_scene_free(s);
+}
+
+/* nee shoot (eikonal) against nee none (comb) around the caustic: blocks
+   of 4x4 pixels agree within 4 standard errors, and the curved connections
+   make the caustic far less noisy than forward tracing does. */
+static void test_lens_caustic_shoot(void)
+{
+    rrv_scene *s = NULL;
+    rrv_error err;
+    rrv_render_stats rs;
+    stats a[NBLOCKS], b[NBLOCKS];
+    int i, bx, by, peak = -1;
+    const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
+    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
+        CHECKF(0, "parse: %s", err.message);
+        return;
+    }
+    memset(a, 0, sizeof a);
+    memset(b, 0, sizeof b);
+    memset(&rs, 0, sizeof rs);
+    use(s, &comb, RRV_NEE_NONE);
+    s->settings.seed = 4;
+    block_samples_rect(s, 640, x0, y0, x1, y1, BLOCK, BLOCK, a, NULL);
+    use(s, &eikonal, RRV_NEE_SHOOT);
+    s->settings.seed = 5;
+    block_samples_rect(s, 24, x0, y0, x1, y1, BLOCK, BLOCK, b, &rs);
+    for (by = y0 / BLOCK; by < y1 / BLOCK; ++by) {
+        for (bx = x0 / BLOCK; bx < x1 / BLOCK; ++bx) {
+            double d, se;
+            i = by * BLOCKS_X + bx;
+            d = stats_mean(&b[i]) - stats_mean(&a[i]);
+            se = sqrt(stats_se(&a[i]) * stats_se(&a[i]) + stats_se(&b[i]) * stats_se(&b[i]));
+            if (peak < 0 || stats_mean(&a[i]) > stats_mean(&a[peak])) peak = i;
+            SAY("  lens caustic block %d,%d: none %.4f +- %.4f (%ld samples), shoot %.4f +- %.4f (%ld samples)\n", bx, by,
+                stats_mean(&a[i]), stats_se(&a[i]), a[i].n, stats_mean(&b[i]), stats_se(&b[i]), b[i].n);
+            CHECKF(fabs(d) <= 4 * se, "block %d,%d: none %.4f, shoot %.4f, difference %.4f over 4 se %.4f", bx, by,
+                   stats_mean(&a[i]), stats_mean(&b[i]), d, 4 * se);
+        }
+    }
+    SAY("  shoot: %llu solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, %.0f segments a chain\n",
+        (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)rs.solves,
+        rs.solve_iterations / (double)rs.solves, rs.solve_trials / (double)rs.solve_connections,
+        rs.solve_segments / (double)rs.solves_converged);
+    CHECK(rs.solves > 0 && rs.solve_connections > 0 && rs.solves_unsupported == 0);
+    /* the curved connections do the work: per sample, the caustic's
+       variance is far below that of forward tracing (measured 23x) */
+    {
+        double vs = stats_se(&b[peak]) * stats_se(&b[peak]) * (double)b[peak].n;
+        double vn = stats_se(&a[peak]) * stats_se(&a[peak]) * (double)a[peak].n;
+        SAY("  caustic variance per sample: shoot %.3f, none %.3f\n", vs, vn);
+        CHECKF(vs * 5 < vn, "caustic: variance per sample %.3f with shoot, %.3f with none", vs, vn);
     }
     rrv_scene_free(s);
 }
@@ -507,6 +575,52 @@ static void test_reciprocity(void)
     rrv_scene_free(b);
 }
 
+/* nee shoot splits the paths from a vertex to a light between three
+   estimators, and each path must belong to exactly one: straight NEE takes
+   the connections that touch no refraction support, shooting the others
+   (curved), and forward paths count only what neither can reach (sharp
+   interfaces, the sky, sphere lights). Here, for connections from the floor
+   to the light of the caustic scene: where straight NEE may connect, the
+   solver's root from the straight seed is that straight path and is not
+   counted as curved; where it may not, every root found is curved. */
+static void test_partition_is_exclusive(void)
+{
+    rrv_scene *s = NULL;
+    rrv_error err;
+    rrv__context ctx;
+    rrv__rng rng;
+    int k, straight = 0, curved = 0;
+    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
+        CHECKF(0, "parse: %s", err.message);
+        return;
+    }
+    solver_context(&ctx, s);
+    ctx.partition = ctx.shoot = 1;
+    rrv__rng_seed(&rng, 3, 0, 0);
+    for (k = 0; k < 400; ++k) {
+        rrv_vec3 x0 = rrv__v3(4.0 * rrv__uniform(&rng) - 2.0, 1e-5, 4.0 * rrv__uniform(&rng) - 2.0);
+        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5);
+        rrv__light_sample ls;
+        rrv__root root;
+        int allowed, found;
+        ls.wi = rrv__normalize(rrv__sub(y, x0));
+        ls.dist = rrv__length(rrv__sub(y, x0));
+        allowed = rrv__straight_allowed(&ctx, x0, &ls);
+        found = rrv__solve_shot(&ctx, x0, y, ls.wi, &root);
+        if (allowed) {
+            ++straight;
+            CHECKF(found && !root.curved && rrv__length(rrv__sub(root.w0, ls.wi)) < 1e-9,
+                   "straight connection %d: found %d curved %d", k, found, found ? root.curved : -1);
+        } else if (found) {
+            ++curved;
+            CHECKF(root.curved, "connection %d through a support found a root not counted as curved", k);
+        }
+    }
+    SAY("  partition: %d straight connections, %d curved roots of 400\n", straight, curved);
+    CHECK(straight > 50 && curved > 50);
+    rrv_scene_free(s);
+}
+
 int main(void)
 {
     const char *v = getenv("NEE_VERBOSE");
@@ -520,8 +634,10 @@ int main(void)
     RUN(test_furnace_blob);
     RUN(test_lens_caustic);
     }
+    RUN(test_lens_caustic_shoot);
     RUN(test_luneburg_two_point);
     RUN(test_jacobian_against_differences);
     RUN(test_reciprocity);
+    RUN(test_partition_is_exclusive);
     return CHECK_EXIT_CODE();
 }
