@@ -286,6 +286,24 @@ static void test_lens_caustic_shoot(void)
         SAY("  caustic variance per sample: shoot %.3f, none %.3f\n", vs, vn);
         CHECKF(vs * 5 < vn, "caustic: variance per sample %.3f with shoot, %.3f with none", vs, vn);
     }
+    /* The comb cannot shoot: its curved connections are left to forward
+       paths, counted, and the image stays unbiased. */
+    memset(b, 0, sizeof b);
+    memset(&rs, 0, sizeof rs);
+    use(s, &comb, RRV_NEE_SHOOT);
+    s->settings.seed = 6;
+    block_samples_rect(s, 640, x0, y0, x1, y1, BLOCK, BLOCK, b, &rs);
+    CHECK(rs.solves == 0 && rs.solves_unsupported > 0);
+    for (by = y0 / BLOCK; by < y1 / BLOCK; ++by) {
+        for (bx = x0 / BLOCK; bx < x1 / BLOCK; ++bx) {
+            double d, se;
+            i = by * BLOCKS_X + bx;
+            d = stats_mean(&b[i]) - stats_mean(&a[i]);
+            se = sqrt(stats_se(&a[i]) * stats_se(&a[i]) + stats_se(&b[i]) * stats_se(&b[i]));
+            CHECKF(fabs(d) <= 4 * se, "comb, shoot unsupported: block %d,%d: %.4f vs none %.4f, 4 se %.4f", bx, by,
+                   stats_mean(&b[i]), stats_mean(&a[i]), 4 * se);
+        }
+    }
     rrv_scene_free(s);
 }
 
