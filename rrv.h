@@ -62,8 +62,8 @@
                  forward paths (still unbiased) and counted in
                  rrv_render_stats.solves_unsupported.
      Curved NEE is to become the default once it pays: on the lens caustic
-     shooting cuts the variance per sample 23x but costs ~120x a forward
-     sample, so at equal time `none` still wins there (README.md).
+     a shooting sample costs ~128x a forward one and at equal time `none`
+     is ~30x as efficient there (README.md, "Next-event estimation").
    Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2;
    blackbody emission is n^2 B where the IOR is n (Kirchhoff), so a fire does
    not dim by 1/n^2 on leaving a dense medium.
