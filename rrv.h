@@ -3578,10 +3578,12 @@ typedef struct rrv__shot {
 } rrv__shot;
 
 /* Traces the ray from x0 along w0 (tangent basis e1, e2 of the two angles)
-   until it passes y. With T, also tests every chord for surfaces (BLOCKED)
-   and ratio-tracks the transmittance along them. */
+   until it passes y: where it first crosses the plane through y with
+   normal *plane from its front (a light's), or with plane NULL, where the
+   chord through y's perpendicular plane is. With T, also tests every chord
+   for surfaces (BLOCKED) and ratio-tracks the transmittance along them. */
 static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1, rrv_vec3 e2, rrv_vec3 y,
-                       rrv__rng *rng, double T[3], rrv__shot *out)
+                       const rrv_vec3 *plane, rrv__rng *rng, double T[3], rrv__shot *out)
 {
     const rrv_scene *scene = ctx->scene;
     rrv__bender b;
@@ -3615,12 +3617,27 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
         } else {
             for (j = 0; j < 2; ++j) dc[j] = J.d[j];
         }
-        s = rrv__dot(rrv__sub(y, x), d);
-        if (s <= len) {
-            if (s < 0) break; /* moving away from y */
+        if (plane) {
+            /* crossing the light's plane from its front: the first place a
+               forward path could hit the light */
+            double h0 = rrv__dot(rrv__sub(x, y), *plane), cn = rrv__dot(d, *plane);
+            s = cn < 0 && h0 > 0 && h0 <= -cn * len ? h0 / -cn : DBL_MAX;
+        } else {
+            /* passing y: the chord's closest point to it, looked for only
+               where the path runs toward y (it may start away from it) */
+            s = rrv__dot(rrv__sub(y, x), d);
+            if (s < 0) s = DBL_MAX;
+        }
+        if (s < DBL_MAX && s <= len) {
             out->end = rrv__madd(x, d, s);
             out->dir = d;
-            for (j = 0; j < 2; ++j) out->de[j] = rrv__madd(J.x[j], dc[j], s);
+            for (j = 0; j < 2; ++j) {
+                rrv_vec3 de = rrv__madd(J.x[j], dc[j], s);
+                /* on the light's plane, the endpoint moves along it (the
+                   chord's oblique projection); perpendicular planes drop
+                   the part along d in the residual */
+                out->de[j] = plane ? rrv__madd(de, d, -rrv__dot(*plane, de) / rrv__dot(d, *plane)) : de;
+            }
             out->segments = n + 1;
             out->status = RRV__SHOT_REACHED;
             if (T) {
@@ -3633,6 +3650,7 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
             }
             return;
         }
+        if (b.end == RRV__END_NONE) break; /* straight on forever, never passing y */
         if (T) {
             rrv__hit hit;
             double Ts[3];
@@ -3664,12 +3682,13 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
     out->status = RRV__SHOT_MISSED;
 }
 
-/* The residual (offset of y from the path in the plane through y
-   perpendicular to the arriving chord) and its 2x2 Jacobian J_perp. */
-static void rrv__shot_residual(const rrv__shot *s, rrv_vec3 y, double r[2], double Jp[4])
+/* The residual (offset of y from the path in the light's plane, or in the
+   plane through y perpendicular to the arriving chord) and its 2x2
+   Jacobian: J_plane, or J_perp = J_plane |cos theta_y|. */
+static void rrv__shot_residual(const rrv__shot *s, rrv_vec3 y, const rrv_vec3 *plane, double r[2], double Jp[4])
 {
     rrv_vec3 f1, f2, off = rrv__sub(y, s->end);
-    rrv__frame(s->dir, &f1, &f2);
+    rrv__frame(plane ? *plane : s->dir, &f1, &f2);
     r[0] = rrv__dot(off, f1);
     r[1] = rrv__dot(off, f2);
     Jp[0] = rrv__dot(f1, s->de[0]);
@@ -3681,7 +3700,7 @@ static void rrv__shot_residual(const rrv__shot *s, rrv_vec3 y, double r[2], doub
 typedef struct rrv__root {
     rrv_vec3 w0;      /* initial direction */
     rrv_vec3 dir;     /* arriving chord direction at y */
-    double det;       /* det J_perp, m^2 per steradian */
+    double det;       /* det J_plane (on a light's plane) or J_perp, m^2 per steradian */
     int curved;
     long segments;
     int iterations;
@@ -3691,7 +3710,8 @@ typedef struct rrv__root {
    halved on a failed or worsening shot and doubled (up to 1) on success,
    each step at most 0.5 rad. Returns 1 with the root, 0 if it did not
    converge, met a sharp interface, or stalled at a caustic (det J = 0). */
-static int rrv__solve_shot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, rrv_vec3 seed, rrv__root *root)
+static int rrv__solve_shot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv_vec3 seed,
+                           rrv__root *root)
 {
     rrv_vec3 w = seed, w_prev = seed, e1, e2, p1 = rrv__v3(0, 0, 0), p2 = p1;
     double prev_norm = DBL_MAX, step = 1.0, delta[2] = {0, 0};
@@ -3702,12 +3722,12 @@ static int rrv__solve_shot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, rrv_vec3 
         rrv__shot shot;
         double r[2] = {0, 0}, Jp[4] = {0, 0, 0, 0}, norm, det, len;
         rrv__frame(w, &e1, &e2);
-        rrv__shoot(ctx, x0, w, e1, e2, y, NULL, NULL, &shot);
+        rrv__shoot(ctx, x0, w, e1, e2, y, plane, NULL, NULL, &shot);
         root->iterations = it + 1;
         if (shot.status == RRV__SHOT_INTERFACE) return 0;
         norm = DBL_MAX;
         if (shot.status == RRV__SHOT_REACHED) {
-            rrv__shot_residual(&shot, y, r, Jp);
+            rrv__shot_residual(&shot, y, plane, r, Jp);
             norm = sqrt(r[0] * r[0] + r[1] * r[1]);
         }
         if (!(norm < prev_norm)) {
@@ -3815,23 +3835,23 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     ny = rrv__normalize(rrv__cross(s->e1, s->e2));
     pdf_area = 1.0 / (rrv__shape_area(s) * choices);
     ++ctx->stats.solves;
-    if (!rrv__solve_shot(ctx, x0, y, rrv__solver_seed(x0, y, rng), &root)) {
+    if (!rrv__solve_shot(ctx, x0, y, &ny, rrv__solver_seed(x0, y, rng), &root)) {
         ctx->stats.solve_iterations += (uint64_t)root.iterations;
         return;
     }
     ctx->stats.solve_iterations += (uint64_t)root.iterations;
     ++ctx->stats.solves_converged;
     ctx->stats.solve_segments += (uint64_t)root.segments;
-    if (!root.curved || !(rrv__dot(root.dir, ny) < 0)) return;
+    if (!root.curved) return;
     rrv__vertex_eval(v, root.w0, f);
     if (!(rrv__max3(f) > 0)) return;
     rrv__frame(root.w0, &e1, &e2);
-    rrv__shoot(ctx, x0, root.w0, e1, e2, y, rng, T, &shot);
+    rrv__shoot(ctx, x0, root.w0, e1, e2, y, &ny, rng, T, &shot);
     if (shot.status != RRV__SHOT_REACHED || !(rrv__max3(T) > 0)) return;
     for (count = 1; count < RRV__SOLVE_TRIALS; ++count) {
         int found;
         ++ctx->stats.solves;
-        found = rrv__solve_shot(ctx, x0, y, rrv__solver_seed(x0, y, rng), &again);
+        found = rrv__solve_shot(ctx, x0, y, &ny, rrv__solver_seed(x0, y, rng), &again);
         ctx->stats.solve_iterations += (uint64_t)again.iterations;
         if (!found) continue;
         ++ctx->stats.solves_converged;
@@ -3840,8 +3860,8 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     }
     ctx->stats.solve_trials += (uint64_t)count;
     ++ctx->stats.solve_connections;
-    k = fabs(rrv__dot(root.dir, ny)) / fabs(root.det) / pdf_area * count * rrv__eta_scale(ctx, y) *
-        rrv__path_mis(path);
+    /* dw0 = dA_y / |det J_plane| (= dA_y |cos theta_y| / |det J_perp|) */
+    k = 1.0 / (fabs(root.det) * pdf_area) * count * rrv__eta_scale(ctx, y) * rrv__path_mis(path);
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
 
