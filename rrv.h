@@ -44,11 +44,13 @@
                  forward paths. The connection: a point y uniform on a
                  light, Newton/Levenberg-Marquardt on the two angles of the
                  initial direction so that the ray, traced with the same
-                 steps camera rays take, passes y (at most 40 iterations,
+                 steps camera rays take, first crosses the light's plane
+                 from its front at y (at most 40 iterations,
                  residual < 1e-9 (1 + |y - x0|), step halved on a worse or
                  failed shot and doubled up to 1, at most 0.5 rad; det J = 0,
                  a caustic, fails); the density from the Jacobi field of
-                 the same discrete steps, G = |cos theta_y| / |det J_perp|;
+                 the same discrete steps, dw0 = dA_y / |det J_plane|
+                 (= |cos theta_y| / |det J_perp|);
                  visibility and ratio-tracked transmittance along every
                  chord. Seeds: a 0.3 rad Gaussian around the straight
                  direction or (1 in 4) uniform, so every root has a nonzero
@@ -60,7 +62,10 @@
                  other IOR (grids, noise, shells, gas), or with the
                  refractive integrator, curved connections are left to
                  forward paths (still unbiased) and counted in
-                 rrv_render_stats.solves_unsupported.
+                 rrv_render_stats.solves_unsupported. Near a fold caustic
+                 1/|det J| is integrable but its square is not: shooting
+                 from there is heavy-tailed (infinite variance in principle;
+                 its images converge slowly and from below).
      Curved NEE is to become the default once it pays: on the lens caustic
      a shooting sample costs ~128x a forward one and at equal time `none`
      is ~30x as efficient there (README.md, "Next-event estimation").
@@ -3323,8 +3328,9 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
    angles of the initial direction w0, the ray traced with exactly the
    segments a camera ray takes (rrv__plan_segment / rrv__finish_segment: RK4
    or leapfrog steps, straight chords between them, faces). The residual is
-   the offset of y from the path, measured on the chord that passes y, in
-   the plane through y perpendicular to that chord. Its Jacobian comes from
+   the offset of y from where the path first crosses the light's plane from
+   its front (for two interior points, as in the tests: from the chord that
+   passes y, in the plane through y perpendicular to it). Its Jacobian comes from
    the variational (Jacobi-field) equations of the very same discrete steps,
    which need the Hessian of eta (closed form below). At the root
    dw0 = dA_y |cos theta_y| / |det J_perp|, J_perp the 2x2 derivative of the
