@@ -68,7 +68,7 @@
                  its images converge slowly and from below).
      Curved NEE is to become the default once it pays: on the lens caustic
      a shooting sample costs ~128x a forward one and at equal time `none`
-     is ~30x as efficient there (README.md, "Next-event estimation").
+     is ~20x as efficient there (README.md, "Next-event estimation").
    Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2;
    blackbody emission is n^2 B where the IOR is n (Kirchhoff), so a fire does
    not dim by 1/n^2 on leaving a dense medium.
