@@ -75,6 +75,11 @@ static const char render_help[] =
     "  --spp N                samples per pixel (default: the scene's)\n"
     "  --seed S               random seed, an integer >= 0 (default: the scene's)\n"
     "  --integrator NAME      classic, refractive or eikonal (default: the scene's)\n"
+    "  --nee MODE             refractive, eikonal: light sampling, straight (the\n"
+    "                         default: straight shadow rays, biased near\n"
+    "                         refracting media), none (lights count only where\n"
+    "                         the bent path hits them: unbiased, noisier) or\n"
+    "                         shoot (eikonal: connections along bent rays)\n"
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop\n"
@@ -721,6 +726,13 @@ static void add_stats(rrv_render_stats *into, const rrv_render_stats *from)
     into->nonfinite += from->nonfinite;
     into->paths_cut += from->paths_cut;
     into->cut_tracking += from->cut_tracking;
+    into->solves += from->solves;
+    into->solves_converged += from->solves_converged;
+    into->solve_iterations += from->solve_iterations;
+    into->solve_segments += from->solve_segments;
+    into->solve_connections += from->solve_connections;
+    into->solve_trials += from->solve_trials;
+    into->solves_unsupported += from->solves_unsupported;
 }
 
 static void *render_worker(void *arg)
@@ -901,6 +913,8 @@ typedef struct render_options {
     int has_seed;
     rrv_integrator integrator;
     int has_integrator;
+    rrv_nee nee;
+    int has_nee;
     int threads;
     double exposure;
     int crop[4], has_crop;
@@ -937,6 +951,14 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
         } else if (strcmp(arg, "--integrator") == 0) {
             if (!take_integrator(&args, 1, &opt->integrator)) return EXIT_USAGE;
             opt->has_integrator = 1;
+        } else if (strcmp(arg, "--nee") == 0) {
+            const char *mode;
+            if (!take_value(&args, arg, "none, straight or shoot", &mode)) return EXIT_USAGE;
+            if (strcmp(mode, "none") == 0) opt->nee = RRV_NEE_NONE;
+            else if (strcmp(mode, "straight") == 0) opt->nee = RRV_NEE_STRAIGHT;
+            else if (strcmp(mode, "shoot") == 0) opt->nee = RRV_NEE_SHOOT;
+            else return usage_error(&args, "--nee needs none, straight or shoot, got \"%s\"", mode);
+            opt->has_nee = 1;
         } else if (strcmp(arg, "--threads") == 0) {
             if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer",
                           &opt->threads))
@@ -985,6 +1007,16 @@ static void print_render_summary(int width, int height, int spp, double seconds,
     if (stats->paths_cut > 0)
         fprintf(stderr, " (%" PRIu64 " paths cut at a work bound, %" PRIu64 " of them in tracking)",
                 stats->paths_cut, stats->cut_tracking);
+    if (stats->solves > 0) {
+        double n = (double)stats->solves, conv = (double)stats->solves_converged;
+        fprintf(stderr, "; shoot: %" PRIu64 " solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, "
+                "%.0f segments a chain", stats->solves, 100.0 * conv / n, (double)stats->solve_iterations / n,
+                stats->solve_connections ? (double)stats->solve_trials / (double)stats->solve_connections : 0.0,
+                conv > 0 ? (double)stats->solve_segments / conv : 0.0);
+    }
+    if (stats->solves_unsupported > 0)
+        fprintf(stderr, "; %" PRIu64 " vertices could not shoot (not eikonal, or an IOR without a closed-form "
+                "Hessian): their curved connections were left to forward paths", stats->solves_unsupported);
     fputc('\n', stderr);
 }
 
@@ -1029,6 +1061,7 @@ static int command_render(int argc, char **argv)
     if (opt.has_spp) scene->settings.spp = opt.spp;
     if (opt.has_seed) scene->settings.seed = opt.seed;
     if (opt.has_integrator) scene->settings.integrator = opt.integrator;
+    if (opt.has_nee) scene->settings.nee = opt.nee;
     if (!apply_refraction_options(scene, &opt.refraction)) {
         rrv_scene_free(scene);
         return EXIT_INPUT;

@@ -16,10 +16,59 @@
                  kick d(eta d) = grad eta h (second order); POISSON is the
                  seed paper's Snell refraction at every null event and
                  MIDPOINT its variant with the normal at the chord midpoint
-                 (both first order). NEE rays stay straight: near refractive
-                 media direct light is biased until manifold NEE lands.
+                 (both first order).
      eikonal     marches the ray equation d/ds(eta dx/ds) = grad eta with RK4
                  (default) or a symplectic leapfrog, step rrv_settings.step.
+   NEXT-EVENT ESTIMATION (rrv_settings.nee, scene `render nee`, CLI --nee)
+     Refractive and eikonal integrators only; classic always samples lights
+     with straight shadow rays, which is exact for straight rays.
+     STRAIGHT    (the default for now) a straight shadow ray, ratio-tracked,
+                 combined by the power heuristic with the phase/BSDF-sampled
+                 continuation as though both sampled the same path. They do
+                 not: the continuation bends and the shadow ray does not, so
+                 wherever either crosses a refracting medium the sum is
+                 biased: a lens caustic comes out at half its radiance and
+                 white furnaces with refraction above 1 (test/test_nee.c).
+     NONE        no light sampling: lights, emitters and the sky count only
+                 where the bent path hits them, with MIS weight 1. Unbiased
+                 (furnaces give exactly 1), but noisy for small lights.
+     SHOOT       curved NEE by shooting (eikonal integrator), unbiased up
+                 to a cap on trials. Path space is partitioned by the path
+                 from the last vertex to the light: touching no refraction
+                 support (box or profile sphere), it is counted by straight
+                 NEE with MIS, as classic does; curved (part of it in a
+                 support, no sharp interface crossed) and ending on a quad
+                 or triangle light, only by the curved connection, forward
+                 paths of that kind count zero; everything else (across a
+                 sharp interface, to the sky, to sphere lights) only by
+                 forward paths. The connection: a point y uniform on a
+                 light, Newton/Levenberg-Marquardt on the two angles of the
+                 initial direction so that the ray, traced with the same
+                 steps camera rays take, first crosses the light's plane
+                 from its front at y (at most 40 iterations,
+                 residual < 1e-9 (1 + |y - x0|), step halved on a worse or
+                 failed shot and doubled up to 1, at most 0.5 rad; det J = 0,
+                 a caustic, fails); the density from the Jacobi field of
+                 the same discrete steps, dw0 = dA_y / |det J_plane|
+                 (= |cos theta_y| / |det J_perp|);
+                 visibility and ratio-tracked transmittance along every
+                 chord. Seeds: a 0.3 rad Gaussian around the straight
+                 direction or (1 in 4) uniform, so every root has a nonzero
+                 probability p; 1/p is estimated by repeating independent
+                 solves until the same root (within 1e-5) comes back, at
+                 most 64 trials (Specular Manifold Sampling). A failed solve
+                 contributes zero. The Hessian of eta has closed forms for
+                 constant, slab, Luneburg, fish-eye and blob IORs; with any
+                 other IOR (grids, noise, shells, gas), or with the
+                 refractive integrator, curved connections are left to
+                 forward paths (still unbiased) and counted in
+                 rrv_render_stats.solves_unsupported. Near a fold caustic
+                 1/|det J| is integrable but its square is not: shooting
+                 from there is heavy-tailed (infinite variance in principle;
+                 its images converge slowly and from below).
+     Curved NEE is to become the default once it pays: on the lens caustic
+     a shooting sample costs ~128x a forward one and at equal time `none`
+     is ~20x as efficient there (README.md, "Next-event estimation").
    Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2;
    blackbody emission is n^2 B where the IOR is n (Kirchhoff), so a fire does
    not dim by 1/n^2 on leaving a dense medium.
@@ -370,6 +419,23 @@ typedef enum rrv_ior_interpolation {
                                      gradient from one C2 function */
 } rrv_ior_interpolation;
 
+/* Next-event estimation (light sampling) in the refractive and eikonal
+   integrators; the classic integrator always uses straight NEE, which is
+   exact there (its rays are straight). */
+typedef enum rrv_nee {
+    RRV_NEE_DEFAULT = 0, /* STRAIGHT for now */
+    RRV_NEE_NONE,        /* no light sampling: lights, emitters and the sky
+                            count only where a (bent) path hits them, MIS
+                            weight 1. Unbiased; the reference. */
+    RRV_NEE_STRAIGHT,    /* straight shadow rays, MIS against phase/BSDF
+                            sampling as if both sampled the same path: biased
+                            wherever a connection or the sampled continuation
+                            crosses a refracting medium */
+    RRV_NEE_SHOOT        /* eikonal: connections to area lights along bent
+                            rays, found by Newton on the initial direction;
+                            straight NEE only where it is exact (see manual) */
+} rrv_nee;
+
 typedef struct rrv_settings {
     int spp;              /* samples per pixel, >= 1 */
     int max_depth;        /* scattering/bounce vertices per path, >= 1 */
@@ -386,6 +452,7 @@ typedef struct rrv_settings {
     rrv_ior_interpolation ior_interpolation; /* grid refractivity; used by prepare */
     int max_bake_samples; /* caps what prepare builds per axis (see rrv_load_options);
                              0 = no cap beyond the defaults */
+    rrv_nee nee;          /* refractive and eikonal: light sampling */
 } rrv_settings;
 
 struct rrv__majorant_grid;
@@ -522,6 +589,16 @@ typedef struct rrv_render_stats {
     uint64_t cut_tracking; /* of which a delta or ratio tracking walk hit its
                               collision bound; the rest hit the bound on
                               refraction events, kicks or eikonal steps */
+    /* nee shoot: */
+    uint64_t solves;            /* Newton solves attempted (first tries and trials) */
+    uint64_t solves_converged;
+    uint64_t solve_iterations;  /* summed over the solves attempted */
+    uint64_t solve_segments;    /* chain length: segments of converged shots, summed */
+    uint64_t solve_connections; /* curved connections made (a root found, counted) */
+    uint64_t solve_trials;      /* trials estimating 1/p, summed over those */
+    uint64_t solves_unsupported;/* vertices whose curved connections were left to
+                                   forward paths because shooting cannot run there:
+                                   not eikonal, or an IOR without a closed-form Hessian */
 } rrv_render_stats;
 
 /* Renders pixels [x0,x1) x [y0,y1) of the image (row 0 at the top) for
@@ -2796,6 +2873,7 @@ typedef struct rrv__bender {
     double segment;    /* its length; DBL_MAX: the ray leaves every support */
     rrv_vec3 normal;   /* END_FACE: the face's normal */
     rrv_vec3 next_d;   /* END_STEP: the direction after the eikonal chord */
+    double h;          /* END_STEP: the arc length the step integrated */
     int surface_free;  /* the segment lies where no surface reaches */
     int reflected;     /* the last face crossed reflected the ray */
     int combing;       /* comb: a comb is running (its first half kick is done) */
@@ -2970,6 +3048,7 @@ static void rrv__eikonal_plan(rrv__bender *b, const rrv_scene *scene, rrv_steppe
         len = rrv__length(chord);
     }
     *d = rrv__scale(chord, 1.0 / len);
+    b->h = h;
     b->segment = len;
     b->end = RRV__END_STEP;
     b->surface_free = 0;
@@ -3040,6 +3119,12 @@ typedef struct rrv__context {
     int comb;                /* refract at comb points */
     int eikonal;             /* march the ray equation through refractive media */
     int bends;               /* any of the three: radiance scales with eta^2 */
+    int sample_lights;       /* NEE on; off (nee none) every emitter found by
+                                the path itself counts with MIS weight 1 */
+    int partition;           /* nee shoot: straight NEE only for connections
+                                outside refraction supports, curved ones by
+                                shooting or (forward) by the path alone */
+    int shoot;               /* nee shoot can run (eikonal, Hessians known) */
     double eta_camera2;      /* (1 + r at the camera)^2: radiance scales as eta^2 */
     double thermal_scale;    /* blackbody radiance at the camera over that in
                                 ambient air: (eta_camera / eta_ambient)^2 */
@@ -3432,8 +3517,33 @@ static long rrv__step_bound(const rrv_scene *scene, rrv_integrator integrator)
     return bound < (double)RRV_MAX_SEGMENT_STEPS ? (long)bound : RRV_MAX_SEGMENT_STEPS;
 }
 
+/* What a vertex does to light arriving from a direction, for the solver. */
+typedef struct rrv__vertex_bsdf {
+    int surface;     /* diffuse surface (n, albedo) or medium (g, d_in) */
+    rrv_vec3 n;      /* facing the side the path is on */
+    double albedo[3];
+    double g;
+    rrv_vec3 d_in;
+} rrv__vertex_bsdf;
+
+/* In the solver section, below. */
+static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x);
+static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d);
+static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls);
+static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
+static int rrv__solver_supports_scene(const rrv_scene *scene);
+
+/* Curved NEE from a vertex, or the count of vertices that could not. */
+static void rrv__curved_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
+{
+    if (ctx->shoot) rrv__shoot_nee(ctx, path, x0, v, rng);
+    else if (ctx->partition) ++ctx->stats.solves_unsupported;
+}
+
 /* One camera path: classic and refractive null-scattering path tracing with
-   NEE + MIS at every real scattering event and surface bounce. */
+   NEE + MIS at every real scattering event and surface bounce, or with no
+   NEE at all (nee none, bending integrators): then the path alone finds the
+   lights and every hit counts in full. */
 static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng *rng, double L[3])
 {
     const rrv_scene *scene = ctx->scene;
@@ -3441,6 +3551,10 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
     double prev_pdf = 0; /* solid-angle pdf of the last sampled direction; 0: camera */
     rrv_vec3 vertex = o; /* the last real vertex: MIS pdfs are measured from it, not from bends */
     int depth = 0, c;
+    /* nee shoot partitions the paths from the last vertex: touched, part of
+       the path lies in a refraction support; jumped, it crossed a sharp
+       interface (shots never do) */
+    int touched = 0, jumped = 0;
     long steps = 0;
     rrv__path_start(&path, rng);
     if (ctx->bends) rrv__bender_start(&path.bender, scene, ctx->eikonal, o);
@@ -3475,6 +3589,10 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
         if (outcome == RRV__FLIGHT_PASSED && !has_hit && segment < DBL_MAX) {
             int end = path.bender.end;
             if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
+            if (ctx->partition) {
+                if (end == RRV__END_FACE && rrv__face_jumps(scene, rrv__madd(o, d, segment), d)) jumped = 1;
+                touched = 1;
+            }
             rrv__finish_segment(&path.bender, scene, &o, &d, rng);
             /* A reflection at an interface is a specular vertex of the path
                and counts toward its depth: light trapped by total internal
@@ -3483,6 +3601,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             continue;
         }
         if (outcome == RRV__FLIGHT_BENT) {
+            touched = 1;
             o = rrv__madd(o, d, flight.t);
             d = flight.direction;
             continue;
@@ -3492,7 +3611,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             double g = flight.medium->g;
             x = rrv__madd(o, d, flight.t);
             if (++depth > scene->settings.max_depth) break;
-            if (rrv__sample_light(scene, x, rng, &ls)) {
+            if (ctx->sample_lights && rrv__sample_light(scene, x, rng, &ls) && rrv__straight_allowed(ctx, x, &ls)) {
                 double phase = rrv__hg_eval(g, rrv__dot(d, ls.wi)), T[3];
                 rrv__light_transmittance(ctx, x, &ls, rng, T);
                 if (T[0] > 0 || T[1] > 0 || T[2] > 0) {
@@ -3500,6 +3619,13 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                                rrv__path_mis(&path);
                     for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * T[c] * ls.L[c] * k;
                 }
+            }
+            if (ctx->partition) {
+                rrv__vertex_bsdf vb;
+                memset(&vb, 0, sizeof vb);
+                vb.g = g;
+                vb.d_in = d;
+                rrv__curved_nee(ctx, &path, x, &vb, rng);
             }
             {
                 rrv_vec3 d_in = d;
@@ -3512,11 +3638,13 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             o = vertex = x;
             steps = 0;
             if (ctx->bends) rrv__bender_restart(&path.bender, scene, x);
+            if (ctx->partition) { touched = rrv__in_support(scene, x); jumped = 0; }
         } else if (!has_hit) {
             double Le[3], w = 1.0;
             if (scene->environment.kind == RRV_ENV_NONE) break;
             rrv__environment_L(&scene->environment, d, Le);
-            if (prev_pdf > 0) w = rrv__power_heuristic(prev_pdf, RRV__INV_4PI / rrv__light_choices(scene));
+            if (prev_pdf > 0 && ctx->sample_lights && !(ctx->partition && touched))
+                w = rrv__power_heuristic(prev_pdf, RRV__INV_4PI / rrv__light_choices(scene));
             {
                 double k = w * rrv__eta_scale(ctx, rrv__madd(o, d, 1e30)) * rrv__path_mis(&path);
                 for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * Le[c] * k;
@@ -3531,8 +3659,12 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             x = hit.p;
             if ((s->L[0] > 0 || s->L[1] > 0 || s->L[2] > 0) && front) {
                 double w = 1.0;
-                if (prev_pdf > 0)
-                    w = rrv__power_heuristic(prev_pdf, rrv__emitter_pdf(s, vertex, x, n) / rrv__light_choices(scene));
+                if (prev_pdf > 0 && ctx->sample_lights) {
+                    if (!(ctx->partition && touched))
+                        w = rrv__power_heuristic(prev_pdf, rrv__emitter_pdf(s, vertex, x, n) / rrv__light_choices(scene));
+                    else if (ctx->shoot && !jumped && s->kind != RRV_SHAPE_SPHERE)
+                        w = 0.0; /* counted by the curved connection */
+                }
                 w *= rrv__eta_scale(ctx, x) * rrv__path_mis(&path);
                 for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * s->L[c] * w;
             }
@@ -3540,7 +3672,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             if (!front) n = rrv__scale(n, -1.0);
             p = rrv__madd(x, n, rrv__offset_scale(x));
             rrv__material_albedo(&scene->materials[s->material], x, n, albedo);
-            if (rrv__sample_light(scene, p, rng, &ls)) {
+            if (ctx->sample_lights && rrv__sample_light(scene, p, rng, &ls) && rrv__straight_allowed(ctx, p, &ls)) {
                 double cosi = rrv__dot(n, ls.wi);
                 if (cosi > 0) {
                     double T[3];
@@ -3553,6 +3685,14 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                     }
                 }
             }
+            if (ctx->partition) {
+                rrv__vertex_bsdf vb;
+                memset(&vb, 0, sizeof vb);
+                vb.surface = 1;
+                vb.n = n;
+                for (c = 0; c < 3; ++c) vb.albedo[c] = albedo[c];
+                rrv__curved_nee(ctx, &path, p, &vb, rng);
+            }
             {
                 double u2 = rrv__uniform(rng), u1 = rrv__uniform(rng); /* in this order on every compiler */
                 d = rrv__sample_cosine_hemisphere(n, u1, u2);
@@ -3563,6 +3703,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             o = vertex = p;
             steps = 0;
             if (ctx->bends) rrv__bender_restart(&path.bender, scene, p);
+            if (ctx->partition) { touched = rrv__in_support(scene, p); jumped = 0; }
         }
         if (depth >= 3) {
             double q = rrv__max3(path.beta) * rrv__path_mis(&path);
@@ -3748,6 +3889,9 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.eikonal = scene->settings.integrator == RRV_INTEGRATOR_EIKONAL;
     ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
     ctx.step_bound = rrv__step_bound(scene, scene->settings.integrator);
+    ctx.sample_lights = !ctx.bends || scene->settings.nee != RRV_NEE_NONE;
+    ctx.partition = ctx.bends && scene->settings.nee == RRV_NEE_SHOOT;
+    ctx.shoot = ctx.partition && ctx.eikonal && rrv__solver_supports_scene(scene);
     rrv__camera_setup(&scene->camera, &frame);
     r_camera = ctx.bends ? rrv__scene_refractivity(scene, frame.eye, NULL) : 0.0;
     ctx.eta_camera2 = (1.0 + r_camera) * (1.0 + r_camera);
@@ -3793,6 +3937,13 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
         stats->nonfinite += ctx.stats.nonfinite;
         stats->paths_cut += ctx.stats.paths_cut;
         stats->cut_tracking += ctx.stats.cut_tracking;
+        stats->solves += ctx.stats.solves;
+        stats->solves_converged += ctx.stats.solves_converged;
+        stats->solve_iterations += ctx.stats.solve_iterations;
+        stats->solve_segments += ctx.stats.solve_segments;
+        stats->solve_connections += ctx.stats.solve_connections;
+        stats->solve_trials += ctx.stats.solve_trials;
+        stats->solves_unsupported += ctx.stats.solves_unsupported;
     }
     return RRV_OK;
 }
@@ -3856,6 +4007,555 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
     result->direction = d;
     result->events = events;
     return RRV_OK;
+}
+
+/* ==== solver: curved next-event estimation by shooting ==========================
+   nee SHOOT (eikonal integrator). A connection from a vertex x0 to a point y
+   on an area light along the bent ray is found by Newton's method on the two
+   angles of the initial direction w0, the ray traced with exactly the
+   segments a camera ray takes (rrv__plan_segment / rrv__finish_segment: RK4
+   or leapfrog steps, straight chords between them, faces). The residual is
+   the offset of y from where the path first crosses the light's plane from
+   its front (for two interior points, as in the tests: from the chord that
+   passes y, in the plane through y perpendicular to it). Its Jacobian comes from
+   the variational (Jacobi-field) equations of the very same discrete steps,
+   which need the Hessian of eta (closed form below). At the root
+   dw0 = dA_y |cos theta_y| / |det J_perp|, J_perp the 2x2 derivative of the
+   endpoint perpendicular to the arriving chord with respect to w0 per unit
+   solid angle (r^2 I for straight rays: cos / r^2). */
+
+#define RRV__SOLVE_ITERATIONS 40
+#define RRV__SOLVE_TRIALS 64          /* cap on the trials that estimate 1/p */
+#define RRV__SOLVE_SAME_ROOT 1e-5     /* roots whose directions differ less are one */
+#define RRV__SOLVE_SEGMENTS 200000L   /* a shot longer than this is a failed one */
+/* A face where the refractivity jumps by more than this is a sharp interface
+   (Fresnel, total internal reflection): paths across one are not shot but
+   left to forward sampling. Below it the Fresnel reflectance is < 1e-14 and
+   the ray passes straight through (the faces of a Luneburg lens, whose IOR
+   meets the ambient one, differ by rounding only). */
+#define RRV__SOLVE_JUMP 1e-7
+
+/* The Hessian of the refractivity of one medium's profile at p, row-major
+   (scaled by ior_scale by the caller); 0 where there is no closed form here:
+   grids (their trilinear Hessian is zero almost everywhere and useless),
+   noise, shells and gas states. */
+static int rrv__profile_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
+{
+    rrv_vec3 d = rrv__sub(p, f->center);
+    double R2 = f->radius * f->radius, q, a = 0, b = 0, dd[3];
+    int i, j;
+    for (i = 0; i < 9; ++i) H[i] = 0;
+    switch (f->kind) {
+    case RRV_FIELD_CONSTANT:
+    case RRV_FIELD_SLAB:
+        return 1;
+    case RRV_FIELD_LUNEBURG: {
+        double s;
+        q = rrv__dot(d, d) / R2;
+        if (q >= 1.0) return 1;
+        s = sqrt(2.0 - q);
+        a = -1.0 / (R2 * s);
+        b = -1.0 / (R2 * R2 * s * s * s);
+        break;
+    }
+    case RRV_FIELD_FISHEYE:
+        q = rrv__dot(d, d) / R2;
+        if (q >= 1.0) return 1;
+        a = -2.0 * f->n0 / (R2 * (1.0 + q) * (1.0 + q));
+        b = 8.0 * f->n0 / (R2 * R2 * (1.0 + q) * (1.0 + q) * (1.0 + q));
+        break;
+    case RRV_FIELD_BLOBS:
+        for (i = 0; i < f->blob_count; ++i) {
+            const rrv_blob *bl = &f->blobs[i];
+            rrv_vec3 e = rrv__sub(p, bl->center);
+            double s2 = bl->radius * bl->radius, qb = rrv__dot(e, e) / s2, w, ee[3];
+            int k, l;
+            if (!(qb < 72.0)) continue; /* the cut-off the value and gradient use */
+            w = bl->weight * exp(-0.5 * qb) / s2;
+            ee[0] = e.x; ee[1] = e.y; ee[2] = e.z;
+            for (k = 0; k < 3; ++k)
+                for (l = 0; l < 3; ++l) H[3 * k + l] += w * (ee[k] * ee[l] / s2 - (k == l ? 1.0 : 0.0));
+        }
+        return 1;
+    default:
+        return 0;
+    }
+    dd[0] = d.x; dd[1] = d.y; dd[2] = d.z;
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j) H[3 * i + j] = (i == j ? a : 0.0) + b * dd[i] * dd[j];
+    return 1;
+}
+
+/* Can shooting differentiate this medium's IOR? */
+static int rrv__solver_supports(const rrv_medium *m)
+{
+    const struct rrv__majorant_grid *g = m->majorant;
+    rrv_field_kind k = m->ior.kind;
+    if (!rrv__medium_refracts(m)) return 1;
+    if (m->ior_from_gas || (g && (g->refraction.data || g->cubic))) return 0;
+    return k == RRV_FIELD_CONSTANT || k == RRV_FIELD_SLAB || k == RRV_FIELD_LUNEBURG || k == RRV_FIELD_FISHEYE ||
+           k == RRV_FIELD_BLOBS;
+}
+
+static int rrv__solver_supports_scene(const rrv_scene *scene)
+{
+    int i;
+    for (i = 0; i < scene->medium_count; ++i)
+        if (!rrv__solver_supports(&scene->media[i])) return 0;
+    return 1;
+}
+
+/* The Hessian of eta at p, where rrv__scene_refractivity takes eta from. */
+static void rrv__scene_hessian(const rrv_scene *scene, rrv_vec3 p, double H[9])
+{
+    int i, k;
+    for (i = scene->medium_count - 1; i >= 0; --i) {
+        const rrv_medium *m = &scene->media[i];
+        if (rrv__medium_refracts(m) && rrv__inside_box(p, m->lo, m->hi)) {
+            rrv__profile_hessian(&m->ior, p, H);
+            for (k = 0; k < 9; ++k) H[k] *= m->ior_scale;
+            return;
+        }
+    }
+    for (k = 0; k < 9; ++k) H[k] = 0;
+}
+
+static rrv_vec3 rrv__mat_apply(const double H[9], rrv_vec3 v)
+{
+    return rrv__v3(H[0] * v.x + H[1] * v.y + H[2] * v.z, H[3] * v.x + H[4] * v.y + H[5] * v.z,
+                   H[6] * v.x + H[7] * v.y + H[8] * v.z);
+}
+
+/* Derivatives of a ray's position and unit direction with respect to the
+   two angles of its initial direction. */
+typedef struct rrv__jacobi { rrv_vec3 x[2], d[2]; } rrv__jacobi;
+
+/* Carries a Jacobi field through one rrv__eikonal_step of length h from
+   (x, d): the exact derivative of that discrete map, including the
+   renormalisation of the direction that ends each step. */
+static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x, rrv_vec3 d,
+                                     rrv__jacobi *J)
+{
+    rrv_vec3 g, v, v1, dx[2], dv[2];
+    double eta = rrv__eta_gradient(scene, x, &g), n1;
+    int j;
+    v = rrv__scale(d, eta);
+    for (j = 0; j < 2; ++j) {
+        dx[j] = J->x[j];
+        dv[j] = rrv__madd(rrv__scale(d, rrv__dot(g, dx[j])), J->d[j], eta); /* v = eta(x) d */
+    }
+    if (stepper != RRV_STEPPER_LEAPFROG) {
+        static const double reach[3] = {0.5, 0.5, 1.0}, weight[4] = {1, 2, 2, 1};
+        rrv_vec3 xs[4], vs[4], gs[4], kx[4], kv[4], sx, sv;
+        double es[4], Hs[4][9];
+        int s;
+        xs[0] = x; vs[0] = v;
+        for (s = 0; s < 4; ++s) {
+            es[s] = rrv__eta_gradient(scene, xs[s], &gs[s]);
+            rrv__scene_hessian(scene, xs[s], Hs[s]);
+            kx[s] = rrv__scale(vs[s], 1.0 / es[s]);
+            kv[s] = gs[s];
+            if (s < 3) {
+                xs[s + 1] = rrv__madd(x, kx[s], reach[s] * h);
+                vs[s + 1] = rrv__madd(v, kv[s], reach[s] * h);
+            }
+        }
+        v1 = v;
+        for (s = 0; s < 4; ++s) v1 = rrv__madd(v1, kv[s], weight[s] * h / 6.0);
+        for (j = 0; j < 2; ++j) {
+            rrv_vec3 ax = dx[j], av = dv[j];
+            sx = dx[j]; sv = dv[j];
+            for (s = 0; s < 4; ++s) {
+                /* d(v / eta) = dv / eta - v (grad eta . dx) / eta^2; d(grad eta) = H dx */
+                rrv_vec3 kxs = rrv__sub(rrv__scale(sv, 1.0 / es[s]),
+                                        rrv__scale(vs[s], rrv__dot(gs[s], sx) / (es[s] * es[s])));
+                rrv_vec3 kvs = rrv__mat_apply(Hs[s], sx);
+                ax = rrv__madd(ax, kxs, weight[s] * h / 6.0);
+                av = rrv__madd(av, kvs, weight[s] * h / 6.0);
+                if (s < 3) {
+                    sx = rrv__madd(dx[j], kxs, reach[s] * h);
+                    sv = rrv__madd(dv[j], kvs, reach[s] * h);
+                }
+            }
+            J->x[j] = ax;
+            dv[j] = av;
+        }
+    } else {
+        /* kick (h/2) grad eta, drift (h / eta) v, kick (h/2) (eta1/eta) grad eta1 */
+        rrv_vec3 vh = rrv__madd(v, g, 0.5 * h), x1, g1;
+        double H[9], H1[9], eta1;
+        rrv__scene_hessian(scene, x, H);
+        x1 = rrv__madd(x, vh, h / eta);
+        eta1 = rrv__eta_gradient(scene, x1, &g1);
+        rrv__scene_hessian(scene, x1, H1);
+        v1 = rrv__madd(vh, g1, 0.5 * h * eta1 / eta);
+        for (j = 0; j < 2; ++j) {
+            rrv_vec3 dvh = rrv__madd(dv[j], rrv__mat_apply(H, dx[j]), 0.5 * h);
+            double ge = rrv__dot(g, dx[j]);
+            rrv_vec3 dx1 = rrv__add(dx[j], rrv__scale(rrv__sub(rrv__scale(dvh, 1.0 / eta),
+                                                                 rrv__scale(vh, ge / (eta * eta))), h));
+            double deta1 = rrv__dot(g1, dx1);
+            rrv_vec3 kick = rrv__add(rrv__scale(g1, (deta1 / eta - eta1 * ge / (eta * eta))),
+                                     rrv__scale(rrv__mat_apply(H1, dx1), eta1 / eta));
+            J->x[j] = dx1;
+            dv[j] = rrv__madd(dvh, kick, 0.5 * h);
+        }
+    }
+    n1 = rrv__length(v1);
+    for (j = 0; j < 2; ++j) {
+        rrv_vec3 d1 = rrv__scale(v1, 1.0 / n1);
+        J->d[j] = rrv__scale(rrv__madd(dv[j], d1, -rrv__dot(d1, dv[j])), 1.0 / n1);
+    }
+}
+
+/* An eikonal step that a face cut short (h < step) has a length that
+   depends on where it starts, and so does where the curve hands over to
+   the straight segment behind it: dh enters as x1 += d1 dh, d1 += kappa1 dh
+   (kappa1 = dd/ds at x1). Two cuts, as in rrv__eikonal_plan: h = t_face(x,
+   d) - nudge along the straight line, differentiated exactly; or, when the
+   chord itself reaches a face, the step's end held on that face (the
+   nudge neglected). J holds the field at the step's start, J1 the field at
+   its end for fixed h, updated here. Returns 0 at a grazing face. */
+static int rrv__clipped_step_jacobi(const rrv_scene *scene, const rrv__bender *b, rrv_vec3 x, rrv_vec3 d_start,
+                                    rrv_vec3 chord, double len, const rrv__jacobi *J, rrv__jacobi *J1)
+{
+    rrv__support_view view;
+    rrv_vec3 x1 = rrv__madd(x, chord, len), d1 = b->next_d, g1, kappa;
+    double eta1 = rrv__eta_gradient(scene, x1, &g1), dh[2], nd;
+    int j;
+    kappa = rrv__scale(rrv__madd(g1, d1, -rrv__dot(d1, g1)), 1.0 / eta1);
+    rrv__look_along(scene, x, d_start, &view);
+    if (fabs(b->h - (view.t_face - RRV__EDGE_NUDGE)) <= 1e-12 * (1.0 + view.t_face)) {
+        nd = rrv__dot(view.normal, d_start);
+        if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
+        for (j = 0; j < 2; ++j) dh[j] = -rrv__dot(view.normal, rrv__madd(J->x[j], J->d[j], view.t_face)) / nd;
+    } else {
+        rrv__look_along(scene, x, chord, &view);
+        nd = rrv__dot(view.normal, d1);
+        if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
+        for (j = 0; j < 2; ++j) dh[j] = -rrv__dot(view.normal, J1->x[j]) / nd;
+    }
+    for (j = 0; j < 2; ++j) {
+        J1->x[j] = rrv__madd(J1->x[j], d1, dh[j]);
+        J1->d[j] = rrv__madd(J1->d[j], kappa, dh[j]);
+    }
+    return 1;
+}
+
+/* Does the refractivity jump across the face the ray along d meets at x? */
+static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
+{
+    double gap = rrv__face_gap(x);
+    double before = rrv__scene_refractivity(scene, rrv__madd(x, d, -gap), NULL);
+    double after = rrv__scene_refractivity(scene, rrv__madd(x, d, gap), NULL);
+    return fabs(after - before) > RRV__SOLVE_JUMP;
+}
+
+/* Is x inside a refraction support (where rays bend)? */
+static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x)
+{
+    rrv__support_view v;
+    rrv__look_along(scene, x, rrv__v3(0.6, 0.48, 0.64), &v);
+    return v.inside;
+}
+
+enum { RRV__SHOT_REACHED, RRV__SHOT_MISSED, RRV__SHOT_INTERFACE, RRV__SHOT_BLOCKED };
+
+typedef struct rrv__shot {
+    int status;
+    int curved;        /* part of the path lies in a refraction support */
+    rrv_vec3 end;      /* where the path passes y: on the chord through y's plane */
+    rrv_vec3 dir;      /* that chord's direction */
+    rrv_vec3 de[2];    /* d(end)/d(angles of w0) */
+    long segments;
+} rrv__shot;
+
+/* Traces the ray from x0 along w0 (tangent basis e1, e2 of the two angles)
+   until it passes y: where it first crosses the plane through y with
+   normal *plane from its front (a light's), or with plane NULL, where the
+   chord through y's perpendicular plane is. With T, also tests every chord
+   for surfaces (BLOCKED) and ratio-tracks the transmittance along them. */
+static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1, rrv_vec3 e2, rrv_vec3 y,
+                       const rrv_vec3 *plane, rrv__rng *rng, double T[3], rrv__shot *out)
+{
+    const rrv_scene *scene = ctx->scene;
+    rrv__bender b;
+    rrv__jacobi J;
+    rrv__rng fixed; /* faces crossed here do not reflect (jumps below RRV__SOLVE_JUMP) */
+    rrv_vec3 x = x0, d = w0;
+    long n;
+    int c;
+    rrv__rng_seed(&fixed, 0, 0, 0);
+    rrv__bender_start(&b, scene, 1, x0);
+    J.x[0] = J.x[1] = rrv__v3(0, 0, 0);
+    J.d[0] = e1;
+    J.d[1] = e2;
+    out->curved = rrv__in_support(scene, x0);
+    if (T) T[0] = T[1] = T[2] = 1.0;
+    for (n = 0; n < RRV__SOLVE_SEGMENTS; ++n) {
+        rrv_vec3 d_start = d, dc[2];
+        rrv__jacobi J1 = J;
+        double len, s;
+        int j;
+        rrv__plan_segment(&b, scene, x, &d, &fixed);
+        len = b.segment;
+        if (b.end == RRV__END_STEP) {
+            rrv__eikonal_step_jacobi(scene, scene->settings.stepper, b.h, x, d_start, &J1);
+            if (b.h < scene->settings.step && !rrv__clipped_step_jacobi(scene, &b, x, d_start, d, len, &J, &J1))
+                break;
+            for (j = 0; j < 2; ++j) {
+                rrv_vec3 w = rrv__scale(rrv__sub(J1.x[j], J.x[j]), 1.0 / len);
+                dc[j] = rrv__madd(w, d, -rrv__dot(w, d));
+            }
+        } else {
+            for (j = 0; j < 2; ++j) dc[j] = J.d[j];
+        }
+        if (plane) {
+            /* crossing the light's plane from its front: the first place a
+               forward path could hit the light */
+            double h0 = rrv__dot(rrv__sub(x, y), *plane), cn = rrv__dot(d, *plane);
+            s = cn < 0 && h0 > 0 && h0 <= -cn * len ? h0 / -cn : DBL_MAX;
+        } else {
+            /* passing y: the chord's closest point to it, looked for only
+               where the path runs toward y (it may start away from it) */
+            s = rrv__dot(rrv__sub(y, x), d);
+            if (s < 0) s = DBL_MAX;
+        }
+        if (s < DBL_MAX && s <= len) {
+            out->end = rrv__madd(x, d, s);
+            out->dir = d;
+            for (j = 0; j < 2; ++j) {
+                rrv_vec3 de = rrv__madd(J.x[j], dc[j], s);
+                /* on the light's plane, the endpoint moves along it (the
+                   chord's oblique projection); perpendicular planes drop
+                   the part along d in the residual */
+                out->de[j] = plane ? rrv__madd(de, d, -rrv__dot(*plane, de) / rrv__dot(d, *plane)) : de;
+            }
+            out->segments = n + 1;
+            out->status = RRV__SHOT_REACHED;
+            if (T) {
+                rrv__hit hit;
+                double Ts[3], tmax = s * (1.0 - 1e-6);
+                ++ctx->stats.paths;
+                if (rrv__intersect_scene(scene, x, d, tmax, &hit)) { out->status = RRV__SHOT_BLOCKED; return; }
+                rrv__ratio_tracking_transmittance(ctx, x, d, tmax, rng, Ts);
+                for (c = 0; c < 3; ++c) T[c] *= Ts[c];
+            }
+            return;
+        }
+        if (b.end == RRV__END_NONE) break; /* straight on forever, never passing y */
+        if (T) {
+            rrv__hit hit;
+            double Ts[3];
+            if (rrv__intersect_scene(scene, x, d, len, &hit)) { out->status = RRV__SHOT_BLOCKED; return; }
+            rrv__ratio_tracking_transmittance(ctx, x, d, len, rng, Ts);
+            for (c = 0; c < 3; ++c) T[c] *= Ts[c];
+        }
+        if (b.end == RRV__END_FACE && rrv__face_jumps(scene, rrv__madd(x, d, len), d)) {
+            out->status = RRV__SHOT_INTERFACE;
+            return;
+        }
+        if (b.end == RRV__END_FACE) {
+            /* The face point x + L d, L(x, d) its distance, moves on the face:
+               dL = -N.(dx + L dd) / N.d. Not a small term: where the face
+               ends a gradient (a Luneburg sphere), entering earlier or later
+               bends the ray by a finite amount (the saltation of the
+               variational equations across a jump of grad eta). */
+            double nd = rrv__dot(b.normal, d);
+            if (!(fabs(nd) > 1e-9 * rrv__length(b.normal))) break; /* grazing */
+            for (j = 0; j < 2; ++j) {
+                rrv_vec3 moved = rrv__madd(J.x[j], J.d[j], len);
+                J1.x[j] = rrv__madd(moved, d, -rrv__dot(b.normal, moved) / nd);
+            }
+        }
+        out->curved = 1;
+        rrv__finish_segment(&b, scene, &x, &d, &fixed);
+        J = J1; /* a face without a jump leaves the direction as it was */
+    }
+    out->status = RRV__SHOT_MISSED;
+}
+
+/* The residual (offset of y from the path in the light's plane, or in the
+   plane through y perpendicular to the arriving chord) and its 2x2
+   Jacobian: J_plane, or J_perp = J_plane |cos theta_y|. */
+static void rrv__shot_residual(const rrv__shot *s, rrv_vec3 y, const rrv_vec3 *plane, double r[2], double Jp[4])
+{
+    rrv_vec3 f1, f2, off = rrv__sub(y, s->end);
+    rrv__frame(plane ? *plane : s->dir, &f1, &f2);
+    r[0] = rrv__dot(off, f1);
+    r[1] = rrv__dot(off, f2);
+    Jp[0] = rrv__dot(f1, s->de[0]);
+    Jp[1] = rrv__dot(f1, s->de[1]);
+    Jp[2] = rrv__dot(f2, s->de[0]);
+    Jp[3] = rrv__dot(f2, s->de[1]);
+}
+
+typedef struct rrv__root {
+    rrv_vec3 w0;      /* initial direction */
+    rrv_vec3 dir;     /* arriving chord direction at y */
+    double det;       /* det J_plane (on a light's plane) or J_perp, m^2 per steradian */
+    int curved;
+    long segments;
+    int iterations;
+} rrv__root;
+
+/* Newton's method on the two angles of w0 from a seed direction, the step
+   halved on a failed or worsening shot and doubled (up to 1) on success,
+   each step at most 0.5 rad. Returns 1 with the root, 0 if it did not
+   converge, met a sharp interface, or stalled at a caustic (det J = 0). */
+static int rrv__solve_shot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv_vec3 seed,
+                           rrv__root *root)
+{
+    rrv_vec3 w = seed, w_prev = seed, e1, e2, p1 = rrv__v3(0, 0, 0), p2 = p1;
+    double prev_norm = DBL_MAX, step = 1.0, delta[2] = {0, 0};
+    double tol = 1e-9 * (1.0 + rrv__length(rrv__sub(y, x0)));
+    int it, have_prev = 0;
+    root->iterations = 0;
+    for (it = 0; it < RRV__SOLVE_ITERATIONS; ++it) {
+        rrv__shot shot;
+        double r[2] = {0, 0}, Jp[4] = {0, 0, 0, 0}, norm, det, len;
+        rrv__frame(w, &e1, &e2);
+        rrv__shoot(ctx, x0, w, e1, e2, y, plane, NULL, NULL, &shot);
+        root->iterations = it + 1;
+        if (shot.status == RRV__SHOT_INTERFACE) return 0;
+        norm = DBL_MAX;
+        if (shot.status == RRV__SHOT_REACHED) {
+            rrv__shot_residual(&shot, y, plane, r, Jp);
+            norm = sqrt(r[0] * r[0] + r[1] * r[1]);
+        }
+        if (!(norm < prev_norm)) {
+            /* worse, or lost: back to the last good direction, half the step */
+            if (!have_prev) return 0;
+            step *= 0.5;
+            if (step < 1e-6) return 0;
+            w = rrv__normalize(rrv__add(w_prev, rrv__add(rrv__scale(p1, step * delta[0]), rrv__scale(p2, step * delta[1]))));
+            continue;
+        }
+        det = Jp[0] * Jp[3] - Jp[1] * Jp[2];
+        if (norm < tol) {
+            if (!(fabs(det) > 0) || !(fabs(det) < DBL_MAX)) return 0;
+            root->w0 = w;
+            root->dir = shot.dir;
+            root->det = det;
+            root->curved = shot.curved;
+            root->segments = shot.segments;
+            return 1;
+        }
+        /* a singular Jacobian is a caustic: no finite density */
+        if (!(fabs(det) > 1e-14 * (Jp[0] * Jp[0] + Jp[1] * Jp[1] + Jp[2] * Jp[2] + Jp[3] * Jp[3]))) return 0;
+        if (have_prev) step = fmin(1.0, 2.0 * step);
+        have_prev = 1;
+        prev_norm = norm;
+        w_prev = w;
+        p1 = e1;
+        p2 = e2;
+        delta[0] = (Jp[3] * r[0] - Jp[1] * r[1]) / det;
+        delta[1] = (Jp[0] * r[1] - Jp[2] * r[0]) / det;
+        len = sqrt(delta[0] * delta[0] + delta[1] * delta[1]);
+        if (len > 0.5) { delta[0] *= 0.5 / len; delta[1] *= 0.5 / len; }
+        w = rrv__normalize(rrv__add(w_prev, rrv__add(rrv__scale(p1, step * delta[0]), rrv__scale(p2, step * delta[1]))));
+    }
+    return 0;
+}
+
+/* Seeds for the solver: a Gaussian of 0.3 rad around the straight direction
+   to y (three times in four) or a uniform direction, so that every root's
+   basin has a nonzero probability and the trials below are unbiased. */
+static rrv_vec3 rrv__solver_seed(rrv_vec3 x0, rrv_vec3 y, rrv__rng *rng)
+{
+    double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng);
+    if (u < 0.75) {
+        double rad = 0.3 * sqrt(-2.0 * log(1.0 - u1)), phi = 2.0 * RRV__PI * u2;
+        rrv_vec3 w = rrv__normalize(rrv__sub(y, x0)), t, b;
+        rrv__frame(w, &t, &b);
+        return rrv__normalize(rrv__add(w, rrv__add(rrv__scale(t, rad * cos(phi)), rrv__scale(b, rad * sin(phi)))));
+    }
+    return rrv__sample_uniform_sphere(u1, u2);
+}
+
+/* Is a straight connection from x to a light sample one of the paths
+   straight NEE stands for when shooting partitions path space, i.e. does it
+   stay out of every refraction support? Forward paths make the same test. */
+static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls)
+{
+    rrv__support_view v;
+    if (!ctx->partition) return 1;
+    rrv__look_along(ctx->scene, x, ls->wi, &v);
+    return !v.inside && !(v.t_face < ls->dist);
+}
+
+static void rrv__vertex_eval(const rrv__vertex_bsdf *v, rrv_vec3 w, double f[3])
+{
+    int c;
+    if (v->surface) {
+        double cosw = fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI;
+        for (c = 0; c < 3; ++c) f[c] = v->albedo[c] * cosw;
+    } else {
+        f[0] = f[1] = f[2] = rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
+    }
+}
+
+/* Curved NEE from vertex x0: a point y sampled uniformly on one area light,
+   one root w0 of the two-point problem from a random seed, and its inverse
+   probability estimated by repeated trials until the same root comes back
+   (Specular Manifold Sampling, Zeltner et al. 2020): E[trials] = 1/p, so
+   summed over roots the estimate is unbiased up to the cap on trials.
+   Only curved paths are counted here (part of them in a refraction support,
+   no sharp interface crossed): straight ones belong to straight NEE, and
+   forward paths of this class count zero. The sky and sphere lights (whose
+   samples cover only what is seen straight) are left to forward paths. */
+static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
+{
+    const rrv_scene *scene = ctx->scene;
+    int choices = rrv__light_choices(scene), pick, count, c;
+    const rrv_shape *s;
+    rrv_vec3 y, ny, e1, e2;
+    rrv__root root, again;
+    rrv__shot shot;
+    double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng), pdf_area, T[3], f[3], k;
+    if (!choices) return;
+    pick = (int)(u * choices);
+    if (pick >= choices) pick = choices - 1;
+    if (pick == scene->light_count) return;
+    s = &scene->shapes[scene->lights[pick]];
+    if (s->kind == RRV_SHAPE_SPHERE) return;
+    if (s->kind == RRV_SHAPE_TRIANGLE) {
+        double su = sqrt(u1);
+        y = rrv__madd(rrv__madd(s->p0, s->e1, 1.0 - su), s->e2, u2 * su);
+    } else {
+        y = rrv__madd(rrv__madd(s->p0, s->e1, u1), s->e2, u2);
+    }
+    ny = rrv__normalize(rrv__cross(s->e1, s->e2));
+    pdf_area = 1.0 / (rrv__shape_area(s) * choices);
+    ++ctx->stats.solves;
+    if (!rrv__solve_shot(ctx, x0, y, &ny, rrv__solver_seed(x0, y, rng), &root)) {
+        ctx->stats.solve_iterations += (uint64_t)root.iterations;
+        return;
+    }
+    ctx->stats.solve_iterations += (uint64_t)root.iterations;
+    ++ctx->stats.solves_converged;
+    ctx->stats.solve_segments += (uint64_t)root.segments;
+    if (!root.curved) return;
+    rrv__vertex_eval(v, root.w0, f);
+    if (!(rrv__max3(f) > 0)) return;
+    rrv__frame(root.w0, &e1, &e2);
+    rrv__shoot(ctx, x0, root.w0, e1, e2, y, &ny, rng, T, &shot);
+    if (shot.status != RRV__SHOT_REACHED || !(rrv__max3(T) > 0)) return;
+    for (count = 1; count < RRV__SOLVE_TRIALS; ++count) {
+        int found;
+        ++ctx->stats.solves;
+        found = rrv__solve_shot(ctx, x0, y, &ny, rrv__solver_seed(x0, y, rng), &again);
+        ctx->stats.solve_iterations += (uint64_t)again.iterations;
+        if (!found) continue;
+        ++ctx->stats.solves_converged;
+        ctx->stats.solve_segments += (uint64_t)again.segments;
+        if (rrv__length(rrv__sub(again.w0, root.w0)) < RRV__SOLVE_SAME_ROOT) break;
+    }
+    ctx->stats.solve_trials += (uint64_t)count;
+    ++ctx->stats.solve_connections;
+    /* dw0 = dA_y / |det J_plane| (= dA_y |cos theta_y| / |det J_perp|) */
+    k = 1.0 / (fabs(root.det) * pdf_area) * count * rrv__eta_scale(ctx, y) * rrv__path_mis(path);
+    for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
 
 /* ==== image I/O: PFM and PNG files, checksums =================================
@@ -5380,6 +6080,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"refraction", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|poisson|midpoint|comb"},
     {"majorantcells", RRV__SF_INT, 1, 0, 0.0, 256.0, NULL},
     {"iorinterp", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "trilinear|cubic"},
+    {"nee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "none|straight|shoot"},
 };
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
@@ -6054,6 +6755,7 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[8].given) s->refraction = rrv__sf_schemes[sl[8].choice];
     if (sl[9].given) s->majorant_cells = (int)sl[9].v[0];
     if (sl[10].given) s->ior_interpolation = sl[10].choice ? RRV_IOR_INTERP_CUBIC : RRV_IOR_INTERP_TRILINEAR;
+    if (sl[11].given) s->nee = sl[11].choice == 0 ? RRV_NEE_NONE : sl[11].choice == 1 ? RRV_NEE_STRAIGHT : RRV_NEE_SHOOT;
     return RRV_OK;
 }
 
