@@ -143,9 +143,12 @@ static void test_refractive_furnace_lens(void)
        7 of 256 camera paths, each cut after ~9e4 events, where the comb and
        Poisson need ~2e3). */
     rrv_scene *s = sky_scene(8, 0.5);
-    rrv_medium *a = tb_medium(s, rrv__v3(-1.2, -0.6, -0.6), rrv__v3(0, 0.6, 0.6), 0, 0);
-    rrv_medium *b = tb_medium(s, rrv__v3(0, -0.6, -0.6), rrv__v3(1.2, 0.6, 0.6), 0, 0);
+    rrv_medium *a, *b;
     static const double expected[3] = {0.5, 0.5, 0.5};
+    tb_medium(s, rrv__v3(-1.2, -0.6, -0.6), rrv__v3(0, 0.6, 0.6), 0, 0);
+    tb_medium(s, rrv__v3(0, -0.6, -0.6), rrv__v3(1.2, 0.6, 0.6), 0, 0);
+    a = &s->media[0]; /* after both: adding a medium may move the array */
+    b = &s->media[1];
     a->density.kind = b->density.kind = RRV_FIELD_NONE;
     a->ior.kind = RRV_FIELD_LUNEBURG;
     a->ior.center = rrv__v3(-0.6, 0, 0);
@@ -235,7 +238,7 @@ static void test_no_ior_renders_alike(void)
        does, sample for sample. */
     rrv_scene *s = sky_scene(10, 0.3);
     rrv_medium *m = tb_medium(s, rrv__v3(-1, 0, -1), rrv__v3(1, 1.5, 1), 0.3, 2.0);
-    rrv_shape *floor_quad = tb_shape(s, RRV_SHAPE_QUAD), *light = tb_shape(s, RRV_SHAPE_QUAD);
+    rrv_shape *floor_quad, *light;
     rrv_blob *b = tb_blobs(&m->density, 1);
     size_t n = 10 * 10 * 3;
     float *ref = (float *)calloc(n, sizeof(float)), *img = (float *)calloc(n, sizeof(float));
@@ -243,6 +246,10 @@ static void test_no_ior_renders_alike(void)
     b->center = rrv__v3(0, 0.7, 0);
     b->radius = 0.4;
     b->weight = 2;
+    tb_shape(s, RRV_SHAPE_QUAD);
+    tb_shape(s, RRV_SHAPE_QUAD);
+    floor_quad = &s->shapes[0]; /* after both: adding a shape may move the array */
+    light = &s->shapes[1];
     floor_quad->p0 = rrv__v3(-4, 0, -4);
     floor_quad->e1 = rrv__v3(0, 0, 8);
     floor_quad->e2 = rrv__v3(8, 0, 0);
