@@ -489,6 +489,33 @@ RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user,
 /* PNG preview: 8-bit sRGB of rgb * 2^exposure, stored (uncompressed) deflate. */
 RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
                                     const float *rgb, int width, int height, double exposure);
+/* OpenEXR: single-part scanline file, channels B, G, R (the order the format
+   requires), lineOrder INCREASING_Y, pixelAspectRatio 1, screenWindowCenter
+   (0, 0), screenWindowWidth 1. A zeroed rrv_exr_options (or NULL) means
+   HALF, ZIP and a display window equal to the image.
+   HALF rounds to nearest even; finite values beyond the largest half
+   (65504) are clamped to +-65504 rather than becoming infinite, infinities
+   stay infinite and NaN stays NaN. ZIP is zlib (rrv's own LZ77 + dynamic
+   Huffman deflate) over blocks of 16 scanlines after the format's byte
+   split and delta predictor; a block that would not shrink is stored raw, as
+   the format prescribes.
+   Crops and tiles of a larger frame: the image is the data window, placed
+   with its top-left pixel at (x, y) in a display window of display_width x
+   display_height pixels (0 means the image's own size), so a compositor puts
+   it where it belongs. The data window may extend past the display window,
+   as the format allows; every coordinate must fit in an int. */
+typedef enum rrv_exr_pixel { RRV_EXR_HALF = 0, RRV_EXR_FLOAT = 1 } rrv_exr_pixel;
+typedef enum rrv_exr_compression { RRV_EXR_ZIP = 0, RRV_EXR_NO_COMPRESSION = 1 } rrv_exr_compression;
+typedef struct rrv_exr_options {
+    rrv_exr_pixel pixel;
+    rrv_exr_compression compression;
+    int display_width, display_height; /* 0: width, height of the image */
+    int x, y;                          /* the image's origin in the display window */
+} rrv_exr_options;
+RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb,
+                                    int width, int height, const rrv_exr_options *options);
+/* The half nearest to value by the rules above, as its 16-bit pattern. */
+RRV_DEF uint16_t rrv_half_from_float(float value);
 /* Reads a PFM (color "PF" or grey "Pf", either endianness) from memory into a
    new RGB buffer (free with rrv_free). */
 RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char *name,
@@ -506,6 +533,8 @@ RRV_DEF rrv_result rrv_write_pfm(const char *path, const float *rgb, int width, 
                                  rrv_error *err);
 RRV_DEF rrv_result rrv_write_png(const char *path, const float *rgb, int width, int height,
                                  double exposure, rrv_error *err);
+RRV_DEF rrv_result rrv_write_exr(const char *path, const float *rgb, int width, int height,
+                                 const rrv_exr_options *options, rrv_error *err);
 RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *height,
                                 rrv_error *err);
 
@@ -3497,6 +3526,586 @@ RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
     return RRV_OK;
 }
 
+/* ---- OpenEXR writer ---------------------------------------------------------------
+   Layout: magic, version 2 (single-part scanline), the header's attributes
+   and a NUL, one 64-bit offset per chunk, then chunks of (int32 y, int32
+   size, data). A chunk holds 1 scanline uncompressed or 16 with ZIP; inside
+   it each scanline stores all B values, then G, then R, little endian. */
+
+RRV_DEF uint16_t rrv_half_from_float(float value)
+{
+    uint32_t bits, magnitude, sign;
+    memcpy(&bits, &value, sizeof bits);
+    sign = (bits >> 16) & 0x8000u;
+    magnitude = bits & 0x7FFFFFFFu;
+    if (magnitude >= 0x7F800000u) { /* infinity, or NaN kept NaN by a forced quiet bit */
+        if (magnitude == 0x7F800000u) return (uint16_t)(sign | 0x7C00u);
+        return (uint16_t)(sign | 0x7E00u | ((magnitude >> 13) & 0x3FFu));
+    }
+    /* 0x477FE000 is 65504, the largest half: clamping instead of rounding to
+       infinity keeps a bright but finite pixel finite in the file. */
+    if (magnitude >= 0x477FE000u) return (uint16_t)(sign | 0x7BFFu);
+    if (magnitude >= 0x38800000u) { /* normal half: >= 2^-14 */
+        uint32_t half = ((magnitude >> 23) - 112u) << 10 | ((magnitude >> 13) & 0x3FFu);
+        uint32_t rest = magnitude & 0x1FFFu;
+        /* A carry out of the mantissa correctly bumps the exponent. */
+        if (rest > 0x1000u || (rest == 0x1000u && (half & 1u))) ++half;
+        return (uint16_t)(sign | half);
+    }
+    if (magnitude <= 0x33000000u) return (uint16_t)sign; /* <= 2^-25 rounds to (even) zero */
+    {
+        /* Subnormal half: the value in units of 2^-24 is the 24-bit mantissa
+           shifted right by 126 - exponent, which lies in [14, 24] here. */
+        uint32_t mantissa = (magnitude & 0x7FFFFFu) | 0x800000u;
+        unsigned shift = 126u - (magnitude >> 23);
+        uint32_t half = mantissa >> shift;
+        uint32_t rest = mantissa & ((1u << shift) - 1u), tie = 1u << (shift - 1u);
+        if (rest > tie || (rest == tie && (half & 1u))) ++half;
+        return (uint16_t)(sign | half);
+    }
+}
+
+/* -- deflate (zlib) for ZIP chunks --------------------------------------------
+   Greedy LZ77 over a 32 KiB window with hash chains, then one block with
+   Huffman codes made for the chunk. The block is written into a buffer the
+   size of the raw chunk; running out of room means the chunk does not shrink
+   and is stored raw instead. */
+
+#define RRV__LZ_WINDOW 32768
+#define RRV__LZ_HASH_BITS 15
+#define RRV__LZ_MAX_CHAIN 48
+#define RRV__HUFF_MAX_BITS 15
+
+typedef struct rrv__bit_writer {
+    unsigned char *out;
+    size_t size, capacity;
+    uint32_t bits;
+    int count, full;
+} rrv__bit_writer;
+
+/* Appends n <= 16 bits, least significant first, as deflate packs them. */
+static void rrv__bits_put(rrv__bit_writer *b, uint32_t value, int n)
+{
+    b->bits |= value << b->count;
+    b->count += n;
+    while (b->count >= 8) {
+        if (b->size < b->capacity) b->out[b->size++] = (unsigned char)b->bits;
+        else b->full = 1;
+        b->bits >>= 8;
+        b->count -= 8;
+    }
+}
+
+/* Huffman codes go out most significant bit first. */
+static void rrv__bits_put_code(rrv__bit_writer *b, uint32_t code, int length)
+{
+    uint32_t reversed = 0;
+    int i;
+    for (i = 0; i < length; ++i) reversed |= ((code >> i) & 1u) << (length - 1 - i);
+    rrv__bits_put(b, reversed, length);
+}
+
+static const uint16_t rrv__deflate_length_base[29] = {
+    3, 4, 5, 6, 7, 8, 9, 10, 11, 13, 15, 17, 19, 23, 27, 31,
+    35, 43, 51, 59, 67, 83, 99, 115, 131, 163, 195, 227, 258 };
+static const unsigned char rrv__deflate_length_extra[29] = {
+    0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 5, 5, 5, 5, 0 };
+static const uint16_t rrv__deflate_dist_base[30] = {
+    1, 2, 3, 4, 5, 7, 9, 13, 17, 25, 33, 49, 65, 97, 129, 193, 257, 385, 513, 769,
+    1025, 1537, 2049, 3073, 4097, 6145, 8193, 12289, 16385, 24577 };
+static const unsigned char rrv__deflate_dist_extra[30] = {
+    0, 0, 0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7, 8, 8, 9, 9, 10, 10, 11, 11, 12, 12, 13, 13 };
+
+static int rrv__deflate_length_code(unsigned length)
+{
+    int i = 28;
+    while (rrv__deflate_length_base[i] > length) --i;
+    return i;
+}
+
+static int rrv__deflate_dist_code(unsigned dist)
+{
+    int i = 29;
+    while (rrv__deflate_dist_base[i] > dist) --i;
+    return i;
+}
+
+/* Code lengths of at most max_bits for the symbols' frequencies (unused
+   symbols get 0). A Huffman tree too deep for the limit is rebuilt from
+   halved frequencies, which flattens it; the caller makes sure at least two
+   symbols are used, so every code is complete. */
+static void rrv__huffman_lengths(const uint32_t *freq, int count, int max_bits, unsigned char *lengths)
+{
+    uint32_t weight[2 * 288];
+    int parent[2 * 288], alive[2 * 288];
+    uint32_t scaled[288];
+    int i, shift = 0;
+    for (;;) {
+        int nodes = count, live = 0, deepest = 0;
+        for (i = 0; i < count; ++i) {
+            scaled[i] = freq[i] ? (freq[i] >> shift) | 1u : 0u;
+            weight[i] = scaled[i];
+            alive[i] = scaled[i] > 0;
+            parent[i] = -1;
+            live += alive[i];
+        }
+        /* Quadratic selection of the two lightest nodes: at most 288
+           symbols, a few times per chunk. */
+        while (live > 1) {
+            int a = -1, b = -1;
+            for (i = 0; i < nodes; ++i) {
+                if (!alive[i]) continue;
+                if (a < 0 || weight[i] < weight[a]) { b = a; a = i; }
+                else if (b < 0 || weight[i] < weight[b]) b = i;
+            }
+            weight[nodes] = weight[a] + weight[b];
+            alive[nodes] = 1;
+            parent[nodes] = -1;
+            alive[a] = alive[b] = 0;
+            parent[a] = parent[b] = nodes;
+            ++nodes;
+            --live;
+        }
+        for (i = 0; i < count; ++i) {
+            int depth = 0, n = i;
+            if (!scaled[i]) { lengths[i] = 0; continue; }
+            while (parent[n] >= 0) { n = parent[n]; ++depth; }
+            lengths[i] = (unsigned char)depth;
+            if (depth > deepest) deepest = depth;
+        }
+        if (deepest <= max_bits) return;
+        ++shift;
+    }
+}
+
+/* Canonical codes from code lengths (RFC 1951, 3.2.2). */
+static void rrv__huffman_codes(const unsigned char *lengths, int count, uint16_t *codes)
+{
+    int bl_count[RRV__HUFF_MAX_BITS + 1] = { 0 }, bits, i;
+    uint32_t next[RRV__HUFF_MAX_BITS + 1], code = 0;
+    for (i = 0; i < count; ++i) ++bl_count[lengths[i]];
+    bl_count[0] = 0;
+    for (bits = 1; bits <= RRV__HUFF_MAX_BITS; ++bits) {
+        code = (code + (uint32_t)bl_count[bits - 1]) << 1;
+        next[bits] = code;
+    }
+    for (i = 0; i < count; ++i)
+        codes[i] = lengths[i] ? (uint16_t)next[lengths[i]]++ : 0;
+}
+
+/* Scratch memory of one compressor, reused across chunks. A token is a
+   literal byte (< 256) or (length << 16 | distance). */
+typedef struct rrv__deflater {
+    int32_t head[1 << RRV__LZ_HASH_BITS];
+    int32_t prev[RRV__LZ_WINDOW];
+    uint32_t *tokens; /* room for one token per input byte */
+} rrv__deflater;
+
+static size_t rrv__lz77(rrv__deflater *z, const unsigned char *data, size_t size)
+{
+    size_t pos = 0, count = 0, i;
+    for (i = 0; i < ((size_t)1 << RRV__LZ_HASH_BITS); ++i) z->head[i] = -1;
+#define RRV__LZ_HASH(p) ((((uint32_t)(p)[0] << 10) ^ ((uint32_t)(p)[1] << 5) ^ (uint32_t)(p)[2]) & \
+                         ((1u << RRV__LZ_HASH_BITS) - 1u))
+    while (pos < size) {
+        size_t best = 0, best_dist = 0;
+        if (pos + 3 <= size) {
+            uint32_t h = RRV__LZ_HASH(data + pos);
+            int32_t candidate = z->head[h];
+            int chain = RRV__LZ_MAX_CHAIN;
+            size_t limit = size - pos < 258 ? size - pos : 258;
+            while (candidate >= 0 && pos - (size_t)candidate <= RRV__LZ_WINDOW && chain-- > 0) {
+                const unsigned char *a = data + candidate, *b = data + pos;
+                if (a[best] == b[best]) {
+                    size_t n = 0;
+                    while (n < limit && a[n] == b[n]) ++n;
+                    if (n > best) {
+                        best = n;
+                        best_dist = pos - (size_t)candidate;
+                        if (n == limit) break;
+                    }
+                }
+                {
+                    int32_t next = z->prev[candidate & (RRV__LZ_WINDOW - 1)];
+                    if (next >= candidate) break;
+                    candidate = next;
+                }
+            }
+            z->prev[pos & (RRV__LZ_WINDOW - 1)] = z->head[h];
+            z->head[h] = (int32_t)pos;
+        }
+        if (best >= 3) {
+            z->tokens[count++] = (uint32_t)best << 16 | (uint32_t)best_dist;
+            for (i = 1; i < best; ++i) {
+                size_t p = pos + i;
+                if (p + 3 <= size) {
+                    uint32_t h = RRV__LZ_HASH(data + p);
+                    z->prev[p & (RRV__LZ_WINDOW - 1)] = z->head[h];
+                    z->head[h] = (int32_t)p;
+                }
+            }
+            pos += best;
+        } else {
+            z->tokens[count++] = data[pos++];
+        }
+    }
+#undef RRV__LZ_HASH
+    return count;
+}
+
+/* Compresses data into out as a zlib stream; returns its size, or 0 when it
+   would not fit in capacity. */
+static size_t rrv__zlib_compress(rrv__deflater *z, const unsigned char *data, size_t size,
+                                 unsigned char *out, size_t capacity)
+{
+    static const unsigned char cl_order[19] = {
+        16, 17, 18, 0, 8, 7, 9, 6, 10, 5, 11, 4, 12, 3, 13, 2, 14, 1, 15 };
+    uint32_t lit_freq[288] = { 0 }, dist_freq[30] = { 0 }, cl_freq[19] = { 0 };
+    unsigned char lit_len[288], dist_len[30], cl_len[19], all_len[288 + 30];
+    uint16_t lit_code[288], dist_code[30], cl_code[19];
+    unsigned char runs[288 + 30], run_extra[288 + 30];
+    size_t tokens, t, run_count = 0;
+    int hlit, hdist, hclen, total, i;
+    rrv__bit_writer b;
+    uint32_t adler;
+
+    if (capacity < 8) return 0;
+    tokens = rrv__lz77(z, data, size);
+    for (t = 0; t < tokens; ++t) {
+        uint32_t token = z->tokens[t];
+        if (token < 256) {
+            ++lit_freq[token];
+        } else {
+            ++lit_freq[257 + rrv__deflate_length_code(token >> 16)];
+            ++dist_freq[rrv__deflate_dist_code(token & 0xFFFFu)];
+        }
+    }
+    lit_freq[256] = 1;
+    /* Two used distance codes at least, so that code is complete even in a
+       chunk without matches (decoders differ on incomplete ones). */
+    if (!dist_freq[0]) dist_freq[0] = 1;
+    if (!dist_freq[1]) dist_freq[1] = 1;
+    rrv__huffman_lengths(lit_freq, 288, RRV__HUFF_MAX_BITS, lit_len);
+    rrv__huffman_lengths(dist_freq, 30, RRV__HUFF_MAX_BITS, dist_len);
+    rrv__huffman_codes(lit_len, 288, lit_code);
+    rrv__huffman_codes(dist_len, 30, dist_code);
+
+    for (hlit = 286; hlit > 257 && lit_len[hlit - 1] == 0; --hlit) {}
+    for (hdist = 30; hdist > 1 && dist_len[hdist - 1] == 0; --hdist) {}
+    memcpy(all_len, lit_len, (size_t)hlit);
+    memcpy(all_len + hlit, dist_len, (size_t)hdist);
+    total = hlit + hdist;
+    /* Runs of code lengths: 16 repeats the previous length 3-6 times, 17 and
+       18 write 3-10 and 11-138 zeros. */
+    for (i = 0; i < total;) {
+        int run = 1;
+        while (i + run < total && all_len[i + run] == all_len[i]) ++run;
+        if (all_len[i] == 0 && run >= 3) {
+            if (run > 138) run = 138;
+            runs[run_count] = (unsigned char)(run >= 11 ? 18 : 17);
+            run_extra[run_count++] = (unsigned char)(run >= 11 ? run - 11 : run - 3);
+            i += run;
+        } else if (all_len[i] != 0 && run >= 4) {
+            if (run > 7) run = 7;
+            runs[run_count] = all_len[i];
+            run_extra[run_count++] = 0;
+            runs[run_count] = 16;
+            run_extra[run_count++] = (unsigned char)(run - 4);
+            i += run;
+        } else {
+            runs[run_count] = all_len[i];
+            run_extra[run_count++] = 0;
+            ++i;
+        }
+    }
+    for (t = 0; t < run_count; ++t) ++cl_freq[runs[t]];
+    {
+        int used = 0;
+        for (i = 0; i < 19; ++i) used += cl_freq[i] > 0;
+        for (i = 0; used < 2; ++i) if (!cl_freq[i]) { cl_freq[i] = 1; ++used; }
+    }
+    rrv__huffman_lengths(cl_freq, 19, 7, cl_len);
+    rrv__huffman_codes(cl_len, 19, cl_code);
+    for (hclen = 19; hclen > 4 && cl_len[cl_order[hclen - 1]] == 0; --hclen) {}
+
+    b.out = out;
+    b.size = 0;
+    b.capacity = capacity - 4; /* room for the Adler-32 trailer */
+    b.bits = 0;
+    b.count = 0;
+    b.full = 0;
+    out[b.size++] = 0x78; /* deflate, 32 KiB window */
+    out[b.size++] = 0x01; /* no dictionary; (0x7801 % 31) == 0 */
+    rrv__bits_put(&b, 1, 1); /* BFINAL */
+    rrv__bits_put(&b, 2, 2); /* dynamic Huffman */
+    rrv__bits_put(&b, (uint32_t)(hlit - 257), 5);
+    rrv__bits_put(&b, (uint32_t)(hdist - 1), 5);
+    rrv__bits_put(&b, (uint32_t)(hclen - 4), 4);
+    for (i = 0; i < hclen; ++i) rrv__bits_put(&b, cl_len[cl_order[i]], 3);
+    for (t = 0; t < run_count; ++t) {
+        rrv__bits_put_code(&b, cl_code[runs[t]], cl_len[runs[t]]);
+        if (runs[t] == 16) rrv__bits_put(&b, run_extra[t], 2);
+        else if (runs[t] == 17) rrv__bits_put(&b, run_extra[t], 3);
+        else if (runs[t] == 18) rrv__bits_put(&b, run_extra[t], 7);
+    }
+    for (t = 0; t < tokens && !b.full; ++t) {
+        uint32_t token = z->tokens[t];
+        if (token < 256) {
+            rrv__bits_put_code(&b, lit_code[token], lit_len[token]);
+        } else {
+            unsigned length = token >> 16, dist = token & 0xFFFFu;
+            int lc = rrv__deflate_length_code(length), dc = rrv__deflate_dist_code(dist);
+            rrv__bits_put_code(&b, lit_code[257 + lc], lit_len[257 + lc]);
+            if (rrv__deflate_length_extra[lc])
+                rrv__bits_put(&b, length - rrv__deflate_length_base[lc], rrv__deflate_length_extra[lc]);
+            rrv__bits_put_code(&b, dist_code[dc], dist_len[dc]);
+            if (rrv__deflate_dist_extra[dc])
+                rrv__bits_put(&b, dist - rrv__deflate_dist_base[dc], rrv__deflate_dist_extra[dc]);
+        }
+    }
+    rrv__bits_put_code(&b, lit_code[256], lit_len[256]);
+    if (b.count > 0) rrv__bits_put(&b, 0, 8 - b.count);
+    if (b.full) return 0;
+    adler = rrv_adler32(1, data, size);
+    rrv__put_u32_be(out + b.size, adler);
+    return b.size + 4;
+}
+
+/* -- the file ------------------------------------------------------------------ */
+
+#define RRV__EXR_ZIP_LINES 16
+
+typedef struct rrv__exr_header {
+    unsigned char bytes[512];
+    size_t size;
+} rrv__exr_header;
+
+static void rrv__put_u32_le(unsigned char *out, uint32_t v)
+{
+    out[0] = (unsigned char)v;
+    out[1] = (unsigned char)(v >> 8);
+    out[2] = (unsigned char)(v >> 16);
+    out[3] = (unsigned char)(v >> 24);
+}
+
+static void rrv__exr_attribute(rrv__exr_header *h, const char *name, const char *type,
+                               const void *value, size_t size)
+{
+    size_t n = strlen(name) + 1, t = strlen(type) + 1;
+    memcpy(h->bytes + h->size, name, n);
+    memcpy(h->bytes + h->size + n, type, t);
+    rrv__put_u32_le(h->bytes + h->size + n + t, (uint32_t)size);
+    memcpy(h->bytes + h->size + n + t + 4, value, size);
+    h->size += n + t + 4 + size;
+}
+
+static void rrv__exr_box(unsigned char *out, long x0, long y0, long x1, long y1)
+{
+    rrv__put_u32_le(out, (uint32_t)x0);
+    rrv__put_u32_le(out + 4, (uint32_t)y0);
+    rrv__put_u32_le(out + 8, (uint32_t)x1);
+    rrv__put_u32_le(out + 12, (uint32_t)y1);
+}
+
+/* The raw bytes of scanlines [y0, y0 + lines) of the image as a chunk
+   stores them: per line B, G, R runs of little-endian halves or floats. */
+static void rrv__exr_pack_lines(const float *rgb, int width, int y0, int lines, int as_float,
+                                unsigned char *out)
+{
+    int y, c, x;
+    for (y = y0; y < y0 + lines; ++y) {
+        const float *row = rgb + (size_t)y * (size_t)width * 3;
+        for (c = 2; c >= 0; --c) { /* B, G, R */
+            for (x = 0; x < width; ++x) {
+                float v = row[3 * (size_t)x + (size_t)c];
+                if (as_float) {
+                    uint32_t bits;
+                    memcpy(&bits, &v, sizeof bits);
+                    rrv__put_u32_le(out, bits);
+                    out += 4;
+                } else {
+                    uint16_t half = rrv_half_from_float(v);
+                    out[0] = (unsigned char)half;
+                    out[1] = (unsigned char)(half >> 8);
+                    out += 2;
+                }
+            }
+        }
+    }
+}
+
+/* ZIP's preprocessing: even-indexed bytes first, then odd ones (so the high
+   and low bytes of each value gather), then each byte replaced by its
+   difference from the previous one plus 128. */
+static void rrv__exr_zip_predict(const unsigned char *raw, size_t size, unsigned char *out)
+{
+    size_t half = (size + 1) / 2, i;
+    unsigned previous;
+    for (i = 0; i < size; ++i) out[(i & 1) ? half + i / 2 : i / 2] = raw[i];
+    previous = out[0];
+    for (i = 1; i < size; ++i) {
+        unsigned current = out[i];
+        out[i] = (unsigned char)(current - previous + 128u);
+        previous = current;
+    }
+}
+
+RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb,
+                                    int width, int height, const rrv_exr_options *options)
+{
+    static const unsigned char magic_version[8] = { 0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0 };
+    rrv_exr_options opt;
+    rrv__exr_header h;
+    unsigned char value[64], *raw = NULL, *predicted = NULL, *packed = NULL, *offsets = NULL;
+    uint32_t *chunk_sizes = NULL;
+    rrv__deflater *z = NULL;
+    int as_float, zip, lines_per_chunk, chunk_count, i, c;
+    size_t value_bytes, line_bytes, chunk_bytes, packed_size = 0;
+    uint64_t position;
+    rrv_result result = RRV_OK;
+    long display_w, display_h;
+
+    if (!write || rrv__check_image_args(rgb, width, height) != RRV_OK) return RRV_ERROR_ARGUMENT;
+    if (options) opt = *options;
+    else memset(&opt, 0, sizeof opt);
+    if ((opt.pixel != RRV_EXR_HALF && opt.pixel != RRV_EXR_FLOAT) ||
+        (opt.compression != RRV_EXR_ZIP && opt.compression != RRV_EXR_NO_COMPRESSION) ||
+        opt.display_width < 0 || opt.display_height < 0)
+        return RRV_ERROR_ARGUMENT;
+    display_w = opt.display_width ? opt.display_width : width;
+    display_h = opt.display_height ? opt.display_height : height;
+    /* The data window's last pixel must be an int coordinate too. */
+    if ((long long)opt.x + width - 1 > INT_MAX || (long long)opt.y + height - 1 > INT_MAX)
+        return RRV_ERROR_ARGUMENT;
+    as_float = opt.pixel == RRV_EXR_FLOAT;
+    zip = opt.compression == RRV_EXR_ZIP;
+    value_bytes = as_float ? 4 : 2;
+    lines_per_chunk = zip ? RRV__EXR_ZIP_LINES : 1;
+    chunk_count = (height + lines_per_chunk - 1) / lines_per_chunk;
+    line_bytes = (size_t)width * 3 * value_bytes;
+    /* A chunk's size is an int32 in the file. */
+    if ((size_t)width > (size_t)INT32_MAX / 3 / value_bytes / (size_t)lines_per_chunk)
+        return RRV_ERROR_ARGUMENT;
+    chunk_bytes = line_bytes * (size_t)(height < lines_per_chunk ? height : lines_per_chunk);
+
+    h.size = 0;
+    memcpy(h.bytes, magic_version, 8);
+    h.size = 8;
+    {
+        /* chlist: per channel name, int32 type (1 HALF, 2 FLOAT), uint8
+           pLinear, 3 reserved bytes, int32 x and y sampling; then a NUL. */
+        size_t n = 0;
+        static const char names[3] = { 'B', 'G', 'R' };
+        for (c = 0; c < 3; ++c) {
+            value[n++] = (unsigned char)names[c];
+            value[n++] = 0;
+            rrv__put_u32_le(value + n, as_float ? 2u : 1u);
+            memset(value + n + 4, 0, 4);
+            rrv__put_u32_le(value + n + 8, 1);
+            rrv__put_u32_le(value + n + 12, 1);
+            n += 16;
+        }
+        value[n++] = 0;
+        rrv__exr_attribute(&h, "channels", "chlist", value, n);
+    }
+    value[0] = (unsigned char)(zip ? 3 : 0); /* ZIP_COMPRESSION, NO_COMPRESSION */
+    rrv__exr_attribute(&h, "compression", "compression", value, 1);
+    rrv__exr_box(value, opt.x, opt.y, (long)opt.x + width - 1, (long)opt.y + height - 1);
+    rrv__exr_attribute(&h, "dataWindow", "box2i", value, 16);
+    rrv__exr_box(value, 0, 0, display_w - 1, display_h - 1);
+    rrv__exr_attribute(&h, "displayWindow", "box2i", value, 16);
+    value[0] = 0; /* INCREASING_Y */
+    rrv__exr_attribute(&h, "lineOrder", "lineOrder", value, 1);
+    {
+        float one = 1.0f;
+        uint32_t bits;
+        memcpy(&bits, &one, sizeof bits);
+        rrv__put_u32_le(value, bits);
+        rrv__exr_attribute(&h, "pixelAspectRatio", "float", value, 4);
+        memset(value, 0, 8);
+        rrv__exr_attribute(&h, "screenWindowCenter", "v2f", value, 8);
+        rrv__put_u32_le(value, bits);
+        rrv__exr_attribute(&h, "screenWindowWidth", "float", value, 4);
+    }
+    h.bytes[h.size++] = 0;
+
+    raw = (unsigned char *)RRV_MALLOC(chunk_bytes);
+    offsets = (unsigned char *)RRV_MALLOC((size_t)chunk_count * 8);
+    chunk_sizes = (uint32_t *)RRV_MALLOC((size_t)chunk_count * sizeof *chunk_sizes);
+    if (!raw || !offsets || !chunk_sizes) { result = RRV_ERROR_MEMORY; goto done; }
+
+    if (zip) {
+        /* Offsets come before the chunks and the callback cannot seek, so
+           every chunk is compressed first; together they are never larger
+           than the uncompressed pixels. */
+        size_t packed_capacity = 0;
+        predicted = (unsigned char *)RRV_MALLOC(chunk_bytes);
+        z = (rrv__deflater *)RRV_MALLOC(sizeof *z);
+        if (z) z->tokens = (uint32_t *)RRV_MALLOC(chunk_bytes * sizeof *z->tokens);
+        if (!predicted || !z || !z->tokens) { result = RRV_ERROR_MEMORY; goto done; }
+        packed_capacity = line_bytes * (size_t)height;
+        packed = (unsigned char *)RRV_MALLOC(packed_capacity);
+        if (!packed) { result = RRV_ERROR_MEMORY; goto done; }
+        for (i = 0; i < chunk_count; ++i) {
+            int y0 = i * lines_per_chunk;
+            int lines = height - y0 < lines_per_chunk ? height - y0 : lines_per_chunk;
+            size_t size = line_bytes * (size_t)lines, compressed;
+            rrv__exr_pack_lines(rgb, width, y0, lines, as_float, raw);
+            rrv__exr_zip_predict(raw, size, predicted);
+            /* Smaller than raw or raw itself: a reader takes a chunk of the
+               uncompressed size as uncompressed. */
+            compressed = rrv__zlib_compress(z, predicted, size, packed + packed_size, size - 1);
+            if (compressed == 0) {
+                memcpy(packed + packed_size, raw, size);
+                compressed = size;
+            }
+            chunk_sizes[i] = (uint32_t)compressed;
+            packed_size += compressed;
+        }
+    } else {
+        for (i = 0; i < chunk_count; ++i) chunk_sizes[i] = (uint32_t)line_bytes;
+    }
+
+    position = (uint64_t)h.size + (uint64_t)chunk_count * 8;
+    for (i = 0; i < chunk_count; ++i) {
+        uint64_t p = position;
+        int k;
+        for (k = 0; k < 8; ++k) offsets[8 * (size_t)i + (size_t)k] = (unsigned char)(p >> (8 * k));
+        position += 8 + (uint64_t)chunk_sizes[i];
+    }
+    if (write(user, h.bytes, h.size) != 0 || write(user, offsets, (size_t)chunk_count * 8) != 0) {
+        result = RRV_ERROR_IO;
+        goto done;
+    }
+    {
+        size_t consumed = 0;
+        for (i = 0; i < chunk_count; ++i) {
+            unsigned char prefix[8];
+            int y0 = i * lines_per_chunk;
+            int lines = height - y0 < lines_per_chunk ? height - y0 : lines_per_chunk;
+            rrv__put_u32_le(prefix, (uint32_t)(opt.y + y0));
+            rrv__put_u32_le(prefix + 4, chunk_sizes[i]);
+            if (write(user, prefix, 8) != 0) { result = RRV_ERROR_IO; goto done; }
+            if (zip) {
+                if (write(user, packed + consumed, chunk_sizes[i]) != 0) { result = RRV_ERROR_IO; goto done; }
+                consumed += chunk_sizes[i];
+            } else {
+                rrv__exr_pack_lines(rgb, width, y0, lines, as_float, raw);
+                if (write(user, raw, chunk_sizes[i]) != 0) { result = RRV_ERROR_IO; goto done; }
+            }
+        }
+    }
+done:
+    if (z) RRV_FREE(z->tokens);
+    RRV_FREE(z);
+    RRV_FREE(packed);
+    RRV_FREE(predicted);
+    RRV_FREE(chunk_sizes);
+    RRV_FREE(offsets);
+    RRV_FREE(raw);
+    return result;
+}
+
 /* ---- PFM reader ------------------------------------------------------------------ */
 
 static int rrv__pfm_is_space(unsigned char c)
@@ -3753,8 +4362,11 @@ static FILE *rrv__open_temp(const char *path, char *temp_path, size_t cap)
 
 /* Writes through a new temporary file and renames it over path only after
    every fwrite and the fclose succeeded. */
+enum { RRV__IMAGE_PFM, RRV__IMAGE_PNG, RRV__IMAGE_EXR };
+
 static rrv_result rrv__write_image_file(const char *path, const float *rgb, int width, int height,
-                                        int as_png, double exposure, rrv_error *err)
+                                        int format, double exposure, const rrv_exr_options *exr,
+                                        rrv_error *err)
 {
     size_t cap;
     char *temp_path;
@@ -3766,7 +4378,7 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
     if (rrv__check_image_args(rgb, width, height) != RRV_OK)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "invalid image (%dx%d, data %s)",
                          width, height, rgb ? "given" : "NULL");
-    if (as_png && !isfinite(exposure))
+    if (format == RRV__IMAGE_PNG && !isfinite(exposure))
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "exposure must be finite");
 
     cap = strlen(path) + 16; /* ".%08lx.tmp" and the NUL */
@@ -3780,13 +4392,20 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
         return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot write: cannot create a temporary file%s%s",
                          why[0] ? ": " : "", why);
     }
-    result = as_png ? rrv_write_png_to(rrv__fwrite_callback, file, rgb, width, height, exposure)
-                    : rrv_write_pfm_to(rrv__fwrite_callback, file, rgb, width, height);
+    if (format == RRV__IMAGE_PNG)
+        result = rrv_write_png_to(rrv__fwrite_callback, file, rgb, width, height, exposure);
+    else if (format == RRV__IMAGE_EXR)
+        result = rrv_write_exr_to(rrv__fwrite_callback, file, rgb, width, height, exr);
+    else
+        result = rrv_write_pfm_to(rrv__fwrite_callback, file, rgb, width, height);
     closed = fclose(file) == 0;
     if (result != RRV_OK || !closed) {
         remove(temp_path);
         RRV_FREE(temp_path);
         if (result == RRV_ERROR_MEMORY) return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory");
+        if (result == RRV_ERROR_ARGUMENT)
+            return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0,
+                             "invalid EXR options or an image too wide for an EXR chunk");
         return rrv__fail(err, RRV_ERROR_IO, path, 0,
                          result != RRV_OK ? "cannot write: writing failed" : "cannot write: closing failed");
     }
@@ -3810,13 +4429,19 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
 RRV_DEF rrv_result rrv_write_pfm(const char *path, const float *rgb, int width, int height,
                                  rrv_error *err)
 {
-    return rrv__write_image_file(path, rgb, width, height, 0, 0.0, err);
+    return rrv__write_image_file(path, rgb, width, height, RRV__IMAGE_PFM, 0.0, NULL, err);
 }
 
 RRV_DEF rrv_result rrv_write_png(const char *path, const float *rgb, int width, int height,
                                  double exposure, rrv_error *err)
 {
-    return rrv__write_image_file(path, rgb, width, height, 1, exposure, err);
+    return rrv__write_image_file(path, rgb, width, height, RRV__IMAGE_PNG, exposure, NULL, err);
+}
+
+RRV_DEF rrv_result rrv_write_exr(const char *path, const float *rgb, int width, int height,
+                                 const rrv_exr_options *options, rrv_error *err)
+{
+    return rrv__write_image_file(path, rgb, width, height, RRV__IMAGE_EXR, 0.0, options, err);
 }
 
 /* A header longer than this is not a PFM: rrv writes 20-odd bytes, and a
