@@ -15,6 +15,9 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#if defined(__unix__) || defined(__APPLE__)
+#include <sys/wait.h>
+#endif
 
 static const char *build_dir = ".";
 
@@ -741,6 +744,110 @@ static void exr_file_form(void)
     free(rgb);
 }
 
+/* ---- the CLI ------------------------------------------------------------------------ */
+
+static unsigned char *read_file(const char *path, size_t *size)
+{
+    FILE *f = fopen(path, "rb");
+    unsigned char *data = NULL;
+    long n;
+    *size = 0;
+    if (!f) return NULL;
+    if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) >= 0 && fseek(f, 0, SEEK_SET) == 0) {
+        data = (unsigned char *)malloc((size_t)n + 1);
+        if (data && fread(data, 1, (size_t)n, f) == (size_t)n) *size = (size_t)n;
+        else { free(data); data = NULL; }
+    }
+    fclose(f);
+    return data;
+}
+
+static int run_rrv(const char *arguments)
+{
+    char command[2048];
+    int status;
+    snprintf(command, sizeof command, "'%s/rrv' %s >'%s/test_exr_cli.out' 2>&1 </dev/null", build_dir, arguments,
+             build_dir);
+    status = system(command);
+#ifdef WEXITSTATUS
+    return status != -1 && WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+#else
+    return status;
+#endif
+}
+
+/* -o picks the format by extension; an EXR of a crop says where the crop
+   lies in the frame, and holds the same pixels as the PFM of that crop. */
+static void cli_writes_exr_by_extension(void)
+{
+    static const char *const flags[3] = { "--exr-float --exr-compression none", "--exr-float", "--exr-half" };
+    char args[1024], pfm[512], exr[512];
+    float *reference = NULL;
+    int width = 0, height = 0, k;
+    rrv_error err;
+    snprintf(pfm, sizeof pfm, "%s/test_exr_cli.pfm", build_dir);
+    snprintf(exr, sizeof exr, "%s/test_exr_cli.exr", build_dir);
+    snprintf(args, sizeof args, "render scenes/smoke.rrv --spp 1 --crop 8 6 40 30 -q -o '%s'", pfm);
+    CHECK(run_rrv(args) == 0);
+    CHECK(rrv_read_pfm(pfm, &reference, &width, &height, &err) == RRV_OK && width == 32 && height == 24);
+    for (k = 0; k < 3 && reference; ++k) {
+        size_t size, i;
+        unsigned char *bytes;
+        parsed_exr e;
+        int bad = 0;
+        snprintf(args, sizeof args, "render scenes/smoke.rrv --spp 1 --crop 8 6 40 30 -q %s -o '%s'", flags[k], exr);
+        CHECKF(run_rrv(args) == 0, "%s", args);
+        bytes = read_file(exr, &size);
+        CHECK(bytes != NULL);
+        if (!bytes) continue;
+        parse_exr(bytes, size, &e);
+        CHECK(e.ok && e.pixel_type == (k < 2 ? 2 : 1) && e.compression == (k == 0 ? 0 : 3));
+        CHECK(e.data[0] == 8 && e.data[1] == 6 && e.data[2] == 39 && e.data[3] == 29);
+        /* smoke.rrv's camera is 480 x 320 */
+        CHECK(e.display[0] == 0 && e.display[1] == 0 && e.display[2] == 479 && e.display[3] == 319);
+        for (i = 0; e.ok && i < (size_t)width * height * 3; ++i) {
+            float want = k < 2 ? reference[i] : (float)half_value(rrv_half_from_float(reference[i]));
+            if (bits_of_float(e.rgb[i]) != bits_of_float(want)) ++bad;
+        }
+        CHECKF(bad == 0, "%s: %d values differ from the PFM", flags[k], bad);
+        free(e.rgb);
+        free(bytes);
+    }
+    rrv_free(reference);
+    remove(pfm);
+    remove(exr);
+}
+
+static void cli_refuses_unknown_formats(void)
+{
+    char args[1024], path[512], out[512], *text;
+    size_t size;
+    snprintf(path, sizeof path, "%s/test_exr_cli.tiff", build_dir);
+    snprintf(out, sizeof out, "%s/test_exr_cli.out", build_dir);
+    snprintf(args, sizeof args, "render scenes/smoke.rrv --spp 1 -q -o '%s'", path);
+    CHECK(run_rrv(args) == 1);
+    text = (char *)read_file(out, &size);
+    if (text) text[size] = '\0';
+    CHECKF(text && strstr(text, "the output must end in .pfm or .exr"), "stderr: %s", text ? text : "(none)");
+    free(text);
+    {
+        FILE *f = fopen(path, "rb"); /* nothing written */
+        CHECK(f == NULL);
+        if (f) fclose(f);
+    }
+    /* EXR options with a PFM output are a mistake, not something to ignore. */
+    snprintf(path, sizeof path, "%s/test_exr_cli.pfm", build_dir);
+    snprintf(args, sizeof args, "render scenes/smoke.rrv --spp 1 -q --exr-half -o '%s'", path);
+    CHECK(run_rrv(args) == 1);
+    text = (char *)read_file(out, &size);
+    if (text) text[size] = '\0';
+    CHECKF(text && strstr(text, "--exr-half needs an .exr output"), "stderr: %s", text ? text : "(none)");
+    free(text);
+    snprintf(args, sizeof args, "render scenes/smoke.rrv --spp 1 -q --exr-compression piz -o '%s'", path);
+    CHECK(run_rrv(args) == 1);
+    remove(out);
+}
+
 /* The OpenEXR library reads what rrv writes (test/exr_check.cpp, built by
    the Makefile when pkg-config finds OpenEXR). Without it this fails: a
    test suite that silently skips the real reader proves nothing. */
@@ -775,6 +882,8 @@ int main(int argc, char **argv)
     RUN(exr_refuses_bad_arguments);
     RUN(exr_write_failures);
     RUN(exr_file_form);
+    RUN(cli_writes_exr_by_extension);
+    RUN(cli_refuses_unknown_formats);
     RUN(openexr_reads_rrv_files);
     return CHECK_EXIT_CODE();
 }
