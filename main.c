@@ -1003,11 +1003,11 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
     args.index = argc;
     if (!opt->scene_path) return usage_error(&args, "render needs a scene file");
     if (!opt->pfm_path) return usage_error(&args, "render needs an output file: -o OUT.pfm");
-    if (has_extension(opt->pfm_path, ".exr")) opt->output_format = OUTPUT_EXR;
-    else if (has_extension(opt->pfm_path, ".pfm")) opt->output_format = OUTPUT_PFM;
-    else
-        return usage_error(&args, "render: cannot tell the format of \"%s\": the output must end "
-                                  "in .pfm or .exr", opt->pfm_path);
+    /* An unknown extension is refused in command_render, after the checks
+       that say more (the output is a folder, or one of the scene's inputs). */
+    opt->output_format = has_extension(opt->pfm_path, ".exr")   ? OUTPUT_EXR
+                         : has_extension(opt->pfm_path, ".pfm") ? OUTPUT_PFM
+                                                                : -1;
     if (opt->exr_flag && opt->output_format != OUTPUT_EXR)
         return usage_error(&args, "%s needs an .exr output, not \"%s\"", opt->exr_flag, opt->pfm_path);
     return EXIT_OK;
@@ -1064,6 +1064,14 @@ static int command_render(int argc, char **argv)
     if (!code) {
         rrv_scene_free(scene);
         return EXIT_USAGE;
+    }
+    if (opt.output_format < 0) {
+        arg_cursor args;
+        memset(&args, 0, sizeof args);
+        args.command = "render";
+        rrv_scene_free(scene);
+        return usage_error(&args, "cannot tell the format of \"%s\": the output must end in .pfm or .exr",
+                           opt.pfm_path);
     }
     if (opt.has_spp) scene->settings.spp = opt.spp;
     if (opt.has_seed) scene->settings.seed = opt.seed;
