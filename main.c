@@ -95,7 +95,8 @@ static const char render_help[] =
 static const char diff_help[] =
     "usage: rrv diff A.pfm B.pfm\n"
     "\n"
-    "Compares image A with the reference B (same size) and prints one\n"
+    "Compares image A with the reference B (same size; PFM, or OpenEXR by the\n"
+    "extension .exr: scanline RGB, uncompressed, RLE or ZIP) and prints one\n"
     "`key: value` per line:\n"
     "  rmse             sqrt(mean((a-b)^2)) over pixels and channels\n"
     "  relmse           mean((a-b)^2 / (b^2 + 0.01)), B being the reference\n"
@@ -1209,7 +1210,10 @@ static int command_diff(int argc, char **argv)
     for (i = 0; i < 2 && code == EXIT_OK; ++i) {
         rrv_error err;
         memset(&err, 0, sizeof err);
-        if (rrv_read_pfm(paths[i], &images[i], &widths[i], &heights[i], &err) != RRV_OK) {
+        /* An EXR is compared over its data window (a crop as rendered). */
+        if ((has_extension(paths[i], ".exr")
+                 ? rrv_read_exr(paths[i], &images[i], &widths[i], &heights[i], NULL, &err)
+                 : rrv_read_pfm(paths[i], &images[i], &widths[i], &heights[i], &err)) != RRV_OK) {
             print_library_error(&err);
             code = EXIT_INPUT;
         }

@@ -521,6 +521,15 @@ RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const floa
                                     int width, int height, const rrv_exr_options *options);
 /* The half nearest to value by the rules above, as its 16-bit pattern. */
 RRV_DEF uint16_t rrv_half_from_float(float value);
+/* Reads a single-part scanline OpenEXR file's R, G and B channels (HALF or
+   FLOAT; other channels are skipped) compressed with NONE, RLE, ZIPS or ZIP
+   (the codecs rrv can decode; others are refused by name) into a new RGB
+   buffer of the data window (free with rrv_free). info, if not NULL, gets
+   the pixel type (FLOAT only if all three are), NO_COMPRESSION or ZIP (for
+   any codec), the display window's size and the data window's origin in it.
+   Every offset and size is checked against the buffer before use. */
+RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char *name, float **rgb,
+                                       int *width, int *height, rrv_exr_options *info, rrv_error *err);
 /* Reads a PFM (color "PF" or grey "Pf", either endianness) from memory into a
    new RGB buffer (free with rrv_free). */
 RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char *name,
@@ -542,6 +551,8 @@ RRV_DEF rrv_result rrv_write_exr(const char *path, const float *rgb, int width, 
                                  const rrv_exr_options *options, rrv_error *err);
 RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *height,
                                 rrv_error *err);
+RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *height,
+                                rrv_exr_options *info, rrv_error *err);
 
 /* Checksums the PNG writer uses, exposed for tests and tools. Start with 0 (crc)
    and 1 (adler). */
@@ -4111,6 +4122,504 @@ done:
     return result;
 }
 
+/* ---- OpenEXR reader --------------------------------------------------------------
+   For rrv diff and round trips: single-part scanline files with R, G and B
+   channels of HALF or FLOAT (other channels are skipped), compression NONE,
+   RLE, ZIPS or ZIP, so it reads what rrv and most renderers write. Every
+   offset and size comes from the file and is checked before it is used. */
+
+static float rrv__float_from_half(uint16_t h)
+{
+    uint32_t sign = (uint32_t)(h & 0x8000u) << 16, exponent = (h >> 10) & 31u, mantissa = h & 0x3FFu, bits;
+    if (exponent == 31) {
+        bits = sign | 0x7F800000u | mantissa << 13;
+    } else if (exponent != 0) {
+        bits = sign | (exponent + 112u) << 23 | mantissa << 13;
+    } else if (mantissa == 0) {
+        bits = sign;
+    } else {
+        /* Subnormal half: normalise; the value is mantissa * 2^-24. */
+        int shift = 0;
+        while (!(mantissa & 0x400u)) { mantissa <<= 1; ++shift; }
+        bits = sign | (uint32_t)(113 - shift) << 23 | (mantissa & 0x3FFu) << 13;
+    }
+    {
+        float f;
+        memcpy(&f, &bits, sizeof f);
+        return f;
+    }
+}
+
+/* -- inflate ---------------------------------------------------------------------- */
+
+typedef struct rrv__inflater {
+    const unsigned char *in;
+    size_t in_size, in_pos;
+    uint32_t bits;
+    int count;
+    unsigned char *out;
+    size_t out_size, out_pos;
+} rrv__inflater;
+
+/* Canonical Huffman decoding: counts of codes per length and the symbols in
+   code order. */
+typedef struct rrv__huffman_decoder {
+    uint16_t count[RRV__HUFF_MAX_BITS + 1];
+    uint16_t symbol[288];
+} rrv__huffman_decoder;
+
+/* Returns -1 past the end of the input. */
+static int rrv__inflate_bits(rrv__inflater *s, int n, uint32_t *value)
+{
+    while (s->count < n) {
+        if (s->in_pos >= s->in_size) return -1;
+        s->bits |= (uint32_t)s->in[s->in_pos++] << s->count;
+        s->count += 8;
+    }
+    *value = s->bits & ((1u << n) - 1u);
+    s->bits >>= n;
+    s->count -= n;
+    return 0;
+}
+
+/* Fails for over-subscribed lengths; incomplete codes are allowed as zlib
+   allows them, a code that falls in the gap fails when decoded. */
+static int rrv__huffman_decoder_build(rrv__huffman_decoder *d, const unsigned char *lengths, int n)
+{
+    uint16_t offset[RRV__HUFF_MAX_BITS + 2];
+    int i, left = 1;
+    memset(d->count, 0, sizeof d->count);
+    for (i = 0; i < n; ++i) ++d->count[lengths[i]];
+    d->count[0] = 0;
+    for (i = 1; i <= RRV__HUFF_MAX_BITS; ++i) {
+        left = 2 * left - d->count[i];
+        if (left < 0) return 0;
+    }
+    offset[1] = 0;
+    for (i = 1; i <= RRV__HUFF_MAX_BITS; ++i) offset[i + 1] = (uint16_t)(offset[i] + d->count[i]);
+    for (i = 0; i < n; ++i)
+        if (lengths[i]) d->symbol[offset[lengths[i]]++] = (uint16_t)i;
+    return 1;
+}
+
+static int rrv__huffman_decode(rrv__inflater *s, const rrv__huffman_decoder *d)
+{
+    int code = 0, first = 0, index = 0, length;
+    for (length = 1; length <= RRV__HUFF_MAX_BITS; ++length) {
+        uint32_t bit;
+        if (rrv__inflate_bits(s, 1, &bit) != 0) return -1;
+        code |= (int)bit;
+        if (code - first < d->count[length]) return d->symbol[index + code - first];
+        index += d->count[length];
+        first = (first + d->count[length]) << 1;
+        code <<= 1;
+    }
+    return -1;
+}
+
+/* Inflates a zlib stream into exactly out_size bytes; returns 1 on success. */
+static int rrv__zlib_inflate(const unsigned char *in, size_t in_size, unsigned char *out, size_t out_size)
+{
+    static const unsigned char cl_order[19] = {
+        16, 17, 18, 0, 8, 7, 9, 6, 10, 5, 11, 4, 12, 3, 13, 2, 14, 1, 15 };
+    rrv__inflater s;
+    uint32_t last = 0, type, v;
+    if (in_size < 6 || (in[0] & 0x0F) != 8 || (in[0] >> 4) > 7 || (in[1] & 0x20) ||
+        (((uint32_t)in[0] << 8) | in[1]) % 31u != 0)
+        return 0;
+    s.in = in + 2;
+    s.in_size = in_size - 6;
+    s.in_pos = 0;
+    s.bits = 0;
+    s.count = 0;
+    s.out = out;
+    s.out_size = out_size;
+    s.out_pos = 0;
+    while (!last) {
+        if (rrv__inflate_bits(&s, 1, &last) != 0 || rrv__inflate_bits(&s, 2, &type) != 0) return 0;
+        if (type == 0) {
+            size_t len;
+            s.bits = 0; /* stored blocks start on a byte */
+            s.count = 0;
+            if (s.in_size - s.in_pos < 4) return 0;
+            len = (size_t)s.in[s.in_pos] | (size_t)s.in[s.in_pos + 1] << 8;
+            if ((len ^ 0xFFFFu) != ((size_t)s.in[s.in_pos + 2] | (size_t)s.in[s.in_pos + 3] << 8)) return 0;
+            s.in_pos += 4;
+            if (len > s.in_size - s.in_pos || len > s.out_size - s.out_pos) return 0;
+            memcpy(s.out + s.out_pos, s.in + s.in_pos, len);
+            s.in_pos += len;
+            s.out_pos += len;
+        } else if (type == 1 || type == 2) {
+            unsigned char lengths[288 + 32];
+            rrv__huffman_decoder lit, dist;
+            uint32_t nlit = 288, ndist = 30;
+            int i;
+            if (type == 1) {
+                for (i = 0; i < 288; ++i) lengths[i] = (unsigned char)(i < 144 ? 8 : i < 256 ? 9 : i < 280 ? 7 : 8);
+                for (i = 0; i < 30; ++i) lengths[288 + i] = 5;
+            } else {
+                rrv__huffman_decoder cl;
+                unsigned char cl_len[19];
+                uint32_t ncl, k = 0;
+                if (rrv__inflate_bits(&s, 5, &nlit) != 0 || rrv__inflate_bits(&s, 5, &ndist) != 0 ||
+                    rrv__inflate_bits(&s, 4, &ncl) != 0)
+                    return 0;
+                nlit += 257;
+                ndist += 1;
+                ncl += 4;
+                if (nlit > 286 || ndist > 30) return 0;
+                memset(cl_len, 0, sizeof cl_len);
+                for (i = 0; i < (int)ncl; ++i) {
+                    if (rrv__inflate_bits(&s, 3, &v) != 0) return 0;
+                    cl_len[cl_order[i]] = (unsigned char)v;
+                }
+                if (!rrv__huffman_decoder_build(&cl, cl_len, 19)) return 0;
+                while (k < nlit + ndist) {
+                    int symbol = rrv__huffman_decode(&s, &cl);
+                    uint32_t repeat;
+                    unsigned char value = 0;
+                    if (symbol < 0) return 0;
+                    if (symbol < 16) {
+                        lengths[k++] = (unsigned char)symbol;
+                        continue;
+                    }
+                    if (symbol == 16) {
+                        if (k == 0 || rrv__inflate_bits(&s, 2, &repeat) != 0) return 0;
+                        value = lengths[k - 1];
+                        repeat += 3;
+                    } else if (symbol == 17) {
+                        if (rrv__inflate_bits(&s, 3, &repeat) != 0) return 0;
+                        repeat += 3;
+                    } else {
+                        if (rrv__inflate_bits(&s, 7, &repeat) != 0) return 0;
+                        repeat += 11;
+                    }
+                    if (repeat > nlit + ndist - k) return 0;
+                    while (repeat-- > 0) lengths[k++] = value;
+                }
+                if (lengths[256] == 0) return 0; /* no end of block */
+            }
+            if (!rrv__huffman_decoder_build(&lit, lengths, (int)nlit) ||
+                !rrv__huffman_decoder_build(&dist, lengths + nlit, (int)ndist))
+                return 0;
+            for (;;) {
+                int symbol = rrv__huffman_decode(&s, &lit);
+                if (symbol < 0) return 0;
+                if (symbol < 256) {
+                    if (s.out_pos >= s.out_size) return 0;
+                    s.out[s.out_pos++] = (unsigned char)symbol;
+                } else if (symbol == 256) {
+                    break;
+                } else {
+                    uint32_t extra;
+                    size_t length, distance;
+                    int dc;
+                    symbol -= 257;
+                    if (symbol >= 29) return 0;
+                    if (rrv__inflate_bits(&s, rrv__deflate_length_extra[symbol], &extra) != 0) return 0;
+                    length = rrv__deflate_length_base[symbol] + extra;
+                    dc = rrv__huffman_decode(&s, &dist);
+                    if (dc < 0 || dc >= 30) return 0;
+                    if (rrv__inflate_bits(&s, rrv__deflate_dist_extra[dc], &extra) != 0) return 0;
+                    distance = rrv__deflate_dist_base[dc] + extra;
+                    if (distance > s.out_pos || length > s.out_size - s.out_pos) return 0;
+                    for (; length > 0; --length, ++s.out_pos) s.out[s.out_pos] = s.out[s.out_pos - distance];
+                }
+            }
+        } else {
+            return 0;
+        }
+    }
+    if (s.out_pos != s.out_size) return 0;
+    /* The Adler-32 trailer follows the last whole byte used. */
+    if (s.in_size - s.in_pos != 0) return 0;
+    {
+        const unsigned char *t = in + in_size - 4;
+        uint32_t want = (uint32_t)t[0] << 24 | (uint32_t)t[1] << 16 | (uint32_t)t[2] << 8 | t[3];
+        return rrv_adler32(1, out, out_size) == want;
+    }
+}
+
+/* OpenEXR's RLE: a signed count byte, then -count literal bytes or one byte
+   repeated count + 1 times. */
+static int rrv__exr_rle_decode(const unsigned char *in, size_t in_size, unsigned char *out, size_t out_size)
+{
+    size_t i = 0, o = 0;
+    while (i < in_size) {
+        int count = in[i] < 128 ? in[i] : (int)in[i] - 256;
+        ++i;
+        if (count < 0) {
+            size_t n = (size_t)-count;
+            if (n > in_size - i || n > out_size - o) return 0;
+            memcpy(out + o, in + i, n);
+            i += n;
+            o += n;
+        } else {
+            size_t n = (size_t)count + 1;
+            if (i >= in_size || n > out_size - o) return 0;
+            memset(out + o, in[i], n);
+            ++i;
+            o += n;
+        }
+    }
+    return o == out_size;
+}
+
+/* Undoes ZIP's and RLE's predictor and byte split. */
+static void rrv__exr_unpredict(unsigned char *tmp, size_t size, unsigned char *raw)
+{
+    size_t half = (size + 1) / 2, i;
+    for (i = 1; i < size; ++i) tmp[i] = (unsigned char)(tmp[i - 1] + tmp[i] - 128u);
+    for (i = 0; i < size; ++i) raw[i] = tmp[(i & 1) ? half + i / 2 : i / 2];
+}
+
+static uint32_t rrv__get_u32_le(const unsigned char *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+static int32_t rrv__get_i32_le(const unsigned char *p)
+{
+    uint32_t u = rrv__get_u32_le(p);
+    return u <= 0x7FFFFFFFu ? (int32_t)u : (int32_t)(u - 0x80000000u) - INT32_MAX - 1;
+}
+
+/* The largest expansion deflate allows is about 1032:1; a header promising
+   more pixels than the file could hold is refused before allocating. */
+#define RRV__EXR_MAX_RATIO 1100u
+
+typedef struct rrv__exr_channel {
+    int rgb;    /* 0 R, 1 G, 2 B, -1 another channel */
+    int type;   /* 0 UINT, 1 HALF, 2 FLOAT */
+    size_t offset; /* of this channel's run within a scanline, in bytes */
+} rrv__exr_channel;
+
+#define RRV__EXR_MAX_CHANNELS 64
+
+RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char *name, float **rgb,
+                                       int *width, int *height, rrv_exr_options *info, rrv_error *err)
+{
+    static const char *const compression_names[10] = {
+        "NONE", "RLE", "ZIPS", "ZIP", "PIZ", "PXR24", "B44", "B44A", "DWAA", "DWAB" };
+    const unsigned char *p = (const unsigned char *)data;
+    rrv__exr_channel channels[RRV__EXR_MAX_CHANNELS];
+    int channel_count = 0, have_channels = 0, have_compression = 0, have_data = 0, have_display = 0;
+    int compression = 0, rgb_type[3] = { -1, -1, -1 }, i, lines_per_chunk;
+    int32_t dw[4] = { 0, 0, 0, 0 }, disp[4] = { 0, 0, 0, 0 };
+    size_t pos = 8, line_bytes = 0, w, h, chunk_count, chunk;
+    unsigned char *raw = NULL, *tmp = NULL, *seen = NULL;
+    float *out = NULL;
+    uint32_t version;
+
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    if (!rgb || !width || !height || (!data && size > 0))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, name, 0, "rrv_read_exr_memory: NULL argument");
+    if (size < 8 || p[0] != 0x76 || p[1] != 0x2f || p[2] != 0x31 || p[3] != 0x01)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "not an OpenEXR file (no magic number 76 2f 31 01)");
+    version = rrv__get_u32_le(p + 4);
+    if ((version & 0xFFu) != 2)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "unsupported OpenEXR version %u", (unsigned)(version & 0xFFu));
+    if (version & 0x1A00u) /* tiled, deep, multi-part */
+        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
+                         "unsupported OpenEXR file: only single-part scanline images are read (%s)",
+                         (version & 0x1000u) ? "multi-part" : (version & 0x800u) ? "deep" : "tiled");
+
+    /* The header: name, type, int32 size and value per attribute, then a NUL. */
+    for (;;) {
+        const char *attr_name, *type;
+        size_t name_len, type_len;
+        uint32_t value_size;
+        const unsigned char *v;
+        if (pos >= size) return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR header");
+        if (p[pos] == 0) break;
+        attr_name = (const char *)p + pos;
+        for (name_len = 0; pos + name_len < size && p[pos + name_len] != 0 && name_len < 256; ++name_len) {}
+        if (pos + name_len >= size || name_len == 256)
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR header");
+        pos += name_len + 1;
+        type = (const char *)p + pos;
+        for (type_len = 0; pos + type_len < size && p[pos + type_len] != 0 && type_len < 256; ++type_len) {}
+        if (pos + type_len >= size || type_len == 256 || size - (pos + type_len + 1) < 4)
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR header");
+        pos += type_len + 1;
+        value_size = rrv__get_u32_le(p + pos);
+        pos += 4;
+        if (value_size > size - pos)
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR attribute %s runs past the end of the file",
+                             attr_name);
+        v = p + pos;
+        pos += value_size;
+        if (strcmp(attr_name, "channels") == 0 && strcmp(type, "chlist") == 0) {
+            size_t k = 0, run = 0;
+            have_channels = 1;
+            while (k < value_size && v[k] != 0) {
+                size_t n = 0;
+                int ctype, c = -1;
+                while (k + n < value_size && v[k + n] != 0) ++n;
+                if (k + n + 1 + 16 > value_size)
+                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "malformed OpenEXR channel list");
+                if (n == 1 && (v[k] == 'R' || v[k] == 'G' || v[k] == 'B')) c = v[k] == 'R' ? 0 : v[k] == 'G' ? 1 : 2;
+                ctype = rrv__get_i32_le(v + k + n + 1);
+                if (ctype < 0 || ctype > 2)
+                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR channel of unknown type %d", ctype);
+                if (rrv__get_i32_le(v + k + n + 1 + 8) != 1 || rrv__get_i32_le(v + k + n + 1 + 12) != 1)
+                    return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
+                                     "subsampled OpenEXR channels are not supported");
+                if (channel_count == RRV__EXR_MAX_CHANNELS)
+                    return rrv__fail(err, RRV_ERROR_LIMIT, name, 0, "more than %d OpenEXR channels",
+                                     RRV__EXR_MAX_CHANNELS);
+                if (c >= 0) {
+                    if (ctype == 0)
+                        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
+                                         "OpenEXR channel %c is UINT; rrv reads HALF or FLOAT", v[k]);
+                    rgb_type[c] = ctype;
+                }
+                channels[channel_count].rgb = c;
+                channels[channel_count].type = ctype;
+                channels[channel_count].offset = run; /* per pixel for now */
+                run += ctype == 1 ? 2 : 4;
+                ++channel_count;
+                k += n + 1 + 16;
+            }
+            line_bytes = run;
+        } else if (strcmp(attr_name, "compression") == 0 && value_size == 1) {
+            compression = v[0];
+            have_compression = 1;
+        } else if ((strcmp(attr_name, "dataWindow") == 0 || strcmp(attr_name, "displayWindow") == 0) &&
+                   value_size == 16) {
+            int32_t *box = attr_name[1] == 'a' ? dw : disp;
+            for (i = 0; i < 4; ++i) box[i] = rrv__get_i32_le(v + 4 * i);
+            if (attr_name[1] == 'a') have_data = 1;
+            else have_display = 1;
+        }
+    }
+    ++pos; /* the header's NUL */
+    if (!have_channels || !have_compression || !have_data || !have_display)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR header lacks %s",
+                         !have_channels ? "channels" : !have_compression ? "compression"
+                         : !have_data ? "dataWindow" : "displayWindow");
+    if (rgb_type[0] < 0 || rgb_type[1] < 0 || rgb_type[2] < 0)
+        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0, "OpenEXR file without R, G and B channels");
+    if (compression != 0 && compression != 1 && compression != 2 && compression != 3)
+        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
+                         "OpenEXR compression %s is not supported; rrv reads NONE, RLE, ZIPS and ZIP",
+                         compression < 10 ? compression_names[compression] : "(unknown)");
+    if (dw[2] < dw[0] || dw[3] < dw[1] || (int64_t)dw[2] - dw[0] >= INT_MAX || (int64_t)dw[3] - dw[1] >= INT_MAX ||
+        disp[2] < disp[0] || disp[3] < disp[1] || (int64_t)disp[2] - disp[0] >= INT_MAX ||
+        (int64_t)disp[3] - disp[1] >= INT_MAX)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR window (%ld %ld)-(%ld %ld) is empty or too large",
+                         (long)dw[0], (long)dw[1], (long)dw[2], (long)dw[3]);
+    w = (size_t)((int64_t)dw[2] - dw[0] + 1);
+    h = (size_t)((int64_t)dw[3] - dw[1] + 1);
+    lines_per_chunk = compression == 3 ? 16 : 1;
+    chunk_count = (h + (size_t)lines_per_chunk - 1) / (size_t)lines_per_chunk;
+    /* Every size below is bounded by what the file could hold. */
+    if (chunk_count > (size - pos) / 8)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR file: %llu chunks do not fit",
+                         (unsigned long long)chunk_count);
+    if (w > (size_t)INT32_MAX / line_bytes / (size_t)lines_per_chunk ||
+        (uint64_t)w * line_bytes * h / RRV__EXR_MAX_RATIO > (uint64_t)size || w > SIZE_MAX / 12 / h)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR data window of %llux%llu pixels is larger "
+                         "than this file could hold", (unsigned long long)w, (unsigned long long)h);
+    for (i = 0; i < channel_count; ++i) channels[i].offset *= w; /* per scanline */
+    line_bytes *= w;
+
+    out = (float *)RRV_MALLOC(w * h * 3 * sizeof *out);
+    raw = (unsigned char *)RRV_MALLOC(line_bytes * (size_t)lines_per_chunk);
+    tmp = (unsigned char *)RRV_MALLOC(line_bytes * (size_t)lines_per_chunk);
+    seen = (unsigned char *)RRV_MALLOC(chunk_count);
+    if (!out || !raw || !tmp || !seen) {
+        RRV_FREE(out);
+        RRV_FREE(raw);
+        RRV_FREE(tmp);
+        RRV_FREE(seen);
+        return rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory for a %llux%llu image",
+                         (unsigned long long)w, (unsigned long long)h);
+    }
+    memset(seen, 0, chunk_count);
+    for (chunk = 0; chunk < chunk_count; ++chunk) {
+        const unsigned char *entry = p + pos + 8 * chunk;
+        uint64_t offset = (uint64_t)rrv__get_u32_le(entry) | (uint64_t)rrv__get_u32_le(entry + 4) << 32;
+        int64_t y;
+        size_t index, lines, expected, packed, line;
+        const char *problem = NULL;
+        if (offset > size || size - offset < 8) {
+            problem = "chunk offset outside the file";
+        } else {
+            y = (int64_t)rrv__get_i32_le(p + offset) - dw[1];
+            packed = rrv__get_u32_le(p + offset + 4);
+            if (y < 0 || (uint64_t)y >= h || y % lines_per_chunk != 0) {
+                problem = "chunk for a scanline outside the data window";
+            } else if (seen[index = (size_t)y / (size_t)lines_per_chunk]) {
+                problem = "two chunks for the same scanlines";
+            } else if (packed > size - offset - 8) {
+                problem = "chunk runs past the end of the file";
+            } else {
+                const unsigned char *src = p + offset + 8;
+                seen[index] = 1;
+                lines = h - (size_t)y < (size_t)lines_per_chunk ? h - (size_t)y : (size_t)lines_per_chunk;
+                expected = line_bytes * lines;
+                if (packed == expected) {
+                    memcpy(raw, src, expected);
+                } else if (packed > expected || compression == 0) {
+                    problem = "chunk of the wrong size";
+                } else if (compression == 1 ? !rrv__exr_rle_decode(src, packed, tmp, expected)
+                                            : !rrv__zlib_inflate(src, packed, tmp, expected)) {
+                    problem = compression == 1 ? "corrupt RLE data" : "corrupt ZIP data";
+                } else {
+                    rrv__exr_unpredict(tmp, expected, raw);
+                }
+                for (line = 0; !problem && line < lines; ++line) {
+                    float *row = out + ((size_t)y + line) * w * 3;
+                    const unsigned char *base = raw + line * line_bytes;
+                    for (i = 0; i < channel_count; ++i) {
+                        const unsigned char *q = base + channels[i].offset;
+                        size_t x;
+                        int c = channels[i].rgb;
+                        if (c < 0) continue;
+                        if (channels[i].type == 1) {
+                            for (x = 0; x < w; ++x, q += 2)
+                                row[3 * x + (size_t)c] = rrv__float_from_half((uint16_t)(q[0] | q[1] << 8));
+                        } else {
+                            for (x = 0; x < w; ++x, q += 4) {
+                                uint32_t bits = rrv__get_u32_le(q);
+                                memcpy(&row[3 * x + (size_t)c], &bits, sizeof bits);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if (problem) {
+            RRV_FREE(out);
+            RRV_FREE(raw);
+            RRV_FREE(tmp);
+            RRV_FREE(seen);
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "bad OpenEXR chunk %llu: %s",
+                             (unsigned long long)chunk, problem);
+        }
+    }
+    RRV_FREE(raw);
+    RRV_FREE(tmp);
+    RRV_FREE(seen);
+    *rgb = out;
+    *width = (int)w;
+    *height = (int)h;
+    if (info) {
+        memset(info, 0, sizeof *info);
+        info->pixel = rgb_type[0] == 2 && rgb_type[1] == 2 && rgb_type[2] == 2 ? RRV_EXR_FLOAT : RRV_EXR_HALF;
+        info->compression = compression == 0 ? RRV_EXR_NO_COMPRESSION : RRV_EXR_ZIP;
+        info->display_width = (int)((int64_t)disp[2] - disp[0] + 1);
+        info->display_height = (int)((int64_t)disp[3] - disp[1] + 1);
+        info->x = (int)((int64_t)dw[0] - disp[0]);
+        info->y = (int)((int64_t)dw[1] - disp[1]);
+    }
+    rrv__clear_error(err);
+    return RRV_OK;
+}
+
 /* ---- PFM reader ------------------------------------------------------------------ */
 
 static int rrv__pfm_is_space(unsigned char c)
@@ -4553,6 +5062,67 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
     *height = h.height;
     rrv__clear_error(err);
     return RRV_OK;
+}
+
+/* A file can be no larger than this to be read whole. */
+#define RRV__EXR_FILE_MAX ((size_t)1 << 31)
+
+RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *height,
+                                rrv_exr_options *info, rrv_error *err)
+{
+    unsigned char *data = NULL;
+    size_t have = 0, capacity = 0;
+    FILE *file;
+    rrv_result result;
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    if (!path || !rgb || !width || !height)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_read_exr: NULL argument");
+    errno = 0;
+    file = fopen(path, "rb");
+    if (!file) {
+        const char *why = rrv__io_reason(errno);
+        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open%s%s", why[0] ? ": " : "", why);
+    }
+    /* The first read is 8 bytes, so a stream that is no EXR (a device, a
+       pipe) is refused without reading on. */
+    for (;;) {
+        size_t want, got;
+        if (have == capacity) {
+            size_t grown = capacity ? capacity * 2 : 8;
+            unsigned char *bigger;
+            if (capacity >= RRV__EXR_FILE_MAX) {
+                RRV_FREE(data);
+                fclose(file);
+                return rrv__fail(err, RRV_ERROR_LIMIT, path, 0, "OpenEXR file larger than %llu bytes",
+                                 (unsigned long long)RRV__EXR_FILE_MAX);
+            }
+            bigger = (unsigned char *)RRV_REALLOC(data, grown);
+            if (!bigger) {
+                RRV_FREE(data);
+                fclose(file);
+                return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory reading the file");
+            }
+            data = bigger;
+            capacity = grown;
+        }
+        want = capacity - have;
+        got = fread(data + have, 1, want, file);
+        have += got;
+        if (got < want) break;
+        if (have == 8 && (data[0] != 0x76 || data[1] != 0x2f || data[2] != 0x31 || data[3] != 0x01)) break;
+    }
+    if (ferror(file)) {
+        const char *why = rrv__io_reason(errno);
+        RRV_FREE(data);
+        fclose(file);
+        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot read%s%s", why[0] ? ": " : "", why);
+    }
+    fclose(file);
+    result = rrv_read_exr_memory(data, have, path, rgb, width, height, info, err);
+    RRV_FREE(data);
+    return result;
 }
 
 #else /* RRV_NO_STDIO */
