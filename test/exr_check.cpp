@@ -3,7 +3,9 @@
    crop whose data window sits inside a larger display window, and one that
    starts at negative coordinates. Halves are compared with Imath's own
    float-to-half conversion (round to nearest even), floats bit for bit.
-   `exrheader` must accept a file too. Run by test/test_exr.c, which fails
+   `exrheader` must accept a file too. The other way round, rrv's reader
+   reads files OpenEXR writes (NONE, RLE, ZIPS, ZIP; extra channels; both
+   line orders) and refuses PIZ. Run by test/test_exr.c, which fails
    when this program was not built (OpenEXR missing). */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
@@ -16,6 +18,7 @@
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
 #include <ImfInputFile.h>
+#include <ImfOutputFile.h>
 #include <ImfLineOrderAttribute.h>
 #include <ImfRgbaFile.h>
 #include <ImfStandardAttributes.h>
@@ -236,6 +239,85 @@ static void openexr_rgba_interface_reads_halves()
     }
 }
 
+/* rrv reads what OpenEXR writes: every codec rrv decodes, both pixel types,
+   extra channels (skipped), an offset data window, decreasing line order;
+   PIZ is refused by name. */
+static void rrv_reads_openexr_files()
+{
+    struct variant {
+        const char *name;
+        Imf::Compression compression;
+        Imf::PixelType type;
+        Imf::LineOrder order;
+    };
+    static const variant variants[] = {
+        { "none", Imf::NO_COMPRESSION, Imf::HALF, Imf::INCREASING_Y },
+        { "rle", Imf::RLE_COMPRESSION, Imf::HALF, Imf::INCREASING_Y },
+        { "zips", Imf::ZIPS_COMPRESSION, Imf::FLOAT, Imf::INCREASING_Y },
+        { "zip", Imf::ZIP_COMPRESSION, Imf::HALF, Imf::INCREASING_Y },
+        { "zip_float_decreasing", Imf::ZIP_COMPRESSION, Imf::FLOAT, Imf::DECREASING_Y },
+        { "piz", Imf::PIZ_COMPRESSION, Imf::HALF, Imf::INCREASING_Y },
+    };
+    const int width = 45, height = 37, x0 = 5, y0 = -7;
+    std::vector<float> rgb = make_image(width, height);
+    std::vector<float> alpha((size_t)width * height, 0.5f);
+    for (size_t v = 0; v < sizeof variants / sizeof variants[0]; ++v) {
+        const variant &var = variants[v];
+        std::string path = build_dir + "/exr_check_openexr_" + var.name + ".exr";
+        /* OpenEXR's own half conversion makes infinities of big values;
+           the expected values are what it stores. */
+        std::vector<float> want(rgb);
+        std::vector<half> halves(rgb.size());
+        for (size_t i = 0; i < rgb.size(); ++i) {
+            halves[i] = half(rgb[i]);
+            if (var.type == Imf::HALF) want[i] = (float)halves[i];
+        }
+        try {
+            Imf::Header header(Imath::Box2i(Imath::V2i(0, 0), Imath::V2i(63, 63)),
+                               Imath::Box2i(Imath::V2i(x0, y0), Imath::V2i(x0 + width - 1, y0 + height - 1)),
+                               1, Imath::V2f(0, 0), 1, var.order, var.compression);
+            const char *names[3] = { "R", "G", "B" };
+            for (int c = 0; c < 3; ++c) header.channels().insert(names[c], Imf::Channel(var.type));
+            header.channels().insert("A", Imf::Channel(Imf::HALF));
+            header.channels().insert("Z", Imf::Channel(Imf::FLOAT));
+            Imf::OutputFile out(path.c_str(), header);
+            Imf::FrameBuffer fb;
+            size_t xs = 3 * (var.type == Imf::HALF ? sizeof(half) : sizeof(float));
+            char *base = var.type == Imf::HALF ? (char *)halves.data() : (char *)rgb.data();
+            size_t each = var.type == Imf::HALF ? sizeof(half) : sizeof(float);
+            base -= (ptrdiff_t)x0 * (ptrdiff_t)xs + (ptrdiff_t)y0 * (ptrdiff_t)(xs * width);
+            for (int c = 0; c < 3; ++c) fb.insert(names[c], Imf::Slice(var.type, base + c * each, xs, xs * width));
+            char *abase = (char *)alpha.data() - (ptrdiff_t)x0 * 4 - (ptrdiff_t)y0 * 4 * width;
+            fb.insert("Z", Imf::Slice(Imf::FLOAT, abase, 4, 4 * (size_t)width));
+            out.setFrameBuffer(fb);
+            out.writePixels(height);
+        } catch (const std::exception &e) {
+            CHECKF(0, "%s: OpenEXR could not write: %s", var.name, e.what());
+            continue;
+        }
+        float *back = NULL;
+        int w = 0, h = 0;
+        rrv_exr_options info;
+        rrv_error err;
+        rrv_result r = rrv_read_exr(path.c_str(), &back, &w, &h, &info, &err);
+        if (var.compression == Imf::PIZ_COMPRESSION) {
+            CHECKF(r == RRV_ERROR_UNSUPPORTED && std::strstr(err.message, "PIZ is not supported"), "%s: %s",
+                   var.name, err.message);
+            continue;
+        }
+        CHECKF(r == RRV_OK, "%s: %s", var.name, err.message);
+        if (r != RRV_OK) continue;
+        CHECK(w == width && h == height && info.x == x0 && info.y == y0 && info.display_width == 64 &&
+              info.display_height == 64);
+        CHECK(info.pixel == (var.type == Imf::FLOAT ? RRV_EXR_FLOAT : RRV_EXR_HALF));
+        int bad = 0;
+        for (size_t i = 0; i < want.size(); ++i)
+            if (std::isnan(want[i]) ? !std::isnan(back[i]) : !same_float_bits(want[i], back[i])) ++bad;
+        CHECKF(bad == 0, "%s: %d values differ", var.name, bad);
+        rrv_free(back);
+    }
+}
+
 static void exrheader_accepts_files()
 {
     const char *names[] = { "half_zip_wide", "crop_float_none" };
@@ -255,5 +337,6 @@ int main(int argc, char **argv)
     RUN(openexr_reads_raw_chunks_in_zip_files);
     RUN(openexr_rgba_interface_reads_halves);
     RUN(exrheader_accepts_files);
+    RUN(rrv_reads_openexr_files);
     return CHECK_EXIT_CODE();
 }

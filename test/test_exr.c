@@ -2,7 +2,8 @@
    header attribute, the offset table against the chunks, pixels decoded
    here from uncompressed and ZIP files (with an inflate written for this
    test, sharing nothing with the library's deflate), the float-to-half
-   conversion exhaustively, argument and I/O errors, and the file form. Last,
+   conversion exhaustively, argument and I/O errors, the file form, the CLI's
+   choice of format, and the reader (round trips, damaged files). Last,
    test/exr_check.cpp reads the files with the OpenEXR library itself; that
    test fails when OpenEXR was missing at build time. */
 #if defined(__unix__) || defined(__APPLE__)
@@ -20,6 +21,8 @@
 #endif
 
 static const char *build_dir = ".";
+/* Output pointers start here so a test can see that a failing call reset them. */
+static float not_reset_value;
 
 /* ---- helpers ------------------------------------------------------------------ */
 
@@ -764,7 +767,7 @@ static unsigned char *read_file(const char *path, size_t *size)
 
 static int run_rrv(const char *arguments)
 {
-    char command[2048];
+    char command[4096];
     int status;
     snprintf(command, sizeof command, "'%s/rrv' %s >'%s/test_exr_cli.out' 2>&1 </dev/null", build_dir, arguments,
              build_dir);
@@ -848,6 +851,148 @@ static void cli_refuses_unknown_formats(void)
     remove(out);
 }
 
+/* ---- the reader ----------------------------------------------------------------- */
+
+/* What rrv writes, rrv reads back: FLOAT exactly, HALF as the half. */
+static void exr_read_round_trip(void)
+{
+    int k;
+    for (k = 0; k < 8; ++k) {
+        int width = k & 4 ? 33 : 7, height = k & 4 ? 40 : 3, w = 0, h = 0, bad = 0;
+        float *rgb = make_image(width, height), *back = NULL;
+        rrv_exr_options opt, info;
+        byte_sink sink;
+        rrv_error err;
+        size_t i;
+        memset(&opt, 0, sizeof opt);
+        opt.pixel = k & 1 ? RRV_EXR_FLOAT : RRV_EXR_HALF;
+        opt.compression = k & 2 ? RRV_EXR_NO_COMPRESSION : RRV_EXR_ZIP;
+        opt.display_width = 50;
+        opt.display_height = 60;
+        opt.x = 3;
+        opt.y = -1;
+        CHECK(rgb && write_exr(rgb, width, height, &opt, &sink));
+        CHECKF(rrv_read_exr_memory(sink.data, sink.size, "mem.exr", &back, &w, &h, &info, &err) == RRV_OK,
+               "%s", err.message);
+        CHECK(w == width && h == height);
+        CHECK(info.pixel == opt.pixel && info.compression == opt.compression && info.display_width == 50 &&
+              info.display_height == 60 && info.x == 3 && info.y == -1);
+        for (i = 0; back && i < (size_t)width * height * 3; ++i) {
+            float want = k & 1 ? rgb[i] : (float)half_value(rrv_half_from_float(rgb[i]));
+            if (bits_of_float(back[i]) != bits_of_float(want)) ++bad;
+        }
+        CHECKF(bad == 0, "variant %d: %d values differ", k, bad);
+        rrv_free(back);
+        free(sink.data);
+        free(rgb);
+    }
+}
+
+/* Every prefix of a file and every single-byte change either reads or is
+   refused with a message; none reads outside the buffer (make test SAN=1
+   checks that) and a refusal leaves no image behind. */
+static void exr_read_hostile_bytes(void)
+{
+    int width = 20, height = 18, compression, bad = 0;
+    float *rgb = make_image(width, height);
+    for (compression = 0; compression < 2; ++compression) {
+        rrv_exr_options opt;
+        byte_sink sink;
+        size_t cut, i;
+        memset(&opt, 0, sizeof opt);
+        opt.compression = compression ? RRV_EXR_NO_COMPRESSION : RRV_EXR_ZIP;
+        CHECK(rgb && write_exr(rgb, width, height, &opt, &sink));
+        for (cut = 0; cut < sink.size; ++cut) {
+            /* a copy of exactly cut bytes, so ASan sees any overread */
+            unsigned char *copy = (unsigned char *)malloc(cut ? cut : 1);
+            float *back = &not_reset_value;
+            int w = -1, h = -1;
+            rrv_error err;
+            memcpy(copy, sink.data, cut);
+            if (rrv_read_exr_memory(copy, cut, "cut.exr", &back, &w, &h, NULL, &err) == RRV_OK ||
+                back != NULL || w != 0 || h != 0 || err.message[0] == 0 || strcmp(err.file, "cut.exr") != 0)
+                ++bad;
+            free(copy);
+        }
+        for (i = 0; i < sink.size; ++i) {
+            unsigned char *copy = (unsigned char *)malloc(sink.size);
+            unsigned char flips[3] = { 0xFF, 0x01, 0x80 };
+            int f;
+            for (f = 0; f < 3; ++f) {
+                float *back = NULL;
+                int w, h;
+                rrv_error err;
+                rrv_result r;
+                memcpy(copy, sink.data, sink.size);
+                copy[i] ^= flips[f];
+                r = rrv_read_exr_memory(copy, sink.size, "flip.exr", &back, &w, &h, NULL, &err);
+                if (r == RRV_OK ? (back == NULL || w <= 0 || h <= 0) : (back != NULL || err.message[0] == 0)) ++bad;
+                rrv_free(back);
+            }
+            free(copy);
+        }
+        free(sink.data);
+    }
+    CHECKF(bad == 0, "%d damaged files mishandled", bad);
+    free(rgb);
+}
+
+static void exr_read_messages(void)
+{
+    float rgb[3 * 4] = { 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12 };
+    byte_sink sink;
+    float *back = NULL;
+    int w, h;
+    rrv_error err;
+    unsigned char *pos;
+    CHECK(write_exr(rgb, 2, 2, NULL, &sink));
+    CHECK(rrv_read_exr_memory("PF\n1 1\n-1\n", 11, "a.exr", &back, &w, &h, NULL, &err) == RRV_ERROR_FORMAT);
+    CHECK(strcmp(err.message, "not an OpenEXR file (no magic number 76 2f 31 01)") == 0);
+    /* tiled */
+    sink.data[5] = 0x02;
+    CHECK(rrv_read_exr_memory(sink.data, sink.size, "a.exr", &back, &w, &h, NULL, &err) == RRV_ERROR_UNSUPPORTED);
+    CHECKF(strcmp(err.message, "unsupported OpenEXR file: only single-part scanline images are read (tiled)") == 0,
+           "%s", err.message);
+    sink.data[5] = 0;
+    /* PIZ, named */
+    pos = (unsigned char *)memchr(sink.data, 'c', sink.size);
+    while (pos && memcmp(pos, "compression\0compression\0", 24) != 0)
+        pos = (unsigned char *)memchr(pos + 1, 'c', sink.size - (size_t)(pos + 1 - sink.data));
+    CHECK(pos != NULL);
+    if (pos) {
+        pos[24 + 4] = 4;
+        CHECK(rrv_read_exr_memory(sink.data, sink.size, "a.exr", &back, &w, &h, NULL, &err) == RRV_ERROR_UNSUPPORTED);
+        CHECKF(strcmp(err.message, "OpenEXR compression PIZ is not supported; rrv reads NONE, RLE, ZIPS and ZIP") == 0,
+               "%s", err.message);
+    }
+    CHECK(back == NULL);
+    free(sink.data);
+}
+
+/* rrv diff compares EXRs with PFMs and EXRs. */
+static void cli_diff_reads_exr(void)
+{
+    char args[1200 + 2 * 512], pfm[512], exr[512], out[512], *text;
+    size_t size;
+    snprintf(pfm, sizeof pfm, "%s/test_exr_diff.pfm", build_dir);
+    snprintf(exr, sizeof exr, "%s/test_exr_diff.exr", build_dir);
+    snprintf(out, sizeof out, "%s/test_exr_cli.out", build_dir);
+    snprintf(args, sizeof args, "render scenes/smoke.rrv --spp 1 --crop 0 0 24 16 -q -o '%s'", pfm);
+    CHECK(run_rrv(args) == 0);
+    snprintf(args, sizeof args, "render scenes/smoke.rrv --spp 1 --crop 0 0 24 16 -q --exr-float -o '%s'", exr);
+    CHECK(run_rrv(args) == 0);
+    snprintf(args, sizeof args, "diff '%s' '%s'", exr, pfm);
+    CHECK(run_rrv(args) == 0);
+    text = (char *)read_file(out, &size);
+    if (text) text[size] = '\0';
+    CHECKF(text && strstr(text, "width: 24\n") && strstr(text, "\nrmse: 0\n") && strstr(text, "max_abs_error: 0\n"),
+           "%s", text ? text : "(none)");
+    free(text);
+    remove(pfm);
+    remove(exr);
+    remove(out);
+}
+
 /* The OpenEXR library reads what rrv writes (test/exr_check.cpp, built by
    the Makefile when pkg-config finds OpenEXR). Without it this fails: a
    test suite that silently skips the real reader proves nothing. */
@@ -884,6 +1029,10 @@ int main(int argc, char **argv)
     RUN(exr_file_form);
     RUN(cli_writes_exr_by_extension);
     RUN(cli_refuses_unknown_formats);
+    RUN(exr_read_round_trip);
+    RUN(exr_read_hostile_bytes);
+    RUN(exr_read_messages);
+    RUN(cli_diff_reads_exr);
     RUN(openexr_reads_rrv_files);
     return CHECK_EXIT_CODE();
 }
