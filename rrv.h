@@ -4511,6 +4511,9 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
         (int64_t)disp[3] - disp[1] >= INT_MAX)
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR window (%ld %ld)-(%ld %ld) is empty or too large",
                          (long)dw[0], (long)dw[1], (long)dw[2], (long)dw[3]);
+    if ((int64_t)dw[0] - disp[0] > INT_MAX || (int64_t)dw[0] - disp[0] < INT_MIN ||
+        (int64_t)dw[1] - disp[1] > INT_MAX || (int64_t)dw[1] - disp[1] < INT_MIN)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR data window too far from the display window");
     w = (size_t)((int64_t)dw[2] - dw[0] + 1);
     h = (size_t)((int64_t)dw[3] - dw[1] + 1);
     lines_per_chunk = compression == 3 ? 16 : 1;
