@@ -86,14 +86,16 @@
    FILES
      Every input is untrusted and read with bounds: a scene or OBJ file up to
      rrv_load_options.max_grid_bytes, a PFM header and then exactly the pixels
-     it announces. Scene numbers are decimal (no hexadecimal) and read the
+     it announces, an OpenEXR file whole (up to 2 GiB) with every offset and
+     size checked against it. Scene numbers are decimal (no hexadecimal) and read the
      same in any locale. The file writers replace their target through a new
      temporary file; rrv_write_pfm says what plain C cannot promise there.
      Images out: rrv_write_pfm (float), rrv_write_exr (OpenEXR scanline, half
      or float, ZIP or uncompressed, a crop placed in a larger display
      window; rrv_half_from_float is its rounding), rrv_write_png (8-bit sRGB
      preview), each also as a *_to form writing through a callback. Images
-     in: rrv_read_pfm, rrv_read_pfm_memory.
+     in: rrv_read_pfm, rrv_read_exr (scanline RGB, NONE, RLE, ZIPS or ZIP),
+     and their *_memory forms.
 
    CONVENTIONS (the contract between scene files, the library and tests)
      Units: metres, kelvin, pascal; extinction in 1/m. Colour is linear RGB,
