@@ -41,7 +41,7 @@ $(BUILD)/test_%: test/test_%.c test/check.h rrv.h $(wildcard parts/*.h) $(wildca
 # test/exr_check.cpp reads rrv's EXR files with the OpenEXR library (tests
 # only); test_exr runs it and fails, saying what to install, when OpenEXR is
 # missing and the program could not be built.
-EXR_CHECK := $(if $(shell pkg-config --exists OpenEXR && echo yes),$(BUILD)/exr_check)
+EXR_CHECK := $(if $(shell pkg-config --exists OpenEXR 2>/dev/null && echo yes),$(BUILD)/exr_check)
 $(BUILD)/exr_check: test/exr_check.cpp test/check.h rrv.h | $(BUILD)
 	$(CXX) -std=c++11 -Wall -Wextra -pedantic $(OPT) $(SANFLAGS) $(CXXFLAGS) \
 	    $(shell pkg-config --cflags OpenEXR) -o $@ $< $(shell pkg-config --libs OpenEXR)
