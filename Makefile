@@ -45,13 +45,18 @@ $(BUILD)/rrv: main.c rrv_impl.c rrv.h $(wildcard parts/*.h) | $(BUILD)
 $(BUILD)/test_%: test/test_%.c test/check.h rrv.h $(wildcard parts/*.h) $(wildcard test/*.h) | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< -lm $(TEST_LIBS_$*)
 
-# Only the tests that compare against EXR references link OpenEXR.
-TEST_LIBS_exr := $(shell pkg-config --libs OpenEXR 2>/dev/null)
+# test/exr_check.cpp reads rrv's EXR files with the OpenEXR library (tests
+# only); test_exr runs it and fails, saying what to install, when OpenEXR is
+# missing and the program could not be built.
+EXR_CHECK := $(if $(shell pkg-config --exists OpenEXR 2>/dev/null && echo yes),$(BUILD)/exr_check)
+$(BUILD)/exr_check: test/exr_check.cpp test/check.h rrv.h | $(BUILD)
+	$(CXX) -std=c++11 -Wall -Wextra -pedantic $(OPT) $(SANFLAGS) $(CXXFLAGS) \
+	    $(shell pkg-config --cflags OpenEXR) -o $@ $< $(shell pkg-config --libs OpenEXR)
 
 $(BUILD):
 	mkdir -p $(BUILD)
 
-test: $(BUILD)/rrv $(TEST_BINS)
+test: $(BUILD)/rrv $(TEST_BINS) $(EXR_CHECK)
 	sh test/run_tests.sh $(BUILD) $(TEST_BINS) test/compile_checks.sh
 
 # Every test/fuzz_*.c is a harness. UBSan findings abort (no recovery), so

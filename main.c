@@ -46,7 +46,7 @@ static const char usage_text[] =
     "refraction (heat haze, shock fronts, hot-air caustics).\n"
     "\n"
     "commands:\n"
-    "  render SCENE -o OUT.pfm [options]   render a scene to a PFM (and PNG)\n"
+    "  render SCENE -o OUT.pfm [options]   render a scene to a PFM or EXR (and PNG)\n"
     "  diff A.pfm B.pfm                    compare an image with a reference\n"
     "  info SCENE                          describe a scene and its memory use\n"
     "  trace SCENE --ray OX OY OZ DX DY DZ trace rays through the refractive media\n"
@@ -60,16 +60,21 @@ static const char usage_text[] =
     "3 cannot write the output.\n";
 
 static const char render_help[] =
-    "usage: rrv render SCENE -o OUT.pfm [options]\n"
+    "usage: rrv render SCENE -o OUT.pfm|OUT.exr [options]\n"
     "\n"
-    "Renders SCENE into a float RGB PFM. Every output is written to a new\n"
+    "Renders SCENE into a float RGB PFM or an OpenEXR image, chosen by the\n"
+    "extension of OUT (.pfm or .exr). Every output is written to a new\n"
     "temporary file in its folder and renamed into place, so a failed run never\n"
     "clobbers an image. An output that is the scene or a file it reads, the\n"
     "other output, or an existing non-regular file (a folder, a device) is\n"
     "refused.\n"
     "\n"
     "options:\n"
-    "  -o, --output OUT.pfm   the PFM to write (required)\n"
+    "  -o, --output OUT       the image to write (required): OUT.pfm or OUT.exr\n"
+    "  --exr-half             EXR channels as 16-bit half (the default; finite\n"
+    "                         values beyond 65504 are clamped to it)\n"
+    "  --exr-float            EXR channels as 32-bit float\n"
+    "  --exr-compression C    EXR compression: zip (default) or none\n"
     "  --png OUT.png          also write an 8-bit sRGB preview\n"
     "  --exposure E           scale the preview by 2^E (default 0)\n"
     "  --spp N                samples per pixel (default: the scene's)\n"
@@ -82,7 +87,9 @@ static const char render_help[] =
     "                         shoot (eikonal: connections along bent rays)\n"
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
-    "                         top; the output is the size of the crop\n"
+    "                         top; the output is the size of the crop (an EXR\n"
+    "                         keeps the full frame as its display window and\n"
+    "                         the crop's place as its data window)\n"
     "  --max-grid-mb N        refuse grids, scene and OBJ files over N MiB\n"
     "                         (default 2048)\n"
     "  -q, --quiet            no progress bar and no summary\n"
@@ -94,7 +101,8 @@ static const char render_help[] =
 static const char diff_help[] =
     "usage: rrv diff A.pfm B.pfm\n"
     "\n"
-    "Compares image A with the reference B (same size) and prints one\n"
+    "Compares image A with the reference B (same size; PFM, or OpenEXR by the\n"
+    "extension .exr: scanline RGB, uncompressed, RLE or ZIP) and prints one\n"
     "`key: value` per line:\n"
     "  rmse             sqrt(mean((a-b)^2)) over pixels and channels\n"
     "  relmse           mean((a-b)^2 / (b^2 + 0.01)), B being the reference\n"
@@ -509,8 +517,12 @@ static int check_output_not_input(const char *output, const input_list *inputs)
     return 1;
 }
 
+enum { OUTPUT_PFM, OUTPUT_PNG, OUTPUT_EXR };
+
 typedef struct pending_output {
     const char *path;
+    int format;                 /* OUTPUT_* */
+    const rrv_exr_options *exr; /* for OUTPUT_EXR */
     char temp[4096 + 32]; /* "" when no temporary file exists; room for a folder and ".rrv.XXXXXX" */
 } pending_output;
 
@@ -528,7 +540,7 @@ static void remove_temp(pending_output *out)
 /* Writes the image to a new temporary file in the output's folder: mkstemp
    picks a name no other file has, so neither a file called "<out>.tmp" nor a
    second render to the same output is touched. On failure nothing is left. */
-static int write_temp(pending_output *out, const float *image, int width, int height, int as_png,
+static int write_temp(pending_output *out, const float *image, int width, int height,
                       double exposure)
 {
     char folder[4096];
@@ -565,8 +577,12 @@ static int write_temp(pending_output *out, const float *image, int width, int he
         remove_temp(out);
         return 0;
     }
-    result = as_png ? rrv_write_png_to(fwrite_callback, file, image, width, height, exposure)
-                    : rrv_write_pfm_to(fwrite_callback, file, image, width, height);
+    if (out->format == OUTPUT_PNG)
+        result = rrv_write_png_to(fwrite_callback, file, image, width, height, exposure);
+    else if (out->format == OUTPUT_EXR)
+        result = rrv_write_exr_to(fwrite_callback, file, image, width, height, out->exr);
+    else
+        result = rrv_write_pfm_to(fwrite_callback, file, image, width, height);
     errno = 0;
     ok = result == RRV_OK && fflush(file) == 0 && fsync(fileno(file)) == 0;
     if (!ok && result == RRV_OK && errno == EINVAL) ok = 1; /* no fsync here, e.g. a pipe fs */
@@ -574,6 +590,7 @@ static int write_temp(pending_output *out, const float *image, int width, int he
     if (!ok) {
         fprintf(stderr, "rrv: cannot write \"%s\": %s\n", out->path,
                 result == RRV_ERROR_MEMORY ? "out of memory"
+                : result == RRV_ERROR_ARGUMENT ? "the image is too wide for this format"
                 : errno ? strerror(errno) : "writing failed");
         remove_temp(out);
         return 0;
@@ -596,7 +613,7 @@ static int write_outputs(pending_output *outputs, int count, const float *image,
     sigaddset(&hold, SIGHUP);
     sigaddset(&hold, SIGQUIT);
     sigprocmask(SIG_BLOCK, &hold, &previous);
-    for (i = 0; i < count && ok; ++i) ok = write_temp(&outputs[i], image, width, height, i == 1, exposure);
+    for (i = 0; i < count && ok; ++i) ok = write_temp(&outputs[i], image, width, height, exposure);
     /* Checked again: a device may have appeared at the path since the start. */
     for (i = 0; i < count && ok; ++i) ok = check_output_target(outputs[i].path);
     for (i = 0; i < count && ok; ++i) {
@@ -920,8 +937,21 @@ typedef struct render_options {
     int crop[4], has_crop;
     size_t max_grid_bytes;
     int quiet;
+    int output_format;      /* OUTPUT_PFM or OUTPUT_EXR, from the extension of -o */
+    rrv_exr_options exr;
+    const char *exr_flag;   /* the last --exr-* option given, for a PFM output's error */
     refraction_options refraction;
 } render_options;
+
+/* Whether path ends in ext, ignoring case (".EXR" is an EXR). */
+static int has_extension(const char *path, const char *ext)
+{
+    size_t n = strlen(path), e = strlen(ext), i;
+    if (n <= e) return 0;
+    for (i = 0; i < e; ++i)
+        if (tolower((unsigned char)path[n - e + i]) != ext[i]) return 0;
+    return 1;
+}
 
 static int parse_render_options(int argc, char **argv, render_options *opt)
 {
@@ -940,6 +970,16 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
             if (!take_value(&args, arg, "an output path", &opt->pfm_path)) return EXIT_USAGE;
         } else if (strcmp(arg, "--png") == 0) {
             if (!take_value(&args, arg, "an output path", &opt->png_path)) return EXIT_USAGE;
+        } else if (strcmp(arg, "--exr-half") == 0 || strcmp(arg, "--exr-float") == 0) {
+            opt->exr.pixel = arg[6] == 'f' ? RRV_EXR_FLOAT : RRV_EXR_HALF;
+            opt->exr_flag = arg;
+        } else if (strcmp(arg, "--exr-compression") == 0) {
+            const char *text;
+            if (!take_value(&args, arg, "zip or none", &text)) return EXIT_USAGE;
+            if (strcmp(text, "zip") == 0) opt->exr.compression = RRV_EXR_ZIP;
+            else if (strcmp(text, "none") == 0) opt->exr.compression = RRV_EXR_NO_COMPRESSION;
+            else return usage_error(&args, "--exr-compression needs zip or none, got \"%s\"", text);
+            opt->exr_flag = arg;
         } else if (strcmp(arg, "--spp") == 0) {
             if (!take_int(&args, arg, 1, 1L << 24, "a positive integer",
                           &opt->spp))
@@ -989,6 +1029,13 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
     args.index = argc;
     if (!opt->scene_path) return usage_error(&args, "render needs a scene file");
     if (!opt->pfm_path) return usage_error(&args, "render needs an output file: -o OUT.pfm");
+    /* An unknown extension is refused in command_render, after the checks
+       that say more (the output is a folder, or one of the scene's inputs). */
+    opt->output_format = has_extension(opt->pfm_path, ".exr")   ? OUTPUT_EXR
+                         : has_extension(opt->pfm_path, ".pfm") ? OUTPUT_PFM
+                                                                : -1;
+    if (opt->exr_flag && opt->output_format != OUTPUT_EXR)
+        return usage_error(&args, "%s needs an .exr output, not \"%s\"", opt->exr_flag, opt->pfm_path);
     return EXIT_OK;
 }
 
@@ -1057,6 +1104,14 @@ static int command_render(int argc, char **argv)
     if (!code) {
         rrv_scene_free(scene);
         return EXIT_USAGE;
+    }
+    if (opt.output_format < 0) {
+        arg_cursor args;
+        memset(&args, 0, sizeof args);
+        args.command = "render";
+        rrv_scene_free(scene);
+        return usage_error(&args, "cannot tell the format of \"%s\": the output must end in .pfm or .exr",
+                           opt.pfm_path);
     }
     if (opt.has_spp) scene->settings.spp = opt.spp;
     if (opt.has_seed) scene->settings.seed = opt.seed;
@@ -1144,7 +1199,15 @@ static int command_render(int argc, char **argv)
 
     memset(outputs, 0, sizeof outputs);
     outputs[0].path = opt.pfm_path;
+    outputs[0].format = opt.output_format;
+    outputs[0].exr = &opt.exr;
     outputs[1].path = opt.png_path;
+    outputs[1].format = OUTPUT_PNG;
+    /* A crop keeps its place in the frame, as an EXR can say. */
+    opt.exr.display_width = width;
+    opt.exr.display_height = height;
+    opt.exr.x = opt.crop[0];
+    opt.exr.y = opt.crop[1];
     code = write_outputs(outputs, opt.png_path ? 2 : 1, image, crop_width, crop_height,
                          opt.exposure)
                ? EXIT_OK
@@ -1187,7 +1250,10 @@ static int command_diff(int argc, char **argv)
     for (i = 0; i < 2 && code == EXIT_OK; ++i) {
         rrv_error err;
         memset(&err, 0, sizeof err);
-        if (rrv_read_pfm(paths[i], &images[i], &widths[i], &heights[i], &err) != RRV_OK) {
+        /* An EXR is compared over its data window (a crop as rendered). */
+        if ((has_extension(paths[i], ".exr")
+                 ? rrv_read_exr(paths[i], &images[i], &widths[i], &heights[i], NULL, &err)
+                 : rrv_read_pfm(paths[i], &images[i], &widths[i], &heights[i], &err)) != RRV_OK) {
             print_library_error(&err);
             code = EXIT_INPUT;
         }

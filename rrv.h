@@ -173,9 +173,16 @@
    FILES
      Every input is untrusted and read with bounds: a scene or OBJ file up to
      rrv_load_options.max_grid_bytes, a PFM header and then exactly the pixels
-     it announces. Scene numbers are decimal (no hexadecimal) and read the
+     it announces, an OpenEXR file whole (up to 2 GiB) with every offset and
+     size checked against it. Scene numbers are decimal (no hexadecimal) and read the
      same in any locale. The file writers replace their target through a new
      temporary file; rrv_write_pfm says what plain C cannot promise there.
+     Images out: rrv_write_pfm (float), rrv_write_exr (OpenEXR scanline, half
+     or float, ZIP or uncompressed, a crop placed in a larger display
+     window; rrv_half_from_float is its rounding), rrv_write_png (8-bit sRGB
+     preview), each also as a *_to form writing through a callback. Images
+     in: rrv_read_pfm, rrv_read_exr (scanline RGB, NONE, RLE, ZIPS or ZIP),
+     and their *_memory forms.
 
    CONVENTIONS (the contract between scene files, the library and tests)
      Units: metres, kelvin, pascal; extinction in 1/m. Colour is linear RGB,
@@ -642,6 +649,42 @@ RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user,
 /* PNG preview: 8-bit sRGB of rgb * 2^exposure, stored (uncompressed) deflate. */
 RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
                                     const float *rgb, int width, int height, double exposure);
+/* OpenEXR: single-part scanline file, channels B, G, R (the order the format
+   requires), lineOrder INCREASING_Y, pixelAspectRatio 1, screenWindowCenter
+   (0, 0), screenWindowWidth 1. A zeroed rrv_exr_options (or NULL) means
+   HALF, ZIP and a display window equal to the image.
+   HALF rounds to nearest even; finite values beyond the largest half
+   (65504) are clamped to +-65504 rather than becoming infinite, infinities
+   stay infinite and NaN stays NaN. ZIP is zlib (rrv's own LZ77 + dynamic
+   Huffman deflate) over blocks of 16 scanlines after the format's byte
+   split and delta predictor; a block that would not shrink is stored raw, as
+   the format prescribes.
+   Crops and tiles of a larger frame: the image is the data window, placed
+   with its top-left pixel at (x, y) in a display window of display_width x
+   display_height pixels (0 means the image's own size), so a compositor puts
+   it where it belongs. The data window may extend past the display window,
+   as the format allows; every coordinate must fit in an int. */
+typedef enum rrv_exr_pixel { RRV_EXR_HALF = 0, RRV_EXR_FLOAT = 1 } rrv_exr_pixel;
+typedef enum rrv_exr_compression { RRV_EXR_ZIP = 0, RRV_EXR_NO_COMPRESSION = 1 } rrv_exr_compression;
+typedef struct rrv_exr_options {
+    rrv_exr_pixel pixel;
+    rrv_exr_compression compression;
+    int display_width, display_height; /* 0: width, height of the image */
+    int x, y;                          /* the image's origin in the display window */
+} rrv_exr_options;
+RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb,
+                                    int width, int height, const rrv_exr_options *options);
+/* The half nearest to value by the rules above, as its 16-bit pattern. */
+RRV_DEF uint16_t rrv_half_from_float(float value);
+/* Reads a single-part scanline OpenEXR file's R, G and B channels (HALF or
+   FLOAT; other channels are skipped) compressed with NONE, RLE, ZIPS or ZIP
+   (the codecs rrv can decode; others are refused by name) into a new RGB
+   buffer of the data window (free with rrv_free). info, if not NULL, gets
+   the pixel type (FLOAT only if all three are), NO_COMPRESSION or ZIP (for
+   any codec), the display window's size and the data window's origin in it.
+   Every offset and size is checked against the buffer before use. */
+RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char *name, float **rgb,
+                                       int *width, int *height, rrv_exr_options *info, rrv_error *err);
 /* Reads a PFM (color "PF" or grey "Pf", either endianness) from memory into a
    new RGB buffer (free with rrv_free). */
 RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char *name,
@@ -659,8 +702,12 @@ RRV_DEF rrv_result rrv_write_pfm(const char *path, const float *rgb, int width, 
                                  rrv_error *err);
 RRV_DEF rrv_result rrv_write_png(const char *path, const float *rgb, int width, int height,
                                  double exposure, rrv_error *err);
+RRV_DEF rrv_result rrv_write_exr(const char *path, const float *rgb, int width, int height,
+                                 const rrv_exr_options *options, rrv_error *err);
 RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *height,
                                 rrv_error *err);
+RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *height,
+                                rrv_exr_options *info, rrv_error *err);
 
 /* Checksums the PNG writer uses, exposed for tests and tools. Start with 0 (crc)
    and 1 (adler). */
@@ -4854,6 +4901,1087 @@ RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
     return RRV_OK;
 }
 
+/* ---- OpenEXR writer ---------------------------------------------------------------
+   Layout: magic, version 2 (single-part scanline), the header's attributes
+   and a NUL, one 64-bit offset per chunk, then chunks of (int32 y, int32
+   size, data). A chunk holds 1 scanline uncompressed or 16 with ZIP; inside
+   it each scanline stores all B values, then G, then R, little endian. */
+
+RRV_DEF uint16_t rrv_half_from_float(float value)
+{
+    uint32_t bits, magnitude, sign;
+    memcpy(&bits, &value, sizeof bits);
+    sign = (bits >> 16) & 0x8000u;
+    magnitude = bits & 0x7FFFFFFFu;
+    if (magnitude >= 0x7F800000u) { /* infinity, or NaN kept NaN by a forced quiet bit */
+        if (magnitude == 0x7F800000u) return (uint16_t)(sign | 0x7C00u);
+        return (uint16_t)(sign | 0x7E00u | ((magnitude >> 13) & 0x3FFu));
+    }
+    /* 0x477FE000 is 65504, the largest half: clamping instead of rounding to
+       infinity keeps a bright but finite pixel finite in the file. */
+    if (magnitude >= 0x477FE000u) return (uint16_t)(sign | 0x7BFFu);
+    if (magnitude >= 0x38800000u) { /* normal half: >= 2^-14 */
+        uint32_t half = ((magnitude >> 23) - 112u) << 10 | ((magnitude >> 13) & 0x3FFu);
+        uint32_t rest = magnitude & 0x1FFFu;
+        /* A carry out of the mantissa correctly bumps the exponent. */
+        if (rest > 0x1000u || (rest == 0x1000u && (half & 1u))) ++half;
+        return (uint16_t)(sign | half);
+    }
+    if (magnitude <= 0x33000000u) return (uint16_t)sign; /* <= 2^-25 rounds to (even) zero */
+    {
+        /* Subnormal half: the value in units of 2^-24 is the 24-bit mantissa
+           shifted right by 126 - exponent, which lies in [14, 24] here. */
+        uint32_t mantissa = (magnitude & 0x7FFFFFu) | 0x800000u;
+        unsigned shift = 126u - (magnitude >> 23);
+        uint32_t half = mantissa >> shift;
+        uint32_t rest = mantissa & ((1u << shift) - 1u), tie = 1u << (shift - 1u);
+        if (rest > tie || (rest == tie && (half & 1u))) ++half;
+        return (uint16_t)(sign | half);
+    }
+}
+
+/* -- deflate (zlib) for ZIP chunks --------------------------------------------
+   Greedy LZ77 over a 32 KiB window with hash chains, then one block with
+   Huffman codes made for the chunk. The block is written into a buffer the
+   size of the raw chunk; running out of room means the chunk does not shrink
+   and is stored raw instead. */
+
+#define RRV__LZ_WINDOW 32768
+#define RRV__LZ_HASH_BITS 15
+#define RRV__LZ_MAX_CHAIN 48
+#define RRV__HUFF_MAX_BITS 15
+
+typedef struct rrv__bit_writer {
+    unsigned char *out;
+    size_t size, capacity;
+    uint32_t bits;
+    int count, full;
+} rrv__bit_writer;
+
+/* Appends n <= 16 bits, least significant first, as deflate packs them. */
+static void rrv__bits_put(rrv__bit_writer *b, uint32_t value, int n)
+{
+    b->bits |= value << b->count;
+    b->count += n;
+    while (b->count >= 8) {
+        if (b->size < b->capacity) b->out[b->size++] = (unsigned char)b->bits;
+        else b->full = 1;
+        b->bits >>= 8;
+        b->count -= 8;
+    }
+}
+
+/* Huffman codes go out most significant bit first. */
+static void rrv__bits_put_code(rrv__bit_writer *b, uint32_t code, int length)
+{
+    uint32_t reversed = 0;
+    int i;
+    for (i = 0; i < length; ++i) reversed |= ((code >> i) & 1u) << (length - 1 - i);
+    rrv__bits_put(b, reversed, length);
+}
+
+static const uint16_t rrv__deflate_length_base[29] = {
+    3, 4, 5, 6, 7, 8, 9, 10, 11, 13, 15, 17, 19, 23, 27, 31,
+    35, 43, 51, 59, 67, 83, 99, 115, 131, 163, 195, 227, 258 };
+static const unsigned char rrv__deflate_length_extra[29] = {
+    0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 5, 5, 5, 5, 0 };
+static const uint16_t rrv__deflate_dist_base[30] = {
+    1, 2, 3, 4, 5, 7, 9, 13, 17, 25, 33, 49, 65, 97, 129, 193, 257, 385, 513, 769,
+    1025, 1537, 2049, 3073, 4097, 6145, 8193, 12289, 16385, 24577 };
+static const unsigned char rrv__deflate_dist_extra[30] = {
+    0, 0, 0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7, 8, 8, 9, 9, 10, 10, 11, 11, 12, 12, 13, 13 };
+
+static int rrv__deflate_length_code(unsigned length)
+{
+    int i = 28;
+    while (rrv__deflate_length_base[i] > length) --i;
+    return i;
+}
+
+static int rrv__deflate_dist_code(unsigned dist)
+{
+    int i = 29;
+    while (rrv__deflate_dist_base[i] > dist) --i;
+    return i;
+}
+
+/* Code lengths of at most max_bits for the symbols' frequencies (unused
+   symbols get 0). A Huffman tree too deep for the limit is rebuilt from
+   halved frequencies, which flattens it; the caller makes sure at least two
+   symbols are used, so every code is complete. */
+static void rrv__huffman_lengths(const uint32_t *freq, int count, int max_bits, unsigned char *lengths)
+{
+    uint32_t weight[2 * 288];
+    int parent[2 * 288], alive[2 * 288];
+    uint32_t scaled[288];
+    int i, shift = 0;
+    for (;;) {
+        int nodes = count, live = 0, deepest = 0;
+        for (i = 0; i < count; ++i) {
+            scaled[i] = freq[i] ? (freq[i] >> shift) | 1u : 0u;
+            weight[i] = scaled[i];
+            alive[i] = scaled[i] > 0;
+            parent[i] = -1;
+            live += alive[i];
+        }
+        /* Quadratic selection of the two lightest nodes: at most 288
+           symbols, a few times per chunk. */
+        while (live > 1) {
+            int a = -1, b = -1;
+            for (i = 0; i < nodes; ++i) {
+                if (!alive[i]) continue;
+                if (a < 0 || weight[i] < weight[a]) { b = a; a = i; }
+                else if (b < 0 || weight[i] < weight[b]) b = i;
+            }
+            weight[nodes] = weight[a] + weight[b];
+            alive[nodes] = 1;
+            parent[nodes] = -1;
+            alive[a] = alive[b] = 0;
+            parent[a] = parent[b] = nodes;
+            ++nodes;
+            --live;
+        }
+        for (i = 0; i < count; ++i) {
+            int depth = 0, n = i;
+            if (!scaled[i]) { lengths[i] = 0; continue; }
+            while (parent[n] >= 0) { n = parent[n]; ++depth; }
+            lengths[i] = (unsigned char)depth;
+            if (depth > deepest) deepest = depth;
+        }
+        if (deepest <= max_bits) return;
+        ++shift;
+    }
+}
+
+/* Canonical codes from code lengths (RFC 1951, 3.2.2). */
+static void rrv__huffman_codes(const unsigned char *lengths, int count, uint16_t *codes)
+{
+    int bl_count[RRV__HUFF_MAX_BITS + 1] = { 0 }, bits, i;
+    uint32_t next[RRV__HUFF_MAX_BITS + 1], code = 0;
+    for (i = 0; i < count; ++i) ++bl_count[lengths[i]];
+    bl_count[0] = 0;
+    for (bits = 1; bits <= RRV__HUFF_MAX_BITS; ++bits) {
+        code = (code + (uint32_t)bl_count[bits - 1]) << 1;
+        next[bits] = code;
+    }
+    for (i = 0; i < count; ++i)
+        codes[i] = lengths[i] ? (uint16_t)next[lengths[i]]++ : 0;
+}
+
+/* Scratch memory of one compressor, reused across chunks. A token is a
+   literal byte (< 256) or (length << 16 | distance). */
+typedef struct rrv__deflater {
+    int32_t head[1 << RRV__LZ_HASH_BITS];
+    int32_t prev[RRV__LZ_WINDOW];
+    uint32_t *tokens; /* room for one token per input byte */
+} rrv__deflater;
+
+static size_t rrv__lz77(rrv__deflater *z, const unsigned char *data, size_t size)
+{
+    size_t pos = 0, count = 0, i;
+    for (i = 0; i < ((size_t)1 << RRV__LZ_HASH_BITS); ++i) z->head[i] = -1;
+#define RRV__LZ_HASH(p) ((((uint32_t)(p)[0] << 10) ^ ((uint32_t)(p)[1] << 5) ^ (uint32_t)(p)[2]) & \
+                         ((1u << RRV__LZ_HASH_BITS) - 1u))
+    while (pos < size) {
+        size_t best = 0, best_dist = 0;
+        if (pos + 3 <= size) {
+            uint32_t h = RRV__LZ_HASH(data + pos);
+            int32_t candidate = z->head[h];
+            int chain = RRV__LZ_MAX_CHAIN;
+            size_t limit = size - pos < 258 ? size - pos : 258;
+            while (candidate >= 0 && pos - (size_t)candidate <= RRV__LZ_WINDOW && chain-- > 0) {
+                const unsigned char *a = data + candidate, *b = data + pos;
+                if (a[best] == b[best]) {
+                    size_t n = 0;
+                    while (n < limit && a[n] == b[n]) ++n;
+                    if (n > best) {
+                        best = n;
+                        best_dist = pos - (size_t)candidate;
+                        if (n == limit) break;
+                    }
+                }
+                {
+                    int32_t next = z->prev[candidate & (RRV__LZ_WINDOW - 1)];
+                    if (next >= candidate) break;
+                    candidate = next;
+                }
+            }
+            z->prev[pos & (RRV__LZ_WINDOW - 1)] = z->head[h];
+            z->head[h] = (int32_t)pos;
+        }
+        if (best >= 3) {
+            z->tokens[count++] = (uint32_t)best << 16 | (uint32_t)best_dist;
+            for (i = 1; i < best; ++i) {
+                size_t p = pos + i;
+                if (p + 3 <= size) {
+                    uint32_t h = RRV__LZ_HASH(data + p);
+                    z->prev[p & (RRV__LZ_WINDOW - 1)] = z->head[h];
+                    z->head[h] = (int32_t)p;
+                }
+            }
+            pos += best;
+        } else {
+            z->tokens[count++] = data[pos++];
+        }
+    }
+#undef RRV__LZ_HASH
+    return count;
+}
+
+/* Compresses data into out as a zlib stream; returns its size, or 0 when it
+   would not fit in capacity. */
+static size_t rrv__zlib_compress(rrv__deflater *z, const unsigned char *data, size_t size,
+                                 unsigned char *out, size_t capacity)
+{
+    static const unsigned char cl_order[19] = {
+        16, 17, 18, 0, 8, 7, 9, 6, 10, 5, 11, 4, 12, 3, 13, 2, 14, 1, 15 };
+    uint32_t lit_freq[288] = { 0 }, dist_freq[30] = { 0 }, cl_freq[19] = { 0 };
+    unsigned char lit_len[288], dist_len[30], cl_len[19], all_len[288 + 30];
+    uint16_t lit_code[288], dist_code[30], cl_code[19];
+    unsigned char runs[288 + 30], run_extra[288 + 30];
+    size_t tokens, t, run_count = 0;
+    int hlit, hdist, hclen, total, i;
+    rrv__bit_writer b;
+    uint32_t adler;
+
+    if (capacity < 8) return 0;
+    tokens = rrv__lz77(z, data, size);
+    for (t = 0; t < tokens; ++t) {
+        uint32_t token = z->tokens[t];
+        if (token < 256) {
+            ++lit_freq[token];
+        } else {
+            ++lit_freq[257 + rrv__deflate_length_code(token >> 16)];
+            ++dist_freq[rrv__deflate_dist_code(token & 0xFFFFu)];
+        }
+    }
+    lit_freq[256] = 1;
+    /* Two used distance codes at least, so that code is complete even in a
+       chunk without matches (decoders differ on incomplete ones). */
+    if (!dist_freq[0]) dist_freq[0] = 1;
+    if (!dist_freq[1]) dist_freq[1] = 1;
+    rrv__huffman_lengths(lit_freq, 288, RRV__HUFF_MAX_BITS, lit_len);
+    rrv__huffman_lengths(dist_freq, 30, RRV__HUFF_MAX_BITS, dist_len);
+    rrv__huffman_codes(lit_len, 288, lit_code);
+    rrv__huffman_codes(dist_len, 30, dist_code);
+
+    for (hlit = 286; hlit > 257 && lit_len[hlit - 1] == 0; --hlit) {}
+    for (hdist = 30; hdist > 1 && dist_len[hdist - 1] == 0; --hdist) {}
+    memcpy(all_len, lit_len, (size_t)hlit);
+    memcpy(all_len + hlit, dist_len, (size_t)hdist);
+    total = hlit + hdist;
+    /* Runs of code lengths: 16 repeats the previous length 3-6 times, 17 and
+       18 write 3-10 and 11-138 zeros. */
+    for (i = 0; i < total;) {
+        int run = 1;
+        while (i + run < total && all_len[i + run] == all_len[i]) ++run;
+        if (all_len[i] == 0 && run >= 3) {
+            if (run > 138) run = 138;
+            runs[run_count] = (unsigned char)(run >= 11 ? 18 : 17);
+            run_extra[run_count++] = (unsigned char)(run >= 11 ? run - 11 : run - 3);
+            i += run;
+        } else if (all_len[i] != 0 && run >= 4) {
+            if (run > 7) run = 7;
+            runs[run_count] = all_len[i];
+            run_extra[run_count++] = 0;
+            runs[run_count] = 16;
+            run_extra[run_count++] = (unsigned char)(run - 4);
+            i += run;
+        } else {
+            runs[run_count] = all_len[i];
+            run_extra[run_count++] = 0;
+            ++i;
+        }
+    }
+    for (t = 0; t < run_count; ++t) ++cl_freq[runs[t]];
+    {
+        int used = 0;
+        for (i = 0; i < 19; ++i) used += cl_freq[i] > 0;
+        for (i = 0; used < 2; ++i) if (!cl_freq[i]) { cl_freq[i] = 1; ++used; }
+    }
+    rrv__huffman_lengths(cl_freq, 19, 7, cl_len);
+    rrv__huffman_codes(cl_len, 19, cl_code);
+    for (hclen = 19; hclen > 4 && cl_len[cl_order[hclen - 1]] == 0; --hclen) {}
+
+    b.out = out;
+    b.size = 0;
+    b.capacity = capacity - 4; /* room for the Adler-32 trailer */
+    b.bits = 0;
+    b.count = 0;
+    b.full = 0;
+    out[b.size++] = 0x78; /* deflate, 32 KiB window */
+    out[b.size++] = 0x01; /* no dictionary; (0x7801 % 31) == 0 */
+    rrv__bits_put(&b, 1, 1); /* BFINAL */
+    rrv__bits_put(&b, 2, 2); /* dynamic Huffman */
+    rrv__bits_put(&b, (uint32_t)(hlit - 257), 5);
+    rrv__bits_put(&b, (uint32_t)(hdist - 1), 5);
+    rrv__bits_put(&b, (uint32_t)(hclen - 4), 4);
+    for (i = 0; i < hclen; ++i) rrv__bits_put(&b, cl_len[cl_order[i]], 3);
+    for (t = 0; t < run_count; ++t) {
+        rrv__bits_put_code(&b, cl_code[runs[t]], cl_len[runs[t]]);
+        if (runs[t] == 16) rrv__bits_put(&b, run_extra[t], 2);
+        else if (runs[t] == 17) rrv__bits_put(&b, run_extra[t], 3);
+        else if (runs[t] == 18) rrv__bits_put(&b, run_extra[t], 7);
+    }
+    for (t = 0; t < tokens && !b.full; ++t) {
+        uint32_t token = z->tokens[t];
+        if (token < 256) {
+            rrv__bits_put_code(&b, lit_code[token], lit_len[token]);
+        } else {
+            unsigned length = token >> 16, dist = token & 0xFFFFu;
+            int lc = rrv__deflate_length_code(length), dc = rrv__deflate_dist_code(dist);
+            rrv__bits_put_code(&b, lit_code[257 + lc], lit_len[257 + lc]);
+            if (rrv__deflate_length_extra[lc])
+                rrv__bits_put(&b, length - rrv__deflate_length_base[lc], rrv__deflate_length_extra[lc]);
+            rrv__bits_put_code(&b, dist_code[dc], dist_len[dc]);
+            if (rrv__deflate_dist_extra[dc])
+                rrv__bits_put(&b, dist - rrv__deflate_dist_base[dc], rrv__deflate_dist_extra[dc]);
+        }
+    }
+    rrv__bits_put_code(&b, lit_code[256], lit_len[256]);
+    if (b.count > 0) rrv__bits_put(&b, 0, 8 - b.count);
+    if (b.full) return 0;
+    adler = rrv_adler32(1, data, size);
+    rrv__put_u32_be(out + b.size, adler);
+    return b.size + 4;
+}
+
+/* -- the file ------------------------------------------------------------------ */
+
+#define RRV__EXR_ZIP_LINES 16
+
+typedef struct rrv__exr_header {
+    unsigned char bytes[512];
+    size_t size;
+} rrv__exr_header;
+
+static void rrv__put_u32_le(unsigned char *out, uint32_t v)
+{
+    out[0] = (unsigned char)v;
+    out[1] = (unsigned char)(v >> 8);
+    out[2] = (unsigned char)(v >> 16);
+    out[3] = (unsigned char)(v >> 24);
+}
+
+static void rrv__exr_attribute(rrv__exr_header *h, const char *name, const char *type,
+                               const void *value, size_t size)
+{
+    size_t n = strlen(name) + 1, t = strlen(type) + 1;
+    memcpy(h->bytes + h->size, name, n);
+    memcpy(h->bytes + h->size + n, type, t);
+    rrv__put_u32_le(h->bytes + h->size + n + t, (uint32_t)size);
+    memcpy(h->bytes + h->size + n + t + 4, value, size);
+    h->size += n + t + 4 + size;
+}
+
+static void rrv__exr_box(unsigned char *out, long x0, long y0, long x1, long y1)
+{
+    rrv__put_u32_le(out, (uint32_t)x0);
+    rrv__put_u32_le(out + 4, (uint32_t)y0);
+    rrv__put_u32_le(out + 8, (uint32_t)x1);
+    rrv__put_u32_le(out + 12, (uint32_t)y1);
+}
+
+/* The raw bytes of scanlines [y0, y0 + lines) of the image as a chunk
+   stores them: per line B, G, R runs of little-endian halves or floats. */
+static void rrv__exr_pack_lines(const float *rgb, int width, int y0, int lines, int as_float,
+                                unsigned char *out)
+{
+    int y, c, x;
+    for (y = y0; y < y0 + lines; ++y) {
+        const float *row = rgb + (size_t)y * (size_t)width * 3;
+        for (c = 2; c >= 0; --c) { /* B, G, R */
+            for (x = 0; x < width; ++x) {
+                float v = row[3 * (size_t)x + (size_t)c];
+                if (as_float) {
+                    uint32_t bits;
+                    memcpy(&bits, &v, sizeof bits);
+                    rrv__put_u32_le(out, bits);
+                    out += 4;
+                } else {
+                    uint16_t half = rrv_half_from_float(v);
+                    out[0] = (unsigned char)half;
+                    out[1] = (unsigned char)(half >> 8);
+                    out += 2;
+                }
+            }
+        }
+    }
+}
+
+/* ZIP's preprocessing: even-indexed bytes first, then odd ones (so the high
+   and low bytes of each value gather), then each byte replaced by its
+   difference from the previous one plus 128. */
+static void rrv__exr_zip_predict(const unsigned char *raw, size_t size, unsigned char *out)
+{
+    size_t half = (size + 1) / 2, i;
+    unsigned previous;
+    for (i = 0; i < size; ++i) out[(i & 1) ? half + i / 2 : i / 2] = raw[i];
+    previous = out[0];
+    for (i = 1; i < size; ++i) {
+        unsigned current = out[i];
+        out[i] = (unsigned char)(current - previous + 128u);
+        previous = current;
+    }
+}
+
+RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb,
+                                    int width, int height, const rrv_exr_options *options)
+{
+    static const unsigned char magic_version[8] = { 0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0 };
+    rrv_exr_options opt;
+    rrv__exr_header h;
+    unsigned char value[64], *raw = NULL, *predicted = NULL, *packed = NULL, *offsets = NULL;
+    uint32_t *chunk_sizes = NULL;
+    rrv__deflater *z = NULL;
+    int as_float, zip, lines_per_chunk, chunk_count, i, c;
+    size_t value_bytes, line_bytes, chunk_bytes, packed_size = 0;
+    uint64_t position;
+    rrv_result result = RRV_OK;
+    long display_w, display_h;
+
+    if (!write || rrv__check_image_args(rgb, width, height) != RRV_OK) return RRV_ERROR_ARGUMENT;
+    if (options) opt = *options;
+    else memset(&opt, 0, sizeof opt);
+    if ((opt.pixel != RRV_EXR_HALF && opt.pixel != RRV_EXR_FLOAT) ||
+        (opt.compression != RRV_EXR_ZIP && opt.compression != RRV_EXR_NO_COMPRESSION) ||
+        opt.display_width < 0 || opt.display_height < 0)
+        return RRV_ERROR_ARGUMENT;
+    display_w = opt.display_width ? opt.display_width : width;
+    display_h = opt.display_height ? opt.display_height : height;
+    /* The data window's last pixel must be an int coordinate too. */
+    if ((long long)opt.x + width - 1 > INT_MAX || (long long)opt.y + height - 1 > INT_MAX)
+        return RRV_ERROR_ARGUMENT;
+    as_float = opt.pixel == RRV_EXR_FLOAT;
+    zip = opt.compression == RRV_EXR_ZIP;
+    value_bytes = as_float ? 4 : 2;
+    lines_per_chunk = zip ? RRV__EXR_ZIP_LINES : 1;
+    chunk_count = (height + lines_per_chunk - 1) / lines_per_chunk;
+    line_bytes = (size_t)width * 3 * value_bytes;
+    /* A chunk's size is an int32 in the file. */
+    if ((size_t)width > (size_t)INT32_MAX / 3 / value_bytes / (size_t)lines_per_chunk)
+        return RRV_ERROR_ARGUMENT;
+    chunk_bytes = line_bytes * (size_t)(height < lines_per_chunk ? height : lines_per_chunk);
+
+    h.size = 0;
+    memcpy(h.bytes, magic_version, 8);
+    h.size = 8;
+    {
+        /* chlist: per channel name, int32 type (1 HALF, 2 FLOAT), uint8
+           pLinear, 3 reserved bytes, int32 x and y sampling; then a NUL. */
+        size_t n = 0;
+        static const char names[3] = { 'B', 'G', 'R' };
+        for (c = 0; c < 3; ++c) {
+            value[n++] = (unsigned char)names[c];
+            value[n++] = 0;
+            rrv__put_u32_le(value + n, as_float ? 2u : 1u);
+            memset(value + n + 4, 0, 4);
+            rrv__put_u32_le(value + n + 8, 1);
+            rrv__put_u32_le(value + n + 12, 1);
+            n += 16;
+        }
+        value[n++] = 0;
+        rrv__exr_attribute(&h, "channels", "chlist", value, n);
+    }
+    value[0] = (unsigned char)(zip ? 3 : 0); /* ZIP_COMPRESSION, NO_COMPRESSION */
+    rrv__exr_attribute(&h, "compression", "compression", value, 1);
+    rrv__exr_box(value, opt.x, opt.y, (long)opt.x + width - 1, (long)opt.y + height - 1);
+    rrv__exr_attribute(&h, "dataWindow", "box2i", value, 16);
+    rrv__exr_box(value, 0, 0, display_w - 1, display_h - 1);
+    rrv__exr_attribute(&h, "displayWindow", "box2i", value, 16);
+    value[0] = 0; /* INCREASING_Y */
+    rrv__exr_attribute(&h, "lineOrder", "lineOrder", value, 1);
+    {
+        float one = 1.0f;
+        uint32_t bits;
+        memcpy(&bits, &one, sizeof bits);
+        rrv__put_u32_le(value, bits);
+        rrv__exr_attribute(&h, "pixelAspectRatio", "float", value, 4);
+        memset(value, 0, 8);
+        rrv__exr_attribute(&h, "screenWindowCenter", "v2f", value, 8);
+        rrv__put_u32_le(value, bits);
+        rrv__exr_attribute(&h, "screenWindowWidth", "float", value, 4);
+    }
+    h.bytes[h.size++] = 0;
+
+    raw = (unsigned char *)RRV_MALLOC(chunk_bytes);
+    offsets = (unsigned char *)RRV_MALLOC((size_t)chunk_count * 8);
+    chunk_sizes = (uint32_t *)RRV_MALLOC((size_t)chunk_count * sizeof *chunk_sizes);
+    if (!raw || !offsets || !chunk_sizes) { result = RRV_ERROR_MEMORY; goto done; }
+
+    if (zip) {
+        /* Offsets come before the chunks and the callback cannot seek, so
+           every chunk is compressed first; together they are never larger
+           than the uncompressed pixels. */
+        size_t packed_capacity = 0;
+        predicted = (unsigned char *)RRV_MALLOC(chunk_bytes);
+        z = (rrv__deflater *)RRV_MALLOC(sizeof *z);
+        if (z) z->tokens = (uint32_t *)RRV_MALLOC(chunk_bytes * sizeof *z->tokens);
+        if (!predicted || !z || !z->tokens) { result = RRV_ERROR_MEMORY; goto done; }
+        packed_capacity = line_bytes * (size_t)height;
+        packed = (unsigned char *)RRV_MALLOC(packed_capacity);
+        if (!packed) { result = RRV_ERROR_MEMORY; goto done; }
+        for (i = 0; i < chunk_count; ++i) {
+            int y0 = i * lines_per_chunk;
+            int lines = height - y0 < lines_per_chunk ? height - y0 : lines_per_chunk;
+            size_t size = line_bytes * (size_t)lines, compressed;
+            rrv__exr_pack_lines(rgb, width, y0, lines, as_float, raw);
+            rrv__exr_zip_predict(raw, size, predicted);
+            /* Smaller than raw or raw itself: a reader takes a chunk of the
+               uncompressed size as uncompressed. */
+            compressed = rrv__zlib_compress(z, predicted, size, packed + packed_size, size - 1);
+            if (compressed == 0) {
+                memcpy(packed + packed_size, raw, size);
+                compressed = size;
+            }
+            chunk_sizes[i] = (uint32_t)compressed;
+            packed_size += compressed;
+        }
+    } else {
+        for (i = 0; i < chunk_count; ++i) chunk_sizes[i] = (uint32_t)line_bytes;
+    }
+
+    position = (uint64_t)h.size + (uint64_t)chunk_count * 8;
+    for (i = 0; i < chunk_count; ++i) {
+        uint64_t p = position;
+        int k;
+        for (k = 0; k < 8; ++k) offsets[8 * (size_t)i + (size_t)k] = (unsigned char)(p >> (8 * k));
+        position += 8 + (uint64_t)chunk_sizes[i];
+    }
+    if (write(user, h.bytes, h.size) != 0 || write(user, offsets, (size_t)chunk_count * 8) != 0) {
+        result = RRV_ERROR_IO;
+        goto done;
+    }
+    {
+        size_t consumed = 0;
+        for (i = 0; i < chunk_count; ++i) {
+            unsigned char prefix[8];
+            int y0 = i * lines_per_chunk;
+            int lines = height - y0 < lines_per_chunk ? height - y0 : lines_per_chunk;
+            rrv__put_u32_le(prefix, (uint32_t)(opt.y + y0));
+            rrv__put_u32_le(prefix + 4, chunk_sizes[i]);
+            if (write(user, prefix, 8) != 0) { result = RRV_ERROR_IO; goto done; }
+            if (zip) {
+                if (write(user, packed + consumed, chunk_sizes[i]) != 0) { result = RRV_ERROR_IO; goto done; }
+                consumed += chunk_sizes[i];
+            } else {
+                rrv__exr_pack_lines(rgb, width, y0, lines, as_float, raw);
+                if (write(user, raw, chunk_sizes[i]) != 0) { result = RRV_ERROR_IO; goto done; }
+            }
+        }
+    }
+done:
+    if (z) RRV_FREE(z->tokens);
+    RRV_FREE(z);
+    RRV_FREE(packed);
+    RRV_FREE(predicted);
+    RRV_FREE(chunk_sizes);
+    RRV_FREE(offsets);
+    RRV_FREE(raw);
+    return result;
+}
+
+/* ---- OpenEXR reader --------------------------------------------------------------
+   For rrv diff and round trips: single-part scanline files with R, G and B
+   channels of HALF or FLOAT (other channels are skipped), compression NONE,
+   RLE, ZIPS or ZIP, so it reads what rrv and most renderers write. Every
+   offset and size comes from the file and is checked before it is used. */
+
+static float rrv__float_from_half(uint16_t h)
+{
+    uint32_t sign = (uint32_t)(h & 0x8000u) << 16, exponent = (h >> 10) & 31u, mantissa = h & 0x3FFu, bits;
+    if (exponent == 31) {
+        bits = sign | 0x7F800000u | mantissa << 13;
+    } else if (exponent != 0) {
+        bits = sign | (exponent + 112u) << 23 | mantissa << 13;
+    } else if (mantissa == 0) {
+        bits = sign;
+    } else {
+        /* Subnormal half: normalise; the value is mantissa * 2^-24. */
+        int shift = 0;
+        while (!(mantissa & 0x400u)) { mantissa <<= 1; ++shift; }
+        bits = sign | (uint32_t)(113 - shift) << 23 | (mantissa & 0x3FFu) << 13;
+    }
+    {
+        float f;
+        memcpy(&f, &bits, sizeof f);
+        return f;
+    }
+}
+
+/* -- inflate ---------------------------------------------------------------------- */
+
+typedef struct rrv__inflater {
+    const unsigned char *in;
+    size_t in_size, in_pos;
+    uint32_t bits;
+    int count;
+    unsigned char *out;
+    size_t out_size, out_pos;
+} rrv__inflater;
+
+/* Canonical Huffman decoding: counts of codes per length and the symbols in
+   code order. */
+typedef struct rrv__huffman_decoder {
+    uint16_t count[RRV__HUFF_MAX_BITS + 1];
+    uint16_t symbol[288];
+} rrv__huffman_decoder;
+
+/* Returns -1 past the end of the input. */
+static int rrv__inflate_bits(rrv__inflater *s, int n, uint32_t *value)
+{
+    while (s->count < n) {
+        if (s->in_pos >= s->in_size) return -1;
+        s->bits |= (uint32_t)s->in[s->in_pos++] << s->count;
+        s->count += 8;
+    }
+    *value = s->bits & ((1u << n) - 1u);
+    s->bits >>= n;
+    s->count -= n;
+    return 0;
+}
+
+/* Fails for over-subscribed lengths; incomplete codes are allowed as zlib
+   allows them, a code that falls in the gap fails when decoded. */
+static int rrv__huffman_decoder_build(rrv__huffman_decoder *d, const unsigned char *lengths, int n)
+{
+    uint16_t offset[RRV__HUFF_MAX_BITS + 2];
+    int i, left = 1;
+    memset(d->count, 0, sizeof d->count);
+    for (i = 0; i < n; ++i) ++d->count[lengths[i]];
+    d->count[0] = 0;
+    for (i = 1; i <= RRV__HUFF_MAX_BITS; ++i) {
+        left = 2 * left - d->count[i];
+        if (left < 0) return 0;
+    }
+    offset[1] = 0;
+    for (i = 1; i <= RRV__HUFF_MAX_BITS; ++i) offset[i + 1] = (uint16_t)(offset[i] + d->count[i]);
+    for (i = 0; i < n; ++i)
+        if (lengths[i]) d->symbol[offset[lengths[i]]++] = (uint16_t)i;
+    return 1;
+}
+
+static int rrv__huffman_decode(rrv__inflater *s, const rrv__huffman_decoder *d)
+{
+    int code = 0, first = 0, index = 0, length;
+    for (length = 1; length <= RRV__HUFF_MAX_BITS; ++length) {
+        uint32_t bit;
+        if (rrv__inflate_bits(s, 1, &bit) != 0) return -1;
+        code |= (int)bit;
+        if (code - first < d->count[length]) return d->symbol[index + code - first];
+        index += d->count[length];
+        first = (first + d->count[length]) << 1;
+        code <<= 1;
+    }
+    return -1;
+}
+
+/* Inflates a zlib stream into exactly out_size bytes; returns 1 on success. */
+static int rrv__zlib_inflate(const unsigned char *in, size_t in_size, unsigned char *out, size_t out_size)
+{
+    static const unsigned char cl_order[19] = {
+        16, 17, 18, 0, 8, 7, 9, 6, 10, 5, 11, 4, 12, 3, 13, 2, 14, 1, 15 };
+    rrv__inflater s;
+    uint32_t last = 0, type, v;
+    if (in_size < 6 || (in[0] & 0x0F) != 8 || (in[0] >> 4) > 7 || (in[1] & 0x20) ||
+        (((uint32_t)in[0] << 8) | in[1]) % 31u != 0)
+        return 0;
+    s.in = in + 2;
+    s.in_size = in_size - 6;
+    s.in_pos = 0;
+    s.bits = 0;
+    s.count = 0;
+    s.out = out;
+    s.out_size = out_size;
+    s.out_pos = 0;
+    while (!last) {
+        if (rrv__inflate_bits(&s, 1, &last) != 0 || rrv__inflate_bits(&s, 2, &type) != 0) return 0;
+        if (type == 0) {
+            size_t len;
+            s.bits = 0; /* stored blocks start on a byte */
+            s.count = 0;
+            if (s.in_size - s.in_pos < 4) return 0;
+            len = (size_t)s.in[s.in_pos] | (size_t)s.in[s.in_pos + 1] << 8;
+            if ((len ^ 0xFFFFu) != ((size_t)s.in[s.in_pos + 2] | (size_t)s.in[s.in_pos + 3] << 8)) return 0;
+            s.in_pos += 4;
+            if (len > s.in_size - s.in_pos || len > s.out_size - s.out_pos) return 0;
+            memcpy(s.out + s.out_pos, s.in + s.in_pos, len);
+            s.in_pos += len;
+            s.out_pos += len;
+        } else if (type == 1 || type == 2) {
+            unsigned char lengths[288 + 32];
+            rrv__huffman_decoder lit, dist;
+            uint32_t nlit = 288, ndist = 30;
+            int i;
+            if (type == 1) {
+                for (i = 0; i < 288; ++i) lengths[i] = (unsigned char)(i < 144 ? 8 : i < 256 ? 9 : i < 280 ? 7 : 8);
+                for (i = 0; i < 30; ++i) lengths[288 + i] = 5;
+            } else {
+                rrv__huffman_decoder cl;
+                unsigned char cl_len[19];
+                uint32_t ncl, k = 0;
+                if (rrv__inflate_bits(&s, 5, &nlit) != 0 || rrv__inflate_bits(&s, 5, &ndist) != 0 ||
+                    rrv__inflate_bits(&s, 4, &ncl) != 0)
+                    return 0;
+                nlit += 257;
+                ndist += 1;
+                ncl += 4;
+                if (nlit > 286 || ndist > 30) return 0;
+                memset(cl_len, 0, sizeof cl_len);
+                for (i = 0; i < (int)ncl; ++i) {
+                    if (rrv__inflate_bits(&s, 3, &v) != 0) return 0;
+                    cl_len[cl_order[i]] = (unsigned char)v;
+                }
+                if (!rrv__huffman_decoder_build(&cl, cl_len, 19)) return 0;
+                while (k < nlit + ndist) {
+                    int symbol = rrv__huffman_decode(&s, &cl);
+                    uint32_t repeat;
+                    unsigned char value = 0;
+                    if (symbol < 0) return 0;
+                    if (symbol < 16) {
+                        lengths[k++] = (unsigned char)symbol;
+                        continue;
+                    }
+                    if (symbol == 16) {
+                        if (k == 0 || rrv__inflate_bits(&s, 2, &repeat) != 0) return 0;
+                        value = lengths[k - 1];
+                        repeat += 3;
+                    } else if (symbol == 17) {
+                        if (rrv__inflate_bits(&s, 3, &repeat) != 0) return 0;
+                        repeat += 3;
+                    } else {
+                        if (rrv__inflate_bits(&s, 7, &repeat) != 0) return 0;
+                        repeat += 11;
+                    }
+                    if (repeat > nlit + ndist - k) return 0;
+                    while (repeat-- > 0) lengths[k++] = value;
+                }
+                if (lengths[256] == 0) return 0; /* no end of block */
+            }
+            if (!rrv__huffman_decoder_build(&lit, lengths, (int)nlit) ||
+                !rrv__huffman_decoder_build(&dist, lengths + nlit, (int)ndist))
+                return 0;
+            for (;;) {
+                int symbol = rrv__huffman_decode(&s, &lit);
+                if (symbol < 0) return 0;
+                if (symbol < 256) {
+                    if (s.out_pos >= s.out_size) return 0;
+                    s.out[s.out_pos++] = (unsigned char)symbol;
+                } else if (symbol == 256) {
+                    break;
+                } else {
+                    uint32_t extra;
+                    size_t length, distance;
+                    int dc;
+                    symbol -= 257;
+                    if (symbol >= 29) return 0;
+                    if (rrv__inflate_bits(&s, rrv__deflate_length_extra[symbol], &extra) != 0) return 0;
+                    length = rrv__deflate_length_base[symbol] + extra;
+                    dc = rrv__huffman_decode(&s, &dist);
+                    if (dc < 0 || dc >= 30) return 0;
+                    if (rrv__inflate_bits(&s, rrv__deflate_dist_extra[dc], &extra) != 0) return 0;
+                    distance = rrv__deflate_dist_base[dc] + extra;
+                    if (distance > s.out_pos || length > s.out_size - s.out_pos) return 0;
+                    for (; length > 0; --length, ++s.out_pos) s.out[s.out_pos] = s.out[s.out_pos - distance];
+                }
+            }
+        } else {
+            return 0;
+        }
+    }
+    if (s.out_pos != s.out_size) return 0;
+    /* The Adler-32 trailer follows the last whole byte used. */
+    if (s.in_size - s.in_pos != 0) return 0;
+    {
+        const unsigned char *t = in + in_size - 4;
+        uint32_t want = (uint32_t)t[0] << 24 | (uint32_t)t[1] << 16 | (uint32_t)t[2] << 8 | t[3];
+        return rrv_adler32(1, out, out_size) == want;
+    }
+}
+
+/* OpenEXR's RLE: a signed count byte, then -count literal bytes or one byte
+   repeated count + 1 times. */
+static int rrv__exr_rle_decode(const unsigned char *in, size_t in_size, unsigned char *out, size_t out_size)
+{
+    size_t i = 0, o = 0;
+    while (i < in_size) {
+        int count = in[i] < 128 ? in[i] : (int)in[i] - 256;
+        ++i;
+        if (count < 0) {
+            size_t n = (size_t)-count;
+            if (n > in_size - i || n > out_size - o) return 0;
+            memcpy(out + o, in + i, n);
+            i += n;
+            o += n;
+        } else {
+            size_t n = (size_t)count + 1;
+            if (i >= in_size || n > out_size - o) return 0;
+            memset(out + o, in[i], n);
+            ++i;
+            o += n;
+        }
+    }
+    return o == out_size;
+}
+
+/* Undoes ZIP's and RLE's predictor and byte split. */
+static void rrv__exr_unpredict(unsigned char *tmp, size_t size, unsigned char *raw)
+{
+    size_t half = (size + 1) / 2, i;
+    for (i = 1; i < size; ++i) tmp[i] = (unsigned char)(tmp[i - 1] + tmp[i] - 128u);
+    for (i = 0; i < size; ++i) raw[i] = tmp[(i & 1) ? half + i / 2 : i / 2];
+}
+
+static uint32_t rrv__get_u32_le(const unsigned char *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+static int32_t rrv__get_i32_le(const unsigned char *p)
+{
+    uint32_t u = rrv__get_u32_le(p);
+    return u <= 0x7FFFFFFFu ? (int32_t)u : (int32_t)(u - 0x80000000u) - INT32_MAX - 1;
+}
+
+/* The largest expansion deflate allows is about 1032:1; a header promising
+   more pixels than the file could hold is refused before allocating. */
+#define RRV__EXR_MAX_RATIO 1100u
+
+typedef struct rrv__exr_channel {
+    int rgb;    /* 0 R, 1 G, 2 B, -1 another channel */
+    int type;   /* 0 UINT, 1 HALF, 2 FLOAT */
+    size_t offset; /* of this channel's run within a scanline, in bytes */
+} rrv__exr_channel;
+
+#define RRV__EXR_MAX_CHANNELS 64
+
+RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char *name, float **rgb,
+                                       int *width, int *height, rrv_exr_options *info, rrv_error *err)
+{
+    static const char *const compression_names[10] = {
+        "NONE", "RLE", "ZIPS", "ZIP", "PIZ", "PXR24", "B44", "B44A", "DWAA", "DWAB" };
+    const unsigned char *p = (const unsigned char *)data;
+    rrv__exr_channel channels[RRV__EXR_MAX_CHANNELS];
+    int channel_count = 0, have_channels = 0, have_compression = 0, have_data = 0, have_display = 0;
+    int compression = 0, rgb_type[3] = { -1, -1, -1 }, i, lines_per_chunk;
+    int32_t dw[4] = { 0, 0, 0, 0 }, disp[4] = { 0, 0, 0, 0 };
+    size_t pos = 8, line_bytes = 0, w, h, chunk_count, chunk;
+    unsigned char *raw = NULL, *tmp = NULL, *seen = NULL;
+    float *out = NULL;
+    uint32_t version;
+
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    if (!rgb || !width || !height || (!data && size > 0))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, name, 0, "rrv_read_exr_memory: NULL argument");
+    if (size < 8 || p[0] != 0x76 || p[1] != 0x2f || p[2] != 0x31 || p[3] != 0x01)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "not an OpenEXR file (no magic number 76 2f 31 01)");
+    version = rrv__get_u32_le(p + 4);
+    if ((version & 0xFFu) != 2)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "unsupported OpenEXR version %u", (unsigned)(version & 0xFFu));
+    if (version & 0x1A00u) /* tiled, deep, multi-part */
+        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
+                         "unsupported OpenEXR file: only single-part scanline images are read (%s)",
+                         (version & 0x1000u) ? "multi-part" : (version & 0x800u) ? "deep" : "tiled");
+
+    /* The header: name, type, int32 size and value per attribute, then a NUL. */
+    for (;;) {
+        const char *attr_name, *type;
+        size_t name_len, type_len;
+        uint32_t value_size;
+        const unsigned char *v;
+        if (pos >= size) return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR header");
+        if (p[pos] == 0) break;
+        attr_name = (const char *)p + pos;
+        for (name_len = 0; pos + name_len < size && p[pos + name_len] != 0 && name_len < 256; ++name_len) {}
+        if (pos + name_len >= size || name_len == 256)
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR header");
+        pos += name_len + 1;
+        type = (const char *)p + pos;
+        for (type_len = 0; pos + type_len < size && p[pos + type_len] != 0 && type_len < 256; ++type_len) {}
+        if (pos + type_len >= size || type_len == 256 || size - (pos + type_len + 1) < 4)
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR header");
+        pos += type_len + 1;
+        value_size = rrv__get_u32_le(p + pos);
+        pos += 4;
+        if (value_size > size - pos)
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR attribute %s runs past the end of the file",
+                             attr_name);
+        v = p + pos;
+        pos += value_size;
+        if (strcmp(attr_name, "channels") == 0 && strcmp(type, "chlist") == 0) {
+            size_t k = 0, run = 0;
+            have_channels = 1;
+            while (k < value_size && v[k] != 0) {
+                size_t n = 0;
+                int ctype, c = -1;
+                while (k + n < value_size && v[k + n] != 0) ++n;
+                if (k + n + 1 + 16 > value_size)
+                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "malformed OpenEXR channel list");
+                if (n == 1 && (v[k] == 'R' || v[k] == 'G' || v[k] == 'B')) c = v[k] == 'R' ? 0 : v[k] == 'G' ? 1 : 2;
+                ctype = rrv__get_i32_le(v + k + n + 1);
+                if (ctype < 0 || ctype > 2)
+                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR channel of unknown type %d", ctype);
+                if (rrv__get_i32_le(v + k + n + 1 + 8) != 1 || rrv__get_i32_le(v + k + n + 1 + 12) != 1)
+                    return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
+                                     "subsampled OpenEXR channels are not supported");
+                if (channel_count == RRV__EXR_MAX_CHANNELS)
+                    return rrv__fail(err, RRV_ERROR_LIMIT, name, 0, "more than %d OpenEXR channels",
+                                     RRV__EXR_MAX_CHANNELS);
+                if (c >= 0) {
+                    if (ctype == 0)
+                        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
+                                         "OpenEXR channel %c is UINT; rrv reads HALF or FLOAT", v[k]);
+                    rgb_type[c] = ctype;
+                }
+                channels[channel_count].rgb = c;
+                channels[channel_count].type = ctype;
+                channels[channel_count].offset = run; /* per pixel for now */
+                run += ctype == 1 ? 2 : 4;
+                ++channel_count;
+                k += n + 1 + 16;
+            }
+            line_bytes = run;
+        } else if (strcmp(attr_name, "compression") == 0 && value_size == 1) {
+            compression = v[0];
+            have_compression = 1;
+        } else if ((strcmp(attr_name, "dataWindow") == 0 || strcmp(attr_name, "displayWindow") == 0) &&
+                   value_size == 16) {
+            int32_t *box = attr_name[1] == 'a' ? dw : disp;
+            for (i = 0; i < 4; ++i) box[i] = rrv__get_i32_le(v + 4 * i);
+            if (attr_name[1] == 'a') have_data = 1;
+            else have_display = 1;
+        }
+    }
+    ++pos; /* the header's NUL */
+    if (!have_channels || !have_compression || !have_data || !have_display)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR header lacks %s",
+                         !have_channels ? "channels" : !have_compression ? "compression"
+                         : !have_data ? "dataWindow" : "displayWindow");
+    if (rgb_type[0] < 0 || rgb_type[1] < 0 || rgb_type[2] < 0)
+        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0, "OpenEXR file without R, G and B channels");
+    if (compression != 0 && compression != 1 && compression != 2 && compression != 3)
+        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
+                         "OpenEXR compression %s is not supported; rrv reads NONE, RLE, ZIPS and ZIP",
+                         compression < 10 ? compression_names[compression] : "(unknown)");
+    if (dw[2] < dw[0] || dw[3] < dw[1] || (int64_t)dw[2] - dw[0] >= INT_MAX || (int64_t)dw[3] - dw[1] >= INT_MAX ||
+        disp[2] < disp[0] || disp[3] < disp[1] || (int64_t)disp[2] - disp[0] >= INT_MAX ||
+        (int64_t)disp[3] - disp[1] >= INT_MAX)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR window (%ld %ld)-(%ld %ld) is empty or too large",
+                         (long)dw[0], (long)dw[1], (long)dw[2], (long)dw[3]);
+    if ((int64_t)dw[0] - disp[0] > INT_MAX || (int64_t)dw[0] - disp[0] < INT_MIN ||
+        (int64_t)dw[1] - disp[1] > INT_MAX || (int64_t)dw[1] - disp[1] < INT_MIN)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR data window too far from the display window");
+    w = (size_t)((int64_t)dw[2] - dw[0] + 1);
+    h = (size_t)((int64_t)dw[3] - dw[1] + 1);
+    lines_per_chunk = compression == 3 ? 16 : 1;
+    chunk_count = (h + (size_t)lines_per_chunk - 1) / (size_t)lines_per_chunk;
+    /* Every size below is bounded by what the file could hold. */
+    if (chunk_count > (size - pos) / 8)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR file: %llu chunks do not fit",
+                         (unsigned long long)chunk_count);
+    if (w > (size_t)INT32_MAX / line_bytes / (size_t)lines_per_chunk ||
+        (uint64_t)w * line_bytes * h / RRV__EXR_MAX_RATIO > (uint64_t)size || w > SIZE_MAX / 12 / h)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR data window of %llux%llu pixels is larger "
+                         "than this file could hold", (unsigned long long)w, (unsigned long long)h);
+    for (i = 0; i < channel_count; ++i) channels[i].offset *= w; /* per scanline */
+    line_bytes *= w;
+
+    out = (float *)RRV_MALLOC(w * h * 3 * sizeof *out);
+    raw = (unsigned char *)RRV_MALLOC(line_bytes * (size_t)lines_per_chunk);
+    tmp = (unsigned char *)RRV_MALLOC(line_bytes * (size_t)lines_per_chunk);
+    seen = (unsigned char *)RRV_MALLOC(chunk_count);
+    if (!out || !raw || !tmp || !seen) {
+        RRV_FREE(out);
+        RRV_FREE(raw);
+        RRV_FREE(tmp);
+        RRV_FREE(seen);
+        return rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory for a %llux%llu image",
+                         (unsigned long long)w, (unsigned long long)h);
+    }
+    memset(seen, 0, chunk_count);
+    for (chunk = 0; chunk < chunk_count; ++chunk) {
+        const unsigned char *entry = p + pos + 8 * chunk;
+        uint64_t offset = (uint64_t)rrv__get_u32_le(entry) | (uint64_t)rrv__get_u32_le(entry + 4) << 32;
+        int64_t y;
+        size_t index, lines, expected, packed, line;
+        const char *problem = NULL;
+        if (offset > size || size - offset < 8) {
+            problem = "chunk offset outside the file";
+        } else {
+            y = (int64_t)rrv__get_i32_le(p + offset) - dw[1];
+            packed = rrv__get_u32_le(p + offset + 4);
+            if (y < 0 || (uint64_t)y >= h || y % lines_per_chunk != 0) {
+                problem = "chunk for a scanline outside the data window";
+            } else if (seen[index = (size_t)y / (size_t)lines_per_chunk]) {
+                problem = "two chunks for the same scanlines";
+            } else if (packed > size - offset - 8) {
+                problem = "chunk runs past the end of the file";
+            } else {
+                const unsigned char *src = p + offset + 8;
+                seen[index] = 1;
+                lines = h - (size_t)y < (size_t)lines_per_chunk ? h - (size_t)y : (size_t)lines_per_chunk;
+                expected = line_bytes * lines;
+                if (packed == expected) {
+                    memcpy(raw, src, expected);
+                } else if (packed > expected || compression == 0) {
+                    problem = "chunk of the wrong size";
+                } else if (compression == 1 ? !rrv__exr_rle_decode(src, packed, tmp, expected)
+                                            : !rrv__zlib_inflate(src, packed, tmp, expected)) {
+                    problem = compression == 1 ? "corrupt RLE data" : "corrupt ZIP data";
+                } else {
+                    rrv__exr_unpredict(tmp, expected, raw);
+                }
+                for (line = 0; !problem && line < lines; ++line) {
+                    float *row = out + ((size_t)y + line) * w * 3;
+                    const unsigned char *base = raw + line * line_bytes;
+                    for (i = 0; i < channel_count; ++i) {
+                        const unsigned char *q = base + channels[i].offset;
+                        size_t x;
+                        int c = channels[i].rgb;
+                        if (c < 0) continue;
+                        if (channels[i].type == 1) {
+                            for (x = 0; x < w; ++x, q += 2)
+                                row[3 * x + (size_t)c] = rrv__float_from_half((uint16_t)(q[0] | q[1] << 8));
+                        } else {
+                            for (x = 0; x < w; ++x, q += 4) {
+                                uint32_t bits = rrv__get_u32_le(q);
+                                memcpy(&row[3 * x + (size_t)c], &bits, sizeof bits);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if (problem) {
+            RRV_FREE(out);
+            RRV_FREE(raw);
+            RRV_FREE(tmp);
+            RRV_FREE(seen);
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "bad OpenEXR chunk %llu: %s",
+                             (unsigned long long)chunk, problem);
+        }
+    }
+    RRV_FREE(raw);
+    RRV_FREE(tmp);
+    RRV_FREE(seen);
+    *rgb = out;
+    *width = (int)w;
+    *height = (int)h;
+    if (info) {
+        memset(info, 0, sizeof *info);
+        info->pixel = rgb_type[0] == 2 && rgb_type[1] == 2 && rgb_type[2] == 2 ? RRV_EXR_FLOAT : RRV_EXR_HALF;
+        info->compression = compression == 0 ? RRV_EXR_NO_COMPRESSION : RRV_EXR_ZIP;
+        info->display_width = (int)((int64_t)disp[2] - disp[0] + 1);
+        info->display_height = (int)((int64_t)disp[3] - disp[1] + 1);
+        info->x = (int)((int64_t)dw[0] - disp[0]);
+        info->y = (int)((int64_t)dw[1] - disp[1]);
+    }
+    rrv__clear_error(err);
+    return RRV_OK;
+}
+
 /* ---- PFM reader ------------------------------------------------------------------ */
 
 static int rrv__pfm_is_space(unsigned char c)
@@ -5110,8 +6238,11 @@ static FILE *rrv__open_temp(const char *path, char *temp_path, size_t cap)
 
 /* Writes through a new temporary file and renames it over path only after
    every fwrite and the fclose succeeded. */
+enum { RRV__IMAGE_PFM, RRV__IMAGE_PNG, RRV__IMAGE_EXR };
+
 static rrv_result rrv__write_image_file(const char *path, const float *rgb, int width, int height,
-                                        int as_png, double exposure, rrv_error *err)
+                                        int format, double exposure, const rrv_exr_options *exr,
+                                        rrv_error *err)
 {
     size_t cap;
     char *temp_path;
@@ -5123,7 +6254,7 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
     if (rrv__check_image_args(rgb, width, height) != RRV_OK)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "invalid image (%dx%d, data %s)",
                          width, height, rgb ? "given" : "NULL");
-    if (as_png && !isfinite(exposure))
+    if (format == RRV__IMAGE_PNG && !isfinite(exposure))
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "exposure must be finite");
 
     cap = strlen(path) + 16; /* ".%08lx.tmp" and the NUL */
@@ -5137,13 +6268,20 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
         return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot write: cannot create a temporary file%s%s",
                          why[0] ? ": " : "", why);
     }
-    result = as_png ? rrv_write_png_to(rrv__fwrite_callback, file, rgb, width, height, exposure)
-                    : rrv_write_pfm_to(rrv__fwrite_callback, file, rgb, width, height);
+    if (format == RRV__IMAGE_PNG)
+        result = rrv_write_png_to(rrv__fwrite_callback, file, rgb, width, height, exposure);
+    else if (format == RRV__IMAGE_EXR)
+        result = rrv_write_exr_to(rrv__fwrite_callback, file, rgb, width, height, exr);
+    else
+        result = rrv_write_pfm_to(rrv__fwrite_callback, file, rgb, width, height);
     closed = fclose(file) == 0;
     if (result != RRV_OK || !closed) {
         remove(temp_path);
         RRV_FREE(temp_path);
         if (result == RRV_ERROR_MEMORY) return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory");
+        if (result == RRV_ERROR_ARGUMENT)
+            return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0,
+                             "invalid EXR options or an image too wide for an EXR chunk");
         return rrv__fail(err, RRV_ERROR_IO, path, 0,
                          result != RRV_OK ? "cannot write: writing failed" : "cannot write: closing failed");
     }
@@ -5167,13 +6305,19 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
 RRV_DEF rrv_result rrv_write_pfm(const char *path, const float *rgb, int width, int height,
                                  rrv_error *err)
 {
-    return rrv__write_image_file(path, rgb, width, height, 0, 0.0, err);
+    return rrv__write_image_file(path, rgb, width, height, RRV__IMAGE_PFM, 0.0, NULL, err);
 }
 
 RRV_DEF rrv_result rrv_write_png(const char *path, const float *rgb, int width, int height,
                                  double exposure, rrv_error *err)
 {
-    return rrv__write_image_file(path, rgb, width, height, 1, exposure, err);
+    return rrv__write_image_file(path, rgb, width, height, RRV__IMAGE_PNG, exposure, NULL, err);
+}
+
+RRV_DEF rrv_result rrv_write_exr(const char *path, const float *rgb, int width, int height,
+                                 const rrv_exr_options *options, rrv_error *err)
+{
+    return rrv__write_image_file(path, rgb, width, height, RRV__IMAGE_EXR, 0.0, options, err);
 }
 
 /* A header longer than this is not a PFM: rrv writes 20-odd bytes, and a
@@ -5280,6 +6424,67 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
     *height = h.height;
     rrv__clear_error(err);
     return RRV_OK;
+}
+
+/* A file can be no larger than this to be read whole. */
+#define RRV__EXR_FILE_MAX ((size_t)1 << 31)
+
+RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *height,
+                                rrv_exr_options *info, rrv_error *err)
+{
+    unsigned char *data = NULL;
+    size_t have = 0, capacity = 0;
+    FILE *file;
+    rrv_result result;
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    if (!path || !rgb || !width || !height)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_read_exr: NULL argument");
+    errno = 0;
+    file = fopen(path, "rb");
+    if (!file) {
+        const char *why = rrv__io_reason(errno);
+        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open%s%s", why[0] ? ": " : "", why);
+    }
+    /* The first read is 8 bytes, so a stream that is no EXR (a device, a
+       pipe) is refused without reading on. */
+    for (;;) {
+        size_t want, got;
+        if (have == capacity) {
+            size_t grown = capacity ? capacity * 2 : 8;
+            unsigned char *bigger;
+            if (capacity >= RRV__EXR_FILE_MAX) {
+                RRV_FREE(data);
+                fclose(file);
+                return rrv__fail(err, RRV_ERROR_LIMIT, path, 0, "OpenEXR file larger than %llu bytes",
+                                 (unsigned long long)RRV__EXR_FILE_MAX);
+            }
+            bigger = (unsigned char *)RRV_REALLOC(data, grown);
+            if (!bigger) {
+                RRV_FREE(data);
+                fclose(file);
+                return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory reading the file");
+            }
+            data = bigger;
+            capacity = grown;
+        }
+        want = capacity - have;
+        got = fread(data + have, 1, want, file);
+        have += got;
+        if (got < want) break;
+        if (have == 8 && (data[0] != 0x76 || data[1] != 0x2f || data[2] != 0x31 || data[3] != 0x01)) break;
+    }
+    if (ferror(file)) {
+        const char *why = rrv__io_reason(errno);
+        RRV_FREE(data);
+        fclose(file);
+        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot read%s%s", why[0] ? ": " : "", why);
+    }
+    fclose(file);
+    result = rrv_read_exr_memory(data, have, path, rgb, width, height, info, err);
+    RRV_FREE(data);
+    return result;
 }
 
 #else /* RRV_NO_STDIO */
