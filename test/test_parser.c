@@ -501,7 +501,7 @@ static void test_statement_errors(void)
     expect_error(WITH_CAM("medium m box 0 0 0 1 1 1\ndensity m grid\n"), RRV_ERROR_PARSE, 3,
                  "density: \"grid\" needs a file path");
     expect_error(WITH_CAM("medium m box 0 0 0 1 1 1\ndensity m\n"), RRV_ERROR_PARSE, 3,
-                 "density: missing kind (constant, blob, noise or grid)");
+                 "density: missing kind (constant, blob, noise, grid or nanovdb)");
     expect_error(WITH_CAM("medium m box 0 0 0 1 1 1\ndensity m noise octaves 2.5\n"), RRV_ERROR_PARSE, 3,
                  "density: octaves must be an integer, got 2.5");
     expect_error(WITH_CAM("medium m box 0 0 0 1 1 1\ndensity m noise falloff cube\n"), RRV_ERROR_PARSE, 3,
