@@ -4353,6 +4353,7 @@ typedef struct rrv__nv_check {
 } rrv__nv_check;
 
 static const char *const rrv__nv_level_names[3] = {"leaf", "lower node", "upper node"};
+static const char *const rrv__nv_level_plurals[3] = {"leaves", "lower nodes", "upper nodes"};
 /* Child offsets beyond this are refused before they are added to a
    position (< 2^62 too), so the sum cannot overflow. */
 #define RRV__NV_FAR ((int64_t)1 << 62)
@@ -4394,8 +4395,8 @@ static int64_t rrv__nv_node_index(rrv__nv_check *c, int level, int64_t at, const
     return (int64_t)k;
 bad:
     rrv__fail(c->err, RRV_ERROR_FORMAT, c->name, 0,
-              "grid \"%s\": %s points to byte %lld, which is not one of its %llu %ss", c->g->name, from,
-              (long long)at, (unsigned long long)arr->count, rrv__nv_level_names[level]);
+              "grid \"%s\": %s points to byte %lld, which is not one of its %llu %s", c->g->name, from,
+              (long long)at, (unsigned long long)arr->count, rrv__nv_level_plurals[level]);
     return -1;
 }
 
@@ -4571,11 +4572,13 @@ static rrv_result rrv__nv_check_grid(const unsigned char *b, uint64_t size, cons
         g->node_count[lv] = (uint32_t)arr->count;
         if (arr->count == 0) continue;
         /* an FpN leaf has at least 1 bit a value: 96 + 64 bytes */
-        if (offset > size - tree || arr->count > (size - tree - offset) / (arr->size ? arr->size : 160))
-            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
-                             "grid \"%s\": its %llu %ss at byte %llu do not fit in its %llu bytes", g->name,
-                             (unsigned long long)arr->count, rrv__nv_level_names[lv],
-                             (unsigned long long)(tree + offset), (unsigned long long)size);
+        if (offset > size - tree || arr->count > (size - tree - offset) / (arr->size ? arr->size : 160)) {
+            r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                          "grid \"%s\": its %llu %s at byte %llu do not fit in its %llu bytes", g->name,
+                          (unsigned long long)arr->count, rrv__nv_level_plurals[lv],
+                          (unsigned long long)(tree + offset), (unsigned long long)size);
+            goto done;
+        }
         arr->first = tree + offset;
         arr->seen = (unsigned char *)RRV_MALLOC((size_t)arr->count);
         if (!arr->seen) { r = rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory checking a grid"); goto done; }
@@ -4720,7 +4723,7 @@ static rrv_result rrv__nv_find_grid(const unsigned char *b, uint64_t size, const
         while (pos < size) {
             uint32_t version, count, codec, i;
             uint64_t meta, data;
-            if (size - pos < 16 || memcmp(b + pos, "NanoVDB", 7) != 0 || (b[pos + 7] != '0' && b[pos + 7] != '2')) {
+            if (size - pos < 8 || memcmp(b + pos, "NanoVDB", 7) != 0 || (b[pos + 7] != '0' && b[pos + 7] != '2')) {
                 if (size - pos >= 8 && memcmp(b + pos, "0BDVonaN", 8) == 0)
                     return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "a big-endian NanoVDB file: rrv reads little-endian ones");
                 if (segments == 0)
@@ -4729,6 +4732,9 @@ static rrv_result rrv__nv_find_grid(const unsigned char *b, uint64_t size, const
                 return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "byte %llu does not start a segment (\"NanoVDB\" header)",
                                  (unsigned long long)pos);
             }
+            if (size - pos < 16)
+                return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "the file ends inside the segment header at byte %llu",
+                                 (unsigned long long)pos);
             version = rrv__nv_u32(b + pos + 8);
             count = (uint32_t)b[pos + 12] | ((uint32_t)b[pos + 13] << 8);
             codec = (uint32_t)b[pos + 14] | ((uint32_t)b[pos + 15] << 8);
