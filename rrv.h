@@ -269,6 +269,7 @@ typedef struct rrv_nanovdb {
     double map[9], inverse[9], translation[3]; /* row-major 3x3 */
     int64_t data_lo[3], data_hi[3]; /* index box of every stored non-background value
                                    (leaf granularity); lo > hi: none */
+    int64_t active_lo[3], active_hi[3]; /* the active voxels' index box, as the file says */
     rrv_vec3 lo, hi;          /* world box outside which the field is the background */
     double background, value_min, value_max; /* over every value stored */
     uint64_t active_voxels;
@@ -4624,6 +4625,10 @@ static rrv_result rrv__nv_check_grid(const unsigned char *b, uint64_t size, cons
     g->root = (size_t)root;
     g->root_tiles = (uint32_t)tiles;
     g->background = rrv__nv_f32(b + root + 28);
+    for (a = 0; a < 3; ++a) {
+        g->active_lo[a] = rrv__nv_s32(rrv__nv_u32(b + root + 4 * (size_t)a));
+        g->active_hi[a] = rrv__nv_s32(rrv__nv_u32(b + root + 12 + 4 * (size_t)a));
+    }
     g->active_voxels = rrv__nv_u64(b + tree + 56);
     if (!rrv__nv_finite(g->background)) {
         r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\": its background value is not finite", g->name);
