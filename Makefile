@@ -49,7 +49,7 @@ test: $(BUILD)/rrv $(TEST_BINS)
 
 FUZZ_CC    ?= clang
 FUZZ_FLAGS := -std=c99 -g -O1 -fsanitize=fuzzer,address,undefined
-fuzz: build-fuzz/fuzz_scene build-fuzz/fuzz_grid
+fuzz: build-fuzz/fuzz_scene build-fuzz/fuzz_grid build-fuzz/fuzz_nanovdb
 build-fuzz/fuzz_%: test/fuzz_%.c rrv.h
 	mkdir -p build-fuzz
 	$(FUZZ_CC) $(FUZZ_FLAGS) -o $@ $< -lm
