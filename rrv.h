@@ -104,6 +104,13 @@
        for a wrong magic or version, a resolution < 2 or an overflowing
        size, a byte count that does not match, an empty or non-finite box, a
        NaN or infinite sample, or a negative density.
+     NanoVDB grids (.nvdb, NanoVDB 32.x as nanovdb_convert writes them,
+       little endian, uncompressed; float, fp4, fp8, fp16, fpN): value ijk
+       sits at world map * ijk + translation (the grid's own map), trilinear
+       between index points; where no data is stored, the grid's background,
+       and an IOR grid beyond one voxel past its data is the ambient IOR.
+       Every offset is checked against the grid's buffer and every value
+       must be finite; negative densities count as 0. See rrv_nanovdb.
      Gas IOR (Hauf-Grigull; Gladstone-Dale for an ideal gas):
        eta - 1 = (eta_ref - 1) (P / P_ref) (T_ref / T), defaults eta_ref =
        1.000292, P_ref = 101325 Pa, T_ref = 300 K; its gradient is
@@ -2147,9 +2154,48 @@ static rrv_result rrv__bake_cubic(const rrv_scene *scene, rrv_medium *m, const r
    48-sample gradient stencil. The gradient is the central difference at
    each sample (one-sided at the faces), blended trilinearly: the second-order
    stencil of rrv__grid_gradient. Analytic profiles keep their closed forms. */
+/* The index points of a NanoVDB grid around the box [lo, hi] as a lattice
+   of corner samples, for the refraction bake: only for maps without
+   rotation or shear (the lattice must be axis-aligned), with at least two
+   points an axis, and at most 2^24 points (256 MiB of baked samples; past
+   that the refractivity comes from the tree at every kick). 0 if none. */
+static int rrv__nv_lattice(const rrv_nanovdb *g, rrv_vec3 lo, rrv_vec3 hi, rrv_grid *out)
+{
+    double blo[3], bhi[3], w[2][3], count = 1;
+    int a, n[3];
+    blo[0] = lo.x; blo[1] = lo.y; blo[2] = lo.z;
+    bhi[0] = hi.x; bhi[1] = hi.y; bhi[2] = hi.z;
+    if (g->map[1] != 0 || g->map[2] != 0 || g->map[3] != 0 || g->map[5] != 0 || g->map[6] != 0 || g->map[7] != 0)
+        return 0;
+    for (a = 0; a < 3; ++a) {
+        double s = g->map[4 * a], t = g->translation[a];
+        double u0 = (blo[a] - t) / s, u1 = (bhi[a] - t) / s, i0, i1;
+        if (u0 > u1) { double x = u0; u0 = u1; u1 = x; }
+        /* One point beyond the cells that reach into the box, so that every
+           sample whose gradient the box sees is a central difference, as
+           inside a gridvol grid (a millionth of a voxel absorbs the rounding
+           of a box face put on an index point). */
+        i0 = fmax(floor(u0 + 1e-6) - 1.0, (double)g->data_lo[a] - 1.0);
+        i1 = fmin(ceil(u1 - 1e-6) + 1.0, (double)g->data_hi[a] + 1.0);
+        if (!(i1 - i0 >= 1.0) || i1 - i0 + 1.0 > (double)(1 << 24)) return 0;
+        n[a] = (int)(i1 - i0) + 1;
+        count *= n[a];
+        w[0][a] = s * (s > 0 ? i0 : i1) + t;
+        w[1][a] = s * (s > 0 ? i1 : i0) + t;
+    }
+    if (count > (double)(1 << 24)) return 0;
+    memset(out, 0, sizeof *out);
+    out->nx = n[0]; out->ny = n[1]; out->nz = n[2];
+    out->channels = 1;
+    out->lo = rrv__v3(w[0][0], w[0][1], w[0][2]);
+    out->hi = rrv__v3(w[1][0], w[1][1], w[1][2]);
+    return 1;
+}
+
 static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, size_t *bytes, rrv_error *err)
 {
     const rrv_grid *lattice = NULL;
+    rrv_grid nanovdb_lattice;
     const rrv_field *candidates[2];
     struct rrv__majorant_grid *g = m->majorant;
     double ambient_r = scene->settings.ambient_ior - 1.0;
@@ -2161,6 +2207,10 @@ static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, si
     candidates[1] = m->ior_from_gas ? rrv__field_of(m, RRV__PRESSURE) : NULL;
     for (k = 0; k < 2 && !lattice; ++k)
         if (candidates[k] && candidates[k]->kind == RRV_FIELD_GRID) lattice = &candidates[k]->grid;
+    for (k = 0; k < 2 && !lattice; ++k)
+        if (candidates[k] && candidates[k]->kind == RRV_FIELD_NANOVDB &&
+            rrv__nv_lattice(&candidates[k]->nanovdb, m->lo, m->hi, &nanovdb_lattice))
+            lattice = &nanovdb_lattice;
     if (!lattice) return RRV_OK;
     if (scene->settings.ior_interpolation == RRV_IOR_INTERP_CUBIC) return rrv__bake_cubic(scene, m, lattice, bytes, err);
     n[0] = lattice->nx; n[1] = lattice->ny; n[2] = lattice->nz;
