@@ -16,6 +16,7 @@
 #define INSTALL_HINT "install them: apt-get install python3-openvdb libnanovdb-tools"
 
 static char dir[512];
+static const char *build_dir = "build";
 static int tools_ok;
 
 static const char *path_in(const char *name)
@@ -401,6 +402,40 @@ static void scene_statements_and_messages(void)
     }
 }
 
+/* `rrv info` lists each grid with its type, voxel count, bounds, values
+   and memory. */
+static void info_lists_grids(void)
+{
+    static const char *const want[] = {
+        "    density grid \"density\": float, 40320 active voxels, index -5 3 10 .. 34 38 37, world -0.15 -0.24 0.52 .. 2.3 1.4 2.5, values 0 .. 3.41237 (background 0), 846.34 KiB\n",
+        "    temperature grid \"temperature\": fp16, 8640 active voxels, index 7 -9 0 .. 26 14 17, world 0.25 -0.88 0.04 .. 1.9 0.44 1.54, values 277.602 .. 1476.86 (background 300), 647.59 KiB\n"};
+    char cmd[1600];
+    size_t size, i;
+    unsigned char *out;
+    FILE *f;
+    if (!tools_ok) { CHECKF(0, "the known-answer files are missing; " INSTALL_HINT); return; }
+    f = fopen(path_in("info.rrv"), "w");
+    if (f) {
+        fputs("camera eye 1 0.6 -3 look 1 0.6 1.5\nmedium m box 0 0 0 2 2 2\ndensity m nanovdb fields.nvdb\n"
+              "temperature m nanovdb fields_fp16.nvdb\n", f);
+        fclose(f);
+    }
+    snprintf(cmd, sizeof cmd, "%s/rrv info '%s' > '%s'", build_dir, path_in("info.rrv"), path_in("info.txt"));
+    CHECKF(system(cmd) == 0, "%s failed", cmd);
+    out = slurp(path_in("info.txt"), &size);
+    CHECK(out != NULL);
+    if (!out) return;
+    {
+        unsigned char *grown = (unsigned char *)realloc(out, size + 1);
+        CHECK(grown != NULL);
+        if (!grown) { free(out); return; }
+        out = grown;
+    }
+    out[size] = 0;
+    for (i = 0; i < 2; ++i) CHECKF(strstr((const char *)out, want[i]) != NULL, "no line %s in:\n%s", want[i], (const char *)out);
+    free(out);
+}
+
 static void put64(unsigned char *b, uint64_t v)
 {
     int i;
@@ -534,8 +569,8 @@ static void hostile_files(void)
 
 int main(int argc, char **argv)
 {
-    const char *build = argc > 1 ? argv[1] : "build";
-    snprintf(dir, sizeof dir, "%s/nanovdb_tmp", build);
+    if (argc > 1) build_dir = argv[1];
+    snprintf(dir, sizeof dir, "%s/nanovdb_tmp", build_dir);
     if (mkdir(dir, 0777) != 0 && errno != EEXIST) {
         printf("FAIL cannot create %s: %s\n", dir, strerror(errno));
         return 1;
@@ -552,6 +587,7 @@ int main(int argc, char **argv)
     RUN(render_equals_gridvol);
     RUN(refractive_render_equals_gridvol);
     RUN(scene_statements_and_messages);
+    RUN(info_lists_grids);
     RUN(hostile_files);
     return CHECK_EXIT_CODE();
 }
