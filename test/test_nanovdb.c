@@ -402,6 +402,55 @@ static void scene_statements_and_messages(void)
     }
 }
 
+/* Newer files: "NanoVDB2" segment headers, and bare grid buffers one after
+   the other (grids starting "NanoVDB1"), made from the real file by
+   changing only the magic numbers. */
+static void newer_magics(void)
+{
+    unsigned char *file, *bare;
+    size_t size, at = 0, used = 0;
+    int grids = 0;
+    rrv_nanovdb g;
+    rrv_error e;
+    if (!tools_ok) { CHECKF(0, "the known-answer files are missing; " INSTALL_HINT); return; }
+    file = slurp(path_in("fields.nvdb"), &size);
+    CHECK(file != NULL);
+    if (!file) return;
+    bare = (unsigned char *)malloc(size);
+    /* each segment here holds one grid: header, metadata, name, buffer */
+    while (at + 16 <= size && bare) {
+        size_t meta = at + 16, name = rrv__nv_u32(file + meta + 136), grid = meta + 176 + name;
+        size_t gs = (size_t)rrv__nv_u64(file + meta);
+        CHECK(rrv__nv_u32(file + at + 12) == 1 && grid + gs <= size);
+        if (grid + gs > size) break;
+        memcpy(file + at, "NanoVDB2", 8);
+        memcpy(bare + used, file + grid, gs);
+        memcpy(bare + used, "NanoVDB1", 8);
+        used += gs;
+        at = grid + gs;
+        ++grids;
+    }
+    CHECK(grids == 2);
+    CHECKF(rrv_nanovdb_read_memory(file, size, "new.nvdb", "temperature", 0, &g, &e) == RRV_OK, "%s", e.message);
+    if (g.buffer) {
+        CHECK(rrv_nanovdb_voxel(&g, 7, -9, 0) != g.background);
+        rrv_nanovdb_free(&g);
+    }
+    CHECKF(rrv_nanovdb_read_memory(bare, used, "bare.nvdb", "temperature", 0, &g, &e) == RRV_OK, "%s", e.message);
+    if (g.buffer) {
+        rrv_nanovdb d;
+        CHECKF(rrv_nanovdb_read_memory(bare, used, "bare.nvdb", "density", 0, &d, &e) == RRV_OK, "%s", e.message);
+        CHECK(d.buffer && rrv_nanovdb_voxel(&d, -5, 3, 10) != rrv_nanovdb_voxel(&g, -5, 3, 10));
+        rrv_nanovdb_free(&d);
+        rrv_nanovdb_free(&g);
+    }
+    CHECK(rrv_nanovdb_read_memory(bare, used, "bare.nvdb", "smoke", 0, &g, &e) == RRV_ERROR_FORMAT &&
+          strcmp(e.message, "no grid named \"smoke\" (the file has \"density\", \"temperature\")") == 0);
+    CHECK(rrv_nanovdb_read_memory(bare, used - 1, "bare.nvdb", "temperature", 0, &g, &e) == RRV_ERROR_FORMAT);
+    free(bare);
+    free(file);
+}
+
 /* `rrv info` lists each grid with its type, voxel count, bounds, values
    and memory. */
 static void info_lists_grids(void)
@@ -588,6 +637,7 @@ int main(int argc, char **argv)
     RUN(refractive_render_equals_gridvol);
     RUN(scene_statements_and_messages);
     RUN(info_lists_grids);
+    RUN(newer_magics);
     RUN(hostile_files);
     return CHECK_EXIT_CODE();
 }
