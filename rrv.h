@@ -1224,8 +1224,6 @@ static const unsigned char *rrv__nv_find(const rrv_nanovdb *g, int32_t i, int32_
     return node + (int64_t)rrv__nv_u64(node + RRV__NV_LOWER_TABLE + 8 * (size_t)n);
 }
 
-static int rrv__nv_in_index_range(int64_t i) { return i >= INT32_MIN && i <= INT32_MAX; }
-
 RRV_DEF double rrv_nanovdb_voxel(const rrv_nanovdb *g, int64_t i, int64_t j, int64_t k)
 {
     const unsigned char *leaf;
@@ -1250,34 +1248,37 @@ static void rrv__nv_to_index(const rrv_nanovdb *g, rrv_vec3 p, double u[3])
     for (a = 0; a < 3; ++a) u[a] = g->inverse[3 * a] * d[0] + g->inverse[3 * a + 1] * d[1] + g->inverse[3 * a + 2] * d[2];
 }
 
-/* Trilinear at continuous index u. The eight index points share a leaf
-   unless the lower one sits on a leaf's last row: then one descent fetches
-   all eight (the common case), else each is looked up. */
+/* Trilinear at continuous index u. The eight index points lie in one leaf
+   unless the lower ones sit on a leaf's last row along some axes; each
+   distinct leaf (or tile) among them is descended to once: one descent for
+   7/8 of the positions along each axis, at most eight at a leaf's corner. */
 static double rrv__nv_trilinear(const rrv_nanovdb *g, const double u[3])
 {
     double f[3], t[3], c[8], c00, c10, c01, c11;
+    const unsigned char *leaf[8];
+    float tile[8];
     int64_t i0[3];
-    int a, corner;
+    int a, corner, cross = 0, near_edge = 0;
     for (a = 0; a < 3; ++a) {
         /* outside the data box (with one voxel to blend into) all is background */
         if (!(u[a] > (double)g->data_lo[a] - 1.0 && u[a] < (double)g->data_hi[a] + 1.0)) return g->background;
         f[a] = floor(u[a]);
         i0[a] = (int64_t)f[a];
         t[a] = u[a] - f[a];
+        if ((i0[a] & 7) == 7) cross |= 1 << a;
+        if (i0[a] < INT32_MIN || i0[a] >= INT32_MAX) near_edge = 1;
     }
-    if ((i0[0] & 7) != 7 && (i0[1] & 7) != 7 && (i0[2] & 7) != 7 && rrv__nv_in_index_range(i0[0]) &&
-        rrv__nv_in_index_range(i0[1]) && rrv__nv_in_index_range(i0[2])) {
-        float v;
-        const unsigned char *leaf = rrv__nv_find(g, (int32_t)i0[0], (int32_t)i0[1], (int32_t)i0[2], &v);
-        if (!leaf) return v;
-        {
-            unsigned n = (unsigned)(((i0[0] & 7) << 6) | ((i0[1] & 7) << 3) | (i0[2] & 7));
-            for (corner = 0; corner < 8; ++corner)
-                c[corner] = rrv__nv_leaf_value(g->type, leaf, n + ((corner & 1) << 6) + ((corner & 2) << 2) + ((corner & 4) >> 2));
+    for (corner = 0; corner < 8; ++corner) {
+        int64_t x = i0[0] + (corner & 1), y = i0[1] + ((corner >> 1) & 1), z = i0[2] + ((corner >> 2) & 1);
+        int id = corner & cross;
+        if (near_edge) {
+            c[corner] = rrv_nanovdb_voxel(g, x, y, z);
+            continue;
         }
-    } else {
-        for (corner = 0; corner < 8; ++corner)
-            c[corner] = rrv_nanovdb_voxel(g, i0[0] + (corner & 1), i0[1] + ((corner >> 1) & 1), i0[2] + ((corner >> 2) & 1));
+        /* corners that differ only along axes that stay in the leaf share it */
+        if (id == corner) leaf[id] = rrv__nv_find(g, (int32_t)x, (int32_t)y, (int32_t)z, &tile[id]);
+        c[corner] = leaf[id] ? rrv__nv_leaf_value(g->type, leaf[id], (unsigned)(((x & 7) << 6) | ((y & 7) << 3) | (z & 7)))
+                             : tile[id];
     }
     /* corner bit 0: x, bit 1: y, bit 2: z */
     c00 = c[0] + t[0] * (c[1] - c[0]);
