@@ -1,7 +1,9 @@
 # rrv build. `make` builds ./rrv; `make test` builds and runs every test;
-# `make test SAN=1` does the same under AddressSanitizer + UBSan;
+# `make test SAN=1` does the same under AddressSanitizer + UBSan (with
+# CC=clang also float-to-int overflow checks, as CI runs it);
 # `make THREADS=0` builds without POSIX threads; `make fuzz` builds the
-# libFuzzer harnesses (clang); `make bench` runs the benchmarks.
+# libFuzzer harnesses (clang) and `make fuzz-run` runs each for a while;
+# `make bench` runs the benchmarks.
 CC      ?= cc
 OPT     ?= -O2 -g
 WARN    := -std=c99 -Wall -Wextra -pedantic
@@ -17,6 +19,11 @@ endif
 ifeq ($(SAN),1)
 BUILD   := build-san
 SANFLAGS := -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer
+# gcc's UBSan does not check float-to-int conversions that overflow; clang's
+# does, so CI runs `make test SAN=1 CC=clang`.
+ifneq ($(findstring clang,$(shell $(CC) --version 2>/dev/null)),)
+SANFLAGS += -fsanitize=float-cast-overflow
+endif
 else
 BUILD   := build
 SANFLAGS :=
@@ -26,7 +33,7 @@ CFLAGS_ALL = $(WARN) $(OPT) $(SANFLAGS) $(CFLAGS)
 TEST_SRCS  := $(wildcard test/test_*.c)
 TEST_BINS  := $(patsubst test/%.c,$(BUILD)/%,$(TEST_SRCS))
 
-.PHONY: all test fuzz bench clean
+.PHONY: all test fuzz fuzz-run bench clean
 all: rrv
 
 rrv: $(BUILD)/rrv
@@ -47,12 +54,23 @@ $(BUILD):
 test: $(BUILD)/rrv $(TEST_BINS)
 	sh test/run_tests.sh $(BUILD) $(TEST_BINS) test/compile_checks.sh
 
+# Every test/fuzz_*.c is a harness. UBSan findings abort (no recovery), so
+# libFuzzer saves the input instead of printing and going on; clang also
+# checks float-to-int conversions that overflow.
 FUZZ_CC    ?= clang
-FUZZ_FLAGS := -std=c99 -g -O1 -fsanitize=fuzzer,address,undefined
-fuzz: build-fuzz/fuzz_scene build-fuzz/fuzz_grid build-fuzz/fuzz_nanovdb
-build-fuzz/fuzz_%: test/fuzz_%.c rrv.h
+FUZZ_FLAGS := -std=c99 -Wall -Wextra -g -O1 -fsanitize=fuzzer,address,undefined,float-cast-overflow \
+              -fno-sanitize-recover=all
+FUZZ_BINS  := $(patsubst test/%.c,build-fuzz/%,$(wildcard test/fuzz_*.c))
+fuzz: $(FUZZ_BINS)
+build-fuzz/fuzz_%: test/fuzz_%.c rrv.h test/fuzz_files.h
 	mkdir -p build-fuzz
 	$(FUZZ_CC) $(FUZZ_FLAGS) -o $@ $< -lm
+
+# Runs every harness for FUZZ_SECONDS on scratch copies of its seeds and
+# prints executions and findings (saved under build-fuzz/findings).
+FUZZ_SECONDS ?= 45
+fuzz-run: fuzz
+	sh test/fuzz_run.sh $(FUZZ_SECONDS) $(patsubst build-fuzz/fuzz_%,%,$(FUZZ_BINS))
 
 bench: $(BUILD)/rrv $(BUILD)/measure_grin
 	python3 test/bench/bench.py $(BUILD)/rrv

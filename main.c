@@ -719,6 +719,8 @@ static void add_stats(rrv_render_stats *into, const rrv_render_stats *from)
     into->paths += from->paths;
     into->events += from->events;
     into->nonfinite += from->nonfinite;
+    into->paths_cut += from->paths_cut;
+    into->cut_tracking += from->cut_tracking;
 }
 
 static void *render_worker(void *arg)
@@ -827,19 +829,19 @@ static int take_refraction_option(arg_cursor *args, refraction_options *opt)
     const char *arg = args->argv[args->index], *text;
     int i;
     if (strcmp(arg, "--bend-tolerance") == 0) {
-        if (!take_double(args, arg, "an angle in (0, 1] radians", &opt->bend_tolerance)) return -1;
-        if (!(opt->bend_tolerance > 0 && opt->bend_tolerance <= 1))
-            return usage_error(args, "--bend-tolerance must be in (0, 1], got %g", opt->bend_tolerance), -1;
+        if (!take_double(args, arg, "an angle in [1e-4, 1] radians", &opt->bend_tolerance)) return -1;
+        if (!(opt->bend_tolerance >= 1e-4 && opt->bend_tolerance <= 1))
+            return usage_error(args, "--bend-tolerance must be in [1e-4, 1], got %g", opt->bend_tolerance), -1;
         opt->has_bend_tolerance = 1;
     } else if (strcmp(arg, "--mu-eta") == 0) {
         if (!take_double(args, arg, "a rate >= 0 per metre", &opt->mu_eta)) return -1;
-        if (!(opt->mu_eta >= 0 && opt->mu_eta < 1e9))
-            return usage_error(args, "--mu-eta must be in [0, 1e9), got %g", opt->mu_eta), -1;
+        if (!(opt->mu_eta >= 0 && opt->mu_eta <= 1e6))
+            return usage_error(args, "--mu-eta must be in [0, 1e6], got %g", opt->mu_eta), -1;
         opt->has_mu_eta = 1;
     } else if (strcmp(arg, "--step") == 0) {
         if (!take_double(args, arg, "a length > 0 in metres", &opt->step)) return -1;
-        if (!(opt->step > 0 && opt->step < 1e6))
-            return usage_error(args, "--step must be in (0, 1e6) metres, got %g", opt->step), -1;
+        if (!(opt->step >= 1e-6 && opt->step <= 1e6))
+            return usage_error(args, "--step must be in [1e-6, 1e6] metres, got %g", opt->step), -1;
         opt->has_step = 1;
     } else if (strcmp(arg, "--majorant-cells") == 0) {
         if (!take_int(args, arg, 1, 256, "an integer in [1, 256]", &opt->majorant_cells)) return -1;
@@ -979,6 +981,10 @@ static void print_render_summary(int width, int height, int spp, double seconds,
             height, spp, seconds, samples_rate, paths_rate);
     if (stats->nonfinite > 0)
         fprintf(stderr, " (%" PRIu64 " non-finite samples discarded)", stats->nonfinite);
+    /* A cut path is a biased sample: never leave it unsaid. */
+    if (stats->paths_cut > 0)
+        fprintf(stderr, " (%" PRIu64 " paths cut at a work bound, %" PRIu64 " of them in tracking)",
+                stats->paths_cut, stats->cut_tracking);
     fputc('\n', stderr);
 }
 

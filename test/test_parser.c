@@ -274,6 +274,15 @@ static const struct corpus_case {
     {"too_many_media", RRV_ERROR_LIMIT},   {"camera_far", RRV_ERROR_PARSE},
     {"camera_up_zero", RRV_ERROR_PARSE},   {"grid_is_directory", RRV_ERROR_IO},
     {"obj_is_directory", RRV_ERROR_IO},    {"obj_nul_byte", RRV_ERROR_PARSE},
+    /* refused by the limits of BOUNDS (rrv.h) */
+    {"bound_ambient", RRV_ERROR_PARSE},    {"bound_bendtolerance", RRV_ERROR_PARSE},
+    {"bound_dense_grid", RRV_ERROR_PARSE}, {"bound_extinction", RRV_ERROR_PARSE},
+    {"bound_fisheye", RRV_ERROR_PARSE},    {"bound_gas_cold", RRV_ERROR_PARSE},
+    {"bound_ior_alternating", RRV_ERROR_PARSE}, {"bound_ior_blob", RRV_ERROR_PARSE},
+    {"bound_ior_nonpositive", RRV_ERROR_PARSE}, {"bound_ior_shell", RRV_ERROR_PARSE},
+    {"bound_ior_slab", RRV_ERROR_PARSE},   {"bound_light", RRV_ERROR_PARSE},
+    {"bound_medium_emission", RRV_ERROR_PARSE}, {"bound_mueta", RRV_ERROR_PARSE},
+    {"bound_sigma_overflow", RRV_ERROR_PARSE}, {"bound_step", RRV_ERROR_PARSE},
 };
 #define CORPUS_COUNT (int)(sizeof corpus_cases / sizeof *corpus_cases)
 
@@ -343,7 +352,7 @@ static void test_defaults_and_values(void)
         "medium a box 0 0 0 1 2 4 albedo 0.25 0.5 1 sigma_t 4 4 4\n"
         "density a noise\n"
         "temperature a constant 500 temperatureoffset 100 temperaturescale 2 blackbody off\n"
-        "ior a slab normal 0 2 0 gradient 0.5 iorscale 3\n"
+        "ior a slab normal 0 2 0 gradient 0.1 iorscale 3\n"
         "medium b box -1 -1 -1 1 1 1\n"
         "temperature b blob center 0 0 0 radius 1\n"
         "temperature b blob center 1 0 0 radius 1 weight 2 base 7\n"
@@ -382,7 +391,7 @@ static void test_defaults_and_values(void)
         CHECK(a->temperature.kind == RRV_FIELD_CONSTANT && a->temperature.value == 500 &&
               a->temperatureoffset == 100 && a->temperaturescale == 2 && a->blackbody_emission == 0);
         CHECK(a->ior.kind == RRV_FIELD_SLAB && a->ior.normal.y == 1 && a->ior.normal.x == 0 &&
-              a->ior.gradient == 0.5 && a->ior_scale == 3 && a->ior.center.y == 1);
+              a->ior.gradient == 0.1 && a->ior_scale == 3 && a->ior.center.y == 1);
         CHECK(a->eta_ref == 1.000292 && a->P_ref == 101325 && a->T_ref == 300 && !a->ior_from_gas);
         CHECK(b->temperature.kind == RRV_FIELD_BLOBS && b->temperature.blob_count == 2 &&
               b->temperature.base == 300 && b->temperature.blobs[1].weight == 2 &&

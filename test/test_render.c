@@ -150,7 +150,7 @@ static void check_transmittance(rrv_scene *s, rrv_vec3 o, rrv_vec3 d, double tma
         rrv__ratio_tracking_transmittance(&ctx, o, d, tmax, &rng, T);
         stats_add(&ratio, T[1]);
         rrv__path_start(&path, &rng);
-        outcome = rrv__sample_free_flight_path(&ctx, &path, o, d, tmax, &rng, &flight);
+        outcome = rrv__refractive_delta_tracking(&ctx, &path, o, d, tmax, &rng, &flight);
         stats_add(&delta, outcome == RRV__FLIGHT_PASSED ? path.beta[1] * rrv__path_mis(&path) : 0.0);
     }
     CHECKF(fabs(stats_mean(&ratio) - expected) < 4 * stats_se(&ratio), "%s: ratio tracking %g +- %g, exp(-tau) %g",
@@ -340,6 +340,323 @@ static void test_blackbody(void)
            c6500[0], c6500[1], c6500[2]);
 }
 
+/* ---- work bounds and hostile inputs (BOUNDS in rrv.h) ------------------------ */
+
+/* A furnace around a refracting shell: no extinction, an environment of 1,
+   so every sample that is not cut is exactly 1 (no MIS weight, no IOR
+   change between camera and environment). */
+static rrv_scene *shell_furnace(double amplitude, double step)
+{
+    rrv_scene *s = tb_scene(40, 30);
+    rrv_medium *m = tb_medium(s, rrv__v3(-1.2, -1.2, -1.2), rrv__v3(1.2, 1.2, 1.2), 0.0, 0.0);
+    m->ior.kind = RRV_FIELD_SHELL;
+    m->ior.center = rrv__v3(0, 0, 0);
+    m->ior.radius = 1.1;
+    m->ior.thickness = 0.15;
+    m->ior.edge = 0.03;
+    m->ior.amplitude = amplitude;
+    s->environment.kind = RRV_ENV_CONSTANT;
+    s->environment.L[0] = s->environment.L[1] = s->environment.L[2] = 1;
+    s->settings.integrator = RRV_INTEGRATOR_EIKONAL;
+    s->settings.step = step;
+    return s;
+}
+
+/* Renders spp samples a pixel and returns how many samples fell short of 1
+   (the furnace's value), from the pixel sums. */
+static long furnace_shortfall(rrv_scene *s, int spp, rrv_render_stats *st, double *worst)
+{
+    int w = s->camera.width, h = s->camera.height, i;
+    float *img = (float *)calloc((size_t)w * h * 3, sizeof(float));
+    double missing = 0;
+    memset(st, 0, sizeof *st);
+    rrv_render_rect(s, 0, 0, w, h, 0, spp, img, w, st);
+    *worst = 0;
+    for (i = 0; i < w * h * 3; i += 3) {
+        missing += spp - img[i + 1];
+        *worst = fmax(*worst, fabs(img[i] - img[i + 1]) + fabs(img[i + 2] - img[i + 1]));
+    }
+    free(img);
+    return lround(missing);
+}
+
+static void test_trapped_eikonal_rays_are_bounded_and_counted(void)
+{
+    /* The issue's case: the blast scene's shell (3 cm edges) at step 0.1 in
+       a furnace must be 1 everywhere, no path cut. */
+    rrv_scene *s = shell_furnace(0.03, 0.1);
+    rrv_render_stats st;
+    rrv_error err;
+    double worst;
+    long bound, short_samples;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    short_samples = furnace_shortfall(s, 4, &st, &worst);
+    CHECKF(short_samples == 0 && st.paths_cut == 0, "%ld samples short, %lu cut", short_samples,
+           (unsigned long)st.paths_cut);
+    rrv_scene_free(s);
+    /* Ten times the amplitude makes a waveguide between the shell's edges:
+       RK4 at step 0.1 drifts some camera rays into orbits inside it (no ray
+       from outside can follow one physically). Each leg is bounded by the
+       scene: 64 + 16 (2 + 4 diag / h) = 2756 steps for this 2.4 m box, not
+       the 1e7 of a fixed cap; every sample that is not 1 is a counted cut,
+       and there are some (measured 8 of 4800), so the count is tested. */
+    s = shell_furnace(0.3, 0.1);
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    bound = rrv__step_bound(s, RRV_INTEGRATOR_EIKONAL);
+    CHECKF(bound < 3000, "step bound %ld", bound);
+    short_samples = furnace_shortfall(s, 4, &st, &worst);
+    CHECKF(st.paths_cut > 0, "no path was cut: the check below would be empty");
+    CHECKF((uint64_t)short_samples == st.paths_cut && st.cut_tracking == 0,
+           "%ld samples short of 1, %lu paths cut", short_samples, (unsigned long)st.paths_cut);
+    CHECKF(worst == 0, "channels differ by %g", worst);
+    /* one leg per sample: the events (eikonal steps) stay under the bound */
+    CHECKF(st.events <= st.samples * (uint64_t)bound, "%lu events for %lu samples", (unsigned long)st.events,
+           (unsigned long)st.samples);
+    rrv_scene_free(s);
+}
+
+static void test_tracking_walks_are_bounded(void)
+{
+    /* A majorant of 1e30 over a density of 1e-30: free flights of 1e-30 m
+       do not move t at all, the hang an overflowing extinction caused. The
+       walk must stop after RRV_MAX_SEGMENT_EVENTS collisions, say so, and
+       return the one safe answer, no light. */
+    rrv_scene *s = tb_scene(4, 4);
+    rrv_error err;
+    rrv__context ctx;
+    rrv__rng rng;
+    rrv__path path;
+    rrv__flight flight;
+    rrv_medium *m = tb_medium(s, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 0.0, 1.0);
+    double T[3];
+    size_t c, cells;
+    int outcome;
+    m->density.value = 1e-30;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    cells = (size_t)m->majorant->n[0] * m->majorant->n[1] * m->majorant->n[2];
+    for (c = 0; c < cells; ++c) m->majorant->density_max[c] = 1e30f;
+    m->majorant->density_peak = 1e30f;
+    memset(&ctx, 0, sizeof ctx);
+    ctx.scene = s;
+    ctx.eta_camera2 = 1;
+    rrv__rng_seed(&rng, 1, 2, 3);
+    rrv__ratio_tracking_transmittance(&ctx, rrv__v3(-2, 0.1, 0.2), rrv__v3(1, 0, 0), DBL_MAX, &rng, T);
+    CHECK(T[0] == 0 && T[1] == 0 && T[2] == 0);
+    CHECKF(ctx.stats.paths_cut == 1 && ctx.stats.cut_tracking == 1 && ctx.stats.events == RRV_MAX_SEGMENT_EVENTS,
+           "cut %lu, events %lu", (unsigned long)ctx.stats.paths_cut, (unsigned long)ctx.stats.events);
+    rrv__path_start(&path, &rng);
+    outcome = rrv__refractive_delta_tracking(&ctx, &path, rrv__v3(-2, 0.1, 0.2), rrv__v3(1, 0, 0), DBL_MAX, &rng,
+                                           &flight);
+    CHECK(outcome == RRV__FLIGHT_CUT && ctx.stats.events == 2 * RRV_MAX_SEGMENT_EVENTS);
+    rrv_scene_free(s);
+}
+
+static void test_majorant_follows_large_voxels(void)
+{
+    /* One sample of 1e8 in an empty 8^3 grid: the majorant cells follow the
+       voxels (7 an axis), and only the 2^3 cells around the sample carry
+       it. With the default 4^3 cells, each two voxels wide and widened by
+       the rounding of their corners, rays through 64 voxels of nothing saw
+       a majorant of 1e8: ~1e7 null collisions each, 1 s a sample. */
+    rrv_scene *s = tb_scene(8, 8);
+    rrv_error err;
+    rrv_medium *m = tb_medium(s, rrv__v3(0, 0, 0), rrv__v3(1, 1, 1), 0.0, 1.0);
+    rrv_grid *g = &m->density.grid;
+    const struct rrv__majorant_grid *mg;
+    rrv_render_stats st;
+    float *img = (float *)calloc(8 * 8 * 3, sizeof(float));
+    int x, y, z, loaded = 0;
+    m->density.kind = RRV_FIELD_GRID;
+    g->nx = g->ny = g->nz = 8;
+    g->channels = 1;
+    g->lo = m->lo;
+    g->hi = m->hi;
+    g->data = (float *)calloc(512, sizeof(float));
+    g->data[(4 * 8 + 4) * 8 + 4] = 1e8f;
+    s->camera.eye = rrv__v3(0.5, 0.5, -3);
+    s->camera.look = rrv__v3(0.5, 0.5, 0.5);
+    s->environment.kind = RRV_ENV_CONSTANT;
+    s->environment.L[0] = s->environment.L[1] = s->environment.L[2] = 1;
+    s->settings.max_depth = 8;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    mg = m->majorant;
+    CHECKF(mg->n[0] == 7 && mg->n[1] == 7 && mg->n[2] == 7, "%d x %d x %d cells", mg->n[0], mg->n[1], mg->n[2]);
+    for (z = 0; z < mg->n[2]; ++z)
+        for (y = 0; y < mg->n[1]; ++y)
+            for (x = 0; x < mg->n[0]; ++x)
+                loaded += mg->density_max[(z * mg->n[1] + y) * mg->n[0] + x] > 0;
+    CHECKF(loaded == 8, "%d cells carry the sample", loaded);
+    memset(&st, 0, sizeof st);
+    rrv_render_rect(s, 0, 0, 8, 8, 0, 16, img, 8, &st);
+    /* measured 4.3e3 events a sample here (with 4^3 cells: 3.3e5, and 80
+       of the 1024 paths cut); the check allows 10 times that, none cut */
+    CHECKF(st.events < 43000 * st.samples && st.paths_cut == 0, "%lu events in %lu samples, %lu cut",
+           (unsigned long)st.events, (unsigned long)st.samples, (unsigned long)st.paths_cut);
+    free(img);
+    rrv_scene_free(s);
+}
+
+static void test_prepare_accounting_and_limits(void)
+{
+    rrv_scene *s = tb_scene(4, 4);
+    rrv_error err;
+    rrv_medium *m = tb_medium(s, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 0.1, 0.5);
+    rrv_shape *q = tb_shape(s, RRV_SHAPE_QUAD);
+    size_t once, twice, coarse;
+    q->p0 = rrv__v3(-2, 3, -2); q->e1 = rrv__v3(4, 0, 0); q->e2 = rrv__v3(0, 0, 4);
+    q->L[0] = q->L[1] = q->L[2] = 1;
+    m->density.kind = RRV_FIELD_NOISE; /* baked by prepare */
+    m->density.amplitude = 1;
+    m->density.noise.octaves = 3;
+    m->density.noise.frequency = 2;
+    m->density.noise.lacunarity = 2;
+    m->density.noise.gain = 0.5;
+    m->density.noise.radius = 1;
+    m->ior.kind = RRV_FIELD_LUNEBURG;
+    m->ior.radius = 1;
+    s->bytes = 1000;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    once = s->bytes;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    twice = s->bytes;
+    CHECKF(once == twice && once > 1000, "bytes %lu after one prepare, %lu after three", (unsigned long)once,
+           (unsigned long)twice);
+    /* 64^3 cells instead of the automatic ones, two floats each (density
+       and gradient) */
+    coarse = s->bytes - (size_t)m->majorant->n[0] * m->majorant->n[1] * m->majorant->n[2] * 2 * sizeof(float);
+    s->settings.majorant_cells = 64;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    CHECKF(s->bytes - coarse == (size_t)64 * 64 * 64 * 2 * sizeof(float), "grew by %lu",
+           (unsigned long)(s->bytes - coarse));
+    /* the grid limit holds for the majorant grid too: 256^3 cells of 8 bytes */
+    s->settings.majorant_cells = 256;
+    s->max_grid_bytes = (size_t)64 << 20;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_ERROR_LIMIT && strstr(err.message, "majorant grid") != NULL);
+    /* a failed prepare releases all it built, and its bytes */
+    CHECKF(s->bytes == 1000, "bytes %lu after a failed prepare", (unsigned long)s->bytes);
+    s->max_grid_bytes = 0;
+    s->settings.majorant_cells = 0;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK && s->bytes == once);
+    /* a scene built in code gets the loader's refusals: eta below zero */
+    m->ior.kind = RRV_FIELD_SLAB;
+    m->ior.normal = rrv__v3(0, 1, 0);
+    m->ior.gradient = 2;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_ERROR_ARGUMENT && strstr(err.message, "IOR from -1 to 3") != NULL);
+    rrv_scene_free(s);
+}
+
+/* max |grad| of a profile sampled on a 9^3 lattice over a box */
+static double sampled_gradient_max(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
+{
+    double best = 0;
+    int i, j, k;
+    for (k = 0; k < 9; ++k)
+        for (j = 0; j < 9; ++j)
+            for (i = 0; i < 9; ++i) {
+                rrv_vec3 p = rrv__v3(lo.x + (hi.x - lo.x) * i / 8.0, lo.y + (hi.y - lo.y) * j / 8.0,
+                                     lo.z + (hi.z - lo.z) * k / 8.0);
+                best = fmax(best, rrv__length(rrv__profile_gradient(f, p, 0)));
+            }
+    return best;
+}
+
+static void test_gradient_bounds_in_closed_form(void)
+{
+    /* The closed forms bound |grad r| over any box (they replace 64 lookups
+       a cell); checked against a 9^3 lattice in 3000 random boxes per kind,
+       and tight where the lattice holds the maximiser (within 1e-9). */
+    rrv_field f;
+    rrv_blob blobs[2];
+    rrv__rng rng;
+    int kind, i, known, loose = 0;
+    rrv__rng_seed(&rng, 4, 0, 0);
+    for (kind = 0; kind < 4; ++kind) {
+        memset(&f, 0, sizeof f);
+        f.center = rrv__v3(0.1, -0.2, 0.05);
+        f.radius = 0.8;
+        if (kind == 0) f.kind = RRV_FIELD_LUNEBURG;
+        if (kind == 1) { f.kind = RRV_FIELD_FISHEYE; f.n0 = 2; }
+        if (kind == 2) { f.kind = RRV_FIELD_SHELL; f.thickness = 0.2; f.edge = 0.03; f.amplitude = -0.4; }
+        if (kind == 3) {
+            f.kind = RRV_FIELD_BLOBS;
+            f.blobs = blobs;
+            f.blob_count = 2;
+            blobs[0].center = rrv__v3(0.2, 0, 0); blobs[0].radius = 0.1; blobs[0].weight = 0.5;
+            blobs[1].center = rrv__v3(-0.3, 0.1, 0); blobs[1].radius = 0.3; blobs[1].weight = -1;
+        }
+        for (i = 0; i < 3000; ++i) {
+            rrv_vec3 a = rrv__v3(2 * rrv__uniform(&rng) - 1, 2 * rrv__uniform(&rng) - 1, 2 * rrv__uniform(&rng) - 1);
+            rrv_vec3 e = rrv__scale(rrv__v3(rrv__uniform(&rng), rrv__uniform(&rng), rrv__uniform(&rng)), 0.3);
+            rrv_vec3 b = rrv__add(a, e);
+            double bound = rrv__profile_gradient_bound(&f, a, b, &known), sampled = sampled_gradient_max(&f, a, b);
+            CHECK(known);
+            if (!(bound >= sampled * (1 - 1e-12))) ++loose;
+        }
+    }
+    CHECKF(loose == 0, "%d boxes where the closed form is below a sampled gradient", loose);
+    memset(&f, 0, sizeof f);
+    f.kind = RRV_FIELD_CONSTANT;
+    CHECK(rrv__profile_gradient_bound(&f, rrv__v3(0, 0, 0), rrv__v3(1, 1, 1), &known) == 0 && known);
+}
+
+static void test_hostile_numbers_stay_finite(void)
+{
+    /* Noise in a box 1e86 wide: lattice coordinates far beyond int (the
+       cast was undefined behaviour). */
+    double v = rrv__value_noise(rrv__v3(1e86, -3e40, 7.5), 3);
+    rrv_scene *s = tb_scene(2, 2);
+    rrv_error err;
+    float img[12];
+    int i, finite = 1;
+    CHECK(v >= 0 && v <= 1);
+    CHECK(rrv__lattice_coord(-1.0) == 4294967295u && rrv__lattice_coord(1e300) < 4294967296.0);
+    /* Pixel sums saturate instead of overflowing to Inf, even when the
+       caller's buffer is already near the top of float's range; samples
+       above RRV_MAX_SAMPLE are discarded and counted. The radiance is set
+       after prepare, as a caller editing a prepared scene could. */
+    s->environment.kind = RRV_ENV_CONSTANT;
+    s->environment.L[0] = s->environment.L[1] = s->environment.L[2] = RRV_MAX_RADIANCE;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    s->environment.L[0] = s->environment.L[1] = s->environment.L[2] = RRV_MAX_SAMPLE;
+    for (i = 0; i < 12; ++i) img[i] = 0.999f * FLT_MAX;
+    rrv_render_rect(s, 0, 0, 2, 2, 0, 1 << 20, img, 2, NULL); /* adds 1e36 a pixel */
+    for (i = 0; i < 12; ++i) finite &= img[i] == FLT_MAX;
+    CHECK(finite);
+    {
+        rrv_render_stats st;
+        memset(&st, 0, sizeof st);
+        for (i = 0; i < 12; ++i) img[i] = 0;
+        s->environment.L[1] = 10 * RRV_MAX_SAMPLE;
+        rrv_render_rect(s, 0, 0, 2, 2, 0, 8, img, 2, &st);
+        CHECK(st.nonfinite == 32 && img[0] == 0);
+    }
+    s->environment.L[1] = 2 * RRV_MAX_RADIANCE;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_ERROR_ARGUMENT);
+    rrv_scene_free(s);
+}
+
+static void test_blob_count_is_capped(void)
+{
+    /* Each blob statement is checked against the limits by summing the
+       field; uncapped, a file of blob lines cost the square of its length. */
+    const char *head = "camera eye 0 0 5 look 0 0 0\nmedium m box -1 -1 -1 1 1 1\n";
+    const char *line = "density m blob center 0 0 0 radius 0.1 weight 0.001\n";
+    size_t hn = strlen(head), ln = strlen(line), i, n = RRV_MAX_BLOBS + 1;
+    char *text = (char *)malloc(hn + n * ln + 1);
+    rrv_scene *s = NULL;
+    rrv_error err;
+    memcpy(text, head, hn);
+    for (i = 0; i < n; ++i) memcpy(text + hn + i * ln, line, ln);
+    CHECK(rrv_scene_parse(text, hn + n * ln, "blobs.rrv", NULL, NULL, &s, &err) == RRV_ERROR_LIMIT);
+    CHECKF(err.line == 2 + RRV_MAX_BLOBS + 1 && strcmp(err.message, "density: more than 4096 blobs in one field (a grid holds more)") == 0,
+           "%d: %s", err.line, err.message);
+    CHECK(rrv_scene_parse(text, hn + (n - 1) * ln, "blobs.rrv", NULL, NULL, &s, &err) == RRV_OK);
+    CHECK(s && s->media[0].density.blob_count == RRV_MAX_BLOBS);
+    rrv_scene_free(s);
+    free(text);
+}
+
 int main(int argc, char **argv)
 {
     (void)argc; (void)argv;
@@ -355,5 +672,12 @@ int main(int argc, char **argv)
     RUN(test_tiles_are_bit_identical);
     RUN(test_grid_gradient_stencil);
     RUN(test_blackbody);
+    RUN(test_trapped_eikonal_rays_are_bounded_and_counted);
+    RUN(test_tracking_walks_are_bounded);
+    RUN(test_majorant_follows_large_voxels);
+    RUN(test_prepare_accounting_and_limits);
+    RUN(test_gradient_bounds_in_closed_form);
+    RUN(test_hostile_numbers_stay_finite);
+    RUN(test_blob_count_is_capped);
     return CHECK_EXIT_CODE();
 }

@@ -52,6 +52,10 @@ def main():
     corpus("grid_encoding", header(encoding=2) + samples(eight))
     corpus("grid_infinite_box", header(box=(0, 0, 0, float("inf"), 1, 1)) + samples(eight))
     corpus("grid_three_channel_T", header(channels=3) + samples([300.0] * 24))
+    # valid files whose values the work bounds refuse (BOUNDS in rrv.h)
+    corpus("bound_dense", header() + samples([3e38] * 8))
+    corpus("bound_ior_alternating", header() + samples([1e9, 0.0] * 4))
+    corpus("bound_ior_nonpositive", header() + samples([-1.0, -2.0] * 4))
 
 
 if __name__ == "__main__":
