@@ -1298,7 +1298,7 @@ static int command_diff(int argc, char **argv)
 static const char *field_kind_name(rrv_field_kind kind)
 {
     static const char *const names[] = {"none",  "constant", "blobs",   "noise", "grid",
-                                        "luneburg", "fisheye", "slab", "shell"};
+                                        "luneburg", "fisheye", "slab", "shell", "nanovdb"};
     return (unsigned)kind < sizeof names / sizeof names[0] ? names[kind] : "unknown";
 }
 
@@ -1310,6 +1310,21 @@ static void print_field(const char *label, const rrv_field *field)
     if (field->kind == RRV_FIELD_GRID && field->grid.channels != 1)
         printf("x%d", field->grid.channels);
     if (field->kind == RRV_FIELD_BLOBS) printf(" (%d)", field->blob_count);
+}
+
+/* One line a NanoVDB grid: what it holds, where, and what it costs. */
+static void print_nanovdb(const char *label, const rrv_field *field)
+{
+    const rrv_nanovdb *g = &field->nanovdb;
+    char text[64];
+    if (field->kind != RRV_FIELD_NANOVDB) return;
+    format_bytes((double)g->size, text, sizeof text);
+    printf("    %s grid \"%s\": %s, %" PRIu64 " active voxels, index %" PRId64 " %" PRId64 " %" PRId64
+           " .. %" PRId64 " %" PRId64 " %" PRId64 ", world %g %g %g .. %g %g %g, values %g .. %g"
+           " (background %g), %s\n",
+           label, g->name, rrv_nanovdb_type_name(g->type), g->active_voxels, g->active_lo[0],
+           g->active_lo[1], g->active_lo[2], g->active_hi[0], g->active_hi[1], g->active_hi[2], g->lo.x,
+           g->lo.y, g->lo.z, g->hi.x, g->hi.y, g->hi.z, g->value_min, g->value_max, g->background, text);
 }
 
 static void print_medium(const rrv_medium *medium)
@@ -1328,6 +1343,10 @@ static void print_medium(const rrv_medium *medium)
     if (medium->ior.kind == RRV_FIELD_GRID)
         printf(" grid %dx%dx%d", medium->ior.grid.nx, medium->ior.grid.ny, medium->ior.grid.nz);
     putchar('\n');
+    print_nanovdb("density", &medium->density);
+    print_nanovdb("temperature", &medium->temperature);
+    print_nanovdb("pressure", &medium->pressure);
+    print_nanovdb("ior", &medium->ior);
 }
 
 static int command_info(int argc, char **argv)

@@ -198,6 +198,13 @@
        for a wrong magic or version, a resolution < 2 or an overflowing
        size, a byte count that does not match, an empty or non-finite box, a
        NaN or infinite sample, or a negative density.
+     NanoVDB grids (.nvdb, NanoVDB 32.x as nanovdb_convert writes them,
+       little endian, uncompressed; float, fp4, fp8, fp16, fpN): value ijk
+       sits at world map * ijk + translation (the grid's own map), trilinear
+       between index points; where no data is stored, the grid's background,
+       and an IOR grid beyond one voxel past its data is the ambient IOR.
+       Every offset is checked against the grid's buffer and every value
+       must be finite; negative densities count as 0. See rrv_nanovdb.
      Gas IOR (Hauf-Grigull; Gladstone-Dale for an ideal gas):
        eta - 1 = (eta_ref - 1) (P / P_ref) (T_ref / T), defaults eta_ref =
        1.000292, P_ref = 101325 Pa, T_ref = 300 K; its gradient is
@@ -301,7 +308,8 @@ typedef enum rrv_field_kind {
     RRV_FIELD_LUNEBURG, /* eta = sqrt(2 - (r/R)^2) for r < R, 1 outside      */
     RRV_FIELD_FISHEYE,  /* eta = n0 / (1 + (r/R)^2) for r < R, n0/2 outside  */
     RRV_FIELD_SLAB,     /* eta - 1 = base + gradient * dot(x - center, normal) */
-    RRV_FIELD_SHELL     /* eta - 1 = base + amplitude * tanh-edged shell       */
+    RRV_FIELD_SHELL,    /* eta - 1 = base + amplitude * tanh-edged shell       */
+    RRV_FIELD_NANOVDB   /* trilinear in a NanoVDB grid, values at index points */
 } rrv_field_kind;
 
 typedef struct rrv_blob {
@@ -336,6 +344,41 @@ typedef struct rrv_grid {
     float *data;              /* ((z*ny + y)*nx + x)*channels + c, owned */
 } rrv_grid;
 
+/* One grid of a NanoVDB file (.nvdb, as nanovdb_convert writes it), kept
+   as the file stores it and looked up in its tree (root tiles, 32^3 upper,
+   16^3 lower and 8^3 leaf nodes), never densified: memory is the grid's
+   size in the file. Values sit at integer index points; the map takes index
+   ijk to world map * ijk + translation, and the field is trilinear between
+   the eight index points around a position (gridvol instead puts its first
+   and last samples on the faces of its box; Mitsuba 3 and pbrt put grid
+   values at cell centres, i.e. at index points of a map shifted by half a
+   voxel, which NanoVDB files do not need since their map is explicit).
+   Everywhere without data the value is the grid's background. */
+typedef enum rrv_nanovdb_type {
+    RRV_NANOVDB_FLOAT = 1, /* NanoVDB's GridType codes */
+    RRV_NANOVDB_FP4 = 13,
+    RRV_NANOVDB_FP8 = 14,
+    RRV_NANOVDB_FP16 = 15,
+    RRV_NANOVDB_FPN = 16
+} rrv_nanovdb_type;
+
+typedef struct rrv_nanovdb {
+    unsigned char *buffer;    /* the grid's bytes, owned; validated on reading */
+    size_t size;
+    char name[256];
+    rrv_nanovdb_type type;
+    double map[9], inverse[9], translation[3]; /* row-major 3x3 */
+    int64_t data_lo[3], data_hi[3]; /* index box of every stored non-background value
+                                   (leaf granularity); lo > hi: none */
+    int64_t active_lo[3], active_hi[3]; /* the active voxels' index box, as the file says */
+    rrv_vec3 lo, hi;          /* world box outside which the field is the background */
+    double background, value_min, value_max; /* over every value stored */
+    uint64_t active_voxels;
+    uint32_t node_count[3];   /* leaf, lower, upper nodes */
+    uint32_t root_tiles;
+    size_t root;              /* offset of the root node in buffer */
+} rrv_nanovdb;
+
 typedef struct rrv_field {
     rrv_field_kind kind;
     double value;      /* CONSTANT */
@@ -345,6 +388,7 @@ typedef struct rrv_field {
     int blob_count;
     rrv_noise noise;   /* NOISE */
     rrv_grid grid;     /* GRID */
+    rrv_nanovdb nanovdb; /* NANOVDB */
     rrv_vec3 center;   /* LUNEBURG, FISHEYE, SLAB, SHELL */
     rrv_vec3 normal;   /* SLAB, unit */
     double radius;     /* LUNEBURG, FISHEYE, SHELL (outer radius), m */
@@ -570,6 +614,25 @@ RRV_DEF rrv_result rrv_grid_read(const char *path, const rrv_load_options *opt,
 RRV_DEF rrv_result rrv_grid_read_memory(const void *data, size_t size, const char *name,
                                         size_t max_grid_bytes, int nonnegative,
                                         rrv_grid *grid, rrv_error *err);
+
+/* Reads grid `grid_name` of a NanoVDB file (every offset, count and size in
+   it is checked before use; a grid over opt->max_grid_bytes is refused).
+   Grid types Float, Fp4, Fp8, Fp16 and FpN, uncompressed files only. On
+   success free with rrv_nanovdb_free. */
+RRV_DEF rrv_result rrv_nanovdb_read(const char *path, const char *grid_name,
+                                    const rrv_load_options *opt, rrv_nanovdb *grid,
+                                    rrv_error *err);
+/* The same from a whole file in memory (copied; `data` stays the caller's). */
+RRV_DEF rrv_result rrv_nanovdb_read_memory(const void *data, size_t size, const char *name,
+                                           const char *grid_name, size_t max_grid_bytes,
+                                           rrv_nanovdb *grid, rrv_error *err);
+RRV_DEF void rrv_nanovdb_free(rrv_nanovdb *grid);
+/* The value stored at index point (i, j, k); the background where none is. */
+RRV_DEF double rrv_nanovdb_voxel(const rrv_nanovdb *grid, int64_t i, int64_t j, int64_t k);
+/* The trilinear field at world position p. */
+RRV_DEF double rrv_nanovdb_sample(const rrv_nanovdb *grid, rrv_vec3 p);
+/* "float", "fp4", "fp8", "fp16" or "fpN". */
+RRV_DEF const char *rrv_nanovdb_type_name(rrv_nanovdb_type type);
 
 /* ---- rendering -------------------------------------------------------------- */
 
@@ -1268,6 +1331,297 @@ static double rrv__grid_sample(const rrv_grid *g, rrv_vec3 p, int channel, doubl
     return rrv__grid_blend(g, &cell, channel);
 }
 
+/* ---- NanoVDB grids: sparse lookup ---------------------------------------------
+   The buffer was validated when it was read (the loader below the image
+   I/O section): every node a lookup can reach lies inside it and has the
+   size its type needs, so the lookups here read without checks. Bytes are
+   decoded little-endian one by one: a grid sits at any offset in its file,
+   so nothing here is aligned. */
+
+/* Byte sizes and offsets of NanoVDB 32.x nodes (values are 4-byte floats
+   in every supported type; internal tables hold 8-byte unions). */
+#define RRV__NV_GRID 672
+#define RRV__NV_TREE 64
+#define RRV__NV_ROOT 64
+#define RRV__NV_TILE 32
+#define RRV__NV_UPPER 270400
+#define RRV__NV_UPPER_TABLE 8256
+#define RRV__NV_LOWER 33856
+#define RRV__NV_LOWER_TABLE 1088
+#define RRV__NV_LEAF_DATA 96
+
+static uint32_t rrv__nv_u32(const unsigned char *b)
+{
+    return (uint32_t)b[0] | ((uint32_t)b[1] << 8) | ((uint32_t)b[2] << 16) | ((uint32_t)b[3] << 24);
+}
+
+static uint64_t rrv__nv_u64(const unsigned char *b)
+{
+    return (uint64_t)rrv__nv_u32(b) | ((uint64_t)rrv__nv_u32(b + 4) << 32);
+}
+
+static float rrv__nv_f32(const unsigned char *b)
+{
+    uint32_t u = rrv__nv_u32(b);
+    float f;
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
+/* Value n (x << 6 | y << 3 | z) of a leaf. Quantised leaves decode as
+   NanoVDB does, code * quantum + minimum in float, so they read back the
+   very floats NanoVDB's own accessors return. */
+static float rrv__nv_leaf_value(rrv_nanovdb_type type, const unsigned char *leaf, unsigned n)
+{
+    const unsigned char *v = leaf + RRV__NV_LEAF_DATA;
+    unsigned code;
+    switch (type) {
+    case RRV_NANOVDB_FLOAT: return rrv__nv_f32(v + 4 * n);
+    case RRV_NANOVDB_FP4: code = (v[n >> 1] >> ((n & 1) << 2)) & 15u; break;
+    case RRV_NANOVDB_FP8: code = v[n]; break;
+    case RRV_NANOVDB_FP16: code = (unsigned)v[2 * n] | ((unsigned)v[2 * n + 1] << 8); break;
+    default: {
+        /* FpN: 2^b bits a value, b = flags >> 5 in 0..4, packed in words */
+        unsigned b = leaf[15] >> 5;
+        uint32_t word = rrv__nv_u32(v + 4 * (n >> (5 - b)));
+        code = (unsigned)((word >> ((n & ((32u >> b) - 1)) << b)) & ((1u << (1u << b)) - 1u));
+        break;
+    }
+    }
+    return (float)code * rrv__nv_f32(leaf + 84) + rrv__nv_f32(leaf + 80);
+}
+
+/* The leaf holding index point (i, j, k), or NULL with *value the tile (or
+   background) value that covers it. */
+static const unsigned char *rrv__nv_find(const rrv_nanovdb *g, int32_t i, int32_t j, int32_t k, float *value)
+{
+    const unsigned char *root = g->buffer + g->root, *tile = root + RRV__NV_ROOT, *node;
+    uint64_t key = ((uint64_t)((uint32_t)i >> 12) << 42) | ((uint64_t)((uint32_t)j >> 12) << 21) |
+                   (uint64_t)((uint32_t)k >> 12);
+    uint32_t t, n;
+    int64_t child;
+    for (t = 0; t < g->root_tiles; ++t, tile += RRV__NV_TILE)
+        if (rrv__nv_u64(tile) == key) break;
+    if (t == g->root_tiles) {
+        *value = (float)g->background;
+        return NULL;
+    }
+    child = (int64_t)rrv__nv_u64(tile + 8);
+    if (child == 0) {
+        *value = rrv__nv_f32(tile + 20);
+        return NULL;
+    }
+    node = root + child;
+    n = ((((uint32_t)i & 4095u) >> 7) << 10) | ((((uint32_t)j & 4095u) >> 7) << 5) | (((uint32_t)k & 4095u) >> 7);
+    if (!((node[32 + 4096 + (n >> 3)] >> (n & 7)) & 1)) {
+        *value = rrv__nv_f32(node + RRV__NV_UPPER_TABLE + 8 * (size_t)n);
+        return NULL;
+    }
+    node += (int64_t)rrv__nv_u64(node + RRV__NV_UPPER_TABLE + 8 * (size_t)n);
+    n = ((((uint32_t)i & 127u) >> 3) << 8) | ((((uint32_t)j & 127u) >> 3) << 4) | (((uint32_t)k & 127u) >> 3);
+    if (!((node[32 + 512 + (n >> 3)] >> (n & 7)) & 1)) {
+        *value = rrv__nv_f32(node + RRV__NV_LOWER_TABLE + 8 * (size_t)n);
+        return NULL;
+    }
+    return node + (int64_t)rrv__nv_u64(node + RRV__NV_LOWER_TABLE + 8 * (size_t)n);
+}
+
+RRV_DEF double rrv_nanovdb_voxel(const rrv_nanovdb *g, int64_t i, int64_t j, int64_t k)
+{
+    const unsigned char *leaf;
+    float v;
+    if (!g || !g->buffer) return 0.0;
+    if (i < g->data_lo[0] || i > g->data_hi[0] || j < g->data_lo[1] || j > g->data_hi[1] ||
+        k < g->data_lo[2] || k > g->data_hi[2])
+        return g->background;
+    leaf = rrv__nv_find(g, (int32_t)i, (int32_t)j, (int32_t)k, &v);
+    if (leaf) v = rrv__nv_leaf_value(g->type, leaf, (unsigned)(((i & 7) << 6) | ((j & 7) << 3) | (k & 7)));
+    return v;
+}
+
+/* World position to continuous index coordinates. */
+static void rrv__nv_to_index(const rrv_nanovdb *g, rrv_vec3 p, double u[3])
+{
+    double d[3];
+    int a;
+    d[0] = p.x - g->translation[0];
+    d[1] = p.y - g->translation[1];
+    d[2] = p.z - g->translation[2];
+    for (a = 0; a < 3; ++a) u[a] = g->inverse[3 * a] * d[0] + g->inverse[3 * a + 1] * d[1] + g->inverse[3 * a + 2] * d[2];
+}
+
+/* Trilinear at continuous index u. The eight index points lie in one leaf
+   unless the lower ones sit on a leaf's last row along some axes; each
+   distinct leaf (or tile) among them is descended to once: one descent for
+   7/8 of the positions along each axis, at most eight at a leaf's corner. */
+static double rrv__nv_trilinear(const rrv_nanovdb *g, const double u[3])
+{
+    double f[3], t[3], c[8], c00, c10, c01, c11;
+    const unsigned char *leaf[8];
+    float tile[8];
+    int64_t i0[3];
+    int a, corner, cross = 0, near_edge = 0;
+    for (a = 0; a < 3; ++a) {
+        /* outside the data box (with one voxel to blend into) all is background */
+        if (!(u[a] > (double)g->data_lo[a] - 1.0 && u[a] < (double)g->data_hi[a] + 1.0)) return g->background;
+        f[a] = floor(u[a]);
+        i0[a] = (int64_t)f[a];
+        t[a] = u[a] - f[a];
+        if ((i0[a] & 7) == 7) cross |= 1 << a;
+        if (i0[a] < INT32_MIN || i0[a] >= INT32_MAX) near_edge = 1;
+    }
+    for (corner = 0; corner < 8; ++corner) {
+        int64_t x = i0[0] + (corner & 1), y = i0[1] + ((corner >> 1) & 1), z = i0[2] + ((corner >> 2) & 1);
+        int id = corner & cross;
+        if (near_edge) {
+            c[corner] = rrv_nanovdb_voxel(g, x, y, z);
+            continue;
+        }
+        /* corners that differ only along axes that stay in the leaf share it */
+        if (id == corner) leaf[id] = rrv__nv_find(g, (int32_t)x, (int32_t)y, (int32_t)z, &tile[id]);
+        c[corner] = leaf[id] ? rrv__nv_leaf_value(g->type, leaf[id], (unsigned)(((x & 7) << 6) | ((y & 7) << 3) | (z & 7)))
+                             : tile[id];
+    }
+    /* corner bit 0: x, bit 1: y, bit 2: z */
+    c00 = c[0] + t[0] * (c[1] - c[0]);
+    c10 = c[2] + t[0] * (c[3] - c[2]);
+    c01 = c[4] + t[0] * (c[5] - c[4]);
+    c11 = c[6] + t[0] * (c[7] - c[6]);
+    c00 += t[1] * (c10 - c00);
+    c01 += t[1] * (c11 - c01);
+    return c00 + t[2] * (c01 - c00);
+}
+
+RRV_DEF double rrv_nanovdb_sample(const rrv_nanovdb *g, rrv_vec3 p)
+{
+    double u[3];
+    if (!g || !g->buffer) return 0.0;
+    if (!rrv__inside_box(p, g->lo, g->hi)) return g->background;
+    rrv__nv_to_index(g, p, u);
+    return rrv__nv_trilinear(g, u);
+}
+
+/* Gradient in world space: central differences of the trilinear field one
+   voxel apart along each index axis, mapped back by the inverse map's
+   transpose (u = inverse (p - translation)). Second order and continuous
+   across cell faces, as for gridvol grids. */
+static rrv_vec3 rrv__nv_gradient(const rrv_nanovdb *g, rrv_vec3 p)
+{
+    double u[3], q[3], d[3];
+    int a, b;
+    rrv__nv_to_index(g, p, u);
+    for (a = 0; a < 3; ++a) {
+        double up, down;
+        for (b = 0; b < 3; ++b) q[b] = u[b];
+        q[a] = u[a] + 1.0;
+        up = rrv__nv_trilinear(g, q);
+        q[a] = u[a] - 1.0;
+        down = rrv__nv_trilinear(g, q);
+        d[a] = 0.5 * (up - down);
+    }
+    return rrv__v3(g->inverse[0] * d[0] + g->inverse[3] * d[1] + g->inverse[6] * d[2],
+                   g->inverse[1] * d[0] + g->inverse[4] * d[1] + g->inverse[7] * d[2],
+                   g->inverse[2] * d[0] + g->inverse[5] * d[1] + g->inverse[8] * d[2]);
+}
+
+/* Tile extents by level: a root tile spans 4096 index points an axis, an
+   upper node's entry 128, a lower node's entry 8 (one leaf). */
+static const int rrv__nv_extent_log2[3] = {12, 7, 3};
+
+/* The largest value any index point in [lo, hi] (inclusive) holds, from
+   the tree: tile values where tiles cover the box, leaf values inside it,
+   and the background wherever a box may reach beyond the data. Every
+   stored value counts, active or not, since trilinear reads them all (the
+   min/max NanoVDB keeps per node cover active values only). */
+static double rrv__nv_node_max(const rrv_nanovdb *g, const unsigned char *node, int level, const int64_t o[3],
+                               const int64_t lo[3], const int64_t hi[3])
+{
+    double best = -DBL_MAX;
+    int64_t a[3], b[3], x, y, z;
+    int s = rrv__nv_extent_log2[level], dim = level == 1 ? 32 : 16, log2dim = level == 1 ? 5 : 4, c;
+    size_t table = level == 1 ? RRV__NV_UPPER_TABLE : RRV__NV_LOWER_TABLE;
+    size_t mask = level == 1 ? 32 + 4096 : 32 + 512;
+    for (c = 0; c < 3; ++c) {
+        a[c] = lo[c] > o[c] ? (lo[c] - o[c]) >> s : 0;
+        b[c] = (hi[c] - o[c]) >> s;
+        if (b[c] > dim - 1) b[c] = dim - 1;
+    }
+    for (x = a[0]; x <= b[0]; ++x)
+        for (y = a[1]; y <= b[1]; ++y)
+            for (z = a[2]; z <= b[2]; ++z) {
+                unsigned n = (unsigned)((x << (2 * log2dim)) | (y << log2dim) | z);
+                const unsigned char *entry = node + table + 8 * (size_t)n;
+                if ((node[mask + (n >> 3)] >> (n & 7)) & 1) {
+                    const unsigned char *child = node + (int64_t)rrv__nv_u64(entry);
+                    int64_t co[3];
+                    co[0] = o[0] + (x << s);
+                    co[1] = o[1] + (y << s);
+                    co[2] = o[2] + (z << s);
+                    if (level == 1) {
+                        best = fmax(best, rrv__nv_node_max(g, child, 2, co, lo, hi));
+                    } else {
+                        int64_t i, j, k, l[3], h[3];
+                        for (c = 0; c < 3; ++c) {
+                            l[c] = lo[c] > co[c] ? lo[c] - co[c] : 0;
+                            h[c] = hi[c] - co[c] < 7 ? hi[c] - co[c] : 7;
+                        }
+                        for (i = l[0]; i <= h[0]; ++i)
+                            for (j = l[1]; j <= h[1]; ++j)
+                                for (k = l[2]; k <= h[2]; ++k)
+                                    best = fmax(best, rrv__nv_leaf_value(g->type, child, (unsigned)((i << 6) | (j << 3) | k)));
+                    }
+                } else {
+                    best = fmax(best, rrv__nv_f32(entry));
+                }
+            }
+    return best;
+}
+
+/* An upper bound of the field over the world box [lo, hi]. */
+static double rrv__nv_bound(const rrv_nanovdb *g, rrv_vec3 lo, rrv_vec3 hi)
+{
+    double ulo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, uhi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX}, best;
+    int64_t ilo[3], ihi[3];
+    const unsigned char *root = g->buffer + g->root;
+    uint32_t t;
+    int corner, a;
+    /* the index box of the world box: the map is affine, so its corners' */
+    for (corner = 0; corner < 8; ++corner) {
+        double u[3];
+        rrv__nv_to_index(g, rrv__v3(corner & 1 ? hi.x : lo.x, corner & 2 ? hi.y : lo.y, corner & 4 ? hi.z : lo.z), u);
+        for (a = 0; a < 3; ++a) {
+            ulo[a] = fmin(ulo[a], u[a]);
+            uhi[a] = fmax(uhi[a], u[a]);
+        }
+    }
+    best = g->background;
+    for (a = 0; a < 3; ++a) {
+        /* the index points whose cells touch the box, within the data */
+        double l = fmax(floor(ulo[a]), (double)g->data_lo[a]), h = fmin(floor(uhi[a]) + 1.0, (double)g->data_hi[a]);
+        if (!(l <= h)) return best;
+        ilo[a] = (int64_t)l;
+        ihi[a] = (int64_t)h;
+    }
+    for (t = 0; t < g->root_tiles; ++t) {
+        const unsigned char *tile = root + RRV__NV_ROOT + (size_t)t * RRV__NV_TILE;
+        uint64_t key = rrv__nv_u64(tile);
+        int64_t o[3], child = (int64_t)rrv__nv_u64(tile + 8);
+        int overlaps = 1;
+        /* key fields are the top 20 bits of each coordinate, two's complement */
+        o[0] = (int64_t)(int32_t)(uint32_t)(((key >> 42) & 0x1fffffu) << 12);
+        o[1] = (int64_t)(int32_t)(uint32_t)(((key >> 21) & 0x1fffffu) << 12);
+        o[2] = (int64_t)(int32_t)(uint32_t)((key & 0x1fffffu) << 12);
+        for (a = 0; a < 3; ++a)
+            if (o[a] > ihi[a] || o[a] + 4095 < ilo[a]) overlaps = 0;
+        if (!overlaps) continue;
+        if (child == 0)
+            best = fmax(best, rrv__nv_f32(tile + 20));
+        else
+            best = fmax(best, rrv__nv_node_max(g, root + child, 1, o, ilo, ihi));
+    }
+    return best;
+}
+
 /* Value noise on an integer lattice hashed from the seed: cheap, bounded in
    [0,1] by construction, which is what lets the majorant be a true bound. */
 static double rrv__lattice(uint32_t x, uint32_t y, uint32_t z, uint32_t seed)
@@ -1388,6 +1742,7 @@ static double rrv__field_eval(const rrv_field *f, rrv_vec3 p, int channel, doubl
         return f->base + f->amplitude * rrv__falloff(&f->noise, p) * rrv__fbm(&f->noise, p);
     case RRV_FIELD_GRID:
         return rrv__grid_sample(&f->grid, p, f->grid.channels == 3 ? channel : 0, ambient);
+    case RRV_FIELD_NANOVDB: return rrv_nanovdb_sample(&f->nanovdb, p);
     default: return ambient;
     }
 }
@@ -1450,6 +1805,7 @@ static double rrv__field_bound(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
                 }
         return best;
     }
+    case RRV_FIELD_NANOVDB: return fmax(0.0, rrv__nv_bound(&f->nanovdb, lo, hi));
     default: return 0;
     }
 }
@@ -1657,6 +2013,7 @@ static double rrv__refractivity(const rrv_medium *m, rrv_vec3 p, double ambient_
            artist scale (meant for the grid's values) must not move: a scaled
            ambient would be a jump at the grid's box that no data holds. */
         if (f->kind == RRV_FIELD_GRID && !rrv__inside_box(p, f->grid.lo, f->grid.hi)) return ambient_r;
+        if (f->kind == RRV_FIELD_NANOVDB && !rrv__inside_box(p, f->nanovdb.lo, f->nanovdb.hi)) return ambient_r;
         r = rrv__profile_refractivity(f, p, ambient_r);
     }
     return m->ior_scale * r;
@@ -1732,6 +2089,8 @@ static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p, double ambie
         return rrv__field_gradient_numeric(f, p, ambient, 0.05 / (f->noise.frequency * (1 << (f->noise.octaves > 4 ? 4 : f->noise.octaves))));
     case RRV_FIELD_GRID:
         return rrv__grid_gradient(&f->grid, p);
+    case RRV_FIELD_NANOVDB:
+        return rrv__inside_box(p, f->nanovdb.lo, f->nanovdb.hi) ? rrv__nv_gradient(&f->nanovdb, p) : rrv__v3(0, 0, 0);
     default:
         return rrv__v3(0, 0, 0);
     }
@@ -1835,6 +2194,10 @@ static void rrv__field_range(const rrv_field *f, double ambient, double *lo, dou
         *hi = rrv__maxd(*hi, ambient);
         return;
     }
+    case RRV_FIELD_NANOVDB: /* every stored value and the background */
+        *lo = f->nanovdb.value_min;
+        *hi = f->nanovdb.value_max;
+        return;
     default: *lo = *hi = ambient; return;
     }
 }
@@ -1987,6 +2350,15 @@ static int rrv__auto_cells(const rrv_medium *m, int axis)
         n = (n + 3) / 4;
         return n < 4 ? 4 : n > 64 ? 64 : n;
     }
+    if (density->kind == RRV_FIELD_NANOVDB) {
+        /* a quarter of the voxels the medium box spans along the axis */
+        const rrv_nanovdb *g = &density->nanovdb;
+        double extent = rrv__axis(rrv__sub(m->hi, m->lo), axis);
+        double voxel = sqrt(g->map[axis] * g->map[axis] + g->map[3 + axis] * g->map[3 + axis] +
+                            g->map[6 + axis] * g->map[6 + axis]);
+        double n = ceil(extent / voxel / 4.0);
+        return !(n >= 4) ? 4 : n > 64 ? 64 : (int)n;
+    }
     return 16;
 }
 
@@ -2055,11 +2427,19 @@ static double rrv__profile_gradient_bound(const rrv_field *f, rrv_vec3 lo, rrv_v
 static int rrv__flat_beyond_bake(const rrv_medium *m)
 {
     const rrv_field *t, *p;
-    if (!m->ior_from_gas) return rrv__field_of(m, RRV__IOR)->kind == RRV_FIELD_GRID;
+    /* a NanoVDB grid's bake reaches one voxel past its data (or past the
+       medium's box), beyond which its background is flat */
+    int tg, pg;
+    if (!m->ior_from_gas) {
+        rrv_field_kind k = rrv__field_of(m, RRV__IOR)->kind;
+        return k == RRV_FIELD_GRID || k == RRV_FIELD_NANOVDB;
+    }
     t = rrv__field_of(m, RRV__TEMPERATURE);
     p = rrv__field_of(m, RRV__PRESSURE);
-    return (t->kind == RRV_FIELD_GRID && (p->kind == RRV_FIELD_NONE || p->kind == RRV_FIELD_CONSTANT)) ||
-           (p->kind == RRV_FIELD_GRID && (t->kind == RRV_FIELD_NONE || t->kind == RRV_FIELD_CONSTANT));
+    tg = t->kind == RRV_FIELD_GRID || t->kind == RRV_FIELD_NANOVDB;
+    pg = p->kind == RRV_FIELD_GRID || p->kind == RRV_FIELD_NANOVDB;
+    return (tg && (p->kind == RRV_FIELD_NONE || p->kind == RRV_FIELD_CONSTANT)) ||
+           (pg && (t->kind == RRV_FIELD_NONE || t->kind == RRV_FIELD_CONSTANT));
 }
 
 /* max |grad r| over a cell, times a margin of 1.5. It sets an event rate,
@@ -2271,9 +2651,49 @@ static rrv_result rrv__bake_cubic(const rrv_scene *scene, rrv_medium *m, const r
    48-sample gradient stencil. The gradient is the central difference at
    each sample (one-sided at the faces), blended trilinearly: the second-order
    stencil of rrv__grid_gradient. Analytic profiles keep their closed forms. */
+/* The index points of a NanoVDB grid around the box [lo, hi] as a lattice
+   of corner samples, for the refraction bake: only for maps without
+   rotation or shear (the lattice must be axis-aligned), with at least two
+   points an axis, and at most 2^24 points (256 MiB of baked samples; past
+   that the refractivity comes from the tree at every kick). 0 if none. */
+static int rrv__nv_lattice(const rrv_nanovdb *g, rrv_vec3 lo, rrv_vec3 hi, int cap, rrv_grid *out)
+{
+    double blo[3], bhi[3], w[2][3], count = 1;
+    int a, n[3];
+    blo[0] = lo.x; blo[1] = lo.y; blo[2] = lo.z;
+    bhi[0] = hi.x; bhi[1] = hi.y; bhi[2] = hi.z;
+    if (g->map[1] != 0 || g->map[2] != 0 || g->map[3] != 0 || g->map[5] != 0 || g->map[6] != 0 || g->map[7] != 0)
+        return 0;
+    for (a = 0; a < 3; ++a) {
+        double s = g->map[4 * a], t = g->translation[a];
+        double u0 = (blo[a] - t) / s, u1 = (bhi[a] - t) / s, i0, i1;
+        if (u0 > u1) { double x = u0; u0 = u1; u1 = x; }
+        /* One point beyond the cells that reach into the box, so that every
+           sample whose gradient the box sees is a central difference, as
+           inside a gridvol grid (a millionth of a voxel absorbs the rounding
+           of a box face put on an index point). */
+        i0 = fmax(floor(u0 + 1e-6) - 1.0, (double)g->data_lo[a] - 1.0);
+        i1 = fmin(ceil(u1 - 1e-6) + 1.0, (double)g->data_hi[a] + 1.0);
+        if (!(i1 - i0 >= 1.0) || i1 - i0 + 1.0 > (double)(1 << 24)) return 0;
+        if (cap > 0 && i1 - i0 + 1.0 > (double)cap) return 0; /* settings.max_bake_samples */
+        n[a] = (int)(i1 - i0) + 1;
+        count *= n[a];
+        w[0][a] = s * (s > 0 ? i0 : i1) + t;
+        w[1][a] = s * (s > 0 ? i1 : i0) + t;
+    }
+    if (count > (double)(1 << 24)) return 0;
+    memset(out, 0, sizeof *out);
+    out->nx = n[0]; out->ny = n[1]; out->nz = n[2];
+    out->channels = 1;
+    out->lo = rrv__v3(w[0][0], w[0][1], w[0][2]);
+    out->hi = rrv__v3(w[1][0], w[1][1], w[1][2]);
+    return 1;
+}
+
 static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, size_t *bytes, rrv_error *err)
 {
     const rrv_grid *lattice = NULL;
+    rrv_grid nanovdb_lattice;
     const rrv_field *candidates[2];
     struct rrv__majorant_grid *g = m->majorant;
     double ambient_r = scene->settings.ambient_ior - 1.0;
@@ -2285,6 +2705,10 @@ static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, si
     candidates[1] = m->ior_from_gas ? rrv__field_of(m, RRV__PRESSURE) : NULL;
     for (k = 0; k < 2 && !lattice; ++k)
         if (candidates[k] && candidates[k]->kind == RRV_FIELD_GRID) lattice = &candidates[k]->grid;
+    for (k = 0; k < 2 && !lattice; ++k)
+        if (candidates[k] && candidates[k]->kind == RRV_FIELD_NANOVDB &&
+            rrv__nv_lattice(&candidates[k]->nanovdb, m->lo, m->hi, scene->settings.max_bake_samples, &nanovdb_lattice))
+            lattice = &nanovdb_lattice;
     if (!lattice) return RRV_OK;
     if (scene->settings.ior_interpolation == RRV_IOR_INTERP_CUBIC) return rrv__bake_cubic(scene, m, lattice, bytes, err);
     n[0] = lattice->nx; n[1] = lattice->ny; n[2] = lattice->nz;
@@ -6517,6 +6941,584 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
 
 #endif /* RRV_NO_STDIO */
 
+/* ==== NanoVDB files: segments, grids and the validation of their trees =======
+   Reads what nanovdb_convert writes: a file of segments, each a 16-byte
+   header ("NanoVDB0" or the newer "NanoVDB2", version, grid count, codec)
+   followed by 176 bytes of metadata and the name of each grid, then the
+   grids' buffers; or, since NanoVDB 32.6, bare grid buffers one after the
+   other (starting "NanoVDB1"). A grid buffer is GridData (672 bytes: magic,
+   version, size, name, map, type), TreeData (node offsets and counts), the
+   root (background, a table of tiles keyed by coordinate) and arrays of
+   upper, lower and leaf nodes reached by signed byte offsets.
+   Everything is untrusted: each node is checked to lie inside the grid's
+   buffer at a position of its level's node array before it is read, each
+   node is visited once (so shared children cannot multiply the work), and
+   every value is checked finite, after which the lookups above need no
+   checks. */
+
+static int32_t rrv__nv_s32(uint32_t u)
+{
+    return u <= 0x7fffffffu ? (int32_t)u : (int32_t)(u - 0x80000000u) - 0x7fffffff - 1;
+}
+
+static int rrv__nv_finite(double v) { return v == v && v <= DBL_MAX && v >= -DBL_MAX; }
+
+/* One level's node array: nodes at first + k size, k < count. */
+typedef struct rrv__nv_array {
+    uint64_t first, count, size;
+    unsigned char *seen; /* a byte a node, so each is checked once */
+    uint64_t *starts;    /* FpN leaves have sizes of their own: their offsets */
+} rrv__nv_array;
+
+typedef struct rrv__nv_check {
+    rrv_nanovdb *g;
+    const unsigned char *b;
+    uint64_t size;
+    rrv__nv_array level[3]; /* leaf, lower, upper */
+    const char *name;
+    rrv_error *err;
+} rrv__nv_check;
+
+static const char *const rrv__nv_level_names[3] = {"leaf", "lower node", "upper node"};
+static const char *const rrv__nv_level_plurals[3] = {"leaves", "lower nodes", "upper nodes"};
+/* Child offsets beyond this are refused before they are added to a
+   position (< 2^62 too), so the sum cannot overflow. */
+#define RRV__NV_FAR ((int64_t)1 << 62)
+
+static void rrv__nv_include(rrv_nanovdb *g, const int64_t o[3], int64_t extent)
+{
+    int a;
+    for (a = 0; a < 3; ++a) {
+        if (o[a] < g->data_lo[a]) g->data_lo[a] = o[a];
+        if (o[a] + extent - 1 > g->data_hi[a]) g->data_hi[a] = o[a] + extent - 1;
+    }
+}
+
+static void rrv__nv_value_seen(rrv_nanovdb *g, double v)
+{
+    if (v < g->value_min) g->value_min = v;
+    if (v > g->value_max) g->value_max = v;
+}
+
+/* The node of `level` at byte `at` of the grid (from a child offset):
+   its index in the level's array, or -1 with the error filled. */
+static int64_t rrv__nv_node_index(rrv__nv_check *c, int level, int64_t at, const char *from)
+{
+    rrv__nv_array *arr = &c->level[level];
+    uint64_t k, off;
+    if (at < 0 || (uint64_t)at < arr->first || (uint64_t)at >= c->size) goto bad;
+    off = (uint64_t)at - arr->first;
+    if (arr->starts) {
+        uint64_t lo = 0, hi = arr->count;
+        while (lo < hi) {
+            uint64_t mid = lo + (hi - lo) / 2;
+            if (arr->starts[mid] < (uint64_t)at) lo = mid + 1; else hi = mid;
+        }
+        if (lo < arr->count && arr->starts[lo] == (uint64_t)at) return (int64_t)lo;
+        goto bad;
+    }
+    k = off / arr->size;
+    if (off % arr->size != 0 || k >= arr->count) goto bad;
+    return (int64_t)k;
+bad:
+    rrv__fail(c->err, RRV_ERROR_FORMAT, c->name, 0,
+              "grid \"%s\": %s points to byte %lld, which is not one of its %llu %s", c->g->name, from,
+              (long long)at, (unsigned long long)arr->count, rrv__nv_level_plurals[level]);
+    return -1;
+}
+
+static rrv_result rrv__nv_bad_value(rrv__nv_check *c, const char *where, const int64_t o[3])
+{
+    return rrv__fail(c->err, RRV_ERROR_FORMAT, c->name, 0,
+                     "grid \"%s\": a %s value at index %lld %lld %lld is not finite", c->g->name, where,
+                     (long long)o[0], (long long)o[1], (long long)o[2]);
+}
+
+static rrv_result rrv__nv_check_leaf(rrv__nv_check *c, uint64_t at, const int64_t o[3])
+{
+    const unsigned char *leaf = c->b + at;
+    unsigned n;
+    for (n = 0; n < 512; ++n) {
+        double v = rrv__nv_leaf_value(c->g->type, leaf, n);
+        if (!rrv__nv_finite(v)) {
+            int64_t p[3];
+            p[0] = o[0] + (n >> 6);
+            p[1] = o[1] + ((n >> 3) & 7);
+            p[2] = o[2] + (n & 7);
+            return rrv__nv_bad_value(c, "voxel", p);
+        }
+        rrv__nv_value_seen(c->g, v);
+    }
+    rrv__nv_include(c->g, o, 8);
+    return RRV_OK;
+}
+
+/* An internal node (level 2 upper, 1 lower) at byte `at` with origin o. */
+static rrv_result rrv__nv_check_internal(rrv__nv_check *c, int level, uint64_t at, const int64_t o[3])
+{
+    const unsigned char *node = c->b + at;
+    int log2dim = level == 2 ? 5 : 4, s = level == 2 ? 7 : 3;
+    unsigned count = 1u << (3 * log2dim), n;
+    size_t mask = 32 + (size_t)(count / 8), table = level == 2 ? RRV__NV_UPPER_TABLE : RRV__NV_LOWER_TABLE;
+    rrv_result r;
+    for (n = 0; n < count; ++n) {
+        const unsigned char *entry = node + table + 8 * (size_t)n;
+        int64_t co[3];
+        co[0] = o[0] + ((int64_t)(n >> (2 * log2dim)) << s);
+        co[1] = o[1] + ((int64_t)((n >> log2dim) & ((1u << log2dim) - 1)) << s);
+        co[2] = o[2] + ((int64_t)(n & ((1u << log2dim) - 1)) << s);
+        if ((node[mask + (n >> 3)] >> (n & 7)) & 1) {
+            int64_t child = (int64_t)rrv__nv_u64(entry), k;
+            if (child <= -RRV__NV_FAR || child >= RRV__NV_FAR) child = -(int64_t)at - 1;
+            k = rrv__nv_node_index(c, level - 1, (int64_t)at + child, level == 2 ? "an upper node" : "a lower node");
+            if (k < 0) return RRV_ERROR_FORMAT;
+            if (c->level[level - 1].seen[k]) {
+                /* a second parent: its region holds that data too */
+                rrv__nv_include(c->g, co, (int64_t)1 << s);
+                continue;
+            }
+            c->level[level - 1].seen[k] = 1;
+            r = level == 2 ? rrv__nv_check_internal(c, 1, (uint64_t)((int64_t)at + child), co)
+                           : rrv__nv_check_leaf(c, (uint64_t)((int64_t)at + child), co);
+            if (r != RRV_OK) return r;
+        } else {
+            double v = rrv__nv_f32(entry);
+            if (!rrv__nv_finite(v)) return rrv__nv_bad_value(c, level == 2 ? "upper-node tile" : "lower-node tile", co);
+            rrv__nv_value_seen(c->g, v);
+            if (v != c->g->background) rrv__nv_include(c->g, co, (int64_t)1 << s);
+        }
+    }
+    return RRV_OK;
+}
+
+static uint64_t rrv__nv_leaf_size(rrv_nanovdb_type type)
+{
+    switch (type) {
+    case RRV_NANOVDB_FLOAT: return 2144;
+    case RRV_NANOVDB_FP4: return 352;
+    case RRV_NANOVDB_FP8: return 608;
+    case RRV_NANOVDB_FP16: return 1120;
+    default: return 0;
+    }
+}
+
+RRV_DEF const char *rrv_nanovdb_type_name(rrv_nanovdb_type type)
+{
+    switch (type) {
+    case RRV_NANOVDB_FLOAT: return "float";
+    case RRV_NANOVDB_FP4: return "fp4";
+    case RRV_NANOVDB_FP8: return "fp8";
+    case RRV_NANOVDB_FP16: return "fp16";
+    case RRV_NANOVDB_FPN: return "fpN";
+    default: return "unknown";
+    }
+}
+
+static const char *rrv__nv_any_type_name(uint32_t t)
+{
+    static const char *const names[] = {"unknown", "float", "double", "int16", "int32", "int64", "vec3f",
+                                        "vec3d", "mask", "half", "uint32", "bool", "rgba8", "fp4",
+                                        "fp8", "fp16", "fpN", "vec4f", "vec4d", "index"};
+    return t < sizeof names / sizeof names[0] ? names[t] : "unknown";
+}
+
+/* Checks the grid buffer b[0, size) and fills g (not g->buffer). */
+static rrv_result rrv__nv_check_grid(const unsigned char *b, uint64_t size, const char *name, rrv_nanovdb *g,
+                                     rrv_error *err)
+{
+    rrv__nv_check c;
+    uint64_t tree = RRV__NV_GRID, root, tiles, t;
+    uint32_t version, type;
+    double det;
+    int a, lv;
+    rrv_result r = RRV_OK;
+    memset(&c, 0, sizeof c);
+    c.g = g;
+    c.b = b;
+    c.size = size;
+    c.name = name;
+    c.err = err;
+    if (size < RRV__NV_GRID + RRV__NV_TREE)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "a grid of %llu bytes is shorter than its %d-byte header",
+                         (unsigned long long)size, RRV__NV_GRID + RRV__NV_TREE);
+    if (memcmp(b, "NanoVDB", 7) != 0 || (b[7] != '0' && b[7] != '1'))
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "a grid does not start with \"NanoVDB0\" or \"NanoVDB1\"");
+    memcpy(g->name, b + 40, 255);
+    g->name[255] = '\0';
+    for (a = 0; g->name[a]; ++a)
+        if ((unsigned char)g->name[a] < 32) g->name[a] = '?';
+    version = rrv__nv_u32(b + 16);
+    if (version >> 21 != 32)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\" has NanoVDB version %u.%u.%u; rrv reads 32.x",
+                         g->name, (unsigned)(version >> 21), (unsigned)((version >> 10) & 2047u),
+                         (unsigned)(version & 1023u));
+    if (rrv__nv_u64(b + 32) != size)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\" says it has %llu bytes, the file holds %llu",
+                         g->name, (unsigned long long)rrv__nv_u64(b + 32), (unsigned long long)size);
+    type = rrv__nv_u32(b + 636);
+    if (type != 1 && (type < 13 || type > 16))
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                         "grid \"%s\" holds %s values; rrv reads float, fp4, fp8, fp16 and fpN grids",
+                         g->name, rrv__nv_any_type_name(type));
+    g->type = (rrv_nanovdb_type)type;
+    /* the double-precision map: 3x3 matrix, its inverse, translation */
+    for (a = 0; a < 9; ++a) {
+        uint64_t u = rrv__nv_u64(b + 384 + 8 * (size_t)a), v = rrv__nv_u64(b + 456 + 8 * (size_t)a);
+        memcpy(&g->map[a], &u, 8);
+        memcpy(&g->inverse[a], &v, 8);
+    }
+    for (a = 0; a < 3; ++a) {
+        uint64_t u = rrv__nv_u64(b + 528 + 8 * (size_t)a);
+        memcpy(&g->translation[a], &u, 8);
+    }
+    det = g->map[0] * (g->map[4] * g->map[8] - g->map[5] * g->map[7]) -
+          g->map[1] * (g->map[3] * g->map[8] - g->map[5] * g->map[6]) +
+          g->map[2] * (g->map[3] * g->map[7] - g->map[4] * g->map[6]);
+    {
+        /* the stored inverse must be the map's: world and index would
+           otherwise disagree about where a voxel is */
+        int ok = rrv__nv_finite(det) && det != 0.0, i, j, k;
+        for (a = 0; a < 9 && ok; ++a) ok = rrv__nv_finite(g->map[a]) && rrv__nv_finite(g->inverse[a]);
+        for (a = 0; a < 3 && ok; ++a) ok = rrv__nv_finite(g->translation[a]);
+        for (i = 0; i < 3 && ok; ++i)
+            for (j = 0; j < 3 && ok; ++j) {
+                double s = 0;
+                for (k = 0; k < 3; ++k) s += g->map[3 * i + k] * g->inverse[3 * k + j];
+                ok = fabs(s - (i == j ? 1.0 : 0.0)) < 1e-6;
+            }
+        if (!ok)
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                             "grid \"%s\": its index-to-world map is not finite and invertible, or its stored inverse does not match it",
+                             g->name);
+    }
+    for (lv = 0; lv < 3; ++lv) {
+        rrv__nv_array *arr = &c.level[lv];
+        uint64_t offset = rrv__nv_u64(b + tree + 8 * (size_t)lv);
+        arr->count = rrv__nv_u32(b + tree + 32 + 4 * (size_t)lv);
+        arr->size = lv == 2 ? RRV__NV_UPPER : lv == 1 ? RRV__NV_LOWER : rrv__nv_leaf_size(g->type);
+        g->node_count[lv] = (uint32_t)arr->count;
+        if (arr->count == 0) continue;
+        /* an FpN leaf has at least 1 bit a value: 96 + 64 bytes */
+        if (offset > size - tree || arr->count > (size - tree - offset) / (arr->size ? arr->size : 160)) {
+            r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                          "grid \"%s\": its %llu %s at byte %llu do not fit in its %llu bytes", g->name,
+                          (unsigned long long)arr->count, rrv__nv_level_plurals[lv],
+                          (unsigned long long)(tree + offset), (unsigned long long)size);
+            goto done;
+        }
+        arr->first = tree + offset;
+        arr->seen = (unsigned char *)RRV_MALLOC((size_t)arr->count);
+        if (!arr->seen) { r = rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory checking a grid"); goto done; }
+        memset(arr->seen, 0, (size_t)arr->count);
+    }
+    if (g->type == RRV_NANOVDB_FPN && c.level[0].count) {
+        /* FpN leaves follow each other, each 96 bytes plus 64 per bit */
+        rrv__nv_array *arr = &c.level[0];
+        uint64_t at = arr->first, k;
+        arr->starts = (uint64_t *)RRV_MALLOC((size_t)arr->count * sizeof(uint64_t));
+        if (!arr->starts) { r = rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory checking a grid"); goto done; }
+        for (k = 0; k < arr->count; ++k) {
+            unsigned bits;
+            if (at > size - RRV__NV_LEAF_DATA || (b[at + 15] >> 5) > 4) {
+                r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\": fpN leaf %llu at byte %llu is %s",
+                              g->name, (unsigned long long)k, (unsigned long long)at,
+                              at > size - RRV__NV_LEAF_DATA ? "outside the grid" : "of an unknown bit width");
+                goto done;
+            }
+            bits = 1u << (b[at + 15] >> 5);
+            if (64u * bits > size - at - RRV__NV_LEAF_DATA) {
+                r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\": fpN leaf %llu at byte %llu ends outside the grid",
+                              g->name, (unsigned long long)k, (unsigned long long)at);
+                goto done;
+            }
+            arr->starts[k] = at;
+            at += RRV__NV_LEAF_DATA + 64u * bits;
+        }
+    }
+    root = rrv__nv_u64(b + tree + 24);
+    if (root > size - tree || size - tree - root < RRV__NV_ROOT) {
+        r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\": its root node lies outside its %llu bytes",
+                      g->name, (unsigned long long)size);
+        goto done;
+    }
+    root += tree;
+    tiles = rrv__nv_u32(b + root + 24);
+    if (tiles > (size - root - RRV__NV_ROOT) / RRV__NV_TILE) {
+        r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\": its root's %llu tiles do not fit in its %llu bytes",
+                      g->name, (unsigned long long)tiles, (unsigned long long)size);
+        goto done;
+    }
+    g->root = (size_t)root;
+    g->root_tiles = (uint32_t)tiles;
+    g->background = rrv__nv_f32(b + root + 28);
+    for (a = 0; a < 3; ++a) {
+        g->active_lo[a] = rrv__nv_s32(rrv__nv_u32(b + root + 4 * (size_t)a));
+        g->active_hi[a] = rrv__nv_s32(rrv__nv_u32(b + root + 12 + 4 * (size_t)a));
+    }
+    g->active_voxels = rrv__nv_u64(b + tree + 56);
+    if (!rrv__nv_finite(g->background)) {
+        r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\": its background value is not finite", g->name);
+        goto done;
+    }
+    g->value_min = g->value_max = g->background;
+    for (a = 0; a < 3; ++a) {
+        g->data_lo[a] = INT64_MAX;
+        g->data_hi[a] = INT64_MIN;
+    }
+    for (t = 0; t < tiles && r == RRV_OK; ++t) {
+        const unsigned char *tile = b + root + RRV__NV_ROOT + t * RRV__NV_TILE;
+        uint64_t key = rrv__nv_u64(tile);
+        int64_t child = (int64_t)rrv__nv_u64(tile + 8), o[3], k;
+        o[0] = rrv__nv_s32((uint32_t)(((key >> 42) & 0x1fffffu) << 12));
+        o[1] = rrv__nv_s32((uint32_t)(((key >> 21) & 0x1fffffu) << 12));
+        o[2] = rrv__nv_s32((uint32_t)((key & 0x1fffffu) << 12));
+        if (child == 0) {
+            double v = rrv__nv_f32(tile + 20);
+            if (!rrv__nv_finite(v)) { r = rrv__nv_bad_value(&c, "root tile", o); break; }
+            rrv__nv_value_seen(g, v);
+            if (v != g->background) rrv__nv_include(g, o, 4096);
+            continue;
+        }
+        if (child <= -RRV__NV_FAR || child >= RRV__NV_FAR) child = -(int64_t)root - 1;
+        k = rrv__nv_node_index(&c, 2, (int64_t)root + child, "a root tile");
+        if (k < 0) { r = RRV_ERROR_FORMAT; break; }
+        if (c.level[2].seen[k]) { rrv__nv_include(g, o, 4096); continue; }
+        c.level[2].seen[k] = 1;
+        r = rrv__nv_check_internal(&c, 2, (uint64_t)((int64_t)root + child), o);
+    }
+    if (r == RRV_OK) {
+        /* the world box of the index region the trilinear field can reach
+           from the data: one voxel beyond it each side */
+        rrv_vec3 lo = rrv__v3(DBL_MAX, DBL_MAX, DBL_MAX), hi = rrv__v3(-DBL_MAX, -DBL_MAX, -DBL_MAX);
+        int corner;
+        if (g->data_lo[0] > g->data_hi[0]) {
+            /* no data: an empty box at the origin */
+            for (a = 0; a < 3; ++a) { g->data_lo[a] = 1; g->data_hi[a] = 0; }
+            lo = hi = rrv__v3(g->translation[0], g->translation[1], g->translation[2]);
+        }
+        for (corner = 0; corner < 8 && g->data_lo[0] <= g->data_hi[0]; ++corner) {
+            double u[3], w[3];
+            u[0] = corner & 1 ? (double)g->data_hi[0] + 1.0 : (double)g->data_lo[0] - 1.0;
+            u[1] = corner & 2 ? (double)g->data_hi[1] + 1.0 : (double)g->data_lo[1] - 1.0;
+            u[2] = corner & 4 ? (double)g->data_hi[2] + 1.0 : (double)g->data_lo[2] - 1.0;
+            for (a = 0; a < 3; ++a)
+                w[a] = g->map[3 * a] * u[0] + g->map[3 * a + 1] * u[1] + g->map[3 * a + 2] * u[2] + g->translation[a];
+            lo = rrv__vmin(lo, rrv__v3(w[0], w[1], w[2]));
+            hi = rrv__vmax(hi, rrv__v3(w[0], w[1], w[2]));
+        }
+        g->lo = lo;
+        g->hi = hi;
+    }
+done:
+    for (lv = 0; lv < 3; ++lv) {
+        RRV_FREE(c.level[lv].seen);
+        RRV_FREE(c.level[lv].starts);
+    }
+    return r;
+}
+
+/* Finds grid `want` in the file and returns its byte range. `names`
+   collects the names seen, for the message when it is missing. */
+static rrv_result rrv__nv_find_grid(const unsigned char *b, uint64_t size, const char *name, const char *want,
+                                    uint64_t *at, uint64_t *grid_size, rrv_error *err)
+{
+    char names[160];
+    size_t used = 0, wl = strlen(want);
+    uint64_t pos = 0;
+    int segments = 0;
+    names[0] = '\0';
+    if (size >= 8 && memcmp(b, "NanoVDB1", 8) == 0) {
+        /* bare grid buffers, each announcing its own size */
+        while (pos < size) {
+            uint64_t gs;
+            if (size - pos < RRV__NV_GRID || memcmp(b + pos, "NanoVDB1", 8) != 0)
+                return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "byte %llu does not start a grid",
+                                 (unsigned long long)pos);
+            gs = rrv__nv_u64(b + pos + 32);
+            if (gs < RRV__NV_GRID || gs > size - pos)
+                return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                                 "the grid at byte %llu claims %llu bytes, the file has %llu left",
+                                 (unsigned long long)pos, (unsigned long long)gs, (unsigned long long)(size - pos));
+            /* GridData holds names of up to 255 bytes (longer ones live in blind data) */
+            if (wl <= 255 && memcmp(b + pos + 40, want, wl) == 0 && b[pos + 40 + wl] == '\0') {
+                *at = pos;
+                *grid_size = gs;
+                return RRV_OK;
+            }
+            if (used + 1 < sizeof names)
+                used += (size_t)snprintf(names + used, sizeof names - used, "%s\"%.40s\"", used ? ", " : "",
+                                         (const char *)b + pos + 40);
+            pos += gs;
+        }
+    } else {
+        while (pos < size) {
+            uint32_t version, count, codec, i;
+            uint64_t meta, data;
+            if (size - pos < 8 || memcmp(b + pos, "NanoVDB", 7) != 0 || (b[pos + 7] != '0' && b[pos + 7] != '2')) {
+                if (size - pos >= 8 && memcmp(b + pos, "0BDVonaN", 8) == 0)
+                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "a big-endian NanoVDB file: rrv reads little-endian ones");
+                if (segments == 0)
+                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                                     "not a NanoVDB file: it does not start with \"NanoVDB0\", \"NanoVDB1\" or \"NanoVDB2\"");
+                return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "byte %llu does not start a segment (\"NanoVDB\" header)",
+                                 (unsigned long long)pos);
+            }
+            if (size - pos < 16)
+                return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "the file ends inside the segment header at byte %llu",
+                                 (unsigned long long)pos);
+            version = rrv__nv_u32(b + pos + 8);
+            count = (uint32_t)b[pos + 12] | ((uint32_t)b[pos + 13] << 8);
+            codec = (uint32_t)b[pos + 14] | ((uint32_t)b[pos + 15] << 8);
+            if (version >> 21 != 32)
+                return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "NanoVDB version %u.%u.%u: rrv reads 32.x files",
+                                 (unsigned)(version >> 21), (unsigned)((version >> 10) & 2047u), (unsigned)(version & 1023u));
+            if (codec == 1 || codec == 2)
+                return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                                 "the grids are %s-compressed; rrv reads uncompressed files: re-convert with nanovdb_convert without -z/-b",
+                                 codec == 1 ? "ZIP" : "BLOSC");
+            if (codec != 0)
+                return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "unknown codec %u", (unsigned)codec);
+            if (count == 0)
+                return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "the segment at byte %llu holds no grids",
+                                 (unsigned long long)pos);
+            /* the metadata of all grids, then their buffers in the same order */
+            meta = pos + 16;
+            data = meta;
+            for (i = 0; i < count; ++i) {
+                uint32_t ns;
+                if (size - data < 176)
+                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "the file ends inside the metadata of grid %u of the segment at byte %llu",
+                                     (unsigned)i, (unsigned long long)pos);
+                ns = rrv__nv_u32(b + data + 136);
+                if (ns == 0 || ns > size - data - 176)
+                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid %u of the segment at byte %llu has a name of %lu bytes, more than the file holds",
+                                     (unsigned)i, (unsigned long long)pos, (unsigned long)ns);
+                data += 176 + (uint64_t)ns;
+            }
+            for (i = 0; i < count; ++i) {
+                uint32_t ns = rrv__nv_u32(b + meta + 136);
+                uint64_t gs = rrv__nv_u64(b + meta), fs = rrv__nv_u64(b + meta + 8);
+                const unsigned char *gname = b + meta + 176;
+                if (fs != gs)
+                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid %u of the segment at byte %llu has %llu bytes in the file but %llu in memory",
+                                     (unsigned)i, (unsigned long long)pos, (unsigned long long)fs, (unsigned long long)gs);
+                if (gs > size - data)
+                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid %u of the segment at byte %llu needs %llu bytes, the file has %llu left",
+                                     (unsigned)i, (unsigned long long)pos, (unsigned long long)gs, (unsigned long long)(size - data));
+                if (ns == wl + 1 && memcmp(gname, want, wl) == 0 && gname[wl] == '\0') {
+                    *at = data;
+                    *grid_size = gs;
+                    return RRV_OK;
+                }
+                if (used + 1 < sizeof names)
+                    used += (size_t)snprintf(names + used, sizeof names - used, "%s\"%.*s\"", used ? ", " : "",
+                                             (int)(ns - 1 > 40 ? 40 : ns - 1), (const char *)gname);
+                data += gs;
+                meta += 176 + (uint64_t)ns;
+            }
+            pos = data;
+            ++segments;
+        }
+    }
+    if (used >= sizeof names) used = sizeof names - 1;
+    for (; used > 0; --used)
+        if ((unsigned char)names[used - 1] < 32) names[used - 1] = '?';
+    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "no grid named \"%.60s\" (the file has %s)", want,
+                     names[0] ? names : "no grids");
+}
+
+/* Finds, copies (or, with `own`, moves within `file` and keeps) and checks
+   the grid. On failure `file` is still the caller's to free. */
+static rrv_result rrv__nv_load(unsigned char *file, size_t size, int own, const char *name, const char *want,
+                               size_t max_bytes, rrv_nanovdb *g, rrv_error *err, int *kept)
+{
+    uint64_t at = 0, gs = 0;
+    unsigned char *buf;
+    rrv_result r;
+    *kept = 0;
+    memset(g, 0, sizeof *g);
+    r = rrv__nv_find_grid(file, size, name, want, &at, &gs, err);
+    if (r != RRV_OK) return r;
+    if (gs > max_bytes)
+        return rrv__fail(err, RRV_ERROR_LIMIT, name, 0,
+                         "grid \"%.60s\" has %llu bytes, over the limit of %llu bytes (raise it with --max-grid-mb N)",
+                         want, (unsigned long long)gs, (unsigned long long)max_bytes);
+    r = rrv__nv_check_grid(file + at, gs, name, g, err);
+    if (r != RRV_OK) return r;
+    if (own) {
+        memmove(file, file + at, (size_t)gs);
+        buf = (unsigned char *)RRV_REALLOC(file, gs ? (size_t)gs : 1);
+        if (!buf) buf = file; /* shrinking failed: keep the larger block */
+        *kept = 1;
+    } else {
+        buf = (unsigned char *)RRV_MALLOC((size_t)gs);
+        if (!buf) return rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory for a grid of %llu bytes", (unsigned long long)gs);
+        memcpy(buf, file + at, (size_t)gs);
+    }
+    g->buffer = buf;
+    g->size = (size_t)gs;
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_nanovdb_read_memory(const void *data, size_t size, const char *name,
+                                           const char *grid_name, size_t max_grid_bytes,
+                                           rrv_nanovdb *grid, rrv_error *err)
+{
+    int kept;
+    rrv__clear_error(err);
+    if (!name) name = "<memory>";
+    if (!grid || !grid_name || (!data && size > 0))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, name, 0, "rrv_nanovdb_read_memory: NULL argument");
+    if (max_grid_bytes == 0) max_grid_bytes = RRV_DEFAULT_MAX_GRID_BYTES;
+    return rrv__nv_load((unsigned char *)(uintptr_t)data, size, 0, name, grid_name, max_grid_bytes, grid, err, &kept);
+}
+
+static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, int text,
+                                     size_t max_bytes, void **data, size_t *size, const char **why);
+
+/* Errors name `name`; an unreadable file gives RRV_ERROR_IO with *why the
+   reason in words, or "". The file may hold other grids too, so the limit
+   applies to the file as read and then to the grid kept. */
+static rrv_result rrv__nv_read_file(const char *path, const char *name, const char *grid_name,
+                                    const rrv_load_options *opt, rrv_nanovdb *grid, rrv_error *err,
+                                    const char **why)
+{
+    size_t max_bytes = opt && opt->max_grid_bytes ? opt->max_grid_bytes : RRV_DEFAULT_MAX_GRID_BYTES;
+    void *data;
+    size_t size;
+    int kept;
+    rrv_result r = rrv__sf_read_whole(opt, path, 0, max_bytes, &data, &size, why);
+    memset(grid, 0, sizeof *grid);
+    if (r == RRV_ERROR_LIMIT)
+        return rrv__fail(err, r, name, 0, "the file is larger than the limit of %llu bytes (raise it with --max-grid-mb N)",
+                         (unsigned long long)max_bytes);
+    if (r == RRV_ERROR_MEMORY) return rrv__fail(err, r, name, 0, "out of memory reading the file");
+    if (r == RRV_ERROR_UNSUPPORTED)
+        return rrv__fail(err, r, name, 0, "this build has no stdio (RRV_NO_STDIO): set rrv_load_options.read_file");
+    if (r != RRV_OK) return rrv__fail(err, r, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
+    r = rrv__nv_load((unsigned char *)data, size, 1, name, grid_name, max_bytes, grid, err, &kept);
+    if (!kept) RRV_FREE(data);
+    return r;
+}
+
+RRV_DEF rrv_result rrv_nanovdb_read(const char *path, const char *grid_name,
+                                    const rrv_load_options *opt, rrv_nanovdb *grid, rrv_error *err)
+{
+    const char *why;
+    rrv__clear_error(err);
+    if (!path || !grid || !grid_name)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_nanovdb_read: NULL argument");
+    return rrv__nv_read_file(path, path, grid_name, opt, grid, err, &why);
+}
+
+RRV_DEF void rrv_nanovdb_free(rrv_nanovdb *grid)
+{
+    if (!grid) return;
+    RRV_FREE(grid->buffer);
+    grid->buffer = NULL;
+    grid->size = 0;
+}
+
 /* ==== scene file: the .rrv parser, the OBJ loader, the gridvol reader =======
    This section owns rrv_scene_load, rrv_scene_parse, rrv_scene_free,
    rrv_grid_read and rrv_grid_read_memory, the OBJ loader behind `mesh file`,
@@ -7410,6 +8412,9 @@ static const rrv__sf_key rrv__sf_gas_keys[] = {
     {"P_ref", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
     {"T_ref", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
 };
+static const rrv__sf_key rrv__sf_nanovdb_keys[] = {
+    {"grid", RRV__SF_WORD, 1, 0, RRV__SF_ANY, NULL},
+};
 /* Keys a field statement accepts whatever its kind. */
 static const rrv__sf_key rrv__sf_ior_extra_keys[] = {
     {"iorscale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
@@ -8279,6 +9284,7 @@ enum {
     RRV__SF_K_SLAB,
     RRV__SF_K_SHELL,
     RRV__SF_K_GAS,
+    RRV__SF_K_NANOVDB,
     RRV__SF_K_COUNT
 };
 
@@ -8297,6 +9303,7 @@ static const struct rrv__sf_field_kind {
     {"slab", rrv__sf_slab_keys, RRV__SF_COUNT(rrv__sf_slab_keys), 1},
     {"shell", rrv__sf_shell_keys, RRV__SF_COUNT(rrv__sf_shell_keys), 1},
     {"gas", rrv__sf_gas_keys, RRV__SF_COUNT(rrv__sf_gas_keys), 1},
+    {"nanovdb", rrv__sf_nanovdb_keys, RRV__SF_COUNT(rrv__sf_nanovdb_keys), 0},
 };
 
 static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const char *stmt, int which,
@@ -8324,6 +9331,39 @@ static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const char *stmt, int wh
     if (which != RRV__SF_F_DENSITY && f->grid.channels != 1)
         return rrv__sf_perr(p, RRV_ERROR_FORMAT, "grid \"%s\": %s grids need 1 channel, found %d",
                             written, stmt, f->grid.channels);
+    return RRV_OK;
+}
+
+/* `nanovdb FILE [grid NAME]`: the grid named as the statement (pbrt-v4's
+   "density" and "temperature") unless `grid` names another. */
+static rrv_result rrv__sf_field_nanovdb(rrv__sf_parser *p, const char *stmt, const rrv__sf_tok *t,
+                                        const rrv__sf_slot *grid_slot, rrv_field *f)
+{
+    char written[RRV__SF_PATH_MAX], full[RRV__SF_PATH_MAX], grid_name[256];
+    const char *why;
+    rrv_error e;
+    rrv_result r;
+    if (!rrv__sf_tok_string(t, written, sizeof written) ||
+        !rrv__sf_join_path(p->base_dir, written, full, sizeof full))
+        return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                            "%s: path \"%.*s\" is too long or has control characters", stmt,
+                            RRV__SF_CLIP(t));
+    if (grid_slot->given) {
+        const rrv__sf_tok *g = &p->toks.v[grid_slot->tok];
+        if (!rrv__sf_tok_string(g, grid_name, sizeof grid_name))
+            return rrv__sf_perr(p, RRV_ERROR_PARSE,
+                                "%s: grid name \"%.*s\" is longer than 255 bytes or has control characters",
+                                stmt, RRV__SF_CLIP(g));
+    } else {
+        strcpy(grid_name, stmt);
+    }
+    rrv__clear_error(&e);
+    r = rrv__nv_read_file(full, written, grid_name, p->opt, &f->nanovdb, &e, &why);
+    if (r == RRV_ERROR_IO)
+        return rrv__sf_perr(p, r, "cannot read NanoVDB file \"%s\"%s%s", written, why[0] ? ": " : "", why);
+    if (r != RRV_OK) return rrv__sf_perr(p, r, "NanoVDB file \"%s\": %s", written, e.message);
+    f->kind = RRV_FIELD_NANOVDB;
+    p->scene->grid_bytes += f->nanovdb.size;
     return RRV_OK;
 }
 
@@ -8358,9 +9398,9 @@ static rrv_result rrv__sf_st_field(rrv__sf_parser *p)
     if (p->toks.n < 3)
         return rrv__sf_perr(p, RRV_ERROR_PARSE,
                             which == RRV__SF_F_IOR
-                                ? "%s: missing kind (constant, blob, noise, grid, luneburg, "
-                                  "fisheye, slab, shell or gas)"
-                                : "%s: missing kind (constant, blob, noise or grid)",
+                                ? "%s: missing kind (constant, blob, noise, grid, nanovdb, "
+                                  "luneburg, fisheye, slab, shell or gas)"
+                                : "%s: missing kind (constant, blob, noise, grid or nanovdb)",
                             stmt);
     for (kind = 0; kind < RRV__SF_K_COUNT; ++kind)
         if (rrv__sf_tok_is(&toks[2], rrv__sf_field_kinds[kind].name) &&
@@ -8370,9 +9410,9 @@ static rrv_result rrv__sf_st_field(rrv__sf_parser *p)
         return rrv__sf_perr(
             p, RRV_ERROR_PARSE,
             which == RRV__SF_F_IOR
-                ? "%s: unknown kind \"%.*s\" (expected constant, blob, noise, grid, luneburg, "
-                  "fisheye, slab, shell or gas)"
-                : "%s: unknown kind \"%.*s\" (expected constant, blob, noise or grid)",
+                ? "%s: unknown kind \"%.*s\" (expected constant, blob, noise, grid, nanovdb, "
+                  "luneburg, fisheye, slab, shell or gas)"
+                : "%s: unknown kind \"%.*s\" (expected constant, blob, noise, grid or nanovdb)",
             stmt, RRV__SF_CLIP(&toks[2]));
     /* blob statements accumulate; anything else may be given once */
     first_blob = f->kind != RRV_FIELD_BLOBS;
@@ -8384,13 +9424,14 @@ static rrv_result rrv__sf_st_field(rrv__sf_parser *p)
                                     : "%s: given twice for medium \"%s\"",
                                 stmt, m->name);
     }
-    if (kind == RRV__SF_K_CONSTANT || kind == RRV__SF_K_GRID) {
+    if (kind == RRV__SF_K_CONSTANT || kind == RRV__SF_K_GRID || kind == RRV__SF_K_NANOVDB) {
         double dummy;
         if (p->toks.n < 4)
             return rrv__sf_perr(p, RRV_ERROR_PARSE,
                                 kind == RRV__SF_K_CONSTANT
                                     ? "%s: \"constant\" needs 1 number, got 0"
-                                    : "%s: \"grid\" needs a file path",
+                                    : kind == RRV__SF_K_GRID ? "%s: \"grid\" needs a file path"
+                                                             : "%s: \"nanovdb\" needs a file path",
                                 stmt);
         if (kind == RRV__SF_K_CONSTANT && p->toks.n > 4 && rrv__sf_tok_number(&toks[3], &dummy) &&
             rrv__sf_tok_number(&toks[4], &dummy)) {
@@ -8461,6 +9502,8 @@ static rrv_result rrv__sf_st_field(rrv__sf_parser *p)
     }
     case RRV__SF_K_GRID:
         return rrv__sf_field_grid(p, stmt, which, &toks[3], f);
+    case RRV__SF_K_NANOVDB:
+        return rrv__sf_field_nanovdb(p, stmt, &toks[3], &sl[0], f);
     case RRV__SF_K_BLOB: {
         rrv_blob *b;
         if (f->blob_count == INT_MAX) return RRV__SF_OOM(p);
@@ -8608,6 +9651,7 @@ static void rrv__sf_field_free(rrv_field *f)
 {
     RRV_FREE(f->blobs);
     RRV_FREE(f->grid.data);
+    rrv_nanovdb_free(&f->nanovdb);
     f->blobs = NULL;
     f->grid.data = NULL;
 }
@@ -8635,6 +9679,7 @@ static size_t rrv__sf_field_bytes(const rrv_field *f)
     if (f->grid.data)
         b += (size_t)f->grid.nx * (size_t)f->grid.ny * (size_t)f->grid.nz *
              (size_t)f->grid.channels * sizeof(float);
+    b += f->nanovdb.size;
     return b;
 }
 

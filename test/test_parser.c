@@ -246,6 +246,9 @@ static const struct corpus_case {
     {"duplicate_camera", RRV_ERROR_PARSE}, {"duplicate_key", RRV_ERROR_PARSE},
     {"duplicate_material", RRV_ERROR_PARSE}, {"extra_value", RRV_ERROR_PARSE},
     {"field_twice", RRV_ERROR_PARSE},      {"grid_bad_magic", RRV_ERROR_FORMAT},
+    {"nanovdb_bad_magic", RRV_ERROR_FORMAT}, {"nanovdb_no_grids", RRV_ERROR_FORMAT},
+    {"nanovdb_truncated", RRV_ERROR_FORMAT}, {"nanovdb_version", RRV_ERROR_FORMAT},
+    {"nanovdb_zip", RRV_ERROR_FORMAT},
     {"grid_bad_version", RRV_ERROR_FORMAT}, {"grid_channels", RRV_ERROR_FORMAT},
     {"grid_empty_box", RRV_ERROR_FORMAT},  {"grid_encoding", RRV_ERROR_FORMAT},
     {"grid_huge", RRV_ERROR_LIMIT},        {"grid_infinite_box", RRV_ERROR_FORMAT},
@@ -510,7 +513,7 @@ static void test_statement_errors(void)
     expect_error(WITH_CAM("medium m box 0 0 0 1 1 1\ndensity m grid\n"), RRV_ERROR_PARSE, 3,
                  "density: \"grid\" needs a file path");
     expect_error(WITH_CAM("medium m box 0 0 0 1 1 1\ndensity m\n"), RRV_ERROR_PARSE, 3,
-                 "density: missing kind (constant, blob, noise or grid)");
+                 "density: missing kind (constant, blob, noise, grid or nanovdb)");
     expect_error(WITH_CAM("medium m box 0 0 0 1 1 1\ndensity m noise octaves 2.5\n"), RRV_ERROR_PARSE, 3,
                  "density: octaves must be an integer, got 2.5");
     expect_error(WITH_CAM("medium m box 0 0 0 1 1 1\ndensity m noise falloff cube\n"), RRV_ERROR_PARSE, 3,
