@@ -4011,46 +4011,202 @@ static void rrv__curved_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, con
     else if (ctx->partition) ++ctx->stats.solves_unsupported;
 }
 
-/* One camera path: classic and refractive null-scattering path tracing with
-   NEE + MIS at every real scattering event and surface bounce, or with no
-   NEE at all (nee none, bending integrators): then the path alone finds the
-   lights and every hit counts in full. */
+/* ---- the path tracer: camera paths, their vertices, next-event estimation -----
+   pbrt-v4's VolPathIntegrator::Li in rrv's terms. A camera path is walked as
+   straight segments (rrv__plan_segment), each delta-tracked
+   (rrv__refractive_delta_tracking); a segment ends in a real vertex
+   (scattering in a medium, a surface), the sky, or a bend. At every real
+   vertex light is sampled (rrv__sample_direct_light, pbrt's SampleLd) and
+   weighed by MIS against the vertex's own sampling of the next direction,
+   or not sampled at all (nee none, bending integrators): then the path
+   alone finds the lights and every hit counts in full. */
+
+typedef struct rrv__camera_path {
+    rrv__path path;      /* throughput, radiance, spectral MIS, refraction state */
+    rrv_vec3 o, d;       /* the straight segment being walked */
+    rrv_vec3 vertex;     /* the last real vertex: MIS pdfs are measured from it, not from bends */
+    double prev_pdf;     /* solid-angle pdf of the last sampled direction; 0: camera */
+    int depth;           /* real vertices and interface reflections so far */
+    int touched, jumped; /* nee shoot partitions paths from the last vertex: touched,
+                            part of it lies in a refraction support; jumped, it crossed
+                            a sharp interface (shots never do) */
+    long steps;          /* loop iterations since the last real vertex (work bound) */
+} rrv__camera_path;
+
+/* Next-event estimation along a straight shadow ray (pbrt-v4's SampleLd):
+   one light sample, its ratio-tracked transmittance, the power heuristic
+   against the vertex's own sampling (phase function or cosine lobe). */
+static void rrv__sample_direct_light(rrv__context *ctx, rrv__path *path, rrv_vec3 x, const rrv__vertex_bsdf *v,
+                                     rrv__rng *rng)
+{
+    static const double white[3] = {1.0, 1.0, 1.0};
+    rrv__light_sample ls;
+    const double *tint = white;
+    double pdf, T[3], k;
+    int c;
+    if (!ctx->sample_lights || !rrv__sample_light(ctx->scene, x, rng, &ls) || !rrv__straight_allowed(ctx, x, &ls))
+        return;
+    if (v->surface) {
+        pdf = rrv__dot(v->n, ls.wi);
+        if (!(pdf > 0)) return;
+        pdf *= RRV__INV_PI;
+        tint = v->albedo;
+    } else {
+        pdf = rrv__hg_eval(v->g, rrv__dot(v->d_in, ls.wi));
+    }
+    rrv__light_transmittance(ctx, x, &ls, rng, T);
+    if (!(T[0] > 0 || T[1] > 0 || T[2] > 0)) return;
+    k = pdf * rrv__power_heuristic(ls.pdf, pdf) / ls.pdf * rrv__eta_scale(ctx, ls.point) * rrv__path_mis(path);
+    for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * tint[c] * T[c] * ls.L[c] * k;
+}
+
+/* What every real vertex does once its light is sampled and its next
+   direction chosen: the path restarts there, straight. */
+static void rrv__restart_at_vertex(rrv__context *ctx, rrv__camera_path *cp, rrv_vec3 x)
+{
+    cp->o = cp->vertex = x;
+    cp->steps = 0;
+    if (ctx->bends) rrv__bender_restart(&cp->path.bender, ctx->scene, x);
+    if (ctx->partition) {
+        cp->touched = rrv__in_support(ctx->scene, x);
+        cp->jumped = 0;
+    }
+}
+
+/* Scattering in a medium at x: light sampled, the phase function sampled.
+   Returns 0 when the path ends. */
+static int rrv__scatter_in_medium(rrv__context *ctx, rrv__camera_path *cp, rrv_vec3 x, double g, rrv__rng *rng)
+{
+    rrv__vertex_bsdf vb;
+    rrv_vec3 d_in = cp->d;
+    if (++cp->depth > ctx->scene->settings.max_depth) return 0;
+    memset(&vb, 0, sizeof vb);
+    vb.g = g;
+    vb.d_in = d_in;
+    rrv__sample_direct_light(ctx, &cp->path, x, &vb, rng);
+    if (ctx->partition) rrv__curved_nee(ctx, &cp->path, x, &vb, rng);
+    {
+        /* two statements: C leaves the order of arguments unspecified,
+           and gcc and clang once drew these in opposite orders */
+        double u2 = rrv__uniform(rng), u1 = rrv__uniform(rng);
+        cp->d = rrv__hg_sample(g, d_in, u1, u2);
+    }
+    cp->prev_pdf = rrv__hg_eval(g, rrv__dot(d_in, cp->d));
+    rrv__restart_at_vertex(ctx, cp, x);
+    return 1;
+}
+
+/* The path leaves every medium and surface: the sky's radiance, weighed by
+   MIS against sampling the sky as a light. */
+static void rrv__escape_to_sky(rrv__context *ctx, rrv__camera_path *cp)
+{
+    const rrv_scene *scene = ctx->scene;
+    double Le[3], w = 1.0, k;
+    int c;
+    if (scene->environment.kind == RRV_ENV_NONE) return;
+    rrv__environment_L(&scene->environment, cp->d, Le);
+    if (cp->prev_pdf > 0 && ctx->sample_lights && !(ctx->partition && cp->touched))
+        w = rrv__power_heuristic(cp->prev_pdf, RRV__INV_4PI / rrv__light_choices(scene));
+    k = w * rrv__eta_scale(ctx, rrv__madd(cp->o, cp->d, 1e30)) * rrv__path_mis(&cp->path);
+    for (c = 0; c < 3; ++c) cp->path.L[c] += cp->path.beta[c] * Le[c] * k;
+}
+
+/* A surface hit: its emission (weighed by MIS against the light sample
+   that could have found it), then a diffuse bounce with light sampled.
+   Returns 0 when the path ends. */
+static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__hit *hit, rrv__rng *rng)
+{
+    const rrv_scene *scene = ctx->scene;
+    const rrv_shape *s = &scene->shapes[hit->shape];
+    rrv_vec3 n = hit->n, x = hit->p, p;
+    rrv__vertex_bsdf vb;
+    int front = rrv__dot(n, cp->d) < 0, c;
+    if ((s->L[0] > 0 || s->L[1] > 0 || s->L[2] > 0) && front) {
+        double w = 1.0;
+        if (cp->prev_pdf > 0 && ctx->sample_lights) {
+            if (!(ctx->partition && cp->touched))
+                w = rrv__power_heuristic(cp->prev_pdf, rrv__emitter_pdf(s, cp->vertex, x, n) / rrv__light_choices(scene));
+            else if (ctx->shoot && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
+                w = 0.0; /* counted by the curved connection */
+        }
+        w *= rrv__eta_scale(ctx, x) * rrv__path_mis(&cp->path);
+        for (c = 0; c < 3; ++c) cp->path.L[c] += cp->path.beta[c] * s->L[c] * w;
+    }
+    if (++cp->depth > scene->settings.max_depth) return 0;
+    if (!front) n = rrv__scale(n, -1.0);
+    p = rrv__madd(x, n, rrv__offset_scale(x));
+    memset(&vb, 0, sizeof vb);
+    vb.surface = 1;
+    vb.n = n;
+    rrv__material_albedo(&scene->materials[s->material], x, n, vb.albedo);
+    rrv__sample_direct_light(ctx, &cp->path, p, &vb, rng);
+    if (ctx->partition) rrv__curved_nee(ctx, &cp->path, p, &vb, rng);
+    {
+        double u2 = rrv__uniform(rng), u1 = rrv__uniform(rng); /* in this order on every compiler */
+        cp->d = rrv__sample_cosine_hemisphere(n, u1, u2);
+    }
+    cp->prev_pdf = fmax(rrv__dot(n, cp->d), 0.0) * RRV__INV_PI;
+    if (!(cp->prev_pdf > 0)) return 0;
+    for (c = 0; c < 3; ++c) cp->path.beta[c] *= vb.albedo[c];
+    rrv__restart_at_vertex(ctx, cp, p);
+    return 1;
+}
+
+/* Russian roulette after three real vertices, on the MIS-weighted
+   throughput. Returns 0 when the path ends. */
+static int rrv__russian_roulette(rrv__camera_path *cp, rrv__rng *rng)
+{
+    int c;
+    if (cp->depth >= 3) {
+        double q = rrv__max3(cp->path.beta) * rrv__path_mis(&cp->path);
+        if (q < 1.0) {
+            if (rrv__uniform(rng) >= q) return 0;
+            for (c = 0; c < 3; ++c) cp->path.beta[c] /= q;
+        }
+    }
+    return rrv__max3(cp->path.beta) > 0;
+}
+
+/* One camera path from o along d; its radiance into L. */
 static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng *rng, double L[3])
 {
     const rrv_scene *scene = ctx->scene;
-    rrv__path path;
-    double prev_pdf = 0; /* solid-angle pdf of the last sampled direction; 0: camera */
-    rrv_vec3 vertex = o; /* the last real vertex: MIS pdfs are measured from it, not from bends */
-    int depth = 0, c;
-    /* nee shoot partitions the paths from the last vertex: touched, part of
-       the path lies in a refraction support; jumped, it crossed a sharp
-       interface (shots never do) */
-    int touched = 0, jumped = 0;
-    long steps = 0;
-    rrv__path_start(&path, rng);
-    if (ctx->bends) rrv__bender_start(&path.bender, scene, ctx->eikonal, o);
+    rrv__camera_path cp;
+    int c;
+    cp.o = cp.vertex = o;
+    cp.d = d;
+    cp.prev_pdf = 0;
+    cp.depth = 0;
+    cp.touched = cp.jumped = 0;
+    cp.steps = 0;
+    rrv__path_start(&cp.path, rng);
+    if (ctx->bends) rrv__bender_start(&cp.path.bender, scene, ctx->eikonal, o);
     ++ctx->stats.paths;
     for (;;) {
         rrv__hit hit;
         rrv__flight flight;
         double segment = DBL_MAX; /* a straight piece of the (bent) ray */
-        rrv_vec3 x;
         int has_hit, outcome;
-        if (++steps > ctx->step_bound) {
+        if (++cp.steps > ctx->step_bound) {
             ++ctx->stats.paths_cut;
             break;
         }
+        /* the next straight segment */
         if (ctx->bends) {
-            if (!path.bender.pending) rrv__plan_segment(&path.bender, scene, o, &d, rng);
-            segment = path.bender.segment;
+            if (!cp.path.bender.pending) rrv__plan_segment(&cp.path.bender, scene, cp.o, &cp.d, rng);
+            segment = cp.path.bender.segment;
         }
         /* A surface lying on the face that ends the segment belongs to it:
            looked for a gap past the end, it cannot slip between this
            segment's end and the next one's start. */
-        has_hit = ctx->bends && path.bender.surface_free
-                      ? 0 : rrv__intersect_scene(
-                            scene, o, d, segment < DBL_MAX ? segment + rrv__face_gap(rrv__madd(o, d, segment)) : DBL_MAX, &hit);
-        outcome = rrv__refractive_delta_tracking(ctx, &path, o, d, has_hit ? hit.t : segment, rng, &flight);
+        has_hit = ctx->bends && cp.path.bender.surface_free
+                      ? 0
+                      : rrv__intersect_scene(scene, cp.o, cp.d,
+                                             segment < DBL_MAX ? segment + rrv__face_gap(rrv__madd(cp.o, cp.d, segment))
+                                                               : DBL_MAX,
+                                             &hit);
+        /* delta tracking along it, up to the surface if one is hit */
+        outcome = rrv__refractive_delta_tracking(ctx, &cp.path, cp.o, cp.d, has_hit ? hit.t : segment, rng, &flight);
         if (outcome == RRV__FLIGHT_ABSORBED) break;
         if (outcome == RRV__FLIGHT_CUT) {
             ++ctx->stats.paths_cut;
@@ -4058,134 +4214,38 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             break;
         }
         if (outcome == RRV__FLIGHT_PASSED && !has_hit && segment < DBL_MAX) {
-            int end = path.bender.end;
+            /* the segment's end: a comb kick, an eikonal step, a face */
+            int end = cp.path.bender.end;
             if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
             if (ctx->partition) {
-                if (end == RRV__END_FACE && rrv__face_jumps(scene, rrv__madd(o, d, segment), d)) jumped = 1;
-                touched = 1;
+                if (end == RRV__END_FACE && rrv__face_jumps(scene, rrv__madd(cp.o, cp.d, segment), cp.d)) cp.jumped = 1;
+                cp.touched = 1;
             }
-            rrv__finish_segment(&path.bender, scene, &o, &d, rng);
+            rrv__finish_segment(&cp.path.bender, scene, &cp.o, &cp.d, rng);
             /* A reflection at an interface is a specular vertex of the path
                and counts toward its depth: light trapped by total internal
                reflection in a lossless box would otherwise bounce forever. */
-            if (end == RRV__END_FACE && path.bender.reflected && ++depth > scene->settings.max_depth) break;
+            if (end == RRV__END_FACE && cp.path.bender.reflected && ++cp.depth > scene->settings.max_depth) break;
             continue;
         }
         if (outcome == RRV__FLIGHT_BENT) {
-            touched = 1;
-            o = rrv__madd(o, d, flight.t);
-            d = flight.direction;
+            /* a null event refracted (Poisson, midpoint): a new segment */
+            cp.touched = 1;
+            cp.o = rrv__madd(cp.o, cp.d, flight.t);
+            cp.d = flight.direction;
             continue;
         }
         if (outcome == RRV__FLIGHT_SCATTERED) {
-            rrv__light_sample ls;
-            double g = flight.medium->g;
-            x = rrv__madd(o, d, flight.t);
-            if (++depth > scene->settings.max_depth) break;
-            if (ctx->sample_lights && rrv__sample_light(scene, x, rng, &ls) && rrv__straight_allowed(ctx, x, &ls)) {
-                double phase = rrv__hg_eval(g, rrv__dot(d, ls.wi)), T[3];
-                rrv__light_transmittance(ctx, x, &ls, rng, T);
-                if (T[0] > 0 || T[1] > 0 || T[2] > 0) {
-                    double k = phase * rrv__power_heuristic(ls.pdf, phase) / ls.pdf * rrv__eta_scale(ctx, ls.point) *
-                               rrv__path_mis(&path);
-                    for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * T[c] * ls.L[c] * k;
-                }
-            }
-            if (ctx->partition) {
-                rrv__vertex_bsdf vb;
-                memset(&vb, 0, sizeof vb);
-                vb.g = g;
-                vb.d_in = d;
-                rrv__curved_nee(ctx, &path, x, &vb, rng);
-            }
-            {
-                rrv_vec3 d_in = d;
-                /* two statements: C leaves the order of arguments unspecified,
-                   and gcc and clang once drew these in opposite orders */
-                double u2 = rrv__uniform(rng), u1 = rrv__uniform(rng);
-                d = rrv__hg_sample(g, d_in, u1, u2);
-                prev_pdf = rrv__hg_eval(g, rrv__dot(d_in, d));
-            }
-            o = vertex = x;
-            steps = 0;
-            if (ctx->bends) rrv__bender_restart(&path.bender, scene, x);
-            if (ctx->partition) { touched = rrv__in_support(scene, x); jumped = 0; }
+            if (!rrv__scatter_in_medium(ctx, &cp, rrv__madd(cp.o, cp.d, flight.t), flight.medium->g, rng)) break;
         } else if (!has_hit) {
-            double Le[3], w = 1.0;
-            if (scene->environment.kind == RRV_ENV_NONE) break;
-            rrv__environment_L(&scene->environment, d, Le);
-            if (prev_pdf > 0 && ctx->sample_lights && !(ctx->partition && touched))
-                w = rrv__power_heuristic(prev_pdf, RRV__INV_4PI / rrv__light_choices(scene));
-            {
-                double k = w * rrv__eta_scale(ctx, rrv__madd(o, d, 1e30)) * rrv__path_mis(&path);
-                for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * Le[c] * k;
-            }
+            rrv__escape_to_sky(ctx, &cp);
             break;
         } else {
-            const rrv_shape *s = &scene->shapes[hit.shape];
-            rrv_vec3 n = hit.n, p;
-            double albedo[3];
-            rrv__light_sample ls;
-            int front = rrv__dot(n, d) < 0;
-            x = hit.p;
-            if ((s->L[0] > 0 || s->L[1] > 0 || s->L[2] > 0) && front) {
-                double w = 1.0;
-                if (prev_pdf > 0 && ctx->sample_lights) {
-                    if (!(ctx->partition && touched))
-                        w = rrv__power_heuristic(prev_pdf, rrv__emitter_pdf(s, vertex, x, n) / rrv__light_choices(scene));
-                    else if (ctx->shoot && !jumped && s->kind != RRV_SHAPE_SPHERE)
-                        w = 0.0; /* counted by the curved connection */
-                }
-                w *= rrv__eta_scale(ctx, x) * rrv__path_mis(&path);
-                for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * s->L[c] * w;
-            }
-            if (++depth > scene->settings.max_depth) break;
-            if (!front) n = rrv__scale(n, -1.0);
-            p = rrv__madd(x, n, rrv__offset_scale(x));
-            rrv__material_albedo(&scene->materials[s->material], x, n, albedo);
-            if (ctx->sample_lights && rrv__sample_light(scene, p, rng, &ls) && rrv__straight_allowed(ctx, p, &ls)) {
-                double cosi = rrv__dot(n, ls.wi);
-                if (cosi > 0) {
-                    double T[3];
-                    rrv__light_transmittance(ctx, p, &ls, rng, T);
-                    if (T[0] > 0 || T[1] > 0 || T[2] > 0) {
-                        double bsdf_pdf = cosi * RRV__INV_PI;
-                        double k = cosi * RRV__INV_PI * rrv__power_heuristic(ls.pdf, bsdf_pdf) / ls.pdf *
-                                   rrv__eta_scale(ctx, ls.point) * rrv__path_mis(&path);
-                        for (c = 0; c < 3; ++c) path.L[c] += path.beta[c] * albedo[c] * T[c] * ls.L[c] * k;
-                    }
-                }
-            }
-            if (ctx->partition) {
-                rrv__vertex_bsdf vb;
-                memset(&vb, 0, sizeof vb);
-                vb.surface = 1;
-                vb.n = n;
-                for (c = 0; c < 3; ++c) vb.albedo[c] = albedo[c];
-                rrv__curved_nee(ctx, &path, p, &vb, rng);
-            }
-            {
-                double u2 = rrv__uniform(rng), u1 = rrv__uniform(rng); /* in this order on every compiler */
-                d = rrv__sample_cosine_hemisphere(n, u1, u2);
-            }
-            prev_pdf = fmax(rrv__dot(n, d), 0.0) * RRV__INV_PI;
-            if (!(prev_pdf > 0)) break;
-            for (c = 0; c < 3; ++c) path.beta[c] *= albedo[c];
-            o = vertex = p;
-            steps = 0;
-            if (ctx->bends) rrv__bender_restart(&path.bender, scene, p);
-            if (ctx->partition) { touched = rrv__in_support(scene, p); jumped = 0; }
+            if (!rrv__hit_surface(ctx, &cp, &hit, rng)) break;
         }
-        if (depth >= 3) {
-            double q = rrv__max3(path.beta) * rrv__path_mis(&path);
-            if (q < 1.0) {
-                if (rrv__uniform(rng) >= q) break;
-                for (c = 0; c < 3; ++c) path.beta[c] /= q;
-            }
-        }
-        if (!(rrv__max3(path.beta) > 0)) break;
+        if (!rrv__russian_roulette(&cp, rng)) break;
     }
-    for (c = 0; c < 3; ++c) L[c] = path.L[c];
+    for (c = 0; c < 3; ++c) L[c] = cp.path.L[c];
 }
 
 

@@ -60,6 +60,13 @@ seeds() {
         printf "PF 1 1 -1\n$le_nan$le_inf$le_half" > "$2/nonfinite.pfm"
         printf "Pf\r\n1\t2\r\n-0.5e1\r$le_one$le_half" > "$2/spaces.pfm"
         ;;
+    # the files make test wrote (rrv's and OpenEXR's EXRs; real NanoVDB
+    # files from OpenVDB's tools), in whichever build folder holds them
+    exr) cp build*/exr_check_*.exr "$2"/ 2>/dev/null || { echo "fuzz_run.sh: run make test first (no EXR seeds)" >&2; return 1; } ;;
+    nanovdb)
+        cp test/corpus/nanovdb_*.nvdb "$2"/
+        cp build*/nanovdb_tmp/*.nvdb "$2"/ 2>/dev/null || true
+        ;;
     *) echo "fuzz_run.sh: no seeds for harness '$1'" >&2; return 1 ;;
     esac
 }
