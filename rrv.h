@@ -6365,6 +6365,8 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
     if (chunk_count > (size - pos) / 8)
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR file: %llu chunks do not fit",
                          (unsigned long long)chunk_count);
+    /* a channel list whose sizes add up to 0 would divide by zero below */
+    if (line_bytes == 0) return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR channels hold no bytes");
     if (w > (size_t)INT32_MAX / line_bytes / (size_t)lines_per_chunk ||
         (uint64_t)w * line_bytes * h / RRV__EXR_MAX_RATIO > (uint64_t)size || w > SIZE_MAX / 12 / h)
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR data window of %llux%llu pixels is larger "
