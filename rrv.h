@@ -2021,20 +2021,6 @@ static double rrv__refractivity(const rrv_medium *m, rrv_vec3 p, double ambient_
 
 /* ---- gradients of the refractivity ----------------------------------------- */
 
-/* Central differences of the trilinear field with a step of one voxel:
-   continuous across cell faces, unlike the gradient of the interpolant. */
-static rrv_vec3 rrv__field_gradient_numeric(const rrv_field *f, rrv_vec3 p, double ambient, double h)
-{
-    rrv_vec3 g;
-    g.x = (rrv__field_eval(f, rrv__v3(p.x + h, p.y, p.z), 0, ambient) -
-           rrv__field_eval(f, rrv__v3(p.x - h, p.y, p.z), 0, ambient)) / (2 * h);
-    g.y = (rrv__field_eval(f, rrv__v3(p.x, p.y + h, p.z), 0, ambient) -
-           rrv__field_eval(f, rrv__v3(p.x, p.y - h, p.z), 0, ambient)) / (2 * h);
-    g.z = (rrv__field_eval(f, rrv__v3(p.x, p.y, p.z + h), 0, ambient) -
-           rrv__field_eval(f, rrv__v3(p.x, p.y, p.z - h), 0, ambient)) / (2 * h);
-    return g;
-}
-
 /* Gradient of a grid field: the trilinear blend of central differences at
    the eight samples around p. Inside the grid this equals central
    differences of the trilinear field with a one-voxel step, which is second
@@ -2071,7 +2057,7 @@ static rrv_vec3 rrv__grid_gradient(const rrv_grid *g, rrv_vec3 p)
 }
 
 /* Gradient of a scalar field: analytic where the field is, numeric else. */
-static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p, double ambient)
+static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p)
 {
     switch (f->kind) {
     case RRV_FIELD_BLOBS: {
@@ -2085,8 +2071,8 @@ static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p, double ambie
         }
         return g;
     }
-    case RRV_FIELD_NOISE:
-        return rrv__field_gradient_numeric(f, p, ambient, 0.05 / (f->noise.frequency * (1 << (f->noise.octaves > 4 ? 4 : f->noise.octaves))));
+    /* no NOISE case: prepare bakes every noise field into a grid, and
+       callers pass rrv__field_of's baked copy */
     case RRV_FIELD_GRID:
         return rrv__grid_gradient(&f->grid, p);
     case RRV_FIELD_NANOVDB:
@@ -2096,7 +2082,7 @@ static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p, double ambie
     }
 }
 
-static rrv_vec3 rrv__profile_gradient(const rrv_field *f, rrv_vec3 p, double ambient_r)
+static rrv_vec3 rrv__profile_gradient(const rrv_field *f, rrv_vec3 p)
 {
     rrv_vec3 d = rrv__sub(p, f->center);
     double R2 = f->radius * f->radius, q;
@@ -2117,7 +2103,7 @@ static rrv_vec3 rrv__profile_gradient(const rrv_field *f, rrv_vec3 p, double amb
         return rrv__scale(d, f->amplitude * 0.5 * (1.0 / (a * a) - 1.0 / (b * b)) / (f->edge * r));
     }
     default:
-        return rrv__field_gradient(f, p, ambient_r);
+        return rrv__field_gradient(f, p);
     }
 }
 
@@ -2131,11 +2117,11 @@ static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double
     r = rrv__refractivity(m, p, ambient_r);
     if (m->ior_from_gas) {
         double T = fmax(rrv__temperature(m, p), 1e-3), P = rrv__pressure(m, p);
-        rrv_vec3 gT = rrv__scale(rrv__field_gradient(rrv__field_of(m, RRV__TEMPERATURE), p, 0), m->temperaturescale);
-        rrv_vec3 gP = rrv__field_gradient(rrv__field_of(m, RRV__PRESSURE), p, 0);
+        rrv_vec3 gT = rrv__scale(rrv__field_gradient(rrv__field_of(m, RRV__TEMPERATURE), p), m->temperaturescale);
+        rrv_vec3 gP = rrv__field_gradient(rrv__field_of(m, RRV__PRESSURE), p);
         *grad = rrv__scale(rrv__sub(rrv__scale(gP, 1.0 / P), rrv__scale(gT, 1.0 / T)), r);
     } else {
-        *grad = rrv__scale(rrv__profile_gradient(rrv__field_of(m, RRV__IOR), p, ambient_r), m->ior_scale);
+        *grad = rrv__scale(rrv__profile_gradient(rrv__field_of(m, RRV__IOR), p), m->ior_scale);
     }
     return r;
 }

@@ -556,7 +556,7 @@ static double sampled_gradient_max(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
             for (i = 0; i < 9; ++i) {
                 rrv_vec3 p = rrv__v3(lo.x + (hi.x - lo.x) * i / 8.0, lo.y + (hi.y - lo.y) * j / 8.0,
                                      lo.z + (hi.z - lo.z) * k / 8.0);
-                best = fmax(best, rrv__length(rrv__profile_gradient(f, p, 0)));
+                best = fmax(best, rrv__length(rrv__profile_gradient(f, p)));
             }
     return best;
 }
