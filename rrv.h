@@ -1,4 +1,4 @@
-/* rrv.h 0.2.0 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.3.0 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -222,6 +222,11 @@
        (eta_c / eta_e)^2; thermal emission follows Kirchhoff (above).
 
    HISTORY
+     0.3.0  boundaries: support faces are sharp interfaces (Snell, Fresnel,
+            total internal reflection) in every integrator; work bounds and
+            load-time limits; nee none|straight|shoot; OpenEXR in and out;
+            NanoVDB grids; cubic IOR grids; one segment planner shared by the
+            path tracer and rrv_trace_ray
      0.2.0  refraction: IOR fields (gas state, profiles, grids), refractive
             and eikonal integrators, rrv_trace_ray
      0.1.0  classic null-scattering path tracer, scene format, image I/O
@@ -233,7 +238,7 @@
 #include <stdint.h>
 
 #define RRV_VERSION_MAJOR 0
-#define RRV_VERSION_MINOR 2
+#define RRV_VERSION_MINOR 3
 #define RRV_VERSION_PATCH 0
 
 #ifndef RRV_DEF
