@@ -56,7 +56,11 @@ $(BUILD)/exr_check: test/exr_check.cpp test/check.h rrv.h | $(BUILD)
 $(BUILD):
 	mkdir -p $(BUILD)
 
-test: $(BUILD)/rrv $(TEST_BINS) $(EXR_CHECK)
+# The measurement programs are built (not run) by make test, so they cannot
+# rot unnoticed between benchmark runs.
+MEASURE_BINS := $(patsubst test/%.c,$(BUILD)/%,$(wildcard test/measure_*.c))
+
+test: $(BUILD)/rrv $(TEST_BINS) $(EXR_CHECK) $(MEASURE_BINS)
 	sh test/run_tests.sh $(BUILD) $(TEST_BINS) test/compile_checks.sh
 
 # Every test/fuzz_*.c is a harness. UBSan findings abort (no recovery), so
@@ -81,9 +85,10 @@ bench: $(BUILD)/rrv $(BUILD)/measure_grin
 	python3 test/bench/bench.py $(BUILD)/rrv
 	$(BUILD)/measure_grin
 
-# The convergence study of the refraction schemes (tables in README).
-$(BUILD)/measure_grin: test/measure_grin.c rrv.h | $(BUILD)
-	$(CC) $(CFLAGS_ALL) -o $@ test/measure_grin.c -lm
+# measure_grin: the convergence study of the refraction schemes (tables in
+# README); measure_nanovdb: NanoVDB lookups against a dense grid.
+$(BUILD)/measure_%: test/measure_%.c rrv.h | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -o $@ $< -lm
 
 clean:
 	rm -rf build build-san build-fuzz rrv
