@@ -163,6 +163,36 @@
      adds the sums into the caller's buffer: split an image into tiles across
      threads or machines and the result is bit-identical to one call.
 
+   FUNCTIONS (every public one; each that can fail returns rrv_result)
+     rrv_scene_load         parse and prepare a scene file
+     rrv_scene_parse        the same from text in memory
+     rrv_scene_prepare      build BVH, lights, majorant and baked grids (again after edits)
+     rrv_scene_free         free a scene and everything it owns
+     rrv_render_rect        add the radiance sums of a pixel rectangle and sample range
+     rrv_trace_ray          walk one ray through the refractive media
+     rrv_grid_read          read and validate a gridvol file
+     rrv_grid_read_memory   the same from memory
+     rrv_nanovdb_read       read a NanoVDB file (one grid, chosen by name)
+     rrv_nanovdb_read_memory the same from memory
+     rrv_nanovdb_voxel      a grid's value at an integer index point
+     rrv_nanovdb_sample     a grid's trilinear value at a world point
+     rrv_nanovdb_type_name  the name of a NanoVDB grid type
+     rrv_nanovdb_free       free what rrv_nanovdb_read allocated
+     rrv_write_pfm          write a PFM file (temporary file, then rename)
+     rrv_write_pfm_to       the same through a write callback
+     rrv_write_exr          write an OpenEXR file (half or float, ZIP or none)
+     rrv_write_exr_to       the same through a write callback
+     rrv_write_png          write an 8-bit sRGB PNG preview
+     rrv_write_png_to       the same through a write callback
+     rrv_read_pfm           read a PFM file
+     rrv_read_pfm_memory    the same from memory
+     rrv_read_exr           read a scanline RGB OpenEXR file
+     rrv_read_exr_memory    the same from memory
+     rrv_half_from_float    the IEEE half nearest a float (finite values clamped)
+     rrv_crc32, rrv_adler32 the checksums the PNG and EXR writers use
+     rrv_result_string      a static string for a result code
+     rrv_free               free memory the library handed out (images)
+
    CONFIGURATION (define before including the implementation)
      RRV_MALLOC(sz) RRV_REALLOC(p,sz) RRV_FREE(p)   all three or none
      RRV_ASSERT(x)    defaults to assert(x)

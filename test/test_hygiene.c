@@ -6,6 +6,7 @@
 #include "../rrv.h"
 #include "../rrv.h"
 #include "check.h"
+#include <ctype.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -81,10 +82,51 @@ static void test_static_build_links(void)
     CHECK(rrv_crc32(0, "123456789", 9) == 0xCBF43926u);
 }
 
+/* The manual's FUNCTIONS list names every public function, so an embedder
+   reading only the first screen misses none. */
+static void test_manual_lists_every_function(void)
+{
+    char *text = read_all("rrv.h"), *list, *end, *p;
+    int count = 0;
+    CHECK(text != NULL);
+    if (!text) return;
+    list = strstr(text, "FUNCTIONS (");
+    end = list ? strstr(list, "CONFIGURATION (") : NULL;
+    CHECKF(list && end, "rrv.h has no FUNCTIONS section before CONFIGURATION");
+    if (list && end) {
+        for (p = strstr(text, "\nRRV_DEF "); p; p = strstr(p + 1, "\nRRV_DEF ")) {
+            char name[64];
+            const char *paren = strchr(p, '('), *start = paren;
+            size_t n;
+            if (!paren) break;
+            while (start > p && (start[-1] == '_' || isalnum((unsigned char)start[-1]))) --start;
+            n = (size_t)(paren - start);
+            if (n == 0 || n >= sizeof name) continue;
+            memcpy(name, start, n);
+            name[n] = '\0';
+            ++count;
+            {
+                /* as a whole word inside the list */
+                const char *q = list;
+                int found = 0;
+                while ((q = strstr(q, name)) != NULL && q < end) {
+                    char after = q[n];
+                    if (!(after == '_' || isalnum((unsigned char)after))) { found = 1; break; }
+                    q += n;
+                }
+                CHECKF(found, "%s is not in the manual's FUNCTIONS list", name);
+            }
+        }
+    }
+    CHECKF(count > 20, "found only %d public functions", count);
+    free(text);
+}
+
 int main(int argc, char **argv)
 {
     (void)argc; (void)argv;
     RUN(test_library_never_prints_or_exits);
     RUN(test_static_build_links);
+    RUN(test_manual_lists_every_function);
     return CHECK_EXIT_CODE();
 }
