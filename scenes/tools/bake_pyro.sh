@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# Bakes a Mantaflow fire with Blender, converts one frame to NanoVDB and
+# renders scenes/pyro.rrv with it: the whole path from a fluid solver to an
+# rrv image, and the recipe of scenes/assets/pyro.nvdb.
+#
+#   scenes/tools/bake_pyro.sh [OUT_DIR]      (default build/pyro)
+#
+# Needs blender (Debian 12: apt-get install --no-install-recommends blender),
+# python3-openvdb (run with Debian's /usr/bin/python3) and libnanovdb-tools.
+# Writes OUT_DIR/cache/ (the bake), OUT_DIR/pyro.nvdb and OUT_DIR/pyro.png;
+# with --install it copies pyro.nvdb to scenes/assets/. Every step that fails
+# stops the script with its message.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+install=0
+if [ "${1:-}" = --install ]; then install=1; shift; fi
+out=${1:-build/pyro}
+resolution=48
+frames=36
+frame=24
+
+for tool in blender nanovdb_convert; do
+    command -v $tool >/dev/null || { echo "bake_pyro: $tool not found" >&2; exit 1; }
+done
+/usr/bin/python3 -c 'import pyopenvdb' || { echo "bake_pyro: /usr/bin/python3 lacks pyopenvdb (python3-openvdb)" >&2; exit 1; }
+[ -x ./rrv ] || make rrv >/dev/null
+
+rm -rf "$out/cache"
+mkdir -p "$out/cache"
+echo "== bake: $resolution divisions, $frames frames"
+blender -b --factory-startup -P scenes/tools/bake_pyro.py -- "$(realpath "$out/cache")" $resolution $frames \
+    > "$out/blender.log" 2>&1 || { tail -20 "$out/blender.log" >&2; echo "bake_pyro: blender failed" >&2; exit 1; }
+grep -q "bake_all -> {'FINISHED'}" "$out/blender.log" || { tail -20 "$out/blender.log" >&2; echo "bake_pyro: bake did not finish" >&2; exit 1; }
+vdb=$(printf '%s/cache/data/fluid_data_%04d.vdb' "$out" $frame)
+[ -s "$vdb" ] || { echo "bake_pyro: $vdb missing" >&2; exit 1; }
+
+# Only the grids the scene reads: flame, velocity, shadow etc. would each
+# add a NanoVDB upper node (~270 KiB) to the file.
+echo "== convert frame $frame"
+/usr/bin/python3 - "$vdb" "$out/pyro.vdb" <<'PY'
+import sys
+import pyopenvdb as vdb
+grids, _ = vdb.readAll(sys.argv[1])
+keep = [g for g in grids if g.name in ("density", "temperature")]
+if len(keep) != 2:
+    sys.exit("bake_pyro: frame lacks density or temperature: %s" % [g.name for g in grids])
+vdb.write(sys.argv[2], grids=keep)
+PY
+nanovdb_convert -f "$out/pyro.vdb" "$out/pyro.nvdb"
+
+echo "== render"
+# The scene names assets/pyro.nvdb; render a copy that points at the new file.
+sed "s|assets/pyro.nvdb|$(realpath "$out/pyro.nvdb")|" scenes/pyro.rrv > "$out/pyro.rrv"
+./rrv info "$out/pyro.rrv" | grep grid
+./rrv render "$out/pyro.rrv" -o "$out/pyro.pfm" --png "$out/pyro.png" --spp "${PYRO_SPP:-8}" -q
+[ -s "$out/pyro.png" ] || { echo "bake_pyro: no image" >&2; exit 1; }
+if [ $install = 1 ]; then cp "$out/pyro.nvdb" scenes/assets/pyro.nvdb; fi
+echo "bake_pyro: $out/pyro.png from frame $frame of a fresh bake"
