@@ -744,7 +744,7 @@ typedef int (*rrv_write_func)(void *user, const void *data, size_t size);
 /* PFM: "PF\n<w> <h>\n-1.0\n", little-endian floats, rows bottom to top. */
 RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user,
                                     const float *rgb, int width, int height);
-/* PNG preview: 8-bit sRGB of rgb * 2^exposure, stored (uncompressed) deflate. */
+/* PNG preview: 8-bit sRGB of rgb * 2^exposure, filtered and deflated. */
 RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
                                     const float *rgb, int width, int height, double exposure);
 /* OpenEXR: single-part scanline file, channels B, G, R (the order the format
@@ -5112,10 +5112,11 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
 
 /* ==== image I/O: PFM and PNG files, checksums =================================
    This section owns everything that turns a float RGB buffer into bytes and
-   back: the PFM writer and reader, the PNG preview writer (stored deflate, so
-   no compressor is needed), the CRC-32 and Adler-32 those formats use, and the
-   file forms that write through a temporary file so a failed write never
-   replaces a good image with half of a new one. */
+   back: the PFM writer and reader, the PNG preview writer (with its own
+   deflate, which the EXR writer's ZIP chunks share), the CRC-32 and
+   Adler-32 those formats use, and the file forms that write through a
+   temporary file so a failed write never replaces a good image with half of
+   a new one. */
 
 /* Floats are moved through uint32_t bit patterns to fix their byte order. */
 typedef char rrv__float_must_be_ieee_single[(sizeof(float) == 4 && FLT_MANT_DIG == 24) ? 1 : -1];
@@ -5260,196 +5261,11 @@ RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user,
     return w.failed ? RRV_ERROR_IO : RRV_OK;
 }
 
-/* ---- PNG writer ------------------------------------------------------------------ */
-
-/* IDAT payload per chunk; the chunk's length, type and CRC frame it in the
-   same buffer so each chunk reaches the callback in one call. */
-#define RRV__PNG_IDAT_BYTES ((size_t)32 * 1024)
-#define RRV__DEFLATE_STORED_MAX 65535u
-
-typedef struct rrv__png_writer {
-    rrv__piece_writer out;      /* piece = [length, "IDAT", payload, CRC] */
-    uint64_t raw_unblocked;     /* filtered image bytes not yet in a stored block */
-    uint32_t block_left;        /* bytes still to come in the current stored block */
-    uint32_t adler;             /* of the filtered image bytes, for the zlib trailer */
-} rrv__png_writer;
-
-static void rrv__png_flush_idat(rrv__png_writer *png)
-{
-    rrv__piece_writer *w = &png->out;
-    unsigned char *chunk = w->piece - 8;
-    size_t payload = w->fill;
-    if (w->failed || payload == 0) return;
-    rrv__put_u32_be(chunk, (uint32_t)payload);
-    memcpy(chunk + 4, "IDAT", 4);
-    rrv__put_u32_be(chunk + 8 + payload, rrv_crc32(0, chunk + 4, 4 + payload));
-    if (w->write(w->user, chunk, 12 + payload) != 0) w->failed = 1;
-    w->fill = 0;
-}
-
-/* Appends bytes of the zlib stream, emitting an IDAT chunk whenever the
-   payload buffer fills. */
-static void rrv__png_put_zlib(rrv__png_writer *png, const unsigned char *src, size_t size)
-{
-    rrv__piece_writer *w = &png->out;
-    while (size > 0 && !w->failed) {
-        size_t room = w->capacity - w->fill;
-        size_t take = size < room ? size : room;
-        memcpy(w->piece + w->fill, src, take);
-        w->fill += take;
-        src += take;
-        size -= take;
-        if (w->fill == w->capacity) rrv__png_flush_idat(png);
-    }
-}
-
-/* Appends filtered image bytes, opening a stored deflate block whenever the
-   previous one is full. The total is known in advance, so each block header
-   can carry its exact length and the last one its BFINAL bit. */
-static void rrv__png_put_raw(rrv__png_writer *png, const unsigned char *src, size_t size)
-{
-    png->adler = rrv_adler32(png->adler, src, size);
-    while (size > 0 && !png->out.failed) {
-        size_t take;
-        if (png->block_left == 0) {
-            unsigned char header[5];
-            uint32_t len = png->raw_unblocked < RRV__DEFLATE_STORED_MAX
-                         ? (uint32_t)png->raw_unblocked : RRV__DEFLATE_STORED_MAX;
-            uint32_t nlen = ~len & 0xFFFFu;
-            png->raw_unblocked -= len;
-            /* bit 0 BFINAL, bits 1-2 BTYPE = 00 (stored), the rest pads to a byte */
-            header[0] = (unsigned char)(png->raw_unblocked == 0 ? 1 : 0);
-            header[1] = (unsigned char)len;
-            header[2] = (unsigned char)(len >> 8);
-            header[3] = (unsigned char)nlen;
-            header[4] = (unsigned char)(nlen >> 8);
-            rrv__png_put_zlib(png, header, sizeof header);
-            png->block_left = len;
-        }
-        take = size < png->block_left ? size : png->block_left;
-        rrv__png_put_zlib(png, src, take);
-        png->block_left -= (uint32_t)take;
-        src += take;
-        size -= take;
-    }
-}
-
-static unsigned char rrv__srgb8(float value, double gain)
-{
-    double linear = (double)value * gain;
-    double encoded;
-    if (!(linear > 0.0)) return 0; /* negative, zero and NaN */
-    if (linear >= 1.0) return 255;
-    encoded = linear <= 0.0031308 ? 12.92 * linear : 1.055 * pow(linear, 1.0 / 2.4) - 0.055;
-    return (unsigned char)(encoded * 255.0 + 0.5);
-}
-
-RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
-                                    const float *rgb, int width, int height, double exposure)
-{
-    static const unsigned char signature[8] = { 137, 'P', 'N', 'G', '\r', '\n', 26, '\n' };
-    static const unsigned char iend[12] = { 0, 0, 0, 0, 'I', 'E', 'N', 'D', 0xAE, 0x42, 0x60, 0x82 };
-    static const unsigned char zlib_header[2] = { 0x78, 0x01 }; /* 32K window, no dictionary */
-    enum { PIXELS_PER_PUT = 256 };
-    unsigned char head[8 + 25], *buffer, trailer[4], bytes[3 * PIXELS_PER_PUT];
-    const unsigned char filter_none = 0;
-    rrv__png_writer png;
-    double gain;
-    int x, y;
-
-    if (!write || rrv__check_image_args(rgb, width, height) != RRV_OK) return RRV_ERROR_ARGUMENT;
-    if (!isfinite(exposure)) return RRV_ERROR_ARGUMENT;
-    gain = pow(2.0, exposure);
-
-    memcpy(head, signature, 8);
-    rrv__put_u32_be(head + 8, 13);
-    memcpy(head + 12, "IHDR", 4);
-    rrv__put_u32_be(head + 16, (uint32_t)width);
-    rrv__put_u32_be(head + 20, (uint32_t)height);
-    head[24] = 8; /* bits per sample */
-    head[25] = 2; /* colour type: RGB */
-    head[26] = 0; /* compression: deflate */
-    head[27] = 0; /* filter method 0 */
-    head[28] = 0; /* not interlaced */
-    rrv__put_u32_be(head + 29, rrv_crc32(0, head + 12, 17));
-    if (write(user, head, sizeof head) != 0) return RRV_ERROR_IO;
-
-    buffer = (unsigned char *)RRV_MALLOC(RRV__PNG_IDAT_BYTES + 12);
-    if (!buffer) return RRV_ERROR_MEMORY;
-    png.out.write = write;
-    png.out.user = user;
-    png.out.piece = buffer + 8;
-    png.out.fill = 0;
-    png.out.capacity = RRV__PNG_IDAT_BYTES;
-    png.out.failed = 0;
-    png.raw_unblocked = (uint64_t)height * (1 + 3 * (uint64_t)width);
-    png.block_left = 0;
-    png.adler = 1;
-
-    rrv__png_put_zlib(&png, zlib_header, sizeof zlib_header);
-    for (y = 0; y < height && !png.out.failed; ++y) {
-        const float *row = rgb + (size_t)y * (size_t)width * 3;
-        rrv__png_put_raw(&png, &filter_none, 1);
-        for (x = 0; x < width && !png.out.failed; x += PIXELS_PER_PUT) {
-            int count = width - x < PIXELS_PER_PUT ? width - x : PIXELS_PER_PUT, i;
-            const float *pixels = row + 3 * (size_t)x;
-            for (i = 0; i < 3 * count; ++i) bytes[i] = rrv__srgb8(pixels[i], gain);
-            rrv__png_put_raw(&png, bytes, 3 * (size_t)count);
-        }
-    }
-    rrv__put_u32_be(trailer, png.adler);
-    rrv__png_put_zlib(&png, trailer, sizeof trailer);
-    rrv__png_flush_idat(&png);
-    RRV_FREE(buffer);
-    if (png.out.failed) return RRV_ERROR_IO;
-    if (write(user, iend, sizeof iend) != 0) return RRV_ERROR_IO;
-    return RRV_OK;
-}
-
-/* ---- OpenEXR writer ---------------------------------------------------------------
-   Layout: magic, version 2 (single-part scanline), the header's attributes
-   and a NUL, one 64-bit offset per chunk, then chunks of (int32 y, int32
-   size, data). A chunk holds 1 scanline uncompressed or 16 with ZIP; inside
-   it each scanline stores all B values, then G, then R, little endian. */
-
-RRV_DEF uint16_t rrv_half_from_float(float value)
-{
-    uint32_t bits, magnitude, sign;
-    memcpy(&bits, &value, sizeof bits);
-    sign = (bits >> 16) & 0x8000u;
-    magnitude = bits & 0x7FFFFFFFu;
-    if (magnitude >= 0x7F800000u) { /* infinity, or NaN kept NaN by a forced quiet bit */
-        if (magnitude == 0x7F800000u) return (uint16_t)(sign | 0x7C00u);
-        return (uint16_t)(sign | 0x7E00u | ((magnitude >> 13) & 0x3FFu));
-    }
-    /* 0x477FE000 is 65504, the largest half: clamping instead of rounding to
-       infinity keeps a bright but finite pixel finite in the file. */
-    if (magnitude >= 0x477FE000u) return (uint16_t)(sign | 0x7BFFu);
-    if (magnitude >= 0x38800000u) { /* normal half: >= 2^-14 */
-        uint32_t half = ((magnitude >> 23) - 112u) << 10 | ((magnitude >> 13) & 0x3FFu);
-        uint32_t rest = magnitude & 0x1FFFu;
-        /* A carry out of the mantissa correctly bumps the exponent. */
-        if (rest > 0x1000u || (rest == 0x1000u && (half & 1u))) ++half;
-        return (uint16_t)(sign | half);
-    }
-    if (magnitude <= 0x33000000u) return (uint16_t)sign; /* <= 2^-25 rounds to (even) zero */
-    {
-        /* Subnormal half: the value in units of 2^-24 is the 24-bit mantissa
-           shifted right by 126 - exponent, which lies in [14, 24] here. */
-        uint32_t mantissa = (magnitude & 0x7FFFFFu) | 0x800000u;
-        unsigned shift = 126u - (magnitude >> 23);
-        uint32_t half = mantissa >> shift;
-        uint32_t rest = mantissa & ((1u << shift) - 1u), tie = 1u << (shift - 1u);
-        if (rest > tie || (rest == tie && (half & 1u))) ++half;
-        return (uint16_t)(sign | half);
-    }
-}
-
-/* -- deflate (zlib) for ZIP chunks --------------------------------------------
-   Greedy LZ77 over a 32 KiB window with hash chains, then one block with
-   Huffman codes made for the chunk. The block is written into a buffer the
-   size of the raw chunk; running out of room means the chunk does not shrink
-   and is stored raw instead. */
+/* ---- deflate (zlib), for PNG's IDAT and EXR's ZIP chunks ---------------------
+   Greedy LZ77 over a 32 KiB window with hash chains, then blocks with
+   Huffman codes made for their tokens. rrv__zlib_compress writes one block
+   into a buffer the size of the raw chunk; running out of room means the
+   chunk does not shrink, and the EXR writer stores it raw instead. */
 
 #define RRV__LZ_WINDOW 32768
 #define RRV__LZ_HASH_BITS 15
@@ -5581,12 +5397,21 @@ typedef struct rrv__deflater {
     uint32_t *tokens; /* room for one token per input byte */
 } rrv__deflater;
 
-static size_t rrv__lz77(rrv__deflater *z, const unsigned char *data, size_t size)
+/* LZ77 tokens of data[start, size). data[0, start) was compressed before
+   (the previous block of the same stream): it is only hashed, so matches can
+   reach back into it. */
+static size_t rrv__lz77(rrv__deflater *z, const unsigned char *data, size_t start, size_t size)
 {
-    size_t pos = 0, count = 0, i;
+    size_t pos, count = 0, i;
     for (i = 0; i < ((size_t)1 << RRV__LZ_HASH_BITS); ++i) z->head[i] = -1;
 #define RRV__LZ_HASH(p) ((((uint32_t)(p)[0] << 10) ^ ((uint32_t)(p)[1] << 5) ^ (uint32_t)(p)[2]) & \
                          ((1u << RRV__LZ_HASH_BITS) - 1u))
+    for (pos = start > RRV__LZ_WINDOW ? start - RRV__LZ_WINDOW : 0; pos < start && pos + 3 <= size; ++pos) {
+        uint32_t h = RRV__LZ_HASH(data + pos);
+        z->prev[pos & (RRV__LZ_WINDOW - 1)] = z->head[h];
+        z->head[h] = (int32_t)pos;
+    }
+    pos = start;
     while (pos < size) {
         size_t best = 0, best_dist = 0;
         if (pos + 3 <= size) {
@@ -5633,10 +5458,9 @@ static size_t rrv__lz77(rrv__deflater *z, const unsigned char *data, size_t size
     return count;
 }
 
-/* Compresses data into out as a zlib stream; returns its size, or 0 when it
-   would not fit in capacity. */
-static size_t rrv__zlib_compress(rrv__deflater *z, const unsigned char *data, size_t size,
-                                 unsigned char *out, size_t capacity)
+/* Appends one deflate block with Huffman codes made for these tokens
+   (BFINAL set when final). */
+static void rrv__deflate_block(rrv__bit_writer *b, const uint32_t *token_list, size_t tokens, int final)
 {
     static const unsigned char cl_order[19] = {
         16, 17, 18, 0, 8, 7, 9, 6, 10, 5, 11, 4, 12, 3, 13, 2, 14, 1, 15 };
@@ -5644,15 +5468,11 @@ static size_t rrv__zlib_compress(rrv__deflater *z, const unsigned char *data, si
     unsigned char lit_len[288], dist_len[30], cl_len[19], all_len[288 + 30];
     uint16_t lit_code[288], dist_code[30], cl_code[19];
     unsigned char runs[288 + 30], run_extra[288 + 30];
-    size_t tokens, t, run_count = 0;
+    size_t t, run_count = 0;
     int hlit, hdist, hclen, total, i;
-    rrv__bit_writer b;
-    uint32_t adler;
 
-    if (capacity < 8) return 0;
-    tokens = rrv__lz77(z, data, size);
     for (t = 0; t < tokens; ++t) {
-        uint32_t token = z->tokens[t];
+        uint32_t token = token_list[t];
         if (token < 256) {
             ++lit_freq[token];
         } else {
@@ -5708,6 +5528,44 @@ static size_t rrv__zlib_compress(rrv__deflater *z, const unsigned char *data, si
     rrv__huffman_codes(cl_len, 19, cl_code);
     for (hclen = 19; hclen > 4 && cl_len[cl_order[hclen - 1]] == 0; --hclen) {}
 
+    rrv__bits_put(b, final ? 1u : 0u, 1); /* BFINAL */
+    rrv__bits_put(b, 2, 2); /* dynamic Huffman */
+    rrv__bits_put(b, (uint32_t)(hlit - 257), 5);
+    rrv__bits_put(b, (uint32_t)(hdist - 1), 5);
+    rrv__bits_put(b, (uint32_t)(hclen - 4), 4);
+    for (i = 0; i < hclen; ++i) rrv__bits_put(b, cl_len[cl_order[i]], 3);
+    for (t = 0; t < run_count; ++t) {
+        rrv__bits_put_code(b, cl_code[runs[t]], cl_len[runs[t]]);
+        if (runs[t] == 16) rrv__bits_put(b, run_extra[t], 2);
+        else if (runs[t] == 17) rrv__bits_put(b, run_extra[t], 3);
+        else if (runs[t] == 18) rrv__bits_put(b, run_extra[t], 7);
+    }
+    for (t = 0; t < tokens && !b->full; ++t) {
+        uint32_t token = token_list[t];
+        if (token < 256) {
+            rrv__bits_put_code(b, lit_code[token], lit_len[token]);
+        } else {
+            unsigned length = token >> 16, dist = token & 0xFFFFu;
+            int lc = rrv__deflate_length_code(length), dc = rrv__deflate_dist_code(dist);
+            rrv__bits_put_code(b, lit_code[257 + lc], lit_len[257 + lc]);
+            if (rrv__deflate_length_extra[lc])
+                rrv__bits_put(b, length - rrv__deflate_length_base[lc], rrv__deflate_length_extra[lc]);
+            rrv__bits_put_code(b, dist_code[dc], dist_len[dc]);
+            if (rrv__deflate_dist_extra[dc])
+                rrv__bits_put(b, dist - rrv__deflate_dist_base[dc], rrv__deflate_dist_extra[dc]);
+        }
+    }
+    rrv__bits_put_code(b, lit_code[256], lit_len[256]);
+}
+
+/* Compresses data into out as a zlib stream of one block; returns its size,
+   or 0 when it would not fit in capacity. */
+static size_t rrv__zlib_compress(rrv__deflater *z, const unsigned char *data, size_t size,
+                                 unsigned char *out, size_t capacity)
+{
+    rrv__bit_writer b;
+    size_t tokens;
+    if (capacity < 8) return 0;
     b.out = out;
     b.size = 0;
     b.capacity = capacity - 4; /* room for the Adler-32 trailer */
@@ -5716,39 +5574,288 @@ static size_t rrv__zlib_compress(rrv__deflater *z, const unsigned char *data, si
     b.full = 0;
     out[b.size++] = 0x78; /* deflate, 32 KiB window */
     out[b.size++] = 0x01; /* no dictionary; (0x7801 % 31) == 0 */
-    rrv__bits_put(&b, 1, 1); /* BFINAL */
-    rrv__bits_put(&b, 2, 2); /* dynamic Huffman */
-    rrv__bits_put(&b, (uint32_t)(hlit - 257), 5);
-    rrv__bits_put(&b, (uint32_t)(hdist - 1), 5);
-    rrv__bits_put(&b, (uint32_t)(hclen - 4), 4);
-    for (i = 0; i < hclen; ++i) rrv__bits_put(&b, cl_len[cl_order[i]], 3);
-    for (t = 0; t < run_count; ++t) {
-        rrv__bits_put_code(&b, cl_code[runs[t]], cl_len[runs[t]]);
-        if (runs[t] == 16) rrv__bits_put(&b, run_extra[t], 2);
-        else if (runs[t] == 17) rrv__bits_put(&b, run_extra[t], 3);
-        else if (runs[t] == 18) rrv__bits_put(&b, run_extra[t], 7);
-    }
-    for (t = 0; t < tokens && !b.full; ++t) {
-        uint32_t token = z->tokens[t];
-        if (token < 256) {
-            rrv__bits_put_code(&b, lit_code[token], lit_len[token]);
-        } else {
-            unsigned length = token >> 16, dist = token & 0xFFFFu;
-            int lc = rrv__deflate_length_code(length), dc = rrv__deflate_dist_code(dist);
-            rrv__bits_put_code(&b, lit_code[257 + lc], lit_len[257 + lc]);
-            if (rrv__deflate_length_extra[lc])
-                rrv__bits_put(&b, length - rrv__deflate_length_base[lc], rrv__deflate_length_extra[lc]);
-            rrv__bits_put_code(&b, dist_code[dc], dist_len[dc]);
-            if (rrv__deflate_dist_extra[dc])
-                rrv__bits_put(&b, dist - rrv__deflate_dist_base[dc], rrv__deflate_dist_extra[dc]);
-        }
-    }
-    rrv__bits_put_code(&b, lit_code[256], lit_len[256]);
+    tokens = rrv__lz77(z, data, 0, size);
+    rrv__deflate_block(&b, z->tokens, tokens, 1);
     if (b.count > 0) rrv__bits_put(&b, 0, 8 - b.count);
     if (b.full) return 0;
-    adler = rrv_adler32(1, data, size);
-    rrv__put_u32_be(out + b.size, adler);
+    rrv__put_u32_be(out + b.size, rrv_adler32(1, data, size));
     return b.size + 4;
+}
+
+
+/* ---- PNG writer ------------------------------------------------------------------
+   Each row takes the filter (None, Sub, Up, Average, Paeth) whose output has
+   the smallest sum of absolute values as signed bytes, libpng's default
+   heuristic: a cheap guess at what deflates best. The filtered rows are
+   deflated in blocks of about RRV__PNG_BLOCK_BYTES, each with Huffman codes
+   of its own; matches reach back into the previous block, and a block that
+   would not shrink is stored instead. Memory stays a few MiB at any image
+   size, and the callback still sees chunks of RRV__PNG_IDAT_BYTES. */
+
+/* IDAT payload per chunk; the chunk's length, type and CRC frame it in the
+   same buffer so each chunk reaches the callback in one call. */
+#define RRV__PNG_IDAT_BYTES ((size_t)32 * 1024)
+#define RRV__PNG_BLOCK_BYTES ((size_t)256 * 1024)
+#define RRV__DEFLATE_STORED_MAX 65535u
+
+typedef struct rrv__png_writer {
+    rrv__piece_writer out;      /* piece = [length, "IDAT", payload, CRC] */
+    rrv__deflater *z;
+    rrv__bit_writer bits;       /* one block's whole bytes; its partial byte stays in bits */
+    unsigned char *block;       /* [the previous window | filtered rows not yet deflated] */
+    size_t history, fill;       /* block[0, history) is already out, [history, fill) is not */
+    uint32_t adler;             /* of the filtered image bytes, for the zlib trailer */
+} rrv__png_writer;
+
+static void rrv__png_flush_idat(rrv__png_writer *png)
+{
+    rrv__piece_writer *w = &png->out;
+    unsigned char *chunk = w->piece - 8;
+    size_t payload = w->fill;
+    if (w->failed || payload == 0) return;
+    rrv__put_u32_be(chunk, (uint32_t)payload);
+    memcpy(chunk + 4, "IDAT", 4);
+    rrv__put_u32_be(chunk + 8 + payload, rrv_crc32(0, chunk + 4, 4 + payload));
+    if (w->write(w->user, chunk, 12 + payload) != 0) w->failed = 1;
+    w->fill = 0;
+}
+
+/* Appends bytes of the zlib stream, emitting an IDAT chunk whenever the
+   payload buffer fills. */
+static void rrv__png_put_zlib(rrv__png_writer *png, const unsigned char *src, size_t size)
+{
+    rrv__piece_writer *w = &png->out;
+    while (size > 0 && !w->failed) {
+        size_t room = w->capacity - w->fill;
+        size_t take = size < room ? size : room;
+        memcpy(w->piece + w->fill, src, take);
+        w->fill += take;
+        src += take;
+        size -= take;
+        if (w->fill == w->capacity) rrv__png_flush_idat(png);
+    }
+}
+
+/* Room a block needs in the bit writer: stored, the worst case kept. */
+static size_t rrv__png_stored_bound(size_t raw)
+{
+    return raw + 5 * (raw / RRV__DEFLATE_STORED_MAX + 1) + 2;
+}
+
+/* Deflates the rows gathered since the last block, then keeps the last
+   window of them as the history the next block may match against. */
+static void rrv__png_deflate(rrv__png_writer *png, int final)
+{
+    rrv__bit_writer *b = &png->bits;
+    const unsigned char *raw = png->block + png->history;
+    size_t raw_size = png->fill - png->history, tokens, keep;
+    uint32_t bits_before = b->bits;
+    int count_before = b->count;
+
+    png->adler = rrv_adler32(png->adler, raw, raw_size);
+    tokens = rrv__lz77(png->z, png->block, png->history, png->fill);
+    b->size = 0;
+    b->full = 0;
+    rrv__deflate_block(b, png->z->tokens, tokens, final);
+    if (b->full || b->size >= rrv__png_stored_bound(raw_size) - 2) {
+        /* Noise-like rows: stored blocks cost 5 bytes per 64 KiB. */
+        size_t done = 0;
+        b->size = 0;
+        b->full = 0;
+        b->bits = bits_before;
+        b->count = count_before;
+        do {
+            size_t len = raw_size - done < RRV__DEFLATE_STORED_MAX ? raw_size - done : RRV__DEFLATE_STORED_MAX;
+            rrv__bits_put(b, final && done + len == raw_size ? 1u : 0u, 1);
+            rrv__bits_put(b, 0, 2); /* BTYPE 00: stored */
+            if (b->count > 0) rrv__bits_put(b, 0, 8 - b->count);
+            b->out[b->size++] = (unsigned char)len;
+            b->out[b->size++] = (unsigned char)(len >> 8);
+            b->out[b->size++] = (unsigned char)~len;
+            b->out[b->size++] = (unsigned char)(~len >> 8);
+            memcpy(b->out + b->size, raw + done, len);
+            b->size += len;
+            done += len;
+        } while (done < raw_size);
+    }
+    rrv__png_put_zlib(png, b->out, b->size);
+    b->size = 0;
+    keep = png->fill < RRV__LZ_WINDOW ? png->fill : RRV__LZ_WINDOW;
+    memmove(png->block, png->block + png->fill - keep, keep);
+    png->history = png->fill = keep;
+}
+
+static unsigned rrv__png_paeth(unsigned a, unsigned b, unsigned c)
+{
+    /* |p - a| = |b - c| etc. with p = a + b - c; no abs(), which needs
+       <stdlib.h> (not included when the user brings an allocator) */
+    unsigned pa = b > c ? b - c : c - b, pb = a > c ? a - c : c - a;
+    unsigned pc = a + b > 2 * c ? a + b - 2 * c : 2 * c - a - b;
+    if (pa <= pb && pa <= pc) return a;
+    return pb <= pc ? b : c;
+}
+
+/* Appends the row (3 bytes a pixel) filtered against the row above it
+   (zeros above the first row) with the filter of the least absolute sum. */
+static void rrv__png_put_row(rrv__png_writer *png, const unsigned char *row, const unsigned char *above,
+                             size_t n)
+{
+    uint64_t sum[5] = { 0, 0, 0, 0, 0 };
+    unsigned char *out = png->block + png->fill;
+    size_t i;
+    int type, best = 0;
+    for (i = 0; i < n; ++i) {
+        unsigned x = row[i], a = i >= 3 ? row[i - 3] : 0, b = above[i], c = i >= 3 ? above[i - 3] : 0;
+        unsigned char f[5];
+        f[0] = (unsigned char)x;
+        f[1] = (unsigned char)(x - a);
+        f[2] = (unsigned char)(x - b);
+        f[3] = (unsigned char)(x - ((a + b) >> 1));
+        f[4] = (unsigned char)(x - rrv__png_paeth(a, b, c));
+        for (type = 0; type < 5; ++type) sum[type] += f[type] < 128 ? f[type] : 256u - f[type];
+    }
+    for (type = 1; type < 5; ++type) if (sum[type] < sum[best]) best = type;
+    out[0] = (unsigned char)best;
+    for (i = 0; i < n; ++i) {
+        unsigned x = row[i], a = i >= 3 ? row[i - 3] : 0, b = above[i], c = i >= 3 ? above[i - 3] : 0;
+        unsigned predicted = best == 0 ? 0 : best == 1 ? a : best == 2 ? b
+                           : best == 3 ? (a + b) >> 1 : rrv__png_paeth(a, b, c);
+        out[1 + i] = (unsigned char)(x - predicted);
+    }
+    png->fill += 1 + n;
+}
+
+static unsigned char rrv__srgb8(float value, double gain)
+{
+    double linear = (double)value * gain;
+    double encoded;
+    if (!(linear > 0.0)) return 0; /* negative, zero and NaN */
+    if (linear >= 1.0) return 255;
+    encoded = linear <= 0.0031308 ? 12.92 * linear : 1.055 * pow(linear, 1.0 / 2.4) - 0.055;
+    return (unsigned char)(encoded * 255.0 + 0.5);
+}
+
+RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
+                                    const float *rgb, int width, int height, double exposure)
+{
+    static const unsigned char signature[8] = { 137, 'P', 'N', 'G', '\r', '\n', 26, '\n' };
+    static const unsigned char iend[12] = { 0, 0, 0, 0, 'I', 'E', 'N', 'D', 0xAE, 0x42, 0x60, 0x82 };
+    static const unsigned char zlib_header[2] = { 0x78, 0x01 }; /* 32K window, no dictionary */
+    unsigned char head[8 + 25], trailer[4];
+    unsigned char *idat = NULL, *rows = NULL, *packed = NULL;
+    size_t row_bytes, max_raw, i;
+    rrv__png_writer png;
+    rrv_result result = RRV_OK;
+    double gain;
+    int y;
+
+    if (!write || rrv__check_image_args(rgb, width, height) != RRV_OK) return RRV_ERROR_ARGUMENT;
+    if (!isfinite(exposure)) return RRV_ERROR_ARGUMENT;
+    gain = pow(2.0, exposure);
+    row_bytes = 3 * (size_t)width;
+    /* A block ends at the first row that reaches RRV__PNG_BLOCK_BYTES. */
+    max_raw = RRV__PNG_BLOCK_BYTES + 1 + row_bytes;
+
+    memcpy(head, signature, 8);
+    rrv__put_u32_be(head + 8, 13);
+    memcpy(head + 12, "IHDR", 4);
+    rrv__put_u32_be(head + 16, (uint32_t)width);
+    rrv__put_u32_be(head + 20, (uint32_t)height);
+    head[24] = 8; /* bits per sample */
+    head[25] = 2; /* colour type: RGB */
+    head[26] = 0; /* compression: deflate */
+    head[27] = 0; /* filter method 0 (adaptive, five filter types) */
+    head[28] = 0; /* not interlaced */
+    rrv__put_u32_be(head + 29, rrv_crc32(0, head + 12, 17));
+    if (write(user, head, sizeof head) != 0) return RRV_ERROR_IO;
+
+    memset(&png, 0, sizeof png);
+    idat = (unsigned char *)RRV_MALLOC(RRV__PNG_IDAT_BYTES + 12);
+    rows = (unsigned char *)RRV_MALLOC(2 * row_bytes);
+    png.block = (unsigned char *)RRV_MALLOC(RRV__LZ_WINDOW + max_raw);
+    packed = (unsigned char *)RRV_MALLOC(rrv__png_stored_bound(max_raw));
+    png.z = (rrv__deflater *)RRV_MALLOC(sizeof *png.z);
+    if (png.z) png.z->tokens = (uint32_t *)RRV_MALLOC(max_raw * sizeof *png.z->tokens);
+    if (!idat || !rows || !png.block || !packed || !png.z || !png.z->tokens) {
+        result = RRV_ERROR_MEMORY;
+        goto done;
+    }
+    png.out.write = write;
+    png.out.user = user;
+    png.out.piece = idat + 8;
+    png.out.capacity = RRV__PNG_IDAT_BYTES;
+    png.bits.out = packed;
+    png.bits.capacity = rrv__png_stored_bound(max_raw);
+    png.adler = 1;
+
+    rrv__png_put_zlib(&png, zlib_header, sizeof zlib_header);
+    memset(rows, 0, row_bytes); /* the "row above" the first row */
+    for (y = 0; y < height && !png.out.failed; ++y) {
+        const float *pixels = rgb + (size_t)y * row_bytes;
+        unsigned char *above = rows + (size_t)(y & 1) * row_bytes;
+        unsigned char *row = rows + (size_t)((y + 1) & 1) * row_bytes;
+        for (i = 0; i < row_bytes; ++i) row[i] = rrv__srgb8(pixels[i], gain);
+        rrv__png_put_row(&png, row, above, row_bytes);
+        if (y == height - 1) rrv__png_deflate(&png, 1);
+        else if (png.fill - png.history >= RRV__PNG_BLOCK_BYTES) rrv__png_deflate(&png, 0);
+    }
+    /* The last block ends on a whole byte: pad its final bits. */
+    if (png.bits.count > 0) {
+        rrv__bits_put(&png.bits, 0, 8 - png.bits.count);
+        rrv__png_put_zlib(&png, png.bits.out, png.bits.size);
+    }
+    rrv__put_u32_be(trailer, png.adler);
+    rrv__png_put_zlib(&png, trailer, sizeof trailer);
+    rrv__png_flush_idat(&png);
+    if (png.out.failed) result = RRV_ERROR_IO;
+    else if (write(user, iend, sizeof iend) != 0) result = RRV_ERROR_IO;
+done:
+    if (png.z) RRV_FREE(png.z->tokens);
+    RRV_FREE(png.z);
+    RRV_FREE(packed);
+    RRV_FREE(png.block);
+    RRV_FREE(rows);
+    RRV_FREE(idat);
+    return result;
+}
+
+/* ---- OpenEXR writer ---------------------------------------------------------------
+   Layout: magic, version 2 (single-part scanline), the header's attributes
+   and a NUL, one 64-bit offset per chunk, then chunks of (int32 y, int32
+   size, data). A chunk holds 1 scanline uncompressed or 16 with ZIP; inside
+   it each scanline stores all B values, then G, then R, little endian. */
+
+RRV_DEF uint16_t rrv_half_from_float(float value)
+{
+    uint32_t bits, magnitude, sign;
+    memcpy(&bits, &value, sizeof bits);
+    sign = (bits >> 16) & 0x8000u;
+    magnitude = bits & 0x7FFFFFFFu;
+    if (magnitude >= 0x7F800000u) { /* infinity, or NaN kept NaN by a forced quiet bit */
+        if (magnitude == 0x7F800000u) return (uint16_t)(sign | 0x7C00u);
+        return (uint16_t)(sign | 0x7E00u | ((magnitude >> 13) & 0x3FFu));
+    }
+    /* 0x477FE000 is 65504, the largest half: clamping instead of rounding to
+       infinity keeps a bright but finite pixel finite in the file. */
+    if (magnitude >= 0x477FE000u) return (uint16_t)(sign | 0x7BFFu);
+    if (magnitude >= 0x38800000u) { /* normal half: >= 2^-14 */
+        uint32_t half = ((magnitude >> 23) - 112u) << 10 | ((magnitude >> 13) & 0x3FFu);
+        uint32_t rest = magnitude & 0x1FFFu;
+        /* A carry out of the mantissa correctly bumps the exponent. */
+        if (rest > 0x1000u || (rest == 0x1000u && (half & 1u))) ++half;
+        return (uint16_t)(sign | half);
+    }
+    if (magnitude <= 0x33000000u) return (uint16_t)sign; /* <= 2^-25 rounds to (even) zero */
+    {
+        /* Subnormal half: the value in units of 2^-24 is the 24-bit mantissa
+           shifted right by 126 - exponent, which lies in [14, 24] here. */
+        uint32_t mantissa = (magnitude & 0x7FFFFFu) | 0x800000u;
+        unsigned shift = 126u - (magnitude >> 23);
+        uint32_t half = mantissa >> shift;
+        uint32_t rest = mantissa & ((1u << shift) - 1u), tie = 1u << (shift - 1u);
+        if (rest > tie || (rest == tie && (half & 1u))) ++half;
+        return (uint16_t)(sign | half);
+    }
 }
 
 /* -- the file ------------------------------------------------------------------ */

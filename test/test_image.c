@@ -10,6 +10,7 @@
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
+#include "inflate.h"
 
 #include <stdlib.h>
 #include <string.h>
@@ -156,6 +157,40 @@ static float *make_image(int width, int height)
     size_t i, n = (size_t)width * (size_t)height * 3;
     if (!rgb) return NULL;
     for (i = 0; i < n; ++i) rgb[i] = (float)((double)lcg_next() / (1 << 24) * 3.0 - 1.0);
+    return rgb;
+}
+
+/* Floats whose sRGB bytes are uniformly random (each the linear value of a
+   byte's centre). */
+static float *make_noise_image(int width, int height)
+{
+    float *rgb = (float *)malloc((size_t)width * (size_t)height * 3 * sizeof *rgb);
+    size_t i, n = (size_t)width * (size_t)height * 3;
+    if (!rgb) return NULL;
+    for (i = 0; i < n; ++i) {
+        double e = ((double)(lcg_next() >> 16 & 255u)) / 255.0;
+        rgb[i] = (float)(e <= 0.04045 ? e / 12.92 : pow((e + 0.055) / 1.055, 2.4));
+    }
+    return rgb;
+}
+
+/* A sky-like gradient with a disc and a few hard edges: what a render
+   without noise looks like. */
+static float *make_smooth_image(int width, int height)
+{
+    float *rgb = (float *)malloc((size_t)width * (size_t)height * 3 * sizeof *rgb);
+    int x, y;
+    if (!rgb) return NULL;
+    for (y = 0; y < height; ++y)
+        for (x = 0; x < width; ++x) {
+            float *px = rgb + ((size_t)y * (size_t)width + (size_t)x) * 3;
+            double u = (double)x / width, v = (double)y / height;
+            double dx = u - 0.6, dy = v - 0.4, disc = dx * dx + dy * dy < 0.04 ? 0.5 : 0.0;
+            int checker = ((x / 25) + (y / 25)) & 1;
+            px[0] = (float)(0.1 + 0.5 * v + disc);
+            px[1] = (float)(0.2 + 0.3 * u * v + (v > 0.8 ? 0.2 * checker : 0.0));
+            px[2] = (float)(0.6 - 0.4 * v + disc * u);
+        }
     return rgb;
 }
 
@@ -559,21 +594,42 @@ static unsigned char expected_srgb8(float value, double exposure)
     return (unsigned char)floor(encoded * 255.0 + 0.5);
 }
 
-/* Takes a PNG apart and checks every byte of it against the float image. */
+/* What check_png saw in the zlib stream. */
+typedef struct png_stats {
+    int blocks[3];       /* deflate blocks: stored, fixed Huffman, dynamic Huffman */
+    int filters[5];      /* rows filtered with None, Sub, Up, Average, Paeth */
+    size_t zlib_size;    /* the IDAT payload */
+} png_stats;
+
+/* PNG's Paeth predictor, as the specification writes it. */
+static int paeth_predictor(int a, int b, int c)
+{
+    int p = a + b - c, pa = abs(p - a), pb = abs(p - b), pc = abs(p - c);
+    if (pa <= pb && pa <= pc) return a;
+    if (pb <= pc) return b;
+    return c;
+}
+
+/* Takes a PNG apart, inflates it with test/inflate.h, undoes the row filters
+   and checks every byte of it against the float image. */
 static void check_png(const byte_sink *png, const float *rgb, int width, int height, double exposure,
-                      int min_stored_blocks, const char *label)
+                      png_stats *stats_out, const char *label)
 {
     static const unsigned char signature[8] = { 137, 80, 78, 71, 13, 10, 26, 10 };
     const unsigned char *p = png->data;
-    size_t pos = 8, idat_size = 0, raw_size = 0, expected_raw = (size_t)height * (1 + 3 * (size_t)width);
-    unsigned char *idat = NULL, *raw = NULL;
-    int chunk_index = 0, seen_iend = 0, idat_done = 0, blocks = 0, final_seen = 0, x, y, c, mismatches = 0;
+    size_t pos = 8, idat_size = 0, raw_size = 0, stride = 1 + 3 * (size_t)width;
+    size_t expected_raw = (size_t)height * stride;
+    unsigned char *idat = NULL, *raw = NULL, *pixels = NULL;
+    int chunk_index = 0, seen_iend = 0, idat_done = 0, x, y, c, mismatches = 0;
+    png_stats stats;
 
+    memset(&stats, 0, sizeof stats);
     CHECKF(png->size >= 8 && memcmp(p, signature, 8) == 0, "%s: signature", label);
     if (png->size < 8) return;
     idat = (unsigned char *)malloc(png->size);
-    raw = (unsigned char *)malloc(expected_raw + 65535);
-    if (!idat || !raw) { CHECK(idat && raw); free(idat); free(raw); return; }
+    raw = (unsigned char *)malloc(expected_raw + 1);
+    pixels = (unsigned char *)malloc(expected_raw + 1);
+    if (!idat || !raw || !pixels) { CHECK(idat && raw && pixels); free(idat); free(raw); free(pixels); return; }
 
     while (pos < png->size && !seen_iend) {
         uint32_t length, crc_stored;
@@ -613,40 +669,31 @@ static void check_png(const byte_sink *png, const float *rgb, int width, int hei
     CHECKF(seen_iend && pos == png->size, "%s: IEND missing or not last", label);
     CHECKF(chunk_index >= 3, "%s: only %d chunks", label, chunk_index);
 
-    /* zlib: header, stored deflate blocks, Adler-32 of the inflated bytes */
-    CHECKF(idat_size >= 2 + 5 + 4, "%s: zlib stream too short", label);
-    if (idat_size >= 2 + 5 + 4) {
-        size_t zpos = 2;
-        CHECK(idat[0] == 0x78 && idat[1] == 0x01);
-        CHECK(((unsigned)idat[0] * 256u + idat[1]) % 31u == 0 && !(idat[1] & 0x20));
-        while (!final_seen) {
-            unsigned len, nlen;
-            if (idat_size - zpos < 5) { CHECKF(0, "%s: block header cut off", label); break; }
-            final_seen = idat[zpos] & 1;
-            CHECKF(((idat[zpos] >> 1) & 3) == 0, "%s: block %d is not stored", label, blocks);
-            len = idat[zpos + 1] | (unsigned)idat[zpos + 2] << 8;
-            nlen = idat[zpos + 3] | (unsigned)idat[zpos + 4] << 8;
-            CHECKF(len == (~nlen & 0xFFFFu), "%s: block %d LEN %u NLEN %u", label, blocks, len, nlen);
-            zpos += 5;
-            if (len > idat_size - zpos || raw_size + len > expected_raw) { CHECKF(0, "%s: block %d overruns", label, blocks); break; }
-            memcpy(raw + raw_size, idat + zpos, len);
-            raw_size += len;
-            zpos += len;
-            ++blocks;
-        }
-        CHECKF(final_seen, "%s: no final block", label);
-        CHECKF(idat_size - zpos == 4, "%s: %lu bytes after the last block", label, (unsigned long)(idat_size - zpos));
-        if (idat_size - zpos >= 4)
-            CHECKF(read_u32_be(idat + zpos) == naive_adler32(raw, raw_size), "%s: Adler-32", label);
-    }
-    CHECKF(blocks >= min_stored_blocks, "%s: %d stored blocks", label, blocks);
-    CHECKF(raw_size == expected_raw, "%s: %lu filtered bytes, expected %lu", label,
-           (unsigned long)raw_size, (unsigned long)expected_raw);
+    /* zlib: rrv's header, then whatever blocks; the inflate checks the Adler-32 */
+    stats.zlib_size = idat_size;
+    CHECKF(idat_size >= 2 && idat[0] == 0x78 && idat[1] == 0x01, "%s: zlib header", label);
+    raw_size = zlib_inflate_blocks(idat, idat_size, raw, expected_raw + 1, stats.blocks);
+    CHECKF(raw_size == expected_raw, "%s: inflates to %ld filtered bytes, expected %lu", label,
+           raw_size == (size_t)-1 ? -1L : (long)raw_size, (unsigned long)expected_raw);
 
     if (raw_size == expected_raw) {
+        /* undo the filters; the row above the first is zeros */
         for (y = 0; y < height; ++y) {
-            const unsigned char *row = raw + (size_t)y * (1 + 3 * (size_t)width);
-            CHECKF(row[0] == 0, "%s: row %d filter %d", label, y, row[0]);
+            const unsigned char *in = raw + (size_t)y * stride;
+            unsigned char *out = pixels + (size_t)y * stride, *up = y > 0 ? out - stride : NULL;
+            int filter = in[0];
+            CHECKF(filter <= 4, "%s: row %d filter %d", label, y, filter);
+            if (filter > 4) break;
+            ++stats.filters[filter];
+            for (x = 1; x < (int)stride; ++x) {
+                int a = x > 3 ? out[x - 3] : 0, b = up ? up[x] : 0, cc = x > 3 && up ? up[x - 3] : 0;
+                int predicted = filter == 0 ? 0 : filter == 1 ? a : filter == 2 ? b
+                              : filter == 3 ? (a + b) / 2 : paeth_predictor(a, b, cc);
+                out[x] = (unsigned char)((in[x] + predicted) & 255);
+            }
+        }
+        for (y = 0; y < height && mismatches < 5; ++y) {
+            const unsigned char *row = pixels + (size_t)y * stride;
             for (x = 0; x < width; ++x)
                 for (c = 0; c < 3; ++c) {
                     float v = rgb[((size_t)y * (size_t)width + (size_t)x) * 3 + (size_t)c];
@@ -657,19 +704,21 @@ static void check_png(const byte_sink *png, const float *rgb, int width, int hei
                 }
         }
     }
+    if (stats_out) *stats_out = stats;
     free(idat);
     free(raw);
+    free(pixels);
 }
 
 static void write_and_check_png(const float *rgb, int width, int height, double exposure,
-                                int min_stored_blocks, const char *label)
+                                png_stats *stats, const char *label)
 {
     byte_sink sink;
     rrv_result r;
     sink_init(&sink, (size_t)-1);
     r = rrv_write_png_to(sink_write, &sink, rgb, width, height, exposure);
     CHECKF(r == RRV_OK, "%s: %s", label, rrv_result_string(r));
-    if (r == RRV_OK) check_png(&sink, rgb, width, height, exposure, min_stored_blocks, label);
+    if (r == RRV_OK) check_png(&sink, rgb, width, height, exposure, stats, label);
     sink_free(&sink);
 }
 
@@ -704,15 +753,27 @@ static void test_png_structure(void)
             small[(y * 5 + x) * 3 + 1] = v * 0.5f;
             small[(y * 5 + x) * 3 + 2] = v * 0.25f;
         }
-    write_and_check_png(small, 5, 4, 0.0, 1, "5x4 exposure 0");
-    write_and_check_png(small, 5, 4, 1.0, 1, "5x4 exposure 1");
-    write_and_check_png(small, 5, 4, -0.5, 1, "5x4 exposure -0.5");
-    write_and_check_png(one, 1, 1, 0.0, 1, "1x1");
+    write_and_check_png(small, 5, 4, 0.0, NULL, "5x4 exposure 0");
+    write_and_check_png(small, 5, 4, 1.0, NULL, "5x4 exposure 1");
+    write_and_check_png(small, 5, 4, -0.5, NULL, "5x4 exposure -0.5");
+    write_and_check_png(one, 1, 1, 0.0, NULL, "1x1");
     if (big) {
-        /* 120 rows of 601 bytes is 72120 bytes: two stored blocks */
         for (x = 0; x < 200 * 120 * 3; x += 97) big[x] = NAN;
-        write_and_check_png(big, 200, 120, 0.0, 2, "200x120 exposure 0");
-        write_and_check_png(big, 200, 120, 1.0, 2, "200x120 exposure 1");
+        write_and_check_png(big, 200, 120, 0.0, NULL, "200x120 exposure 0");
+        write_and_check_png(big, 200, 120, 1.0, NULL, "200x120 exposure 1");
+    } else {
+        CHECK(big != NULL);
+    }
+    free(big);
+    big = make_noise_image(200, 120);
+    if (big) {
+        /* Uniformly random bytes do not shrink: every block must fall back
+           to stored, 5 bytes of header per 64 KiB (72120 bytes: 2 blocks). */
+        png_stats st;
+        write_and_check_png(big, 200, 120, 0.0, &st, "200x120 noise");
+        CHECKF(st.blocks[0] >= 2 && st.blocks[1] == 0 && st.blocks[2] == 0,
+               "noise: %d stored, %d fixed, %d dynamic blocks", st.blocks[0], st.blocks[1], st.blocks[2]);
+        CHECKF(st.zlib_size <= 2 + 120 * 601 + 5 * 2 + 4, "noise: %lu zlib bytes", (unsigned long)st.zlib_size);
 
         /* streamed in pieces, not handed over as one block */
         sink_init(&sink, (size_t)-1);
@@ -725,6 +786,27 @@ static void test_png_structure(void)
         CHECKF(sink.calls >= 2 && sink.largest_write < sink.size,
                "%d calls, largest %lu of %lu", sink.calls, (unsigned long)sink.largest_write, (unsigned long)sink.size);
         sink_free(&sink);
+    } else {
+        CHECK(big != NULL);
+    }
+    free(big);
+    big = make_smooth_image(400, 300);
+    if (big) {
+        /* 300 rows of 1201 bytes is 360300 bytes, more than one 256 KiB
+           block. A smooth image must really compress: every block with
+           Huffman codes, the whole under 1/8 of the filtered bytes (a
+           stored or a filter-less stream would be far above it), and the
+           filters in use beyond None. */
+        png_stats st;
+        int f, used = 0;
+        write_and_check_png(big, 400, 300, 0.0, &st, "400x300 smooth");
+        CHECKF(st.blocks[2] >= 2 && st.blocks[0] == 0,
+               "smooth: %d stored, %d fixed, %d dynamic blocks", st.blocks[0], st.blocks[1], st.blocks[2]);
+        CHECKF(st.zlib_size < 300 * 1201 / 8, "smooth: %lu zlib bytes of 360300", (unsigned long)st.zlib_size);
+        for (f = 1; f < 5; ++f) used += st.filters[f] > 0;
+        CHECKF(st.filters[0] < 300 && used >= 1, "smooth: filters None %d Sub %d Up %d Average %d Paeth %d",
+               st.filters[0], st.filters[1], st.filters[2], st.filters[3], st.filters[4]);
+        write_and_check_png(big, 400, 300, -2.0, NULL, "400x300 smooth exposure -2");
     } else {
         CHECK(big != NULL);
     }
@@ -871,7 +953,7 @@ static void test_pfm_png_files(void)
     CHECK(rrv_write_png_to(sink_write, &from_callback, first, 7, 5, 0.5) == RRV_OK);
     CHECK(from_file.size == from_callback.size && from_file.size > 0
           && memcmp(from_file.data, from_callback.data, from_file.size) == 0);
-    check_png(&from_file, first, 7, 5, 0.5, 1, "PNG file");
+    check_png(&from_file, first, 7, 5, 0.5, NULL, "PNG file");
     sink_free(&from_file);
     sink_free(&from_callback);
 
@@ -920,7 +1002,7 @@ static void test_pfm_png_files(void)
                     CHECK(count_temp_files("test_image_tmp.p") == 0);
                     expect_pfm_file(path, second, 9, 2, "after a failed write");
                     read_file_bytes(png_path, &from_file);
-                    check_png(&from_file, first, 7, 5, 0.5, 1, "PNG after a failed write");
+                    check_png(&from_file, first, 7, 5, 0.5, NULL, "PNG after a failed write");
                     sink_free(&from_file);
                 }
             }
