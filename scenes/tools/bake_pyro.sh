@@ -47,11 +47,29 @@ if len(keep) != 2:
 vdb.write(sys.argv[2], grids=keep)
 PY
 nanovdb_convert -f "$out/pyro.vdb" "$out/pyro.nvdb"
+# The scene names assets/pyro.nvdb; a copy of it reads the new file.
+sed "s|assets/pyro.nvdb|$(realpath "$out/pyro.nvdb")|" scenes/pyro.rrv > "$out/pyro.rrv"
+
+# What the scene relies on: both grids hold data, and the temperature
+# reaches a flame's (Blender: 0 ambient, about 1.5-3 in a flame).
+info=$(./rrv info "$out/pyro.rrv") || { echo "bake_pyro: rrv cannot read $out/pyro.nvdb" >&2; exit 1; }
+echo "$info" | grep grid
+echo "$info" | awk '
+    / grid "density":/     { d = $5 + 0 }
+    / grid "temperature":/ { t = $5 + 0; for (i = 1; i < NF; ++i) if ($i == "values") tmax = $(i + 3) + 0 }
+    END {
+        if (d < 1000 || t < 1000 || tmax < 1.5 || tmax > 5) {
+            printf "bake_pyro: implausible bake: %d density voxels, %d temperature voxels, max temperature %g\n", d, t, tmax > "/dev/stderr"
+            exit 1
+        }
+    }'
+if cmp -s "$out/pyro.nvdb" scenes/assets/pyro.nvdb; then
+    echo "bake_pyro: the frame is byte-identical to scenes/assets/pyro.nvdb"
+else
+    echo "bake_pyro: the frame differs from scenes/assets/pyro.nvdb (another Blender build or CPU; not an error)"
+fi
 
 echo "== render"
-# The scene names assets/pyro.nvdb; render a copy that points at the new file.
-sed "s|assets/pyro.nvdb|$(realpath "$out/pyro.nvdb")|" scenes/pyro.rrv > "$out/pyro.rrv"
-./rrv info "$out/pyro.rrv" | grep grid
 ./rrv render "$out/pyro.rrv" -o "$out/pyro.pfm" --png "$out/pyro.png" --spp "${PYRO_SPP:-8}" -q
 [ -s "$out/pyro.png" ] || { echo "bake_pyro: no image" >&2; exit 1; }
 if [ $install = 1 ]; then cp "$out/pyro.nvdb" scenes/assets/pyro.nvdb; fi
