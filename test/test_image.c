@@ -811,6 +811,21 @@ static void test_png_structure(void)
         CHECK(big != NULL);
     }
     free(big);
+
+    /* Rows longer than a deflate block (90000 pixels, 270001 bytes): each
+       row is a block of its own, stored ones split into 64 KiB pieces. */
+    big = make_smooth_image(90000, 2);
+    if (big) write_and_check_png(big, 90000, 2, 0.0, NULL, "90000x2 smooth");
+    CHECK(big != NULL);
+    free(big);
+    big = make_noise_image(90000, 2);
+    if (big) {
+        png_stats st;
+        write_and_check_png(big, 90000, 2, 0.0, &st, "90000x2 noise");
+        CHECKF(st.blocks[0] >= 9, "90000x2 noise: %d stored blocks", st.blocks[0]);
+    }
+    CHECK(big != NULL);
+    free(big);
 }
 
 /* ---- write failures and bad arguments ------------------------------------------------ */
