@@ -23,7 +23,7 @@ for tool in blender nanovdb_convert; do
     command -v $tool >/dev/null || { echo "bake_pyro: $tool not found" >&2; exit 1; }
 done
 /usr/bin/python3 -c 'import pyopenvdb' || { echo "bake_pyro: /usr/bin/python3 lacks pyopenvdb (python3-openvdb)" >&2; exit 1; }
-[ -x ./rrv ] || make rrv >/dev/null
+make rrv >/dev/null
 
 rm -rf "$out/cache"
 mkdir -p "$out/cache"
