@@ -312,6 +312,69 @@ static void test_lens_caustic_shoot(void)
     rrv_scene_free(s);
 }
 
+/* nee manifold against nee none (comb) in 4x4-pixel blocks around the
+   caustic, within 4 standard errors, for the unbiased estimate in both
+   gauges (eikonal) and with the comb integrator; the fixed-trial variant
+   (M = 4) is biased low in principle, checked only for finiteness. */
+static void caustic_manifold_case(rrv_scene *s, const stats *ref, const method *m, rrv_manifold_gauge gauge,
+                                  int trials, int spp, uint64_t seed, const char *name, int compare)
+{
+    rrv_render_stats rs;
+    stats b[NBLOCKS];
+    int i, bx, by, worse = 0;
+    const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
+    memset(b, 0, sizeof b);
+    memset(&rs, 0, sizeof rs);
+    use(s, m, RRV_NEE_MANIFOLD);
+    s->settings.manifold_gauge = gauge;
+    s->settings.manifold_trials = trials;
+    s->settings.seed = seed;
+    block_samples_rect(s, spp, x0, y0, x1, y1, BLOCK, BLOCK, b, &rs);
+    for (by = y0 / BLOCK; by < y1 / BLOCK; ++by) {
+        for (bx = x0 / BLOCK; bx < x1 / BLOCK; ++bx) {
+            double d, se;
+            i = by * BLOCKS_X + bx;
+            d = stats_mean(&b[i]) - stats_mean(&ref[i]);
+            se = sqrt(stats_se(&ref[i]) * stats_se(&ref[i]) + stats_se(&b[i]) * stats_se(&b[i]));
+            SAY("  %s block %d,%d: none %.4f +- %.4f, manifold %.4f +- %.4f (%.1f se)\n", name, bx, by,
+                stats_mean(&ref[i]), stats_se(&ref[i]), stats_mean(&b[i]), stats_se(&b[i]), se > 0 ? d / se : 0.0);
+            CHECKF(stats_mean(&b[i]) >= 0 && stats_mean(&b[i]) < 1e3, "%s block %d,%d: %g", name, bx, by,
+                   stats_mean(&b[i]));
+            if (compare)
+                CHECKF(fabs(d) <= 4 * se, "%s block %d,%d: none %.4f, manifold %.4f, difference %.4f over 4 se %.4f",
+                       name, bx, by, stats_mean(&ref[i]), stats_mean(&b[i]), d, 4 * se);
+            if (fabs(d) > 4 * se) ++worse;
+        }
+    }
+    SAY("  %s: %llu solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, %.0f segments a chain, "
+        "%d blocks beyond 4 se\n",
+        name, (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)rs.solves,
+        rs.solve_iterations / (double)rs.solves, rs.solve_trials / (double)rs.solve_connections,
+        rs.solve_segments / (double)rs.solves_converged, worse);
+    CHECK(rs.solves > 0 && rs.solve_connections > 0 && rs.solves_unsupported == 0);
+}
+
+static void test_lens_caustic_manifold(void)
+{
+    rrv_scene *s = NULL;
+    rrv_error err;
+    stats a[NBLOCKS];
+    const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
+    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
+        CHECKF(0, "parse: %s", err.message);
+        return;
+    }
+    memset(a, 0, sizeof a);
+    use(s, &comb, RRV_NEE_NONE);
+    s->settings.seed = 40;
+    block_samples_rect(s, 640, x0, y0, x1, y1, BLOCK, BLOCK, a, NULL);
+    caustic_manifold_case(s, a, &eikonal, RRV_GAUGE_CHORD, 0, 8, 41, "manifold chord", 1);
+    caustic_manifold_case(s, a, &comb, RRV_GAUGE_CHORD, 0, 8, 42, "manifold chord, comb", 1);
+    caustic_manifold_case(s, a, &eikonal, RRV_GAUGE_ISO, 0, 8, 43, "manifold iso", 0);
+    caustic_manifold_case(s, a, &eikonal, RRV_GAUGE_CHORD, 4, 4, 44, "manifold chord M=4", 0);
+    rrv_scene_free(s);
+}
+
 /* Fog inside the lens (albedo 1, optical radius 0.75) under the same
    light, seen from the side, three bounces: shooting from vertices in the
    medium, most of them inside the refraction support, with the phase
@@ -704,22 +767,31 @@ static void test_partition_is_exclusive(void)
     rrv_scene_free(s);
 }
 
+/* NEE_ONLY=NAME runs only the tests whose name contains NAME (development). */
+static const char *only;
+#define NEE_RUN(fn)                                                                                                    \
+    do {                                                                                                               \
+        if (!only || strstr(#fn, only)) RUN(fn);                                                                       \
+    } while (0)
+
 int main(void)
 {
     const char *v = getenv("NEE_VERBOSE");
+    only = getenv("NEE_ONLY");
     verbose = v && *v && *v != '0';
     (void)tb_shape; /* the caustic scene is parsed, not built */
-    RUN(test_nee_key);
-    RUN(test_nee_key_rejects_unknown_mode);
-    RUN(test_classic_ignores_nee);
-    RUN(test_furnace_luneburg);
-    RUN(test_furnace_blob);
-    RUN(test_lens_caustic);
-    RUN(test_lens_caustic_shoot);
-    RUN(test_fog_in_lens_shoot);
-    RUN(test_luneburg_two_point);
-    RUN(test_jacobian_against_differences);
-    RUN(test_reciprocity);
-    RUN(test_partition_is_exclusive);
+    NEE_RUN(test_nee_key);
+    NEE_RUN(test_nee_key_rejects_unknown_mode);
+    NEE_RUN(test_classic_ignores_nee);
+    NEE_RUN(test_furnace_luneburg);
+    NEE_RUN(test_furnace_blob);
+    NEE_RUN(test_lens_caustic);
+    NEE_RUN(test_lens_caustic_shoot);
+    NEE_RUN(test_fog_in_lens_shoot);
+    NEE_RUN(test_lens_caustic_manifold);
+    NEE_RUN(test_luneburg_two_point);
+    NEE_RUN(test_jacobian_against_differences);
+    NEE_RUN(test_reciprocity);
+    NEE_RUN(test_partition_is_exclusive);
     return CHECK_EXIT_CODE();
 }
