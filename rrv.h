@@ -5165,7 +5165,7 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
 #define RRV__MANIFOLD_TOL 1e-9    /* max |residual| at a root (eta radians) */
 #define RRV__MANIFOLD_FLAT 1e-9   /* |grad eta| below which a vertex has no isosurface */
 #define RRV__MANIFOLD_ROOTS 8     /* distinct roots the fixed-trial variant keeps */
-#define RRV__MANIFOLD_ITERATIONS 24 /* evaluations of the chain a solve may take */
+#define RRV__MANIFOLD_ITERATIONS 40 /* evaluations of the chain a solve may take */
 
 typedef struct rrv__chain {
     int n;                                /* inner vertices x[1..n] */
@@ -5178,8 +5178,9 @@ typedef struct rrv__chain {
     rrv_vec3 x[RRV__CHAIN_MAX + 2];       /* x[0] = x0, x[n + 1] = y */
     double eta[RRV__CHAIN_MAX + 2];       /* at vertex k */
     rrv_vec3 g[RRV__CHAIN_MAX + 2];
-    double em[RRV__CHAIN_MAX + 2];        /* of segment k, at its midpoint */
+    double em[RRV__CHAIN_MAX + 2];        /* of segment k: at its midpoint, at x0 for the first, y for the last */
     rrv_vec3 gm[RRV__CHAIN_MAX + 2];
+    double wa[RRV__CHAIN_MAX + 2], wb[RRV__CHAIN_MAX + 2]; /* d em_k = gm_k . (wa dx_k + wb dx_k+1) */
     rrv_vec3 b1[RRV__CHAIN_MAX + 2], b2[RRV__CHAIN_MAX + 2]; /* gauge basis */
     double r[RRV__CHAIN_MAX + 2][2];      /* residual of vertex k */
     double A[RRV__CHAIN_MAX + 2][4], B[RRV__CHAIN_MAX + 2][4], C[RRV__CHAIN_MAX + 2][4]; /* d r_k / d u_k-1, u_k, u_k+1 */
@@ -5323,8 +5324,8 @@ static int rrv__chain_thomas(const rrv__chain *ch, double (*rhs)[4], int cols, d
             rhs[k][2 + j] -= Cp[k][2] * a0 + Cp[k][3] * a1;
         }
     for (k = 1; k <= n; ++k)
-        for (j = 0; j < 4; ++j)
-            if (!(fabs(rhs[k][j]) < DBL_MAX)) return 0;
+        for (j = 0; j < cols; ++j)
+            if (!(fabs(rhs[k][j]) < DBL_MAX) || !(fabs(rhs[k][2 + j]) < DBL_MAX)) return 0;
     return 1;
 }
 
@@ -5385,9 +5386,9 @@ static void rrv__chain_vertex(const rrv_scene *scene, rrv__chain *ch, int k, int
             dwi[j] = sw * Pa[j];
             dn[j] = q == 1 ? DN[j] : 0.0;
         }
-        /* segment IORs at midpoints: d ep = gm_k-1 . (dx_k-1 + dx_k) / 2, d ei = gm_k . (dx_k + dx_k+1) / 2 */
-        if (q <= 1) deta = rrv__madd(deta, ch->gm[k - 1], 0.5 * eta / ep);
-        if (q >= 1) deta = rrv__madd(deta, ch->gm[k], -0.5 * eta / ei);
+        /* d eta = eta (d ep / ep - d ei / ei) */
+        if (q <= 1) deta = rrv__madd(deta, ch->gm[k - 1], (q == 0 ? ch->wa[k - 1] : ch->wb[k - 1]) * eta / ep);
+        if (q >= 1) deta = rrv__madd(deta, ch->gm[k], -(q == 1 ? ch->wa[k] : ch->wb[k]) * eta / ei);
         /* dcn = n^T dwi + wi^T dn, as a row: column i of the sum */
         for (i = 0; i < 3; ++i) {
             rrv_vec3 colw = rrv__v3(dwi[i], dwi[3 + i], dwi[6 + i]), coln = rrv__v3(dn[i], dn[3 + i], dn[6 + i]);
@@ -5427,13 +5428,15 @@ static void rrv__chain_vertex(const rrv_scene *scene, rrv__chain *ch, int k, int
 }
 
 /* IORs, gradients, gauge bases, residuals and (jac) the Jacobian at the
-   chain's positions. Returns the largest residual, DBL_MAX when the chain
-   is not usable there (an ISO vertex off every isosurface, a degenerate
-   segment, not finite). */
-static double rrv__chain_eval(const rrv_scene *scene, rrv__chain *ch, int jac)
+   chain's positions. Returns the root of the sum of squared residuals (the
+   merit Newton's step control uses) and sets *largest to the largest
+   residual; DBL_MAX when the chain is not usable there (an ISO vertex off
+   every isosurface, a degenerate segment, not finite). */
+static double rrv__chain_eval(const rrv_scene *scene, rrv__chain *ch, int jac, double *largest)
 {
     int k;
-    double worst = 0;
+    double worst = 0, sum = 0;
+    *largest = DBL_MAX;
     if (ch->failed) return DBL_MAX;
     ch->eta[0] = rrv__eta_gradient(scene, ch->x[0], &ch->g[0]);
     for (k = 1; k <= ch->n; ++k) {
@@ -5451,14 +5454,24 @@ static double rrv__chain_eval(const rrv_scene *scene, rrv__chain *ch, int jac)
     }
     for (k = 0; k <= ch->n; ++k) {
         if (!(rrv__length(rrv__sub(ch->x[k + 1], ch->x[k])) > 1e-12)) return DBL_MAX;
-        ch->em[k] = rrv__eta_gradient(scene, rrv__scale(rrv__add(ch->x[k], ch->x[k + 1]), 0.5), &ch->gm[k]);
+        /* the end segments take the IOR of their ends, so the kicks of
+           the vertices account for the whole change of eta from x0 to y
+           whatever the comb's offset */
+        ch->wa[k] = k == 0 ? 1.0 : k == ch->n ? 0.0 : 0.5;
+        ch->wb[k] = 1.0 - ch->wa[k];
+        if (ch->n == 0) ch->wa[k] = ch->wb[k] = 0.5;
+        ch->em[k] = rrv__eta_gradient(scene, rrv__madd(ch->x[k], rrv__sub(ch->x[k + 1], ch->x[k]), ch->wb[k]), &ch->gm[k]);
     }
     for (k = 1; k <= ch->n; ++k) {
         rrv__chain_vertex(scene, ch, k, jac);
         worst = fmax(worst, fmax(fabs(ch->r[k][0]), fabs(ch->r[k][1])));
+        sum += ch->r[k][0] * ch->r[k][0] + ch->r[k][1] * ch->r[k][1];
     }
-    return worst < DBL_MAX ? worst : DBL_MAX; /* NaN compares false: unusable */
+    if (!(worst < DBL_MAX) || !(sum < DBL_MAX)) return DBL_MAX; /* NaN compares false: unusable */
+    *largest = worst;
+    return sqrt(sum);
 }
+
 
 /* Moves every vertex by s times its step du (gauge coordinates in the
    bases b1, b2 of the positions xs it steps from). */
@@ -5529,7 +5542,9 @@ static void rrv__chain_setup(const rrv_scene *scene, rrv_vec3 x0, rrv_vec3 y, rr
 
 /* Seeds the chain from a direction w at x0: a parabola from x0 to y that
    leaves x0 along w (as nearly as a graph over the chord can), sampled at
-   the comb planes, ISO vertices then projected onto their isosurfaces. */
+   the comb planes, ISO vertices then projected onto their isosurfaces.
+   Good where the path stays near the chord; rrv__chain_trace below where
+   it bends far from it. */
 static void rrv__chain_seed(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w)
 {
     rrv_vec3 y = ch->x[ch->n + 1], x0 = ch->x[0];
@@ -5540,6 +5555,41 @@ static void rrv__chain_seed(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w)
     for (k = 1; k <= ch->n; ++k) {
         double t = ch->t[k - 1];
         ch->x[k] = rrv__madd(rrv__madd(x0, ch->c, t), v, t * (L - t) / L);
+        if (ch->iso && !rrv__project_iso(scene, &ch->x[k], ch->level[k])) ch->failed = 1;
+    }
+}
+
+/* Seeds the chain from a direction w at x0 by tracing it: the ray from x0
+   along w meets each comb plane in turn and is refracted there by the
+   chain's own rule (the segment's IOR taken at the middle of its chord
+   along the current direction), so every vertex but the last starts
+   satisfied and Newton has only to bend the whole path onto y, as a
+   shot would; far simpler than bending a guessed curve into a ray.
+   ISO vertices are then projected onto their isosurfaces. A ray that turns
+   back along the chord fails the seed. */
+static void rrv__chain_trace(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w)
+{
+    rrv_vec3 x0 = ch->x[0], x = x0, d = w, g;
+    double e_prev = rrv__eta_gradient(scene, x0, &g);
+    int k;
+    ch->failed = 0;
+    for (k = 1; k <= ch->n; ++k) {
+        double dc = rrv__dot(d, ch->c), s, e_next, next, cn, eta, D;
+        rrv_vec3 n;
+        if (!(dc > 1e-6)) { ch->failed = 1; return; }
+        s = (ch->t[k - 1] - rrv__dot(rrv__sub(x, x0), ch->c)) / dc;
+        x = rrv__madd(x, d, s);
+        ch->x[k] = x;
+        next = (k < ch->n ? ch->t[k] : rrv__dot(rrv__sub(ch->x[ch->n + 1], x0), ch->c)) - ch->t[k - 1];
+        e_next = rrv__eta_gradient(scene, rrv__madd(x, d, 0.5 * next / dc), NULL);
+        if (rrv__vertex_normal(scene, x, (rrv__eta_gradient(scene, x, &g), g), &n, NULL)) {
+            cn = rrv__dot(d, n);
+            eta = e_prev / e_next;
+            D = 1.0 - eta * eta * (1.0 - cn * cn);
+            d = D >= 0 ? rrv__normalize(rrv__add(rrv__scale(d, eta), rrv__scale(n, (cn >= 0 ? 1.0 : -1.0) * sqrt(D) - eta * cn)))
+                       : rrv__madd(d, n, -2.0 * cn);
+        }
+        e_prev = e_next;
         if (ch->iso && !rrv__project_iso(scene, &ch->x[k], ch->level[k])) ch->failed = 1;
     }
 }
@@ -5607,7 +5657,7 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
     int it, k, have_prev = 0, n = ch->n;
     root->iterations = 0;
     for (it = 0; it < RRV__MANIFOLD_ITERATIONS; ++it) {
-        double norm = rrv__chain_eval(scene, ch, 1), big = 0;
+        double largest, norm = rrv__chain_eval(scene, ch, 1, &largest), big = 0;
         root->iterations = it + 1;
         if (!(norm < prev)) {
             if (!have_prev) return 0;
@@ -5616,7 +5666,7 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
             rrv__chain_move(scene, ch, xs, sb1, sb2, du, step);
             continue;
         }
-        if (norm < RRV__MANIFOLD_TOL) {
+        if (largest < RRV__MANIFOLD_TOL) {
             /* the geometry term: dx_1/dy from J Z = -E, E in the last row */
             rrv_vec3 x1, w0, e1, e2, dw[2];
             double D[4], l01;
@@ -5737,11 +5787,13 @@ static rrv_vec3 rrv__chain_seed_direction(const rrv__chain *ch, rrv__rng *rng)
     return rrv__sample_uniform_sphere(u1, u2);
 }
 
-/* One solve from a fresh seed, counted in the stats. */
+/* One solve from a fresh seed (a parabola or, half the time, a traced
+   ray, from a direction of rrv__chain_seed_direction), counted in the stats. */
 static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, rrv__mroot *root)
 {
     int found;
-    rrv__chain_seed(ctx->scene, ch, rrv__chain_seed_direction(ch, rng));
+    if (rrv__uniform(rng) < 0.5) rrv__chain_seed(ctx->scene, ch, rrv__chain_seed_direction(ch, rng));
+    else rrv__chain_trace(ctx->scene, ch, rrv__chain_seed_direction(ch, rng));
     found = rrv__manifold_solve(ctx->scene, ch, root);
     ++ctx->stats.solves;
     ctx->stats.solve_iterations += (uint64_t)root->iterations;
