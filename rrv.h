@@ -66,6 +66,39 @@
                  1/|det J| is integrable but its square is not: shooting
                  from there is heavy-tailed (infinite variance in principle;
                  its images converge slowly and from below).
+     MANIFOLD    curved NEE by the paper's method (refractive and eikonal
+                 integrators, the same closed-form Hessians), with shoot's
+                 partition of path space (weights: 1 for the estimator a
+                 path belongs to, 0 for the others; power heuristic only
+                 between straight NEE and forward paths outside supports).
+                 A point y uniform on a quad or triangle light; a chain of
+                 refraction vertices on comb planes along the chord x0 -> y
+                 (spacing `step`, random offset, at most 256, wider beyond),
+                 each refracting by Snell's law about its isosurface normal;
+                 Newton on two unknowns a vertex (gauge `manifoldgauge
+                 chord`, the default: in the comb plane; `iso`: in the
+                 isosurface's tangent plane, the paper's, undefined where
+                 grad eta ~ 0) until every vertex refracts within 1e-9 rad:
+                 block-tridiagonal 2x2 Jacobian solved by block Thomas in
+                 O(n), step halved on a worse or unusable step and doubled
+                 up to 1, at most 40 evaluations, a singular pivot (a
+                 caustic) or a root that is not a physical path (a reflected
+                 vertex without total internal reflection, a sharp
+                 interface crossed) fails. The density dw0/dA_y from the
+                 same block elimination (the generalised geometry term of
+                 Specular Manifold Sampling). Seeds: a direction from a
+                 mixture of Gaussians around the chord (0.02 rad half the
+                 time, 0.2 rad 3 in 8) and uniform (1 in 8), made into a
+                 parabola or a ray traced through the planes by the chain's
+                 own rule; the first solve and every trial draw from that
+                 one distribution. `manifoldtrials 0` (default, unbiased
+                 for the chain model): 1/p by repeating solves until the
+                 root recurs (initial directions within 1e-5), at most 64
+                 trials. `manifoldtrials M`: M solves, each distinct root
+                 counted once (biased low where a root's basin is small).
+                 `manifolddrop D`: leave out comb planes across which eta
+                 on the chord changes by less than D (faster, biased; 0, the
+                 default, keeps all). Unsupported IORs as for shoot.
      Curved NEE is to become the default once it pays: on the lens caustic
      a shooting sample costs ~128x a forward one and at equal time `none`
      is ~20x as efficient there (README.md, "Next-event estimation").
@@ -5134,32 +5167,35 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
 /* ---- nee MANIFOLD: a chain of refraction vertices moved by Newton ----------------
    The paper's refractive ratio tracking (section 2.3) with the generalised
    geometry term of Specular Manifold Sampling (Zeltner et al. 2020). A
-   connection x0 -> y is a polyline x0, x_1 .. x_n, y; segment k (x_k ->
-   x_k+1) has the index eta_k = eta(x_k), and vertex k refracts from
-   eta_k-1 to eta_k about the normal of its IOR isosurface, grad eta / |grad
-   eta|: the comb model of the ray, which tends to the ray equation as the
-   vertices get dense. Vertices sit on the planes of a comb along the chord
-   x0 -> y (spacing rrv_settings.step, one random offset for the whole
-   estimate) over the part of the chord whose planes meet a refraction
-   support, so every path from x0 to y through a support that runs forward
-   along the chord has one vertex on each plane; a vertex where grad eta = 0
-   (outside every support) passes straight on.
-   Constraint, two per vertex: with m = eta_k w_out - eta_k-1 w_in, Snell's
-   law is m parallel to n; the residual is the part of m in the tangent
-   plane of n, in that plane's frame (where grad eta = 0: eta_k times the
-   part of w_out across w_in, in w_in's frame). To first order these are
-   eta times the two angle differences between w_out and the refracted
-   w_in in the vertex's local frame, without a pole or a 2 pi wrap.
+   connection x0 -> y is a polyline x0, x_1 .. x_n, y. Vertices sit on the
+   planes of a comb along the chord x0 -> y (spacing rrv_settings.step, one
+   random offset for the whole estimate) over the part of the chord whose
+   planes meet a refraction support, so every path from x0 to y through a
+   support that runs forward along the chord has one vertex on each plane.
+   Segment k has the IOR at its midpoint (the first and last at x0 and y,
+   so the kicks account for the whole change of eta whatever the offset);
+   vertex k refracts by Snell's law from segment k-1's IOR to segment k's
+   about its normal (grad eta / |grad eta|; radial for Luneburg and
+   fish-eye spheres, see rrv__vertex_normal), or passes straight on where
+   there is none. This is the comb model of the ray, second order in the
+   spacing (test_nee: 1e-6 in direction, 7e-5 in density at h = 0.004).
+   Constraint, two per vertex: the two components of the outgoing
+   direction across the refracted incoming one, in a frame perpendicular to
+   the refracted direction (to first order its two angle differences, no
+   pole or 2 pi wrap). Where refraction is impossible the refracted
+   direction is the reflected one (total internal reflection).
    Unknowns, two per vertex (the gauge): CHORD moves a vertex in its comb
    plane (perpendicular to the chord), ISO (the paper's) in the tangent
-   plane of its IOR isosurface and projects it back onto the isosurface
-   eta = eta(comb point on the chord); where grad eta ~ 0 the isosurface is
-   undefined and ISO drops those vertices, which CHORD needs not do.
-   Either way the Jacobian is block tridiagonal with 2x2 blocks and is
-   solved by block Thomas elimination in O(n); a pivot block that is
-   singular (a caustic: the chain cannot be moved to follow y) fails the
-   solve. The same elimination gives dx_1/dy and so the density of the
-   connection, dw0/dA_y = |det (dw0/dy)|. */
+   plane of its IOR isosurface and projects it back onto the isosurface of
+   eta at the chord's comb point; where grad eta ~ 0 the isosurface is
+   undefined and ISO drops those planes; and its levels are the chord's,
+   which a curved path through a lens's centre region need not reach, so
+   ISO finds few roots there (measured in README.md).
+   The Jacobian is block tridiagonal with 2x2 blocks and is solved by block
+   Thomas elimination in O(n); a pivot block that is singular (a caustic:
+   the chain cannot follow y) fails the solve. The same elimination with
+   the derivative of the last residual with respect to y gives dx_1/dy and
+   so the density of the connection, dw0/dA_y = |det (dw0/dy)|. */
 
 #define RRV__CHAIN_MAX 256        /* comb planes a chain may have (more: wider spacing) */
 #define RRV__MANIFOLD_TOL 1e-9    /* max |residual| at a root (eta radians) */
@@ -5722,7 +5758,7 @@ static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__
 {
     const rrv_scene *scene = ctx->scene;
     double T[3] = {1, 1, 1}, f[3];
-    int k, c, touched = ch->n > 0;
+    int k, c, touched = 0; /* vertices do not imply it: comb planes reach past the supports */
     rrv__vertex_eval(v, rrv__normalize(rrv__sub(ch->x[1], ch->x[0])), f);
     if (!(rrv__max3(f) > 0)) return 0;
     ++ctx->stats.paths;

@@ -997,6 +997,59 @@ static const char *only;
         if (!only || strstr(#fn, only) || strstr(only, #fn)) RUN(fn);                                                                     \
     } while (0)
 
+/* The same partition for nee manifold, whose comb planes reach past the
+   supports: where straight NEE may connect, the chain's root from the
+   chord is the straight path and the manifold estimator gives it weight 0
+   (it carries nothing); where straight NEE may not, every root it carries
+   is one that forward paths give weight 0. So straight NEE, manifold and
+   forward weights of each connection sum to one. */
+static void test_partition_manifold(void)
+{
+    rrv_scene *s = NULL;
+    rrv_error err;
+    rrv__context ctx;
+    rrv__rng rng;
+    rrv__vertex_bsdf vb;
+    static rrv__chain ch;
+    int k, straight = 0, curved = 0;
+    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
+        CHECKF(0, "parse: %s", err.message);
+        return;
+    }
+    solver_context(&ctx, s);
+    ctx.partition = ctx.manifold = 1;
+    memset(&vb, 0, sizeof vb);
+    vb.surface = 1;
+    vb.n = rrv__v3(0, 1, 0);
+    vb.albedo[0] = vb.albedo[1] = vb.albedo[2] = 1;
+    rrv__rng_seed(&rng, 23, 0, 0);
+    for (k = 0; k < 300; ++k) {
+        rrv_vec3 x0 = rrv__v3(4.0 * rrv__uniform(&rng) - 2.0, 1e-5, 4.0 * rrv__uniform(&rng) - 2.0);
+        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5);
+        rrv__light_sample ls;
+        rrv__mroot root;
+        double carried[3];
+        int allowed, found, carries;
+        ls.wi = rrv__normalize(rrv__sub(y, x0));
+        ls.dist = rrv__length(rrv__sub(y, x0));
+        allowed = rrv__straight_allowed(&ctx, x0, &ls);
+        rrv__chain_setup(s, x0, y, rrv__v3(0, -1, 0), 0, 0.0, rrv__uniform(&rng), &ch);
+        rrv__chain_seed(s, &ch, ls.wi);
+        found = rrv__manifold_solve(s, &ch, &root);
+        carries = found && rrv__chain_carry(&ctx, &ch, &vb, &rng, carried);
+        if (allowed) {
+            ++straight;
+            CHECKF(found && !carries && rrv__length(rrv__sub(root.w0, ls.wi)) < 1e-9,
+                   "straight connection %d (%d vertices): found %d, carried %d", k, ch.n, found, carries);
+        } else if (carries) {
+            ++curved;
+        }
+    }
+    SAY("  manifold partition: %d straight connections, %d curved roots carried of 300\n", straight, curved);
+    CHECK(straight > 50 && curved > 30);
+    rrv_scene_free(s);
+}
+
 int main(void)
 {
     const char *v = getenv("NEE_VERBOSE");
@@ -1019,5 +1072,6 @@ int main(void)
     NEE_RUN(test_manifold_against_differences);
     NEE_RUN(test_manifold_reciprocity);
     NEE_RUN(test_partition_is_exclusive);
+    NEE_RUN(test_partition_manifold);
     return CHECK_EXIT_CODE();
 }
