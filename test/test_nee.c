@@ -13,7 +13,13 @@
      caustic and fog inside the lens agree with `none` within 4 standard
      errors, and the solver is checked against the closed-form two-point
      problem of the Luneburg lens, finite differences of its Jacobian,
-     reciprocity, and the partition of paths between the estimators.
+     reciprocity, and the partition of paths between the estimators;
+   - `manifold` (a chain of refraction vertices, both integrators): the
+     furnaces give 1, the caustic agrees with `none` in blocks within 4
+     standard errors (CHORD gauge; ISO misses it), and the chain is checked
+     against the closed-form Luneburg root and its density, its Jacobian
+     blocks and density against finite differences, reciprocity (to the
+     chain's O(h)), and the same partition of paths.
    Fixed seeds; the renders compared are independent (distinct seeds).
    NEE_VERBOSE=1 prints the values. */
 #define RRV_IMPLEMENTATION
@@ -322,12 +328,15 @@ static void test_lens_caustic_shoot(void)
 }
 
 /* nee manifold against nee none (comb) in 4x4-pixel blocks around the
-   caustic, within 4 standard errors, for the unbiased estimate in both
-   gauges (eikonal) and with the comb integrator; the fixed-trial variant
-   (M = 4) is biased low in principle, checked only for finiteness. */
-static void caustic_manifold_case(rrv_scene *s, const stats *ref, const method *m, rrv_manifold_gauge gauge,
-                                  int trials, int spp, uint64_t seed, const char *name, int compare)
+   caustic, within 4 standard errors, for the unbiased estimate in the
+   CHORD gauge with the eikonal and the comb integrator; the ISO gauge is shown
+   to miss the caustic; the fixed-trial variant (M = 4) is biased low in
+   principle, checked only for finite, nonnegative blocks. */
+static double caustic_manifold_case(rrv_scene *s, const stats *ref, const method *m, rrv_manifold_gauge gauge,
+                                    int trials, int spp, uint64_t seed, const char *name, int compare)
 {
+    double peak_ratio = 0;
+    int peak = -1;
     rrv_render_stats rs;
     stats b[NBLOCKS];
     int i, bx, by, worse = 0;
@@ -353,14 +362,17 @@ static void caustic_manifold_case(rrv_scene *s, const stats *ref, const method *
                 CHECKF(fabs(d) <= 4 * se, "%s block %d,%d: none %.4f, manifold %.4f, difference %.4f over 4 se %.4f",
                        name, bx, by, stats_mean(&ref[i]), stats_mean(&b[i]), d, 4 * se);
             if (fabs(d) > 4 * se) ++worse;
+            if (peak < 0 || stats_mean(&ref[i]) > stats_mean(&ref[peak])) peak = i;
         }
     }
+    peak_ratio = stats_mean(&b[peak]) / stats_mean(&ref[peak]);
     SAY("  %s: %llu solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, %.0f segments a chain, "
         "%d blocks beyond 4 se\n",
         name, (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)rs.solves,
         rs.solve_iterations / (double)rs.solves, rs.solve_trials / (double)rs.solve_connections,
         rs.solve_segments / (double)rs.solves_converged, worse);
     CHECK(rs.solves > 0 && rs.solve_connections > 0 && rs.solves_unsupported == 0);
+    return peak_ratio;
 }
 
 static void test_lens_caustic_manifold(void)
@@ -379,7 +391,14 @@ static void test_lens_caustic_manifold(void)
     block_samples_rect(s, 640, x0, y0, x1, y1, BLOCK, BLOCK, a, NULL);
     caustic_manifold_case(s, a, &eikonal, RRV_GAUGE_CHORD, 0, 8, 41, "manifold chord", 1);
     caustic_manifold_case(s, a, &comb, RRV_GAUGE_CHORD, 0, 8, 42, "manifold chord, comb", 1);
-    caustic_manifold_case(s, a, &eikonal, RRV_GAUGE_ISO, 0, 8, 43, "manifold iso", 0);
+    /* The ISO gauge's vertices keep the chord's IOR levels, which the
+       curved paths through the lens's centre region do not reach: it
+       finds few roots and misses most of the caustic (measured: 0.00 of
+       the peak block) */
+    {
+        double iso = caustic_manifold_case(s, a, &eikonal, RRV_GAUGE_ISO, 0, 8, 43, "manifold iso", 0);
+        CHECKF(iso < 0.5, "manifold iso: the caustic's peak block at %.2f of none's", iso);
+    }
     caustic_manifold_case(s, a, &eikonal, RRV_GAUGE_CHORD, 4, 4, 44, "manifold chord M=4", 0);
     rrv_scene_free(s);
 }
