@@ -722,6 +722,39 @@ static void test_manifold_luneburg_two_point(void)
     rrv_scene_free(s);
 }
 
+/* Chains that cannot bend: with no comb plane (the chord's planes meet no
+   support) and with a hundred planes outside the supports (every vertex
+   passes straight on), the root is the chord and the density the straight
+   one, |cos theta_y| / r^2, exactly (to the solver's tolerance). */
+static void test_manifold_straight_chains(void)
+{
+    static const double pts[2][6] = {{0.2, 0.1, 3.0, -0.1, 0.3, 5.0}, {3.0, 0.2, 2.0, 3.1, -0.1, -2.0}};
+    static const int vertices[2] = {0, 200};
+    rrv_scene *s = lens_scene(0.01, RRV_STEPPER_RK4);
+    static rrv__chain ch;
+    rrv__rng rng;
+    int i;
+    rrv__rng_seed(&rng, 29, 0, 0);
+    for (i = 0; i < 2; ++i) {
+        rrv_vec3 x0 = rrv__v3(pts[i][0], pts[i][1], pts[i][2]), y = rrv__v3(pts[i][3], pts[i][4], pts[i][5]);
+        rrv_vec3 ny = rrv__normalize(rrv__v3(0.3, 0.2, -1.0)), d = rrv__sub(y, x0);
+        double r = rrv__length(d), want = fabs(rrv__dot(ny, d)) / (r * r * r);
+        rrv__mroot root;
+        if (!manifold_root(s, x0, y, ny, 0, 0.5, 8, &rng, &ch, &root)) {
+            CHECKF(0, "straight chain %d: no root", i);
+            continue;
+        }
+        SAY("  manifold straight chain %d: %d vertices, w0 off by %.1e, density %.9f vs %.9f\n", i, ch.n,
+            rrv__length(rrv__sub(root.w0, rrv__scale(d, 1.0 / r))), root.density, want);
+        /* 0 planes; 200 at spacing 0.01 over the sphere's 2 m (the cap of
+           256 is not reached) */
+        CHECKF(ch.n == vertices[i], "chain %d: %d vertices", i, ch.n);
+        CHECK(rrv__length(rrv__sub(root.w0, rrv__scale(d, 1.0 / r))) < 1e-9);
+        CHECKF(fabs(root.density / want - 1.0) < 1e-9, "chain %d: density %.12g, straight %.12g", i, root.density, want);
+    }
+    rrv_scene_free(s);
+}
+
 /* The Jacobian blocks of the chain against central differences of its
    residuals, at a root (where the turn of each residual's frame, left out
    of the blocks, multiplies a zero residual), and the density from the
@@ -1088,6 +1121,7 @@ int main(void)
     NEE_RUN(test_jacobian_against_differences);
     NEE_RUN(test_reciprocity);
     NEE_RUN(test_manifold_luneburg_two_point);
+    NEE_RUN(test_manifold_straight_chains);
     NEE_RUN(test_manifold_against_differences);
     NEE_RUN(test_manifold_reciprocity);
     NEE_RUN(test_partition_is_exclusive);
