@@ -463,8 +463,7 @@ static void test_nee_key(void)
     static const char *const texts[] = {"camera eye 0 0 -1 look 0 0 0\nrender nee none\n",
                                         "camera eye 0 0 -1 look 0 0 0\nrender nee straight\n",
                                         "camera eye 0 0 -1 look 0 0 0\nrender spp 1\n",
-                                        "camera eye 0 0 -1 look 0 0 0\nrender nee manifold manifoldgauge iso "
-                                        "manifoldtrials 4 manifolddrop 0.001\n"};
+                                        "camera eye 0 0 -1 look 0 0 0\nrender nee manifold manifoldgauge iso manifoldtrials 4 manifolddrop 0.001\n"};
     static const rrv_nee expected[] = {RRV_NEE_NONE, RRV_NEE_STRAIGHT, RRV_NEE_DEFAULT, RRV_NEE_MANIFOLD};
     int i;
     for (i = 0; i < 4; ++i) {
