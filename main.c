@@ -84,7 +84,9 @@ static const char render_help[] =
     "                         default: straight shadow rays, biased near\n"
     "                         refracting media), none (lights count only where\n"
     "                         the bent path hits them: unbiased, noisier) or\n"
-    "                         shoot (eikonal: connections along bent rays)\n"
+    "                         shoot (eikonal: connections along bent rays) or\n"
+    "                         manifold (a chain of refraction vertices solved by\n"
+    "                         Newton; scene keys manifoldgauge, manifoldtrials)\n"
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop (an EXR\n"
@@ -997,7 +999,8 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
             if (strcmp(mode, "none") == 0) opt->nee = RRV_NEE_NONE;
             else if (strcmp(mode, "straight") == 0) opt->nee = RRV_NEE_STRAIGHT;
             else if (strcmp(mode, "shoot") == 0) opt->nee = RRV_NEE_SHOOT;
-            else return usage_error(&args, "--nee needs none, straight or shoot, got \"%s\"", mode);
+            else if (strcmp(mode, "manifold") == 0) opt->nee = RRV_NEE_MANIFOLD;
+            else return usage_error(&args, "--nee needs none, straight, shoot or manifold, got \"%s\"", mode);
             opt->has_nee = 1;
         } else if (strcmp(arg, "--threads") == 0) {
             if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer",
@@ -1056,7 +1059,7 @@ static void print_render_summary(int width, int height, int spp, double seconds,
                 stats->paths_cut, stats->cut_tracking);
     if (stats->solves > 0) {
         double n = (double)stats->solves, conv = (double)stats->solves_converged;
-        fprintf(stderr, "; shoot: %" PRIu64 " solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, "
+        fprintf(stderr, "; curved nee: %" PRIu64 " solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, "
                 "%.0f segments a chain", stats->solves, 100.0 * conv / n, (double)stats->solve_iterations / n,
                 stats->solve_connections ? (double)stats->solve_trials / (double)stats->solve_connections : 0.0,
                 conv > 0 ? (double)stats->solve_segments / conv : 0.0);

@@ -66,6 +66,39 @@
                  1/|det J| is integrable but its square is not: shooting
                  from there is heavy-tailed (infinite variance in principle;
                  its images converge slowly and from below).
+     MANIFOLD    curved NEE by the paper's method (refractive and eikonal
+                 integrators, the same closed-form Hessians), with shoot's
+                 partition of path space (weights: 1 for the estimator a
+                 path belongs to, 0 for the others; power heuristic only
+                 between straight NEE and forward paths outside supports).
+                 A point y uniform on a quad or triangle light; a chain of
+                 refraction vertices on comb planes along the chord x0 -> y
+                 (spacing `step`, random offset, at most 256, wider beyond),
+                 each refracting by Snell's law about its isosurface normal;
+                 Newton on two unknowns a vertex (gauge `manifoldgauge
+                 chord`, the default: in the comb plane; `iso`: in the
+                 isosurface's tangent plane, the paper's, undefined where
+                 grad eta ~ 0) until every vertex refracts within 1e-9 rad:
+                 block-tridiagonal 2x2 Jacobian solved by block Thomas in
+                 O(n), step halved on a worse or unusable step and doubled
+                 up to 1, at most 40 evaluations, a singular pivot (a
+                 caustic) or a root that is not a physical path (a reflected
+                 vertex without total internal reflection, a sharp
+                 interface crossed) fails. The density dw0/dA_y from the
+                 same block elimination (the generalised geometry term of
+                 Specular Manifold Sampling). Seeds: a direction from a
+                 mixture of Gaussians around the chord (0.02 rad half the
+                 time, 0.2 rad 3 in 8) and uniform (1 in 8), made into a
+                 parabola or a ray traced through the planes by the chain's
+                 own rule; the first solve and every trial draw from that
+                 one distribution. `manifoldtrials 0` (default, unbiased
+                 for the chain model): 1/p by repeating solves until the
+                 root recurs (initial directions within 1e-5), at most 64
+                 trials. `manifoldtrials M`: M solves, each distinct root
+                 counted once (biased low where a root's basin is small).
+                 `manifolddrop D`: leave out comb planes across which eta
+                 on the chord changes by less than D (faster, biased; 0, the
+                 default, keeps all). Unsupported IORs as for shoot.
      Curved NEE is to become the default once it pays: on the lens caustic
      a shooting sample costs ~128x a forward one and at equal time `none`
      is ~20x as efficient there (README.md, "Next-event estimation").
@@ -517,10 +550,21 @@ typedef enum rrv_nee {
                             sampling as if both sampled the same path: biased
                             wherever a connection or the sampled continuation
                             crosses a refracting medium */
-    RRV_NEE_SHOOT        /* eikonal: connections to area lights along bent
+    RRV_NEE_SHOOT,       /* eikonal: connections to area lights along bent
                             rays, found by Newton on the initial direction;
                             straight NEE only where it is exact (see manual) */
+    RRV_NEE_MANIFOLD     /* refractive and eikonal: a chain of refraction
+                            vertices moved by Newton until each obeys Snell's
+                            law (the paper's refractive ratio tracking) */
 } rrv_nee;
+
+/* nee MANIFOLD: the two unknowns of a chain vertex. */
+typedef enum rrv_manifold_gauge {
+    RRV_GAUGE_DEFAULT = 0, /* CHORD */
+    RRV_GAUGE_CHORD,       /* in the plane perpendicular to the chord x0 -> y */
+    RRV_GAUGE_ISO          /* in the tangent plane of the IOR isosurface (the
+                              paper's; undefined where grad eta ~ 0) */
+} rrv_manifold_gauge;
 
 typedef struct rrv_settings {
     int spp;              /* samples per pixel, >= 1 */
@@ -539,6 +583,11 @@ typedef struct rrv_settings {
     int max_bake_samples; /* caps what prepare builds per axis (see rrv_load_options);
                              0 = no cap beyond the defaults */
     rrv_nee nee;          /* refractive and eikonal: light sampling */
+    rrv_manifold_gauge manifold_gauge; /* nee manifold */
+    int manifold_trials;  /* nee manifold: 0 = unbiased (trials until the root
+                             recurs); M > 0 = M solves, distinct roots summed (biased) */
+    double manifold_drop; /* nee manifold: leave out comb planes across which eta
+                             along the chord changes by less than this (0: none; biased) */
 } rrv_settings;
 
 struct rrv__majorant_grid;
@@ -3617,6 +3666,7 @@ typedef struct rrv__context {
                                 outside refraction supports, curved ones by
                                 shooting or (forward) by the path alone */
     int shoot;               /* nee shoot can run (eikonal, Hessians known) */
+    int manifold;            /* nee manifold can run (Hessians known) */
     double eta_camera2;      /* (1 + r at the camera)^2: radiance scales as eta^2 */
     double thermal_scale;    /* blackbody radiance at the camera over that in
                                 ambient air: (eta_camera / eta_ambient)^2 */
@@ -4023,12 +4073,15 @@ static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x);
 static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d);
 static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls);
 static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
+static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                              rrv__rng *rng);
 static int rrv__solver_supports_scene(const rrv_scene *scene);
 
 /* Curved NEE from a vertex, or the count of vertices that could not. */
 static void rrv__curved_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
 {
     if (ctx->shoot) rrv__shoot_nee(ctx, path, x0, v, rng);
+    else if (ctx->manifold) rrv__manifold_nee(ctx, path, x0, v, rng);
     else if (ctx->partition) ++ctx->stats.solves_unsupported;
 }
 
@@ -4147,7 +4200,7 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
         if (cp->prev_pdf > 0 && ctx->sample_lights) {
             if (!(ctx->partition && cp->touched))
                 w = rrv__power_heuristic(cp->prev_pdf, rrv__emitter_pdf(s, cp->vertex, x, n) / rrv__light_choices(scene));
-            else if (ctx->shoot && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
+            else if ((ctx->shoot || ctx->manifold) && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
                 w = 0.0; /* counted by the curved connection */
         }
         w *= rrv__eta_scale(ctx, x) * rrv__path_mis(&cp->path);
@@ -4442,8 +4495,9 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
     ctx.step_bound = rrv__step_bound(scene, scene->settings.integrator);
     ctx.sample_lights = !ctx.bends || scene->settings.nee != RRV_NEE_NONE;
-    ctx.partition = ctx.bends && scene->settings.nee == RRV_NEE_SHOOT;
-    ctx.shoot = ctx.partition && ctx.eikonal && rrv__solver_supports_scene(scene);
+    ctx.partition = ctx.bends && (scene->settings.nee == RRV_NEE_SHOOT || scene->settings.nee == RRV_NEE_MANIFOLD);
+    ctx.shoot = ctx.partition && scene->settings.nee == RRV_NEE_SHOOT && ctx.eikonal && rrv__solver_supports_scene(scene);
+    ctx.manifold = ctx.partition && scene->settings.nee == RRV_NEE_MANIFOLD && rrv__solver_supports_scene(scene);
     rrv__camera_setup(&scene->camera, &frame);
     r_camera = ctx.bends ? rrv__scene_refractivity(scene, frame.eye, NULL) : 0.0;
     ctx.eta_camera2 = (1.0 + r_camera) * (1.0 + r_camera);
@@ -5108,6 +5162,732 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     /* dw0 = dA_y / |det J_plane| (= dA_y |cos theta_y| / |det J_perp|) */
     k = 1.0 / (fabs(root.det) * pdf_area) * count * rrv__eta_scale(ctx, y) * rrv__path_mis(path);
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
+}
+
+/* ---- nee MANIFOLD: a chain of refraction vertices moved by Newton ----------------
+   The paper's refractive ratio tracking (section 2.3) with the generalised
+   geometry term of Specular Manifold Sampling (Zeltner et al. 2020). A
+   connection x0 -> y is a polyline x0, x_1 .. x_n, y. Vertices sit on the
+   planes of a comb along the chord x0 -> y (spacing rrv_settings.step, one
+   random offset for the whole estimate) over the part of the chord whose
+   planes meet a refraction support, so every path from x0 to y through a
+   support that runs forward along the chord has one vertex on each plane.
+   Segment k has the IOR at its midpoint (the first and last at x0 and y,
+   so the kicks account for the whole change of eta whatever the offset);
+   vertex k refracts by Snell's law from segment k-1's IOR to segment k's
+   about its normal (grad eta / |grad eta|; radial for Luneburg and
+   fish-eye spheres, see rrv__vertex_normal), or passes straight on where
+   there is none. This is the comb model of the ray, second order in the
+   spacing (test_nee: 1e-6 in direction, 7e-5 in density at h = 0.004).
+   Constraint, two per vertex: the two components of the outgoing
+   direction across the refracted incoming one, in a frame perpendicular to
+   the refracted direction (to first order its two angle differences, no
+   pole or 2 pi wrap). Where refraction is impossible the refracted
+   direction is the reflected one (total internal reflection).
+   Unknowns, two per vertex (the gauge): CHORD moves a vertex in its comb
+   plane (perpendicular to the chord), ISO (the paper's) in the tangent
+   plane of its IOR isosurface and projects it back onto the isosurface of
+   eta at the chord's comb point; where grad eta ~ 0 the isosurface is
+   undefined and ISO drops those planes; and its levels are the chord's,
+   which a curved path through a lens's centre region need not reach, so
+   ISO finds few roots there (measured in README.md).
+   The Jacobian is block tridiagonal with 2x2 blocks and is solved by block
+   Thomas elimination in O(n); a pivot block that is singular (a caustic:
+   the chain cannot follow y) fails the solve. The same elimination with
+   the derivative of the last residual with respect to y gives dx_1/dy and
+   so the density of the connection, dw0/dA_y = |det (dw0/dy)|. */
+
+#define RRV__CHAIN_MAX 256        /* comb planes a chain may have (more: wider spacing) */
+#define RRV__MANIFOLD_TOL 1e-9    /* max |residual| at a root (eta radians) */
+#define RRV__MANIFOLD_FLAT 1e-9   /* |grad eta| below which a vertex has no isosurface */
+#define RRV__MANIFOLD_ROOTS 8     /* distinct roots the fixed-trial variant keeps */
+#define RRV__MANIFOLD_ITERATIONS 40 /* evaluations of the chain a solve may take */
+
+typedef struct rrv__chain {
+    int n;                                /* inner vertices x[1..n] */
+    int iso;                              /* gauge ISO, else CHORD */
+    int failed;                           /* a projection onto an isosurface failed */
+    rrv_vec3 c, c1, c2;                   /* chord direction and its frame */
+    rrv_vec3 s1, s2;                      /* the light's tangent frame at y */
+    double t[RRV__CHAIN_MAX];             /* vertex k's comb plane: (x - x0).c = t */
+    double level[RRV__CHAIN_MAX + 2];     /* ISO: eta of vertex k's isosurface */
+    rrv_vec3 x[RRV__CHAIN_MAX + 2];       /* x[0] = x0, x[n + 1] = y */
+    double eta[RRV__CHAIN_MAX + 2];       /* at vertex k */
+    rrv_vec3 g[RRV__CHAIN_MAX + 2];
+    double em[RRV__CHAIN_MAX + 2];        /* of segment k: at its midpoint, at x0 for the first, y for the last */
+    rrv_vec3 gm[RRV__CHAIN_MAX + 2];
+    double wa[RRV__CHAIN_MAX + 2], wb[RRV__CHAIN_MAX + 2]; /* d em_k = gm_k . (wa dx_k + wb dx_k+1) */
+    rrv_vec3 b1[RRV__CHAIN_MAX + 2], b2[RRV__CHAIN_MAX + 2]; /* gauge basis */
+    double r[RRV__CHAIN_MAX + 2][2];      /* residual of vertex k */
+    double A[RRV__CHAIN_MAX + 2][4], B[RRV__CHAIN_MAX + 2][4], C[RRV__CHAIN_MAX + 2][4]; /* d r_k / d u_k-1, u_k, u_k+1 */
+    double E[4];                          /* d r_n / d(y in the light's frame) */
+    int snell[RRV__CHAIN_MAX + 2];        /* vertex k refracts about nrm[k] */
+    rrv_vec3 nrm[RRV__CHAIN_MAX + 2];
+} rrv__chain;
+
+/* 3x3 matrices row-major: M = s (I - w w^T), M += s a b^T, M = P Q. */
+static void rrv__m3_proj(double M[9], rrv_vec3 w, double s)
+{
+    double v[3];
+    int i, j;
+    v[0] = w.x; v[1] = w.y; v[2] = w.z;
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j) M[3 * i + j] = s * ((i == j ? 1.0 : 0.0) - v[i] * v[j]);
+}
+static void rrv__m3_outer(double M[9], rrv_vec3 a, rrv_vec3 b, double s)
+{
+    double u[3], v[3];
+    int i, j;
+    u[0] = a.x; u[1] = a.y; u[2] = a.z;
+    v[0] = b.x; v[1] = b.y; v[2] = b.z;
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j) M[3 * i + j] += s * u[i] * v[j];
+}
+static void rrv__m3_mul(const double P[9], const double Q[9], double M[9])
+{
+    int i, j, k;
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j) {
+            double s = 0;
+            for (k = 0; k < 3; ++k) s += P[3 * i + k] * Q[3 * k + j];
+            M[3 * i + j] = s;
+        }
+}
+/* The 2x2 block t_k . (M b_l). */
+static void rrv__block(const double M[9], rrv_vec3 t1, rrv_vec3 t2, rrv_vec3 b1, rrv_vec3 b2, double out[4])
+{
+    rrv_vec3 m1 = rrv__mat_apply(M, b1), m2 = rrv__mat_apply(M, b2);
+    out[0] = rrv__dot(t1, m1);
+    out[1] = rrv__dot(t1, m2);
+    out[2] = rrv__dot(t2, m1);
+    out[3] = rrv__dot(t2, m2);
+}
+
+/* The refraction normal at x and (dn) its derivative dn/dx, row-major.
+   grad eta / |grad eta| in general; for a profile with a sphere support
+   (Luneburg, fish-eye) the radial direction, which is that inside the
+   sphere and stays continuous across it and beyond (inside the box),
+   where grad eta jumps to 0: a normal that jumped there would make the
+   residual of a vertex crossing the sphere jump by the kick it gets,
+   and Newton would stall. Returns 0 where there is no normal (grad eta
+   ~ 0 away from a sphere support): the vertex passes the ray straight on. */
+static int rrv__vertex_normal(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 g, rrv_vec3 *n, double dn[9])
+{
+    int i;
+    double gl = rrv__length(g);
+    for (i = scene->medium_count - 1; i >= 0; --i) {
+        const rrv_medium *m = &scene->media[i];
+        if (rrv__medium_refracts(m) && rrv__inside_box(x, m->lo, m->hi)) {
+            if (rrv__has_sphere_support(m)) {
+                rrv_vec3 d = rrv__sub(x, m->ior.center);
+                double r = rrv__length(d);
+                if (!(r > 1e-9 * m->ior.radius)) return 0;
+                *n = rrv__scale(d, 1.0 / r);
+                if (dn) rrv__m3_proj(dn, *n, 1.0 / r);
+                return 1;
+            }
+            break;
+        }
+    }
+    if (!(gl > RRV__MANIFOLD_FLAT)) return 0;
+    *n = rrv__scale(g, 1.0 / gl);
+    if (dn) {
+        double N[9], H[9];
+        int j;
+        rrv__m3_proj(N, *n, 1.0);
+        rrv__scene_hessian(scene, x, H);
+        rrv__m3_mul(N, H, dn);
+        for (j = 0; j < 9; ++j) dn[j] /= gl;
+    }
+    return 1;
+}
+
+/* 2x2 helpers: inverse (0 if singular relative to its size), products. */
+static int rrv__m2_inverse(const double M[4], double out[4])
+{
+    double det = M[0] * M[3] - M[1] * M[2];
+    double size = M[0] * M[0] + M[1] * M[1] + M[2] * M[2] + M[3] * M[3];
+    if (!(fabs(det) > 1e-13 * size) || !(size < DBL_MAX)) return 0;
+    out[0] = M[3] / det;
+    out[1] = -M[1] / det;
+    out[2] = -M[2] / det;
+    out[3] = M[0] / det;
+    return 1;
+}
+static void rrv__m2_mul(const double P[4], const double Q[4], double out[4])
+{
+    double o[4];
+    o[0] = P[0] * Q[0] + P[1] * Q[2];
+    o[1] = P[0] * Q[1] + P[1] * Q[3];
+    o[2] = P[2] * Q[0] + P[3] * Q[2];
+    o[3] = P[2] * Q[1] + P[3] * Q[3];
+    memcpy(out, o, sizeof o);
+}
+
+/* Solves the chain's block-tridiagonal system for `cols` right-hand sides
+   (2 x cols blocks rhs[k], k = 1..n, overwritten by the solution) by block
+   Thomas elimination: O(n), no pivoting across blocks. Returns 0 when a
+   pivot block is singular. */
+static int rrv__chain_thomas(const rrv__chain *ch, double (*rhs)[4], int cols, double (*Cp)[4])
+{
+    int k, n = ch->n, j;
+    for (k = 1; k <= n; ++k) {
+        double M[4], Mi[4], AC[4], d[4];
+        memcpy(M, ch->B[k], sizeof M);
+        if (k > 1) {
+            rrv__m2_mul(ch->A[k], Cp[k - 1], AC);
+            for (j = 0; j < 4; ++j) M[j] -= AC[j];
+            /* rhs_k -= A_k rhs'_k-1 */
+            for (j = 0; j < cols; ++j) {
+                double a0 = rhs[k - 1][j], a1 = rhs[k - 1][2 + j];
+                rhs[k][j] -= ch->A[k][0] * a0 + ch->A[k][1] * a1;
+                rhs[k][2 + j] -= ch->A[k][2] * a0 + ch->A[k][3] * a1;
+            }
+        }
+        if (!rrv__m2_inverse(M, Mi)) return 0;
+        if (k < n) rrv__m2_mul(Mi, ch->C[k], Cp[k]);
+        for (j = 0; j < cols; ++j) {
+            double a0 = rhs[k][j], a1 = rhs[k][2 + j];
+            d[j] = Mi[0] * a0 + Mi[1] * a1;
+            d[2 + j] = Mi[2] * a0 + Mi[3] * a1;
+        }
+        for (j = 0; j < cols; ++j) { rhs[k][j] = d[j]; rhs[k][2 + j] = d[2 + j]; }
+    }
+    for (k = n - 1; k >= 1; --k)
+        for (j = 0; j < cols; ++j) {
+            double a0 = rhs[k + 1][j], a1 = rhs[k + 1][2 + j];
+            rhs[k][j] -= Cp[k][0] * a0 + Cp[k][1] * a1;
+            rhs[k][2 + j] -= Cp[k][2] * a0 + Cp[k][3] * a1;
+        }
+    for (k = 1; k <= n; ++k)
+        for (j = 0; j < cols; ++j)
+            if (!(fabs(rhs[k][j]) < DBL_MAX) || !(fabs(rhs[k][2 + j]) < DBL_MAX)) return 0;
+    return 1;
+}
+
+/* Moves x onto the isosurface eta = level by Newton steps along grad eta. */
+static int rrv__project_iso(const rrv_scene *scene, rrv_vec3 *x, double level)
+{
+    int it;
+    for (it = 0; it < 20; ++it) {
+        rrv_vec3 g;
+        double e = rrv__eta_gradient(scene, *x, &g) - level, g2 = rrv__dot(g, g);
+        if (fabs(e) < 1e-13) return 1;
+        if (!(g2 > RRV__MANIFOLD_FLAT * RRV__MANIFOLD_FLAT)) return 0;
+        *x = rrv__madd(*x, g, -e / g2);
+    }
+    return 0;
+}
+
+/* The residual of vertex k and, with jac, its three Jacobian blocks (and E
+   at the last vertex). eta, g and the basis of k-1, k, k+1 must be set. */
+static void rrv__chain_vertex(const rrv_scene *scene, rrv__chain *ch, int k, int jac)
+{
+    rrv_vec3 a = rrv__sub(ch->x[k], ch->x[k - 1]), b = rrv__sub(ch->x[k + 1], ch->x[k]);
+    double la = rrv__length(a), lb = rrv__length(b), ep = ch->em[k - 1], ei = ch->em[k];
+    rrv_vec3 wi = rrv__scale(a, 1.0 / la), wo = rrv__scale(b, 1.0 / lb), n = ch->nrm[k], r, t1, t2;
+    double Pa[9], Pb[9], DN[9], dr[3][9], eta = ep / ei, cn = 0, D = 0, beta = 0, s = 1;
+    int j, q, mode = 0; /* 0 passes straight on, 1 refracts, 2 reflects (total internal reflection) */
+    if (ch->snell[k]) {
+        cn = rrv__dot(wi, n);
+        s = cn >= 0 ? 1.0 : -1.0;
+        D = 1.0 - eta * eta * (1.0 - cn * cn);
+        mode = D >= 0 ? 1 : 2;
+    }
+    if (mode == 1) {
+        beta = s * sqrt(D) - eta * cn;
+        r = rrv__add(rrv__scale(wi, eta), rrv__scale(n, beta));
+    } else if (mode == 2) {
+        r = rrv__madd(wi, n, -2.0 * cn);
+    } else {
+        r = wi;
+    }
+    rrv__frame(r, &t1, &t2);
+    {
+        rrv_vec3 R = rrv__madd(wo, r, -rrv__dot(wo, r));
+        ch->r[k][0] = rrv__dot(t1, R);
+        ch->r[k][1] = rrv__dot(t2, R);
+    }
+    if (!jac) return;
+    rrv__m3_proj(Pa, wi, 1.0 / la);
+    rrv__m3_proj(Pb, wo, 1.0 / lb);
+    for (j = 0; j < 9; ++j) DN[j] = 0;
+    if (mode) rrv__vertex_normal(scene, ch->x[k], ch->g[k], &n, DN);
+    /* dr with respect to x_k-1, x_k, x_k+1 (q = 0, 1, 2) */
+    for (q = 0; q < 3; ++q) {
+        double dwi[9], dn[9], sw = q == 0 ? -1.0 : q == 1 ? 1.0 : 0.0;
+        rrv_vec3 deta = rrv__v3(0, 0, 0), dcn[3];
+        int i;
+        for (j = 0; j < 9; ++j) {
+            dwi[j] = sw * Pa[j];
+            dn[j] = q == 1 ? DN[j] : 0.0;
+        }
+        /* d eta = eta (d ep / ep - d ei / ei) */
+        if (q <= 1) deta = rrv__madd(deta, ch->gm[k - 1], (q == 0 ? ch->wa[k - 1] : ch->wb[k - 1]) * eta / ep);
+        if (q >= 1) deta = rrv__madd(deta, ch->gm[k], -(q == 1 ? ch->wa[k] : ch->wb[k]) * eta / ei);
+        /* dcn = n^T dwi + wi^T dn, as a row: column i of the sum */
+        for (i = 0; i < 3; ++i) {
+            rrv_vec3 colw = rrv__v3(dwi[i], dwi[3 + i], dwi[6 + i]), coln = rrv__v3(dn[i], dn[3 + i], dn[6 + i]);
+            double v = rrv__dot(n, colw) + rrv__dot(wi, coln);
+            if (i == 0) dcn[0] = rrv__v3(v, 0, 0);
+            else if (i == 1) dcn[0].y = v;
+            else dcn[0].z = v;
+        }
+        if (mode == 1) {
+            /* r = eta wi + beta n, beta = s sqrt(D) - eta cn, D = 1 - eta^2 (1 - cn^2) */
+            rrv_vec3 dD = rrv__add(rrv__scale(deta, 2.0 * eta * (cn * cn - 1.0)), rrv__scale(dcn[0], 2.0 * eta * eta * cn));
+            rrv_vec3 dbeta = rrv__sub(rrv__sub(rrv__scale(dD, D > 0 ? s / (2.0 * sqrt(D)) : 0.0), rrv__scale(deta, cn)),
+                                      rrv__scale(dcn[0], eta));
+            for (j = 0; j < 9; ++j) dr[q][j] = eta * dwi[j] + beta * dn[j];
+            rrv__m3_outer(dr[q], wi, deta, 1.0);
+            rrv__m3_outer(dr[q], n, dbeta, 1.0);
+        } else if (mode == 2) {
+            /* r = wi - 2 cn n */
+            for (j = 0; j < 9; ++j) dr[q][j] = dwi[j] - 2.0 * cn * dn[j];
+            rrv__m3_outer(dr[q], n, dcn[0], -2.0);
+        } else {
+            memcpy(dr[q], dwi, sizeof dwi);
+        }
+    }
+    /* d(residual) = t . (dwo - (wo.r) dr): the frame's own turn multiplies
+       the residual, zero at a root */
+    {
+        double wr = rrv__dot(wo, r), M[9];
+        for (j = 0; j < 9; ++j) M[j] = -wr * dr[0][j];
+        if (k > 1) rrv__block(M, t1, t2, ch->b1[k - 1], ch->b2[k - 1], ch->A[k]);
+        for (j = 0; j < 9; ++j) M[j] = -Pb[j] - wr * dr[1][j];
+        rrv__block(M, t1, t2, ch->b1[k], ch->b2[k], ch->B[k]);
+        for (j = 0; j < 9; ++j) M[j] = Pb[j] - wr * dr[2][j];
+        if (k < ch->n) rrv__block(M, t1, t2, ch->b1[k + 1], ch->b2[k + 1], ch->C[k]);
+        else rrv__block(M, t1, t2, ch->s1, ch->s2, ch->E);
+    }
+}
+
+/* IORs, gradients, gauge bases, residuals and (jac) the Jacobian at the
+   chain's positions. Returns the root of the sum of squared residuals (the
+   merit Newton's step control uses) and sets *largest to the largest
+   residual; DBL_MAX when the chain is not usable there (an ISO vertex off
+   every isosurface, a degenerate segment, not finite). */
+static double rrv__chain_eval(const rrv_scene *scene, rrv__chain *ch, int jac, double *largest)
+{
+    int k;
+    double worst = 0, sum = 0;
+    *largest = DBL_MAX;
+    if (ch->failed) return DBL_MAX;
+    ch->eta[0] = rrv__eta_gradient(scene, ch->x[0], &ch->g[0]);
+    for (k = 1; k <= ch->n; ++k) {
+        double gl;
+        ch->eta[k] = rrv__eta_gradient(scene, ch->x[k], &ch->g[k]);
+        gl = rrv__length(ch->g[k]);
+        ch->snell[k] = rrv__vertex_normal(scene, ch->x[k], ch->g[k], &ch->nrm[k], NULL);
+        if (ch->iso) {
+            if (!ch->snell[k]) return DBL_MAX;
+            rrv__frame(rrv__scale(ch->g[k], 1.0 / gl), &ch->b1[k], &ch->b2[k]);
+        } else {
+            ch->b1[k] = ch->c1;
+            ch->b2[k] = ch->c2;
+        }
+    }
+    for (k = 0; k <= ch->n; ++k) {
+        if (!(rrv__length(rrv__sub(ch->x[k + 1], ch->x[k])) > 1e-12)) return DBL_MAX;
+        /* the end segments take the IOR of their ends, so the kicks of
+           the vertices account for the whole change of eta from x0 to y
+           whatever the comb's offset */
+        ch->wa[k] = k == 0 ? 1.0 : k == ch->n ? 0.0 : 0.5;
+        ch->wb[k] = 1.0 - ch->wa[k];
+        if (ch->n == 0) ch->wa[k] = ch->wb[k] = 0.5;
+        ch->em[k] = rrv__eta_gradient(scene, rrv__madd(ch->x[k], rrv__sub(ch->x[k + 1], ch->x[k]), ch->wb[k]), &ch->gm[k]);
+    }
+    for (k = 1; k <= ch->n; ++k) {
+        rrv__chain_vertex(scene, ch, k, jac);
+        worst = fmax(worst, fmax(fabs(ch->r[k][0]), fabs(ch->r[k][1])));
+        sum += ch->r[k][0] * ch->r[k][0] + ch->r[k][1] * ch->r[k][1];
+    }
+    if (!(worst < DBL_MAX) || !(sum < DBL_MAX)) return DBL_MAX; /* NaN compares false: unusable */
+    *largest = worst;
+    return sqrt(sum);
+}
+
+
+/* Moves every vertex by s times its step du (gauge coordinates in the
+   bases b1, b2 of the positions xs it steps from). */
+static void rrv__chain_move(const rrv_scene *scene, rrv__chain *ch, const rrv_vec3 *xs, const rrv_vec3 *b1,
+                            const rrv_vec3 *b2, double (*du)[4], double s)
+{
+    int k;
+    ch->failed = 0;
+    for (k = 1; k <= ch->n; ++k) {
+        ch->x[k] = rrv__madd(rrv__madd(xs[k], b1[k], s * du[k][0]), b2[k], s * du[k][2]);
+        if (ch->iso && !rrv__project_iso(scene, &ch->x[k], ch->level[k])) ch->failed = 1;
+    }
+}
+
+/* Sets up the chain x0 -> y: the comb planes over the part of the chord
+   whose planes meet a refraction support (offset u in [0,1) of a spacing),
+   ISO levels, and the light frame. With drop > 0 a plane is left out
+   where eta along the chord changes by less than drop across it (faster,
+   biased). ISO leaves out planes where the chord has no isosurface. */
+static void rrv__chain_setup(const rrv_scene *scene, rrv_vec3 x0, rrv_vec3 y, rrv_vec3 ny, int iso, double drop,
+                             double u, rrv__chain *ch)
+{
+    rrv_vec3 d = rrv__sub(y, x0);
+    double L = rrv__length(d), lo = DBL_MAX, hi = -DBL_MAX, h = scene->settings.step, prev_eta = 0;
+    long count, i;
+    int m;
+    ch->n = 0;
+    ch->iso = iso;
+    ch->failed = 0;
+    ch->c = rrv__scale(d, 1.0 / L);
+    rrv__frame(ch->c, &ch->c1, &ch->c2);
+    rrv__frame(ny, &ch->s1, &ch->s2);
+    ch->x[0] = x0;
+    for (m = 0; m < scene->medium_count; ++m) {
+        const rrv_medium *md = &scene->media[m];
+        rrv_vec3 mid = rrv__scale(rrv__add(md->lo, md->hi), 0.5), half = rrv__scale(rrv__sub(md->hi, md->lo), 0.5);
+        double cm = rrv__dot(rrv__sub(mid, x0), ch->c);
+        double ext = fabs(half.x * ch->c.x) + fabs(half.y * ch->c.y) + fabs(half.z * ch->c.z);
+        double a = cm - ext, b = cm + ext;
+        if (!rrv__medium_refracts(md)) continue;
+        if (rrv__has_sphere_support(md)) {
+            double cs = rrv__dot(rrv__sub(md->ior.center, x0), ch->c);
+            a = fmax(a, cs - md->ior.radius);
+            b = fmin(b, cs + md->ior.radius);
+        }
+        if (a < b) { lo = fmin(lo, a); hi = fmax(hi, b); }
+    }
+    lo = fmax(lo, 0.0);
+    hi = fmin(hi, L);
+    if (!(lo < hi)) { ch->x[1] = y; return; }
+    count = (long)ceil((hi - lo) / h);
+    if (count > RRV__CHAIN_MAX) { count = RRV__CHAIN_MAX; h = (hi - lo) / RRV__CHAIN_MAX; }
+    for (i = 0; i < count; ++i) {
+        double t = lo + ((double)i + u) * h;
+        rrv_vec3 g, p = rrv__madd(x0, ch->c, t);
+        double eta;
+        if (!(t > 0 && t < L)) continue;
+        eta = rrv__eta_gradient(scene, p, &g);
+        if (i > 0 && drop > 0 && fabs(eta - prev_eta) < drop) continue;
+        prev_eta = eta;
+        if (iso && !(rrv__length(g) > RRV__MANIFOLD_FLAT)) continue;
+        ch->t[ch->n] = t;
+        ch->level[ch->n + 1] = eta;
+        ++ch->n;
+    }
+    ch->x[ch->n + 1] = y;
+}
+
+/* Seeds the chain from a direction w at x0: a parabola from x0 to y that
+   leaves x0 along w (as nearly as a graph over the chord can), sampled at
+   the comb planes, ISO vertices then projected onto their isosurfaces.
+   Good where the path stays near the chord; rrv__chain_trace below where
+   it bends far from it. */
+static void rrv__chain_seed(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w)
+{
+    rrv_vec3 y = ch->x[ch->n + 1], x0 = ch->x[0];
+    double L = rrv__length(rrv__sub(y, x0)), wc = rrv__dot(w, ch->c);
+    rrv_vec3 v = rrv__scale(rrv__madd(w, ch->c, -wc), 1.0 / fmax(wc, 0.1));
+    int k;
+    ch->failed = 0;
+    for (k = 1; k <= ch->n; ++k) {
+        double t = ch->t[k - 1];
+        ch->x[k] = rrv__madd(rrv__madd(x0, ch->c, t), v, t * (L - t) / L);
+        if (ch->iso && !rrv__project_iso(scene, &ch->x[k], ch->level[k])) ch->failed = 1;
+    }
+}
+
+/* Seeds the chain from a direction w at x0 by tracing it: the ray from x0
+   along w meets each comb plane in turn and is refracted there by the
+   chain's own rule (the segment's IOR taken at the middle of its chord
+   along the current direction), so every vertex but the last starts
+   satisfied and Newton has only to bend the whole path onto y, as a
+   shot would; far simpler than bending a guessed curve into a ray.
+   ISO vertices are then projected onto their isosurfaces. A ray that turns
+   back along the chord fails the seed. */
+static void rrv__chain_trace(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w)
+{
+    rrv_vec3 x0 = ch->x[0], x = x0, d = w, g;
+    double e_prev = rrv__eta_gradient(scene, x0, &g);
+    int k;
+    ch->failed = 0;
+    for (k = 1; k <= ch->n; ++k) {
+        double dc = rrv__dot(d, ch->c), s, e_next, next, cn, eta, D;
+        rrv_vec3 n;
+        if (!(dc > 1e-6)) { ch->failed = 1; return; }
+        s = (ch->t[k - 1] - rrv__dot(rrv__sub(x, x0), ch->c)) / dc;
+        x = rrv__madd(x, d, s);
+        ch->x[k] = x;
+        next = (k < ch->n ? ch->t[k] : rrv__dot(rrv__sub(ch->x[ch->n + 1], x0), ch->c)) - ch->t[k - 1];
+        e_next = rrv__eta_gradient(scene, rrv__madd(x, d, 0.5 * next / dc), NULL);
+        if (rrv__vertex_normal(scene, x, (rrv__eta_gradient(scene, x, &g), g), &n, NULL)) {
+            cn = rrv__dot(d, n);
+            eta = e_prev / e_next;
+            D = 1.0 - eta * eta * (1.0 - cn * cn);
+            d = D >= 0 ? rrv__normalize(rrv__add(rrv__scale(d, eta), rrv__scale(n, (cn >= 0 ? 1.0 : -1.0) * sqrt(D) - eta * cn)))
+                       : rrv__madd(d, n, -2.0 * cn);
+        }
+        e_prev = e_next;
+        if (ch->iso && !rrv__project_iso(scene, &ch->x[k], ch->level[k])) ch->failed = 1;
+    }
+}
+
+typedef struct rrv__mroot {
+    rrv_vec3 w0;      /* initial direction */
+    double density;   /* dw0 / dA_y, sr per m^2 */
+    int iterations;
+} rrv__mroot;
+
+/* Is the converged chain a physical path, and no chord crosses a sharp
+   interface? The constraint admits the reflected direction as well as the
+   refracted one. A vertex may reflect only where refraction is impossible
+   (total internal reflection) or where the normal momentum it reverses,
+   eta |w_in.n|, is at most the kick grad eta gives over the vertex's share
+   of the chain, |grad eta| (l_in + l_out) / 2: that is how a discrete
+   chain turns a ray around where it grazes an isosurface (its apex in a
+   lens, where the continuous ray's normal momentum passes through zero);
+   a larger reversal would be a mirror, which a smooth medium is not. */
+static int rrv__chain_physical(const rrv_scene *scene, const rrv__chain *ch)
+{
+    int k;
+    for (k = 1; k <= ch->n; ++k) {
+        rrv_vec3 wi = rrv__normalize(rrv__sub(ch->x[k], ch->x[k - 1]));
+        rrv_vec3 wo = rrv__normalize(rrv__sub(ch->x[k + 1], ch->x[k]));
+        if (ch->snell[k]) {
+            double ci = rrv__dot(wi, ch->nrm[k]), ratio = ch->em[k - 1] / ch->em[k];
+            double share = 0.5 * (rrv__length(rrv__sub(ch->x[k], ch->x[k - 1])) + rrv__length(rrv__sub(ch->x[k + 1], ch->x[k])));
+            if (!(ci * rrv__dot(wo, ch->nrm[k]) > 0) && !(ratio * ratio * (1.0 - ci * ci) > 1.0) &&
+                !(ch->em[k - 1] * fabs(ci) <= rrv__length(ch->g[k]) * share))
+                return 0;
+        } else if (!(rrv__dot(wi, wo) > 0)) {
+            return 0;
+        }
+    }
+    for (k = 0; k <= ch->n; ++k) {
+        rrv_vec3 x = ch->x[k], d = rrv__sub(ch->x[k + 1], x);
+        double len = rrv__length(d), done = 0;
+        int faces;
+        d = rrv__scale(d, 1.0 / len);
+        for (faces = 0; faces < 64; ++faces) {
+            rrv__support_view view;
+            rrv_vec3 p = rrv__madd(x, d, done);
+            rrv__look_along(scene, p, d, &view);
+            if (!(view.t_face < len - done)) break;
+            if (rrv__face_jumps(scene, rrv__madd(p, d, view.t_face), d)) return 0;
+            done += view.t_face + 2.0 * rrv__face_gap(rrv__madd(p, d, view.t_face));
+        }
+    }
+    return 1;
+}
+
+/* Newton's method on the chain from its seeded positions: the full step
+   J du = -r (block Thomas), halved on a worse or unusable step and
+   doubled up to 1 on success (the step control of Specular Manifold
+   Sampling's solver), no vertex moved more than a quarter of the chord at
+   once. At most RRV__SOLVE_ITERATIONS evaluations. Returns 1 with the
+   root's initial direction and density, 0 when it did not converge, the
+   root is not a physical path, or the Jacobian is singular there. */
+static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroot *root)
+{
+    rrv_vec3 xs[RRV__CHAIN_MAX + 2], sb1[RRV__CHAIN_MAX + 2], sb2[RRV__CHAIN_MAX + 2];
+    double du[RRV__CHAIN_MAX + 2][4], Cp[RRV__CHAIN_MAX + 2][4];
+    double prev = DBL_MAX, step = 1.0, L = rrv__length(rrv__sub(ch->x[ch->n + 1], ch->x[0]));
+    int it, k, have_prev = 0, n = ch->n;
+    root->iterations = 0;
+    for (it = 0; it < RRV__MANIFOLD_ITERATIONS; ++it) {
+        double largest, norm = rrv__chain_eval(scene, ch, 1, &largest), big = 0;
+        root->iterations = it + 1;
+        if (!(norm < prev)) {
+            if (!have_prev) return 0;
+            step *= 0.5;
+            if (step < 1e-6) return 0;
+            rrv__chain_move(scene, ch, xs, sb1, sb2, du, step);
+            continue;
+        }
+        if (largest < RRV__MANIFOLD_TOL) {
+            /* the geometry term: dx_1/dy from J Z = -E, E in the last row */
+            rrv_vec3 x1, w0, e1, e2, dw[2];
+            double D[4], l01;
+            int j;
+            if (!rrv__chain_physical(scene, ch)) return 0;
+            if (n > 0) {
+                for (k = 1; k <= n; ++k) du[k][0] = du[k][1] = du[k][2] = du[k][3] = 0;
+                for (j = 0; j < 4; ++j) du[n][j] = -ch->E[j];
+                if (!rrv__chain_thomas(ch, du, 2, Cp)) return 0;
+            }
+            x1 = ch->x[1];
+            l01 = rrv__length(rrv__sub(x1, ch->x[0]));
+            w0 = rrv__scale(rrv__sub(x1, ch->x[0]), 1.0 / l01);
+            rrv__frame(w0, &e1, &e2);
+            for (j = 0; j < 2; ++j) {
+                rrv_vec3 dx = n > 0 ? rrv__add(rrv__scale(ch->b1[1], du[1][j]), rrv__scale(ch->b2[1], du[1][2 + j]))
+                                    : (j ? ch->s2 : ch->s1);
+                dw[j] = rrv__scale(rrv__madd(dx, w0, -rrv__dot(dx, w0)), 1.0 / l01);
+            }
+            D[0] = rrv__dot(e1, dw[0]);
+            D[1] = rrv__dot(e1, dw[1]);
+            D[2] = rrv__dot(e2, dw[0]);
+            D[3] = rrv__dot(e2, dw[1]);
+            root->w0 = w0;
+            root->density = fabs(D[0] * D[3] - D[1] * D[2]);
+            return root->density < DBL_MAX && root->density > 0;
+        }
+        for (k = 1; k <= n; ++k) {
+            du[k][0] = -ch->r[k][0];
+            du[k][2] = -ch->r[k][1];
+        }
+        if (!rrv__chain_thomas(ch, du, 1, Cp)) return 0;
+        for (k = 1; k <= n; ++k) big = fmax(big, sqrt(du[k][0] * du[k][0] + du[k][2] * du[k][2]));
+        if (big > 0.25 * L)
+            for (k = 1; k <= n; ++k) { du[k][0] *= 0.25 * L / big; du[k][2] *= 0.25 * L / big; }
+        if (have_prev) step = fmin(1.0, 2.0 * step);
+        have_prev = 1;
+        prev = norm;
+        memcpy(xs, ch->x, sizeof(rrv_vec3) * (size_t)(n + 2));
+        memcpy(sb1, ch->b1, sizeof(rrv_vec3) * (size_t)(n + 2));
+        memcpy(sb2, ch->b2, sizeof(rrv_vec3) * (size_t)(n + 2));
+        rrv__chain_move(scene, ch, xs, sb1, sb2, du, step);
+    }
+    return 0;
+}
+
+/* The contribution of one root's path: visibility and ratio-tracked
+   transmittance along its chords, the vertex's BSDF or phase function
+   toward w0, 0 for a path that touches no refraction support (straight
+   NEE's). Returns 0 when nothing arrives. */
+static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__vertex_bsdf *v, rrv__rng *rng,
+                            double out[3])
+{
+    const rrv_scene *scene = ctx->scene;
+    double T[3] = {1, 1, 1}, f[3];
+    int k, c, touched = 0; /* vertices do not imply it: comb planes reach past the supports */
+    rrv__vertex_eval(v, rrv__normalize(rrv__sub(ch->x[1], ch->x[0])), f);
+    if (!(rrv__max3(f) > 0)) return 0;
+    ++ctx->stats.paths;
+    for (k = 0; k <= ch->n; ++k) {
+        rrv_vec3 x = ch->x[k], d = rrv__sub(ch->x[k + 1], x);
+        double len = rrv__length(d), Ts[3];
+        rrv__hit hit;
+        d = rrv__scale(d, 1.0 / len);
+        if (!touched) {
+            rrv__support_view view;
+            rrv__look_along(scene, x, d, &view);
+            touched = view.inside || view.t_face < len;
+        }
+        if (rrv__intersect_scene(scene, x, d, len * (1.0 - 1e-6), &hit)) return 0;
+        rrv__ratio_tracking_transmittance(ctx, x, d, len * (1.0 - 1e-6), rng, Ts);
+        for (c = 0; c < 3; ++c) T[c] *= Ts[c];
+        if (!(rrv__max3(T) > 0)) return 0;
+    }
+    if (!touched) return 0;
+    for (c = 0; c < 3; ++c) out[c] = f[c] * T[c];
+    return 1;
+}
+
+/* A point y uniform on one area light (quads and triangles; the sky and
+   sphere lights are left to forward paths), its normal and area pdf
+   (selection included). Draws three numbers whatever it returns. */
+static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, rrv__rng *rng, rrv_vec3 *y, rrv_vec3 *ny,
+                                             double *pdf_area)
+{
+    int choices = rrv__light_choices(scene), pick;
+    const rrv_shape *s;
+    double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng);
+    if (!choices) return NULL;
+    pick = (int)(u * choices);
+    if (pick >= choices) pick = choices - 1;
+    if (pick == scene->light_count) return NULL;
+    s = &scene->shapes[scene->lights[pick]];
+    if (s->kind == RRV_SHAPE_SPHERE) return NULL;
+    if (s->kind == RRV_SHAPE_TRIANGLE) {
+        double su = sqrt(u1);
+        *y = rrv__madd(rrv__madd(s->p0, s->e1, 1.0 - su), s->e2, u2 * su);
+    } else {
+        *y = rrv__madd(rrv__madd(s->p0, s->e1, u1), s->e2, u2);
+    }
+    *ny = rrv__normalize(rrv__cross(s->e1, s->e2));
+    *pdf_area = 1.0 / (rrv__shape_area(s) * choices);
+    return s;
+}
+
+/* The seed's initial direction, from one distribution for the first solve
+   and every trial: a Gaussian around the chord of 0.02 rad (half the
+   time), of 0.2 rad (three times in eight) or uniform (one in eight), so
+   every root's basin has a nonzero probability while most seeds start
+   near the chord, where most roots are. */
+static rrv_vec3 rrv__chain_seed_direction(const rrv__chain *ch, rrv__rng *rng)
+{
+    double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng);
+    if (u < 0.875) {
+        double rad = (u < 0.5 ? 0.02 : 0.2) * sqrt(-2.0 * log(1.0 - u1)), phi = 2.0 * RRV__PI * u2;
+        return rrv__normalize(rrv__add(ch->c, rrv__add(rrv__scale(ch->c1, rad * cos(phi)), rrv__scale(ch->c2, rad * sin(phi)))));
+    }
+    return rrv__sample_uniform_sphere(u1, u2);
+}
+
+/* One solve from a fresh seed (a parabola or, half the time, a traced
+   ray, from a direction of rrv__chain_seed_direction), counted in the stats. */
+static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, rrv__mroot *root)
+{
+    int found;
+    if (rrv__uniform(rng) < 0.5) rrv__chain_seed(ctx->scene, ch, rrv__chain_seed_direction(ch, rng));
+    else rrv__chain_trace(ctx->scene, ch, rrv__chain_seed_direction(ch, rng));
+    found = rrv__manifold_solve(ctx->scene, ch, root);
+    ++ctx->stats.solves;
+    ctx->stats.solve_iterations += (uint64_t)root->iterations;
+    if (found) {
+        ++ctx->stats.solves_converged;
+        ctx->stats.solve_segments += (uint64_t)(ch->n + 1);
+    }
+    return found;
+}
+
+/* Curved NEE from x0 by the manifold walk. The light point y and the
+   chain's comb offset are drawn once; conditioned on them the estimate is
+   unbiased for the chain model: unbiased mode (manifold_trials 0) repeats
+   independent solves until the first root comes back (directions within
+   RRV__SOLVE_SAME_ROOT, at most RRV__SOLVE_TRIALS), E[trials] = 1/p; the
+   fixed-trial mode sums each distinct root found in M solves once (biased
+   low where a root's basin is small, Zeltner et al.'s biased SMS). The
+   partition of path space is shoot's (manual, NEXT-EVENT ESTIMATION). */
+static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                              rrv__rng *rng)
+{
+    const rrv_scene *scene = ctx->scene;
+    const rrv_settings *st = &scene->settings;
+    rrv__chain ch;
+    rrv__mroot root, again;
+    rrv_vec3 y, ny, roots[RRV__MANIFOLD_ROOTS];
+    double pdf_area, carried[3], k;
+    const rrv_shape *s = rrv__pick_area_light(scene, rng, &y, &ny, &pdf_area);
+    int c, count, nroots = 0, trial;
+    if (!s) return;
+    rrv__chain_setup(scene, x0, y, ny, st->manifold_gauge == RRV_GAUGE_ISO, st->manifold_drop, rrv__uniform(rng),
+                     &ch);
+    if (st->manifold_trials <= 0) {
+        if (!rrv__manifold_try(ctx, &ch, rng, &root)) return;
+        if (!rrv__chain_carry(ctx, &ch, v, rng, carried)) return;
+        for (count = 1; count < RRV__SOLVE_TRIALS; ++count)
+            if (rrv__manifold_try(ctx, &ch, rng, &again) &&
+                rrv__length(rrv__sub(again.w0, root.w0)) < RRV__SOLVE_SAME_ROOT)
+                break;
+        ctx->stats.solve_trials += (uint64_t)count;
+        ++ctx->stats.solve_connections;
+        k = root.density / pdf_area * count * rrv__eta_scale(ctx, y) * rrv__path_mis(path);
+        for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * carried[c] * s->L[c] * k;
+        return;
+    }
+    for (trial = 0; trial < st->manifold_trials; ++trial) {
+        int i;
+        if (!rrv__manifold_try(ctx, &ch, rng, &root)) continue;
+        for (i = 0; i < nroots; ++i)
+            if (rrv__length(rrv__sub(roots[i], root.w0)) < RRV__SOLVE_SAME_ROOT) break;
+        if (i < nroots || nroots == RRV__MANIFOLD_ROOTS) continue;
+        roots[nroots++] = root.w0;
+        if (!rrv__chain_carry(ctx, &ch, v, rng, carried)) continue;
+        ctx->stats.solve_trials += (uint64_t)st->manifold_trials;
+        ++ctx->stats.solve_connections;
+        k = root.density / pdf_area * rrv__eta_scale(ctx, y) * rrv__path_mis(path);
+        for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * carried[c] * s->L[c] * k;
+    }
 }
 
 /* ==== image I/O: PFM and PNG files, checksums =================================
@@ -8477,7 +9257,10 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"refraction", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|poisson|midpoint|comb"},
     {"majorantcells", RRV__SF_INT, 1, 0, 0.0, 256.0, NULL},
     {"iorinterp", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "trilinear|cubic"},
-    {"nee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "none|straight|shoot"},
+    {"nee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "none|straight|shoot|manifold"},
+    {"manifoldgauge", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "chord|iso"},
+    {"manifoldtrials", RRV__SF_INT, 1, 0, 0.0, 1024.0, NULL},
+    {"manifolddrop", RRV__SF_NUM, 1, 0, 0.0, 1.0, NULL},
 };
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
@@ -9155,7 +9938,13 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[8].given) s->refraction = rrv__sf_schemes[sl[8].choice];
     if (sl[9].given) s->majorant_cells = (int)sl[9].v[0];
     if (sl[10].given) s->ior_interpolation = sl[10].choice ? RRV_IOR_INTERP_CUBIC : RRV_IOR_INTERP_TRILINEAR;
-    if (sl[11].given) s->nee = sl[11].choice == 0 ? RRV_NEE_NONE : sl[11].choice == 1 ? RRV_NEE_STRAIGHT : RRV_NEE_SHOOT;
+    if (sl[11].given) {
+        static const rrv_nee modes[] = {RRV_NEE_NONE, RRV_NEE_STRAIGHT, RRV_NEE_SHOOT, RRV_NEE_MANIFOLD};
+        s->nee = modes[sl[11].choice];
+    }
+    if (sl[12].given) s->manifold_gauge = sl[12].choice ? RRV_GAUGE_ISO : RRV_GAUGE_CHORD;
+    if (sl[13].given) s->manifold_trials = (int)sl[13].v[0];
+    if (sl[14].given) s->manifold_drop = sl[14].v[0];
     return RRV_OK;
 }
 

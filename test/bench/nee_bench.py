@@ -1,0 +1,118 @@
+#!/usr/bin/env python3
+"""Equal-time error of the next-event estimators on the lens caustic.
+
+Renders a crop of scenes/lens_caustic.rrv (eikonal integrator, one thread)
+with every `nee` mode, each for about the same CPU time, and reports the
+RMSE against a converged `nee none` reference, the efficiency 1 / (time x
+MSE), and the solver's statistics from the render summary. Time is user +
+sys CPU time of the render process (the machine may be shared, so wall
+time is printed beside it but not used).
+
+    python3 test/bench/nee_bench.py [--seconds 20] [--ref-spp 4096]
+
+Not a test: nothing here can fail on a number. The reference is the mean of
+two independent `none` renders; half their RMS difference is its own error,
+printed so the RMSEs below can be read against it.
+"""
+import argparse
+import os
+import re
+import resource
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+RRV = os.path.join(ROOT, "rrv")
+SCENE = os.path.join(ROOT, "scenes", "lens_caustic.rrv")
+CROP = ["32", "24", "96", "72"]
+
+MODES = [
+    ("none", "none", ""),
+    ("straight", "straight", ""),
+    ("shoot", "shoot", ""),
+    ("manifold chord", "manifold", "manifoldgauge chord"),
+    ("manifold iso", "manifold", "manifoldgauge iso"),
+    ("manifold chord M=1", "manifold", "manifoldgauge chord manifoldtrials 1"),
+    ("manifold chord M=4", "manifold", "manifoldgauge chord manifoldtrials 4"),
+]
+
+
+def read_pfm(path):
+    with open(path, "rb") as f:
+        kind = f.readline().strip()
+        w, h = map(int, f.readline().split())
+        scale = float(f.readline())
+        data = f.read()
+    fmt = ("<" if scale < 0 else ">") + "f" * (len(data) // 4)
+    vals = struct.unpack(fmt, data)
+    assert kind == b"PF" and len(vals) == 3 * w * h
+    return vals
+
+
+def scene_with(extra, workdir):
+    """The lens caustic with the render statement extended by `extra`."""
+    with open(SCENE) as f:
+        text = f.read()
+    text = re.sub(r"^(render .*)$", lambda m: m.group(1) + " " + extra, text, count=1, flags=re.M)
+    path = os.path.join(workdir, "scene_%d.rrv" % abs(hash(extra)))
+    with open(path, "w") as f:
+        f.write(text)
+    return path
+
+
+def render(scene, nee, spp, seed, out):
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    p = subprocess.run([RRV, "render", scene, "-o", out, "--spp", str(spp), "--seed", str(seed), "--nee", nee,
+                        "--integrator", "eikonal", "--threads", "1", "--crop"] + CROP,
+                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True, check=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return cpu, wall, p.stderr.strip().splitlines()[-1] if p.stderr.strip() else ""
+
+
+def rmse(a, b):
+    n = len(a)
+    return (sum((x - y) ** 2 for x, y in zip(a, b)) / n) ** 0.5
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seconds", type=float, default=20.0, help="CPU seconds per mode")
+    ap.add_argument("--ref-spp", type=int, default=4096, help="spp of each of the two reference renders")
+    args = ap.parse_args()
+    work = tempfile.mkdtemp(prefix="nee_bench_")
+    plain = scene_with("", work)
+    refs = []
+    for seed in (1001, 1002):
+        out = os.path.join(work, "ref%d.pfm" % seed)
+        cpu, wall, _ = render(plain, "none", args.ref_spp, seed, out)
+        refs.append(read_pfm(out))
+        print("reference none %d spp seed %d: %.1f s cpu" % (args.ref_spp, seed, cpu), flush=True)
+    ref = [(x + y) / 2 for x, y in zip(*refs)]
+    ref_mse = (rmse(*refs) / 2) ** 2
+    print("reference own RMSE ~ %.4f (half the RMS difference of its two halves)" % ref_mse ** 0.5)
+    print()
+    print("RMSE against the reference; MSE* = MSE minus the reference's own, used for the efficiency")
+    print("| mode | spp | cpu s | wall s | RMSE | efficiency 1/(s MSE*) | solver |")
+    print("|---|---|---|---|---|---|---|")
+    for name, nee, extra in MODES:
+        scene = scene_with(extra, work)
+        out = os.path.join(work, "probe.pfm")
+        cpu, _, _ = render(scene, nee, 1, 7, out)  # calibrate: CPU seconds per spp
+        spp = max(1, int(args.seconds / max(cpu, 1e-3)))
+        out = os.path.join(work, "mode.pfm")
+        cpu, wall, summary = render(scene, nee, spp, 11, out)
+        e = rmse(read_pfm(out), ref)
+        solver = summary.split("; ", 1)[1] if "; " in summary else ""
+        mse = max(e * e - ref_mse, 1e-30)
+        print("| %s | %d | %.1f | %.1f | %.4f | %.3g | %s |" % (name, spp, cpu, wall, e, 1.0 / (cpu * mse), solver),
+              flush=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
