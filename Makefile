@@ -93,11 +93,11 @@ refs: $(BUILD)/rrv $(BUILD)/ref_compare
 	python3 test/bench/refs.py $(BUILD)/rrv $(BUILD)/ref_compare $(REFS)
 
 bench: $(BUILD)/rrv $(BUILD)/ref_compare $(BUILD)/measure_grin $(BUILD)/measure_tracking
-	python3 test/bench/bench.py $(BUILD)
+	RRV_BENCH_CC='$(CC)' RRV_BENCH_FLAGS='$(CFLAGS_ALL) $(THREAD_FLAGS)' python3 test/bench/bench.py $(BUILD)
 	$(BUILD)/measure_grin
 
 bench-quick: $(BUILD)/rrv $(BUILD)/ref_compare $(BUILD)/measure_tracking
-	python3 test/bench/bench.py $(BUILD) --quick
+	RRV_BENCH_CC='$(CC)' RRV_BENCH_FLAGS='$(CFLAGS_ALL) $(THREAD_FLAGS)' python3 test/bench/bench.py $(BUILD) --quick
 
 # measure_grin: the convergence study of the refraction schemes (tables in
 # README); measure_nanovdb: NanoVDB lookups against a dense grid;

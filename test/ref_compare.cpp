@@ -6,6 +6,11 @@
        relmse is the mean of (img - ref)^2 / (ref^2 + 0.01) (the 0.01 keeps
        dark pixels from dominating).
 
+   ref_compare --floor REF_VAR.exr REF_SPP
+       prints "floor F": the MSE the reference's own noise adds to an
+       error measured against it (its per-sample variance over REF_SPP,
+       averaged over pixels and channels).
+
    ref_compare --merge OUT.exr OUT_VAR.exr M IMG_1.exr ... IMG_C.exr
        `make refs`: C independent renders (different seeds) of M samples per
        pixel each become the reference OUT.exr (their mean) and OUT_VAR.exr,
@@ -257,6 +262,14 @@ int main(int argc, char **argv)
         double ref_spp = std::atof(argv[4]), spp = std::atof(argv[5]);
         if (k <= 64 && ref_spp > 0 && spp > 0) return check(argv[2], argv[3], ref_spp, spp, k, argv + 6);
     }
+    if (argc == 4 && mode == "--floor") {
+        image var;
+        double spp = std::atof(argv[3]), sum = 0;
+        if (!read_exr(argv[2], var) || !(spp > 0)) return 2;
+        for (float v : var.rgb) sum += v;
+        std::printf("floor %.6e\n", sum / var.rgb.size() / spp);
+        return 0;
+    }
     if (argc >= 7 && mode == "--merge") {
         double m = std::atof(argv[4]);
         if (m > 0) return merge(argv[2], argv[3], m, argc - 5, argv + 5);
@@ -264,6 +277,7 @@ int main(int argc, char **argv)
     std::fprintf(stderr,
                  "usage: ref_compare REF.exr IMG.exr\n"
                  "       ref_compare --check REF.exr REF_VAR.exr REF_SPP SPP IMG_1.exr ... IMG_K.exr  (K <= 64)\n"
+                 "       ref_compare --floor REF_VAR.exr REF_SPP\n"
                  "       ref_compare --merge OUT.exr OUT_VAR.exr SPP_EACH IMG_1.exr ... IMG_C.exr  (C >= 2)\n");
     return 2;
 }
