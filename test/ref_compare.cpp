@@ -49,6 +49,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -197,6 +198,8 @@ static int check(const char *ref_path, const char *var_path, double ref_spp, dou
     int blocks = 0, worst_x = 0, worst_y = 0, own_larger = 0;
     double chi2 = 0, worst = 0, worst_mean = 0, worst_ref = 0, sum_mean = 0, sum_ref = 0;
     bool finite = true;
+    std::vector<double> resolution;
+    double power = 0;
     for (int by = 0; by < h; by += B)
         for (int bx = 0; bx < w; bx += B) {
             double mean = 0, refmean = 0, var = 0;
@@ -231,6 +234,8 @@ static int check(const char *ref_path, const char *var_path, double ref_spp, dou
             var += floor * floor;
             double z = (mean - refmean) / std::sqrt(var);
             if (!std::isfinite(z)) finite = false;
+            if (refmean > 0) resolution.push_back(4.0 * std::sqrt(var) / refmean);
+            power += refmean * refmean / var;
             chi2 += z * z;
             sum_mean += mean * n;
             sum_ref += refmean * n;
@@ -244,12 +249,23 @@ static int check(const char *ref_path, const char *var_path, double ref_spp, dou
             ++blocks;
         }
     double limit = blocks + 4.0 * std::sqrt(2.0 * blocks);
+    /* The power of the check: a bias of this fraction of a block's mean
+       fails it in the median block. */
+    double detectable = 0;
+    if (!resolution.empty()) {
+        std::nth_element(resolution.begin(), resolution.begin() + resolution.size() / 2, resolution.end());
+        detectable = resolution[resolution.size() / 2];
+    }
+    /* A bias of the same fraction d of every block's mean adds d^2 power
+       to chi^2: this d reaches the chi^2 limit. */
+    double uniform = power > 0 ? std::sqrt((limit - blocks) / power) : 0;
     bool pass = finite && std::fabs(worst) <= 4.0 && chi2 <= limit;
     std::printf("%d x %g spp against %g spp, %d blocks of 8x8: chi2 %.1f (limit %.1f), max |z| %.2f at (%d,%d) "
-                "(%.5g against %.5g), mean ratio %.5f, own variance larger in %.0f%% of pixels: %s\n",
+                "(%.5g against %.5g), mean ratio %.5f, own variance larger in %.0f%% of pixels; "
+                "a bias of %.1f%% fails the median block, %.2f%% in every block fails chi2: %s\n",
                 k, spp, ref_spp, blocks, chi2, limit, std::fabs(worst), worst_x, worst_y, worst_mean, worst_ref,
                 sum_ref != 0 ? sum_mean / sum_ref : 1.0, 100.0 * own_larger / ((double)w * h),
-                pass ? "PASS" : "FAIL");
+                100.0 * detectable, 100.0 * uniform, pass ? "PASS" : "FAIL");
     return pass ? 0 : 1;
 }
 

@@ -71,6 +71,7 @@ class Bench:
         self.md = []
         self.curves = {}  # scene -> [(label, [(cpu s, rmse)])]
         self.count = 0
+        self.summary_rows = []
 
     def out(self, text=""):
         print(text, flush=True)
@@ -121,6 +122,9 @@ class Bench:
                      % (label, spp, wall, cpu, rss / 1024, mse, rel, 1 / (cpu * mse) if mse > 0 else float("inf")))
         self.out()
         self.curves[scene] = [(label, curves[label]) for label, _ in methods]
+        for label, _ in methods:
+            pts = sorted(curves[label])
+            self.summary_rows.append((scene, label, pts, floor))
 
     def setting_sweep(self, title, scene, spp, rows):
         """rows: [(setting label, args)] at one spp."""
@@ -156,6 +160,40 @@ class Bench:
             self.out("| %d | %.2f | %.2f | %.2fx |" % (t, wall, cpu, res[0][0] / wall))
         self.out()
 
+    def majorant_and_memory(self):
+        """The majorant grid against one global majorant, and peak memory
+        against grid bytes, on grids made by make_grid.py (not stored)."""
+        grids = {}
+        for name, n, extra in (("dense64.vol", 64, []), ("sparse128.vol", 128, ["--sparse"]), ("dense128.vol", 128, [])):
+            path = os.path.join(OUT, name)
+            if not os.path.exists(path):
+                subprocess.run([sys.executable, os.path.join(ROOT, "test", "bench", "make_grid.py"), path, str(n)]
+                               + extra, check=True)
+            grids[name] = path
+        template = open(os.path.join(ROOT, "test", "bench", "smoke_grid.rrv.in")).read()
+        def scene(grid, cells):
+            path = os.path.join(OUT, "%s_%d.rrv" % (grid, cells))
+            open(path, "w").write(template.replace("@GRID@", grid).replace("@CELLS@", str(cells)))
+            return os.path.relpath(path, ROOT)
+        img = os.path.join(OUT, "grid.pfm")
+        self.out("### Majorant grid against one global majorant (--majorant-cells 1), 256x256, 16 spp, 2 threads\n")
+        self.out("| volume | one global majorant wall s (user+sys) | majorant grid wall s (user+sys) | speedup |")
+        self.out("|---|---|---|---|")
+        for label, grid in (("sparse 128^3 grid, 6 small dense puffs", "sparse128.vol"),
+                            ("dense 64^3 smoke column", "dense64.vol")):
+            res = timed([[self.rrv, "render", scene(grid, c), "-o", img, "-q"] for c in (1, 0)], self.runs)
+            self.out("| %s | %.2f (%.2f) | %.2f (%.2f) | %.1fx |" % (label, res[0][0], res[0][1], res[1][0], res[1][1],
+                                                                    res[0][0] / res[1][0]))
+        self.out()
+        self.out("### Peak memory against grid bytes (1 spp, 256x256)\n")
+        self.out("| grid | grid bytes | peak RSS | RSS - grid |")
+        self.out("|---|---|---|---|")
+        for grid in ("dense64.vol", "dense128.vol"):
+            size = (os.path.getsize(grids[grid]) - 48) / 2 ** 20
+            rss = timed([[self.rrv, "render", scene(grid, 0), "-o", img, "--spp", "1", "-q"]], 1)[0][2] / 1024
+            self.out("| %s | %.1f MiB | %.1f MiB | %.1f MiB |" % (grid, size, rss, rss - size))
+        self.out()
+
     def tracking(self):
         spp = "1" if self.quick else "4"
         out = Timer.once([os.path.join(self.build, "measure_tracking"), spp])[3]
@@ -166,6 +204,24 @@ class Bench:
             if line.startswith("|"):
                 self.out(line)
         self.out()
+
+    def summary(self):
+        """One line per curve: the error at the most samples, its efficiency,
+        and the log-log slope of MSE against CPU time (-1 for plain Monte
+        Carlo once loading is amortised; flatter where a bias or the
+        reference's noise floor takes over)."""
+        rows = ["| scene | method | CPU s at most spp | RMSE there | efficiency 1/(CPU s x MSE) | slope of log MSE vs log time (last 3 points) |",
+                "|---|---|---|---|---|---|"]
+        for scene, label, pts, floor in self.summary_rows:
+            t, r = pts[-1]
+            tail = pts[-3:]
+            xs = [math.log(p[0]) for p in tail]
+            ys = [math.log(p[1] ** 2) for p in tail]
+            mx, my = sum(xs) / len(xs), sum(ys) / len(ys)
+            sxx = sum((x - mx) ** 2 for x in xs)
+            slope = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx if sxx > 0 else float("nan")
+            rows.append("| %s | %s | %.2f | %.3e | %.3g | %.2f |" % (scene, label, t, r, 1 / (t * r * r), slope))
+        return rows
 
     # ---- the plot ---------------------------------------------------------------------
     def svg(self, path):
@@ -270,7 +326,7 @@ def main():
     b.out("## Error against time\n")
     b.out("Every render at the reference's resolution, 1 thread, whole process (loading included). MSE over "
           "pixels and channels; relative MSE divides each squared error by ref^2 + 0.01.\n")
-    b.sweep("plume", [("classic", ["--integrator", "classic"])], (1, 4, 16) if quick else (1, 4, 16, 64, 256))
+    b.sweep("plume", [("classic", ["--integrator", "classic"])], (4, 16, 64, 256) if quick else (1, 4, 16, 64, 256, 1024))
     lune = [("refractive comb, nee none", ["--integrator", "refractive", "--nee", "none"]),
             ("refractive comb, nee straight", ["--integrator", "refractive", "--nee", "straight"]),
             ("eikonal RK4 h=0.05, nee shoot", ["--integrator", "eikonal", "--step", "0.05", "--nee", "shoot"])]
@@ -305,8 +361,13 @@ def main():
     b.overhead(("fire",) if quick else ("fire", "blast"), 16 if quick else 64)
     if not quick:
         b.threads()
+        b.majorant_and_memory()
     b.tracking()
     b.out("Bench wall time: %.0f s." % (time.time() - t0))
+    summary = ["## Summary\n"] + b.summary() + [""]
+    for line in summary:
+        print(line)
+    b.md[2:2] = summary
     open(os.path.join(RESULTS, "bench.md"), "w").write("\n".join(b.md) + "\n")
     b.svg(os.path.join(RESULTS, "bench.svg"))
     print("bench: wrote test/bench/results/bench.md and bench.svg")
