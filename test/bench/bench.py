@@ -337,7 +337,7 @@ def main():
     fire = [("refractive tol 0.05, nee none", ["--integrator", "refractive", "--bend-tolerance", "0.05", "--nee", "none"]),
             ("refractive tol 0.05, nee straight", ["--integrator", "refractive", "--bend-tolerance", "0.05",
                                                    "--nee", "straight"])]
-    b.sweep("fire", fire, (2, 8) if quick else (2, 8, 32, 128))
+    b.sweep("fire", fire, (2, 8, 32) if quick else (2, 8, 32, 128))
     if not quick:
         b.sweep("smoke", [("classic", ["--integrator", "classic"])], (1, 4, 16, 64))
         b.sweep("fisheye", [("refractive comb, nee none", ["--integrator", "refractive", "--nee", "none"]),
