@@ -3,7 +3,8 @@
 # CC=clang also float-to-int overflow checks, as CI runs it);
 # `make THREADS=0` builds without POSIX threads; `make fuzz` builds the
 # libFuzzer harnesses (clang) and `make fuzz-run` runs each for a while;
-# `make bench` runs the benchmarks.
+# `make bench` runs the benchmarks (`make bench-quick` a short version);
+# `make refs` renders the reference images in test/ref/.
 CC      ?= cc
 OPT     ?= -O2 -g
 WARN    := -std=c99 -Wall -Wextra -pedantic
@@ -33,7 +34,7 @@ CFLAGS_ALL = $(WARN) $(OPT) $(SANFLAGS) $(CFLAGS)
 TEST_SRCS  := $(wildcard test/test_*.c)
 TEST_BINS  := $(patsubst test/%.c,$(BUILD)/%,$(TEST_SRCS))
 
-.PHONY: all test fuzz fuzz-run bench clean
+.PHONY: all test fuzz fuzz-run bench bench-quick refs clean
 all: rrv
 
 rrv: $(BUILD)/rrv
@@ -48,8 +49,13 @@ $(BUILD)/test_%: test/test_%.c test/check.h rrv.h $(wildcard parts/*.h) $(wildca
 # test/exr_check.cpp reads rrv's EXR files with the OpenEXR library (tests
 # only); test_exr runs it and fails, saying what to install, when OpenEXR is
 # missing and the program could not be built.
-EXR_CHECK := $(if $(shell pkg-config --exists OpenEXR 2>/dev/null && echo yes),$(BUILD)/exr_check)
+EXR_CHECK := $(if $(shell pkg-config --exists OpenEXR 2>/dev/null && echo yes),$(BUILD)/exr_check $(BUILD)/ref_compare)
 $(BUILD)/exr_check: test/exr_check.cpp test/check.h rrv.h | $(BUILD)
+	$(CXX) -std=c++11 -Wall -Wextra -pedantic $(OPT) $(SANFLAGS) $(CXXFLAGS) \
+	    $(shell pkg-config --cflags OpenEXR) -o $@ $< $(shell pkg-config --libs OpenEXR)
+# test/ref_compare.cpp: error and consistency of renders against test/ref/
+# (test_refs runs it; the benchmarks too).
+$(BUILD)/ref_compare: test/ref_compare.cpp | $(BUILD)
 	$(CXX) -std=c++11 -Wall -Wextra -pedantic $(OPT) $(SANFLAGS) $(CXXFLAGS) \
 	    $(shell pkg-config --cflags OpenEXR) -o $@ $< $(shell pkg-config --libs OpenEXR)
 
@@ -81,12 +87,21 @@ FUZZ_SECONDS ?= 45
 fuzz-run: fuzz
 	sh test/fuzz_run.sh $(FUZZ_SECONDS) $(patsubst build-fuzz/fuzz_%,%,$(FUZZ_BINS))
 
-bench: $(BUILD)/rrv $(BUILD)/measure_grin
-	python3 test/bench/bench.py $(BUILD)/rrv
+# References of every scene (test/ref/refs.txt: settings, spp); `make refs
+# REFS="plume smoke"` renders only those.
+refs: $(BUILD)/rrv $(BUILD)/ref_compare
+	python3 test/bench/refs.py $(BUILD)/rrv $(BUILD)/ref_compare $(REFS)
+
+bench: $(BUILD)/rrv $(BUILD)/ref_compare $(BUILD)/measure_grin $(BUILD)/measure_tracking
+	RRV_BENCH_CC='$(CC)' RRV_BENCH_FLAGS='$(CFLAGS_ALL) $(THREAD_FLAGS)' python3 test/bench/bench.py $(BUILD)
 	$(BUILD)/measure_grin
 
+bench-quick: $(BUILD)/rrv $(BUILD)/ref_compare $(BUILD)/measure_tracking
+	RRV_BENCH_CC='$(CC)' RRV_BENCH_FLAGS='$(CFLAGS_ALL) $(THREAD_FLAGS)' python3 test/bench/bench.py $(BUILD) --quick
+
 # measure_grin: the convergence study of the refraction schemes (tables in
-# README); measure_nanovdb: NanoVDB lookups against a dense grid.
+# README); measure_nanovdb: NanoVDB lookups against a dense grid;
+# measure_tracking: collisions per second against the grid lookup alone.
 $(BUILD)/measure_%: test/measure_%.c rrv.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< -lm
 
