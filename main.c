@@ -2110,7 +2110,7 @@ static int command_farm(int argc, char **argv)
     put_quoted(f, rrv_path);
     fputs(" render ", f);
     put_quoted(f, scene);
-    fprintf(f, " -o %s/parts/tile_\"$i\".exr --tile \"$i\"/%s --resume -q", dir, tiles_text);
+    fprintf(f, " -o %s/parts/tile_\"$i\".exr --tile \"$i\"/%s --resume", dir, tiles_text);
     if (cpus) fprintf(f, " --threads %d", cpus);
     for (i = extra; i < argc; ++i) {
         fputc(' ', f);
