@@ -1809,9 +1809,9 @@ static int command_merge(int argc, char **argv)
         if (i > 0 && (strcmp(parts[i].info.hash, parts[0].info.hash) != 0 ||
                       parts[i].info.width != parts[0].info.width || parts[i].info.height != parts[0].info.height ||
                       parts[i].info.spp != parts[0].info.spp)) {
-            fprintf(stderr, "rrv: merge: \"%s\" is from another scene or settings than \"%s\" (scene %s, %dx%d, "
-                    "%d spp; not %s, %dx%d, %d spp)\n", paths[i], paths[0], parts[i].info.hash,
-                    parts[i].info.width, parts[i].info.height, parts[i].info.spp, parts[0].info.hash,
+            fprintf(stderr, "rrv: merge: \"%s\" is from another scene or settings than \"%s\" (%dx%d, %d spp "
+                    "and %dx%d, %d spp; their hashes differ)\n", paths[i], paths[0],
+                    parts[i].info.width, parts[i].info.height, parts[i].info.spp,
                     parts[0].info.width, parts[0].info.height, parts[0].info.spp);
             goto done;
         }
