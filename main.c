@@ -93,13 +93,23 @@ static const char render_help[] =
     "                         top; the output is the size of the crop (an EXR\n"
     "                         keeps the full frame as its display window and\n"
     "                         the crop's place as its data window)\n"
+    "  --tile I/N|I/CxR       render a part: tile I (from 0) of N bands of rows,\n"
+    "                         or of a C by R grid numbered row by row from the\n"
+    "                         top left; bounds at floor(k * size / count)\n"
+    "  --samples A:B          render a part: samples A..B-1 of every pixel; A:B\n"
+    "                         must be a block of the sample tree (0:N halves\n"
+    "                         at the largest power of two below N, and so on)\n"
+    "  --resume               keep OUT if it already is this complete part\n"
     "  --max-grid-mb N        refuse grids, scene and OBJ files over N MiB\n"
     "                         (default 2048)\n"
     "  -q, --quiet            no progress bar and no summary\n"
     "%s"
     "\n"
     "The image is bit-identical for any thread count, and crops of a render\n"
-    "match the same pixels of the full image.\n";
+    "match the same pixels of the full image. A part (--tile, --samples) is a\n"
+    "float EXR of sample sums with its tile as data window and an rrvPart\n"
+    "attribute saying what it holds; `rrv merge` makes the full image of parts,\n"
+    "bit-identical to one render.\n";
 
 static const char diff_help[] =
     "usage: rrv diff A.pfm B.pfm\n"

@@ -130,8 +130,8 @@ fi
 echo "slurm: one node up: slurmctld, slurmd on port $port, loopback only (own network namespace: $RRV_SLURM_NETNS), munged"
 
 # The farm: tiles as an array, the merge after it.
-"$rrv" farm slurm "$scene" -o "$work/merged.exr" --tiles "$tiles" --dir "$work/farm" --partition ci -- $render_args \
-    >/dev/null || fail "rrv farm slurm failed"
+"$rrv" farm slurm "$scene" -o "$work/merged.exr" --tiles "$tiles" --dir "$work/farm" --partition ci \
+    ${RRV_SLURM_FARM_ARGS:-} -- $render_args >/dev/null || fail "rrv farm slurm failed"
 wait_jobs() {
     local start=$SECONDS
     while [ -n "$(squeue -h -o %i 2>/dev/null)" ]; do
@@ -144,11 +144,16 @@ sh "$work/farm/submit.sh" || fail "sbatch refused the jobs"
 wait_jobs
 t1=$(date +%s.%N)
 [ -s "$work/merged.exr" ] || fail "the merge job wrote no image"
-"$rrv" render "$scene" -o "$work/single.exr" -q $render_args || fail "the single render failed"
+TIMEFORMAT="%U %S"
+{ time "$rrv" render "$scene" -o "$work/single.exr" -q $render_args 2>"$work/single.err"; } 2>"$work/single.time" ||
+    fail "the single render failed: $(cat "$work/single.err")"
 t2=$(date +%s.%N)
 cmp -s "$work/merged.exr" "$work/single.exr" || fail "the merged image differs from a single render"
 echo "PASS slurm: $tiles tiles as a job array, merged after it, byte-identical to a single render"
-awk -v a="$t0" -v b="$t1" -v c="$t2" 'BEGIN { printf "slurm: array + merge %.2f s wall, single render %.2f s wall\n", b - a, c - b }'
+tasks=$(cat "$work"/farm/logs/tile_*.log | sed -n 's/.* in \([0-9.]*\) s:.*/\1/p' | awk '{ t += $1 } END { printf "%.2f", t }')
+awk -v a="$t0" -v b="$t1" -v c="$t2" -v t="$tasks" -v u="$(cat "$work/single.time")" 'BEGIN { split(u, us, " ");
+    printf "slurm: submit to merged %.2f s wall (tasks rendered %s s in all); single render %.2f s wall, %.2f s user+sys\n",
+        b - a, t, c - b, us[1] + us[2] }'
 
 # Resume: one part lost, the same jobs submitted again render only it.
 rm -f "$work/farm/parts/tile_1.exr" "$work/merged.exr"
