@@ -772,7 +772,7 @@ typedef struct rrv_exr_options {
     int x, y;                          /* the image's origin in the display window */
     /* Writer: one extra attribute of type "string" when text_name is not NULL
        (a name of 1-63 bytes, text up to 4095 bytes, e.g. what a partial render
-       holds); the reader leaves both alone: rrv_exr_find_attribute reads it. */
+       holds); the reader sets both to NULL: rrv_exr_find_attribute finds it. */
     const char *text_name, *text;
 } rrv_exr_options;
 RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb,
@@ -6532,6 +6532,7 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
         info->display_height = (int)((int64_t)disp[3] - disp[1] + 1);
         info->x = (int)((int64_t)dw[0] - disp[0]);
         info->y = (int)((int64_t)dw[1] - disp[1]);
+        info->text_name = info->text = NULL;
     }
     rrv__clear_error(err);
     return RRV_OK;

@@ -263,6 +263,50 @@ static void farm_scripts_render_and_resume(void)
     CHECK(same_image("farm.exr", "single.exr"));
 }
 
+typedef struct byte_sink { unsigned char data[8192]; size_t size; } byte_sink;
+static int sink_write(void *user, const void *data, size_t size)
+{
+    byte_sink *sink = (byte_sink *)user;
+    if (size > sizeof sink->data - sink->size) return 1;
+    memcpy(sink->data + sink->size, data, size);
+    sink->size += size;
+    return 0;
+}
+
+/* The writer's string attribute reads back by name, and a header cut
+   anywhere is refused rather than read past. */
+static void exr_text_attribute_round_trips(void)
+{
+    static byte_sink sink;
+    float rgb[6] = { 1, 2, 3, 4, 5, 6 }, *back = NULL;
+    rrv_exr_options opt, info;
+    const char *type;
+    const void *value;
+    size_t size, cut;
+    int w, h;
+    memset(&opt, 0, sizeof opt);
+    opt.pixel = RRV_EXR_FLOAT;
+    opt.text_name = "rrvPart";
+    opt.text = "line one\nline two\n";
+    sink.size = 0;
+    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 1, &opt) == RRV_OK);
+    CHECK(rrv_exr_find_attribute(sink.data, sink.size, "rrvPart", &type, &value, &size) == RRV_OK &&
+          strcmp(type, "string") == 0 && size == strlen(opt.text) && memcmp(value, opt.text, size) == 0);
+    CHECK(rrv_exr_find_attribute(sink.data, sink.size, "rrvOther", &type, &value, &size) == RRV_ERROR_FORMAT &&
+          value == NULL);
+    memset(&info, 0xAB, sizeof info);
+    CHECK(rrv_read_exr_memory(sink.data, sink.size, "t.exr", &back, &w, &h, &info, NULL) == RRV_OK && w == 2 &&
+          memcmp(back, rgb, sizeof rgb) == 0 && info.text_name == NULL && info.text == NULL);
+    rrv_free(back);
+    for (cut = 0; cut < 330 && cut < sink.size; ++cut) {
+        rrv_result r = rrv_exr_find_attribute(sink.data, cut, "rrvPart", &type, &value, &size);
+        CHECKF(r == RRV_ERROR_FORMAT || ((const unsigned char *)value + size <= sink.data + cut),
+               "cut at %u", (unsigned)cut);
+    }
+    opt.text_name = "";
+    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 1, &opt) == RRV_ERROR_ARGUMENT);
+}
+
 int main(int argc, char **argv)
 {
     char command[2 * PATH_SIZE];
@@ -278,6 +322,7 @@ int main(int argc, char **argv)
         printf("FAIL setup: cannot make %s\n", tmp_dir);
         return 1;
     }
+    RUN(exr_text_attribute_round_trips);
     RUN(layouts_merge_to_the_single_render);
     RUN(part_options_are_checked);
     RUN(merge_errors_match_the_corpus);
