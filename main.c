@@ -1810,6 +1810,10 @@ static int command_merge(int argc, char **argv)
     for (i = 0; i < path_count; ++i) {
         parts[i].path = paths[i];
         order[i] = &parts[i];
+        if (same_file(out_path, paths[i])) {
+            fprintf(stderr, "rrv: merge: refusing to write \"%s\": it is one of the parts\n", out_path);
+            goto done;
+        }
         for (j = 0; j < i; ++j)
             if (same_file(paths[i], paths[j])) {
                 fprintf(stderr, "rrv: merge: \"%s\" and \"%s\" are the same file\n", paths[j], paths[i]);

@@ -218,6 +218,9 @@ static void merge_errors_match_the_corpus(void)
     }
     if (dir) closedir(dir);
     CHECKF(cases >= 11, "only %d merge cases in %s", cases, corpus);
+    CHECK(sh("cp t1a.exr keep_t1a.exr && \"$RRV\" merge t1a.exr t0.exr t1a.exr t1b.exr", NULL, NULL) == 2 &&
+          strcmp(last_err, "rrv: merge: refusing to write \"t1a.exr\": it is one of the parts\n") == 0 &&
+          same_image("t1a.exr", "keep_t1a.exr"));
     /* The good parts of the same set do merge. */
     CHECKF(sh("\"$RRV\" merge -q merged_ok.exr t0.exr t1a.exr t1b.exr", NULL, NULL) == 0, "%s", last_err);
 }
