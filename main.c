@@ -2,8 +2,9 @@
 
    The library never prints and never starts threads; this file is the only
    place that does either, so it also shows how a client is meant to split a
-   render across threads (tiles through rrv_render_rect, all samples of a
-   pixel in one call, so the image does not depend on the split). */
+   render across threads and machines (tiles through rrv_render_rect, a
+   pixel's samples added in one fixed tree, so the image does not depend on
+   the split: see "the sample tree"). */
 #define _XOPEN_SOURCE 700 /* POSIX 2008 with realpath */
 #include "rrv.h"
 
