@@ -2,13 +2,15 @@
 
    The library never prints and never starts threads; this file is the only
    place that does either, so it also shows how a client is meant to split a
-   render across threads (tiles through rrv_render_rect, all samples of a
-   pixel in one call, so the image does not depend on the split). */
+   render across threads and machines (tiles through rrv_render_rect, a
+   pixel's samples added in one fixed tree, so the image does not depend on
+   the split: see "the sample tree"). */
 #define _XOPEN_SOURCE 700 /* POSIX 2008 with realpath */
 #include "rrv.h"
 
 #include <ctype.h>
 #include <errno.h>
+#include <float.h>
 #include <inttypes.h>
 #include <limits.h>
 #include <math.h>
@@ -48,6 +50,8 @@ static const char usage_text[] =
     "commands:\n"
     "  render SCENE -o OUT.pfm [options]   render a scene to a PFM or EXR (and PNG)\n"
     "  diff A.pfm B.pfm                    compare an image with a reference\n"
+    "  merge OUT PART...                   merge the parts of a split render\n"
+    "  farm slurm SCENE -o OUT --tiles N   write Slurm jobs rendering tiles, then merging\n"
     "  info SCENE                          describe a scene and its memory use\n"
     "  trace SCENE --ray OX OY OZ DX DY DZ trace rays through the refractive media\n"
     "  help [COMMAND]                      show this or a command's help\n"
@@ -92,13 +96,23 @@ static const char render_help[] =
     "                         top; the output is the size of the crop (an EXR\n"
     "                         keeps the full frame as its display window and\n"
     "                         the crop's place as its data window)\n"
+    "  --tile I/N|I/CxR       render a part: tile I (from 0) of N bands of rows,\n"
+    "                         or of a C by R grid numbered row by row from the\n"
+    "                         top left; bounds at floor(k * size / count)\n"
+    "  --samples A:B          render a part: samples A..B-1 of every pixel; A:B\n"
+    "                         must be a block of the sample tree (0:N halves\n"
+    "                         at the largest power of two below N, and so on)\n"
+    "  --resume               keep OUT if it already is this complete part\n"
     "  --max-grid-mb N        refuse grids, scene and OBJ files over N MiB\n"
     "                         (default 2048)\n"
     "  -q, --quiet            no progress bar and no summary\n"
     "%s"
     "\n"
     "The image is bit-identical for any thread count, and crops of a render\n"
-    "match the same pixels of the full image.\n";
+    "match the same pixels of the full image. A part (--tile, --samples) is a\n"
+    "float EXR of sample sums with its tile as data window and an rrvPart\n"
+    "attribute saying what it holds; `rrv merge` makes the full image of parts,\n"
+    "bit-identical to one render.\n";
 
 static const char diff_help[] =
     "usage: rrv diff A.pfm B.pfm\n"
@@ -673,7 +687,7 @@ static int load_scene(const char *path, size_t max_grid_bytes, input_list *input
 typedef struct render_job {
     const rrv_scene *scene;
     int x0, y0, x1, y1; /* the rectangle to render */
-    int spp;
+    int sample_begin, sample_end; /* a block of the sample tree (see sum_samples) */
     float *sum;         /* the rectangle's sums, row 0 = its top row */
     int stride;
     int tiles_x, tile_count;
@@ -754,11 +768,93 @@ static void add_stats(rrv_render_stats *into, const rrv_render_stats *from)
     into->solves_unsupported += from->solves_unsupported;
 }
 
+/* ---- the sample tree ------------------------------------------------------------
+   Float addition is not associative, so a pixel's sum could only be split
+   between machines bit-identically if every split added in the same order.
+   rrv therefore sums a pixel's samples in one fixed binary tree: a block of
+   samples [a, b) with more than one sample is the float sum of [a, m) and
+   [m, b), m - a the largest power of two below b - a; a single sample is the
+   library's sum of that sample alone. A render of the whole range and the
+   merge of any blocks of this tree (sample_block_ok) then do the very same
+   additions, so a split render is bit-identical to a single one. */
+
+static int sample_split(int a, int b)
+{
+    int half = 1;
+    while (half < (b - a) - half) half *= 2;
+    return a + half;
+}
+
+/* Whether [a, b) is a block of the tree over [0, total). */
+static int sample_block_ok(int a, int b, int total)
+{
+    int lo = 0, hi = total;
+    if (a < 0 || b > total || a >= b) return 0;
+    while (lo != a || hi != b) {
+        int mid;
+        if (hi - lo < 2) return 0;
+        mid = sample_split(lo, hi);
+        if (b <= mid) hi = mid;
+        else if (a >= mid) lo = mid;
+        else return 0;
+    }
+    return 1;
+}
+
+/* out[c] += add[c], saturated as the library saturates its sums. */
+static float add_saturated(float a, float b)
+{
+    float v = a + b;
+    return v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : v;
+}
+
+/* How many levels of scratch a tree over n samples needs. */
+static int sample_tree_depth(int n)
+{
+    int depth = 1;
+    while (n > 1) {
+        n = (n + 1) / 2;
+        ++depth;
+    }
+    return depth;
+}
+
+/* Sums samples [a, b) of pixels [x0,x1) x [y0,y1) into out (zero on entry)
+   by the sample tree; scratch holds one TILE_SIZE^2 RGB buffer a level. */
+static rrv_result sum_samples(const rrv_scene *scene, int x0, int y0, int x1, int y1, int a, int b,
+                              float *out, int stride, float *scratch, rrv_render_stats *stats)
+{
+    int w = x1 - x0, h = y1 - y0, mid, x, y, c;
+    rrv_result result;
+    if (b - a == 1) return rrv_render_rect(scene, x0, y0, x1, y1, a, b, out, stride, stats);
+    mid = sample_split(a, b);
+    result = sum_samples(scene, x0, y0, x1, y1, a, mid, out, stride, scratch + 3 * TILE_SIZE * TILE_SIZE, stats);
+    if (result != RRV_OK) return result;
+    memset(scratch, 0, (size_t)w * (size_t)h * 3 * sizeof *scratch);
+    result = sum_samples(scene, x0, y0, x1, y1, mid, b, scratch, w, scratch + 3 * TILE_SIZE * TILE_SIZE, stats);
+    if (result != RRV_OK) return result;
+    for (y = 0; y < h; ++y)
+        for (x = 0; x < w; ++x)
+            for (c = 0; c < 3; ++c) {
+                float *o = out + 3 * ((size_t)y * (size_t)stride + (size_t)x) + c;
+                *o = add_saturated(*o, scratch[3 * ((size_t)y * (size_t)w + (size_t)x) + c]);
+            }
+    return RRV_OK;
+}
+
 static void *render_worker(void *arg)
 {
     render_job *job = (render_job *)arg;
     rrv_render_stats stats;
+    float *scratch = (float *)malloc((size_t)sample_tree_depth(job->sample_end - job->sample_begin) * 3 *
+                                     TILE_SIZE * TILE_SIZE * sizeof *scratch);
     memset(&stats, 0, sizeof stats);
+    if (!scratch) {
+        job_lock(job);
+        if (job->failure == RRV_OK) job->failure = RRV_ERROR_MEMORY;
+        job_unlock(job);
+        return NULL;
+    }
     for (;;) {
         int tile, tx0, ty0, tx1, ty1;
         rrv_result result;
@@ -771,11 +867,9 @@ static void *render_worker(void *arg)
         ty0 = job->y0 + (tile / job->tiles_x) * TILE_SIZE;
         tx1 = tx0 + TILE_SIZE < job->x1 ? tx0 + TILE_SIZE : job->x1;
         ty1 = ty0 + TILE_SIZE < job->y1 ? ty0 + TILE_SIZE : job->y1;
-        /* All samples of a pixel in one call: the float sums then do not
-           depend on how the image was split. */
-        result = rrv_render_rect(job->scene, tx0, ty0, tx1, ty1, 0, job->spp,
-                                 job->sum + 3 * ((size_t)(ty0 - job->y0) * job->stride + (size_t)(tx0 - job->x0)),
-                                 job->stride, &stats);
+        result = sum_samples(job->scene, tx0, ty0, tx1, ty1, job->sample_begin, job->sample_end,
+                             job->sum + 3 * ((size_t)(ty0 - job->y0) * job->stride + (size_t)(tx0 - job->x0)),
+                             job->stride, scratch, &stats);
 
         job_lock(job);
         if (result != RRV_OK) {
@@ -786,6 +880,7 @@ static void *render_worker(void *arg)
         }
         job_unlock(job);
     }
+    free(scratch);
     job_lock(job);
     add_stats(&job->stats, &stats);
     job_unlock(job);
@@ -923,6 +1018,222 @@ static int apply_refraction_options(rrv_scene *scene, const refraction_options *
     return 1;
 }
 
+/* ---- parts: partial renders for a farm ------------------------------------------
+   A part is a float OpenEXR file whose data window is its rectangle in the
+   display window of the full image and whose pixels are the tree sums (not
+   means) of a block of samples; an "rrvPart" string attribute says what it
+   holds, in the lines PART_FORMAT prints. */
+
+#define PART_ATTRIBUTE "rrvPart"
+#define PART_FORMAT "rrv part 1\nhash %s\nimage %d %d\ntile %s\nrect %d %d %d %d\nsamples %d %d\nspp %d\n"
+
+typedef struct part_info {
+    char hash[17], tile[32];
+    int width, height, rect[4]; /* rect: x0 y0 x1 y1 */
+    int sample_begin, sample_end, spp;
+} part_info;
+
+static int format_part(const part_info *part, char *text, size_t size)
+{
+    return snprintf(text, size, PART_FORMAT, part->hash, part->width, part->height, part->tile, part->rect[0],
+                    part->rect[1], part->rect[2], part->rect[3], part->sample_begin, part->sample_end,
+                    part->spp) < (int)size;
+}
+
+/* Parses an attribute value; only the exact form format_part writes. */
+static int parse_part(const char *value, size_t size, part_info *part)
+{
+    char text[1024], again[1024];
+    if (size == 0 || size >= sizeof text || memchr(value, '\0', size)) return 0;
+    memcpy(text, value, size);
+    text[size] = '\0';
+    memset(part, 0, sizeof *part);
+    if (sscanf(text, "rrv part 1\nhash %16s\nimage %d %d\ntile %31s\nrect %d %d %d %d\nsamples %d %d\nspp %d",
+               part->hash, &part->width, &part->height, part->tile, &part->rect[0], &part->rect[1],
+               &part->rect[2], &part->rect[3], &part->sample_begin, &part->sample_end, &part->spp) != 11)
+        return 0;
+    if (!format_part(part, again, sizeof again) || strcmp(again, text) != 0) return 0;
+    return part->width > 0 && part->height > 0 && part->rect[0] >= 0 && part->rect[1] >= 0 &&
+           part->rect[0] < part->rect[2] && part->rect[1] < part->rect[3] && part->rect[2] <= part->width &&
+           part->rect[3] <= part->height && sample_block_ok(part->sample_begin, part->sample_end, part->spp);
+}
+
+/* "I/N" (band I of N bands of rows, columns 1) or "I/CxR" (tile I of a C by
+   R grid, row by row from the top left). */
+static int parse_tile(const char *text, int *index, int *columns, int *rows)
+{
+    long i, a, b = 0;
+    char *end;
+    if (!isdigit((unsigned char)text[0])) return 0;
+    errno = 0;
+    i = strtol(text, &end, 10);
+    if (*end != '/' || !isdigit((unsigned char)end[1])) return 0;
+    a = strtol(end + 1, &end, 10);
+    if (*end == 'x') {
+        if (!isdigit((unsigned char)end[1])) return 0;
+        b = strtol(end + 1, &end, 10);
+    }
+    if (*end || errno || a < 1 || a > 65536 || b < 0 || b > 65536 || (b == 0 ? a : a * b) <= i) return 0;
+    *index = (int)i;
+    *columns = b ? (int)a : 1;
+    *rows = b ? (int)b : (int)a;
+    return 1;
+}
+
+static int parse_range(const char *text, int *a, int *b)
+{
+    long lo, hi;
+    char *end;
+    if (!isdigit((unsigned char)text[0])) return 0;
+    errno = 0;
+    lo = strtol(text, &end, 10);
+    if (*end != ':' || !isdigit((unsigned char)end[1])) return 0;
+    hi = strtol(end + 1, &end, 10);
+    if (*end || errno || lo >= hi || hi > (1L << 24)) return 0;
+    *a = (int)lo;
+    *b = (int)hi;
+    return 1;
+}
+
+/* Tile index of a columns x rows grid: column and row bounds split the
+   image as evenly as integers allow (floor(k * size / count)). */
+static void tile_rect(int index, int columns, int rows, int width, int height, int rect[4])
+{
+    int cx = index % columns, cy = index / columns;
+    rect[0] = (int)((long long)cx * width / columns);
+    rect[2] = (int)((long long)(cx + 1) * width / columns);
+    rect[1] = (int)((long long)cy * height / rows);
+    rect[3] = (int)((long long)(cy + 1) * height / rows);
+}
+
+typedef struct hasher { uint64_t h; } hasher;
+static void hash_bytes(hasher *hs, const void *data, size_t size)
+{
+    const unsigned char *p = (const unsigned char *)data;
+    size_t i;
+    for (i = 0; i < size; ++i) hs->h = (hs->h ^ p[i]) * 0x100000001b3ULL; /* FNV-1a */
+}
+
+/* A hash of what decides the pixels: every file the scene read (by content,
+   so machines may mount it at other paths), the settings after the command
+   line's overrides, and rrv's version. 0 when a file cannot be read. */
+static int scene_hash(const input_list *inputs, const rrv_scene *scene, char out[17])
+{
+    hasher hs;
+    char text[512];
+    unsigned char buf[65536];
+    const rrv_settings *st = &scene->settings;
+    int i;
+    hs.h = 0xcbf29ce484222325ULL;
+    for (i = 0; i < inputs->count; ++i) {
+        FILE *f = fopen(inputs->paths[i], "rb");
+        size_t n;
+        uint64_t total = 0;
+        if (!f) return 0;
+        while ((n = fread(buf, 1, sizeof buf, f)) > 0) {
+            hash_bytes(&hs, buf, n);
+            total += n;
+        }
+        if (ferror(f)) {
+            fclose(f);
+            return 0;
+        }
+        fclose(f);
+        snprintf(text, sizeof text, "|file %d: %" PRIu64 " bytes|", i, total);
+        hash_bytes(&hs, text, strlen(text));
+    }
+    snprintf(text, sizeof text,
+             "rrv %d.%d.%d spp %d seed %" PRIu64 " integrator %d nee %d bend %.17g mu_eta %.17g step %.17g "
+             "refraction %d stepper %d majorant %d ior %d",
+             RRV_VERSION_MAJOR, RRV_VERSION_MINOR, RRV_VERSION_PATCH, st->spp, (uint64_t)st->seed,
+             (int)st->integrator, (int)st->nee, st->bend_tolerance, st->mu_eta, st->step, (int)st->refraction,
+             (int)st->stepper, st->majorant_cells, (int)st->ior_interpolation);
+    hash_bytes(&hs, text, strlen(text));
+    snprintf(out, 17, "%016" PRIx64, hs.h);
+    return 1;
+}
+
+/* Reads a whole file; NULL with errno set on failure. */
+static unsigned char *slurp(const char *path, size_t *size)
+{
+    FILE *f = fopen(path, "rb");
+    unsigned char *data = NULL;
+    size_t have = 0, cap = 0, n;
+    struct stat st;
+    if (!f) return NULL;
+    if (fstat(fileno(f), &st) == 0 && S_ISDIR(st.st_mode)) {
+        fclose(f);
+        errno = EISDIR;
+        return NULL;
+    }
+    for (;;) {
+        if (have == cap) {
+            size_t grown = cap ? 2 * cap : 65536;
+            unsigned char *bigger = (unsigned char *)realloc(data, grown);
+            if (!bigger || grown > ((size_t)1 << 31)) {
+                free(bigger ? bigger : data);
+                fclose(f);
+                errno = ENOMEM;
+                return NULL;
+            }
+            data = bigger;
+            cap = grown;
+        }
+        n = fread(data + have, 1, cap - have, f);
+        have += n;
+        if (n == 0) break;
+    }
+    if (ferror(f)) {
+        free(data);
+        fclose(f);
+        errno = EIO;
+        return NULL;
+    }
+    fclose(f);
+    *size = have;
+    return data;
+}
+
+/* Loads a part: its description and (if sums is not NULL) its pixel sums.
+   Prints the problem (naming the file) and returns 0 when it is no part. */
+static int load_part(const char *path, part_info *part, float **sums, const char *command)
+{
+    size_t size = 0, value_size;
+    unsigned char *data = slurp(path, &size);
+    const char *type;
+    const void *value;
+    float *rgb = NULL;
+    int w, h, ok = 0;
+    rrv_exr_options info;
+    rrv_error err;
+    if (sums) *sums = NULL;
+    if (!data) {
+        fprintf(stderr, "rrv: %s: \"%s\": cannot read: %s\n", command, path, strerror(errno));
+        return 0;
+    }
+    memset(&err, 0, sizeof err);
+    memset(&info, 0, sizeof info);
+    if (rrv_read_exr_memory(data, size, path, &rgb, &w, &h, &info, &err) != RRV_OK) {
+        fprintf(stderr, "rrv: %s: \"%s\": not a complete OpenEXR part: %s\n", command, path,
+                err.message[0] ? err.message : rrv_result_string(err.code));
+    } else if (rrv_exr_find_attribute(data, size, PART_ATTRIBUTE, &type, &value, &value_size) != RRV_OK) {
+        fprintf(stderr, "rrv: %s: \"%s\": not a part (no %s attribute): render parts with --tile or --samples\n",
+                command, path, PART_ATTRIBUTE);
+    } else if (strcmp(type, "string") != 0 || !parse_part((const char *)value, value_size, part) ||
+               info.pixel != RRV_EXR_FLOAT || info.display_width != part->width ||
+               info.display_height != part->height || info.x != part->rect[0] || info.y != part->rect[1] ||
+               w != part->rect[2] - part->rect[0] || h != part->rect[3] - part->rect[1]) {
+        fprintf(stderr, "rrv: %s: \"%s\": a damaged part: its %s attribute does not describe its pixels\n",
+                command, path, PART_ATTRIBUTE);
+    } else {
+        ok = 1;
+    }
+    free(data);
+    if (ok && sums) *sums = rgb;
+    else rrv_free(rgb);
+    return ok;
+}
+
 /* ---- rrv render ---------------------------------------------------------------- */
 
 typedef struct render_options {
@@ -937,6 +1248,9 @@ typedef struct render_options {
     int threads;
     double exposure;
     int crop[4], has_crop;
+    int tile_index, tile_columns, tile_rows, has_tile; /* --tile I/N (rows) or I/CxR */
+    int sample_begin, sample_end, has_samples;         /* --samples A:B */
+    int resume;
     size_t max_grid_bytes;
     int quiet;
     int output_format;      /* OUTPUT_PFM or OUTPUT_EXR, from the extension of -o */
@@ -1015,6 +1329,21 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
                               &opt->crop[i]))
                     return EXIT_USAGE;
             opt->has_crop = 1;
+        } else if (strcmp(arg, "--tile") == 0) {
+            const char *text;
+            if (!take_value(&args, arg, "I/N or I/CxR", &text)) return EXIT_USAGE;
+            if (!parse_tile(text, &opt->tile_index, &opt->tile_columns, &opt->tile_rows))
+                return usage_error(&args, "--tile needs I/N (tile I of N bands of rows) or I/CxR (tile I of a "
+                                   "C by R grid), 0 <= I < N, got \"%s\"", text);
+            opt->has_tile = 1;
+        } else if (strcmp(arg, "--samples") == 0) {
+            const char *text;
+            if (!take_value(&args, arg, "A:B", &text)) return EXIT_USAGE;
+            if (!parse_range(text, &opt->sample_begin, &opt->sample_end))
+                return usage_error(&args, "--samples needs A:B, sample indices 0 <= A < B, got \"%s\"", text);
+            opt->has_samples = 1;
+        } else if (strcmp(arg, "--resume") == 0) {
+            opt->resume = 1;
         } else if (strcmp(arg, "--max-grid-mb") == 0) {
             if (!take_grid_limit(&args, &opt->max_grid_bytes)) return EXIT_USAGE;
         } else if (strcmp(arg, "-q") == 0 || strcmp(arg, "--quiet") == 0) {
@@ -1039,6 +1368,20 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
                                                                 : -1;
     if (opt->exr_flag && opt->output_format != OUTPUT_EXR)
         return usage_error(&args, "%s needs an .exr output, not \"%s\"", opt->exr_flag, opt->pfm_path);
+    if (opt->has_tile || opt->has_samples) {
+        if (opt->output_format != OUTPUT_EXR)
+            return usage_error(&args, "a part (--tile, --samples) is an OpenEXR file: -o PART.exr, not \"%s\"",
+                               opt->pfm_path);
+        if (opt->has_crop) return usage_error(&args, "--crop cannot be combined with --tile or --samples");
+        if (opt->png_path) return usage_error(&args, "--png cannot be combined with --tile or --samples: "
+                                              "preview the merged image");
+        if (opt->exr_flag && strcmp(opt->exr_flag, "--exr-half") == 0)
+            return usage_error(&args, "a part holds float sums: --exr-half cannot be combined with --tile or --samples");
+        /* Sums must survive exactly: float, whatever the default. */
+        opt->exr.pixel = RRV_EXR_FLOAT;
+    } else if (opt->resume) {
+        return usage_error(&args, "--resume needs --tile or --samples");
+    }
     return EXIT_OK;
 }
 
@@ -1078,22 +1421,24 @@ static int command_render(int argc, char **argv)
     input_list inputs;
     pending_output outputs[2];
     float *sum = NULL, *image = NULL;
-    int code, width, height, crop_width, crop_height, x, y, c, thread_count;
+    int code, width, height, crop_width, crop_height, x, y, c, thread_count, is_part;
     size_t sum_count, image_count;
     double seconds;
+    part_info part;
+    char part_text[1024];
+    arg_cursor args;
 
     code = parse_render_options(argc, argv, &opt);
     if (code == HELP_SHOWN) return EXIT_OK;
     if (code != EXIT_OK) return code;
+    memset(&args, 0, sizeof args);
+    args.command = "render";
+    is_part = opt.has_tile || opt.has_samples;
 
     /* Output problems are found before a long load or render, except that
        only the load knows which files the scene reads. */
-    if (opt.png_path && same_file(opt.pfm_path, opt.png_path)) {
-        arg_cursor args;
-        memset(&args, 0, sizeof args);
-        args.command = "render";
+    if (opt.png_path && same_file(opt.pfm_path, opt.png_path))
         return usage_error(&args, "-o and --png name the same file \"%s\"", opt.png_path);
-    }
     if (!check_output(opt.pfm_path) || (opt.png_path && !check_output(opt.png_path)))
         return EXIT_IO;
     memset(&inputs, 0, sizeof inputs);
@@ -1103,15 +1448,13 @@ static int command_render(int argc, char **argv)
     }
     code = check_output_not_input(opt.pfm_path, &inputs) &&
            (!opt.png_path || check_output_not_input(opt.png_path, &inputs));
-    free_inputs(&inputs);
     if (!code) {
+        free_inputs(&inputs);
         rrv_scene_free(scene);
         return EXIT_USAGE;
     }
     if (opt.output_format < 0) {
-        arg_cursor args;
-        memset(&args, 0, sizeof args);
-        args.command = "render";
+        free_inputs(&inputs);
         rrv_scene_free(scene);
         return usage_error(&args, "cannot tell the format of \"%s\": the output must end in .pfm or .exr",
                            opt.pfm_path);
@@ -1121,27 +1464,95 @@ static int command_render(int argc, char **argv)
     if (opt.has_integrator) scene->settings.integrator = opt.integrator;
     if (opt.has_nee) scene->settings.nee = opt.nee;
     if (!apply_refraction_options(scene, &opt.refraction)) {
+        free_inputs(&inputs);
         rrv_scene_free(scene);
         return EXIT_INPUT;
     }
     width = scene->camera.width;
     height = scene->camera.height;
 
-    if (!opt.has_crop) {
-        opt.crop[0] = opt.crop[1] = 0;
-        opt.crop[2] = width;
-        opt.crop[3] = height;
-    } else if (opt.crop[0] >= opt.crop[2] || opt.crop[1] >= opt.crop[3] ||
-               opt.crop[2] > width || opt.crop[3] > height) {
-        arg_cursor args;
-        memset(&args, 0, sizeof args);
-        args.command = "render";
-        rrv_scene_free(scene);
-        return usage_error(&args,
-                           "--crop %d %d %d %d is not a nonempty rectangle inside the %dx%d "
-                           "image (X0 < X1 <= %d, Y0 < Y1 <= %d)",
-                           opt.crop[0], opt.crop[1], opt.crop[2], opt.crop[3], width, height,
-                           width, height);
+    memset(&part, 0, sizeof part);
+    if (is_part) {
+        int ok = scene_hash(&inputs, scene, part.hash);
+        free_inputs(&inputs);
+        if (!ok) {
+            fprintf(stderr, "rrv: %s: cannot read the scene's files again to hash them: %s\n", opt.scene_path,
+                    strerror(errno));
+            rrv_scene_free(scene);
+            return EXIT_INPUT;
+        }
+        if (!opt.has_tile) {
+            opt.tile_index = 0;
+            opt.tile_columns = opt.tile_rows = 1;
+        }
+        if (opt.tile_columns > width || opt.tile_rows > height) {
+            rrv_scene_free(scene);
+            return usage_error(&args, "--tile %d/%dx%d: the %dx%d image has too few %s for that many tiles",
+                               opt.tile_index, opt.tile_columns, opt.tile_rows, width, height,
+                               opt.tile_columns > width ? "columns" : "rows");
+        }
+        if (!opt.has_samples) {
+            opt.sample_begin = 0;
+            opt.sample_end = scene->settings.spp;
+        }
+        if (!sample_block_ok(opt.sample_begin, opt.sample_end, scene->settings.spp)) {
+            int n = scene->settings.spp, m = sample_split(0, n);
+            rrv_scene_free(scene);
+            if (opt.sample_end > n)
+                return usage_error(&args, "--samples %d:%d: the render has only %d samples a pixel",
+                                   opt.sample_begin, opt.sample_end, n);
+            return usage_error(&args, "--samples %d:%d is not a block of the sample tree of %d samples "
+                               "(0:%d splits into 0:%d and %d:%d, each block of more than one sample at its "
+                               "start plus the largest power of two below its length)",
+                               opt.sample_begin, opt.sample_end, n, n, m, m, n);
+        }
+        part.width = width;
+        part.height = height;
+        tile_rect(opt.tile_index, opt.tile_columns, opt.tile_rows, width, height, part.rect);
+        if (opt.tile_columns == 1) snprintf(part.tile, sizeof part.tile, "%d/%d", opt.tile_index, opt.tile_rows);
+        else snprintf(part.tile, sizeof part.tile, "%d/%dx%d", opt.tile_index, opt.tile_columns, opt.tile_rows);
+        part.sample_begin = opt.sample_begin;
+        part.sample_end = opt.sample_end;
+        part.spp = scene->settings.spp;
+        format_part(&part, part_text, sizeof part_text);
+        if (opt.resume) {
+            /* A part already complete for this very scene and block is kept,
+               so a re-submitted array only renders what is missing. */
+            FILE *probe = fopen(opt.pfm_path, "rb");
+            part_info have;
+            if (probe) {
+                fclose(probe);
+                if (load_part(opt.pfm_path, &have, NULL, "render --resume") &&
+                    memcmp(&have, &part, sizeof part) == 0) {
+                    if (!opt.quiet) fprintf(stderr, "rrv: \"%s\" is complete (tile %s, samples %d:%d): kept\n",
+                                            opt.pfm_path, part.tile, part.sample_begin, part.sample_end);
+                    rrv_scene_free(scene);
+                    return EXIT_OK;
+                }
+                if (!opt.quiet) fprintf(stderr, "rrv: \"%s\" is not this part: rendering it again\n", opt.pfm_path);
+            }
+        }
+        opt.crop[0] = part.rect[0];
+        opt.crop[1] = part.rect[1];
+        opt.crop[2] = part.rect[2];
+        opt.crop[3] = part.rect[3];
+    } else {
+        free_inputs(&inputs);
+        opt.sample_begin = 0;
+        opt.sample_end = scene->settings.spp;
+        if (!opt.has_crop) {
+            opt.crop[0] = opt.crop[1] = 0;
+            opt.crop[2] = width;
+            opt.crop[3] = height;
+        } else if (opt.crop[0] >= opt.crop[2] || opt.crop[1] >= opt.crop[3] ||
+                   opt.crop[2] > width || opt.crop[3] > height) {
+            rrv_scene_free(scene);
+            return usage_error(&args,
+                               "--crop %d %d %d %d is not a nonempty rectangle inside the %dx%d "
+                               "image (X0 < X1 <= %d, Y0 < Y1 <= %d)",
+                               opt.crop[0], opt.crop[1], opt.crop[2], opt.crop[3], width, height,
+                               width, height);
+        }
     }
     crop_width = opt.crop[2] - opt.crop[0];
     crop_height = opt.crop[3] - opt.crop[1];
@@ -1164,7 +1575,8 @@ static int command_render(int argc, char **argv)
     job.y0 = opt.crop[1];
     job.x1 = opt.crop[2];
     job.y1 = opt.crop[3];
-    job.spp = scene->settings.spp;
+    job.sample_begin = opt.sample_begin;
+    job.sample_end = opt.sample_end;
     job.sum = sum;
     job.stride = crop_width;
     job.tiles_x = (crop_width + TILE_SIZE - 1) / TILE_SIZE;
@@ -1193,11 +1605,13 @@ static int command_render(int argc, char **argv)
         return EXIT_INPUT;
     }
 
+    /* A part keeps its sums; an image is their mean. */
     for (y = 0; y < crop_height; ++y)
         for (x = 0; x < crop_width; ++x)
-            for (c = 0; c < 3; ++c)
-                image[3 * ((size_t)y * crop_width + x) + c] =
-                    sum[3 * ((size_t)y * crop_width + x) + c] / (float)job.spp;
+            for (c = 0; c < 3; ++c) {
+                size_t i = 3 * ((size_t)y * crop_width + x) + c;
+                image[i] = is_part ? sum[i] : sum[i] / (float)scene->settings.spp;
+            }
     free(sum);
 
     memset(outputs, 0, sizeof outputs);
@@ -1211,14 +1625,561 @@ static int command_render(int argc, char **argv)
     opt.exr.display_height = height;
     opt.exr.x = opt.crop[0];
     opt.exr.y = opt.crop[1];
+    if (is_part) {
+        opt.exr.text_name = PART_ATTRIBUTE;
+        opt.exr.text = part_text;
+    }
     code = write_outputs(outputs, opt.png_path ? 2 : 1, image, crop_width, crop_height,
                          opt.exposure)
                ? EXIT_OK
                : EXIT_IO;
-    if (code == EXIT_OK && !opt.quiet)
-        print_render_summary(crop_width, crop_height, job.spp, seconds, &job.stats);
+    if (code == EXIT_OK && !opt.quiet) {
+        if (is_part)
+            fprintf(stderr, "part %s: tile %s, samples %d:%d of %d: ", opt.pfm_path, part.tile,
+                    part.sample_begin, part.sample_end, part.spp);
+        print_render_summary(crop_width, crop_height, opt.sample_end - opt.sample_begin, seconds, &job.stats);
+    }
     free(image);
     rrv_scene_free(scene);
+    return code;
+}
+
+/* ---- rrv merge ------------------------------------------------------------------- */
+
+static const char merge_help[] =
+    "usage: rrv merge OUT.exr|OUT.pfm PART.exr... [options]\n"
+    "       rrv merge --status PART.exr...\n"
+    "\n"
+    "Merges the parts that `rrv render --tile I/N` and `--samples A:B` wrote\n"
+    "into the image a single render would have written, bit for bit. The\n"
+    "parts must come from the same scene and settings, their tiles must cover\n"
+    "the image exactly once (one tile layout), and at every tile their sample\n"
+    "blocks must not overlap and must add up to all samples. Any problem (a\n"
+    "missing, unreadable, truncated, foreign or overlapping part) is reported\n"
+    "and nothing is written (exit 2). OUT is written to a new temporary file\n"
+    "and renamed into place.\n"
+    "\n"
+    "options:\n"
+    "  --status         do not merge: print each part's tile and samples, or\n"
+    "                   why it is missing; exit 0 only if every part is there\n"
+    "  --exr-half       EXR channels as 16-bit half (the default, as render)\n"
+    "  --exr-float      EXR channels as 32-bit float\n"
+    "  -q, --quiet      no summary\n";
+
+typedef struct merge_part {
+    const char *path;
+    part_info info;
+    float *sums;
+} merge_part;
+
+static int rects_intersect(const int a[4], const int b[4])
+{
+    return a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3];
+}
+
+/* The tree sum of samples [a, b) of the parts of one tile (all with the
+   same rectangle) into out; tmp is a scratch buffer per level. */
+static void merge_block(merge_part *const *tile, int count, int a, int b, float *out, float **tmp,
+                        size_t values)
+{
+    int i, mid;
+    size_t k;
+    for (i = 0; i < count; ++i)
+        if (tile[i]->info.sample_begin == a && tile[i]->info.sample_end == b) {
+            memcpy(out, tile[i]->sums, values * sizeof *out);
+            return;
+        }
+    /* Coverage was checked, so the block is made of smaller ones. */
+    mid = sample_split(a, b);
+    merge_block(tile, count, a, mid, out, tmp + 1, values);
+    merge_block(tile, count, mid, b, tmp[0], tmp + 1, values);
+    for (k = 0; k < values; ++k) out[k] = add_saturated(out[k], tmp[0][k]);
+}
+
+static int compare_by_rect_then_samples(const void *pa, const void *pb)
+{
+    const merge_part *a = *(merge_part *const *)pa, *b = *(merge_part *const *)pb;
+    int i;
+    for (i = 0; i < 4; ++i) {
+        int ka = i < 2 ? a->info.rect[1 - i] : a->info.rect[i], kb = i < 2 ? b->info.rect[1 - i] : b->info.rect[i];
+        if (ka != kb) return ka < kb ? -1 : 1;
+    }
+    return a->info.sample_begin < b->info.sample_begin ? -1 : a->info.sample_begin > b->info.sample_begin;
+}
+
+static int merge_status(char **paths, int count)
+{
+    int i, present = 0;
+    for (i = 0; i < count; ++i) {
+        part_info info;
+        struct stat st;
+        if (stat(paths[i], &st) != 0 && errno == ENOENT) {
+            printf("%s: missing\n", paths[i]);
+            continue;
+        }
+        if (!load_part(paths[i], &info, NULL, "merge --status")) {
+            printf("%s: not a usable part (see above)\n", paths[i]);
+            continue;
+        }
+        ++present;
+        printf("%s: tile %s (pixels %d,%d-%d,%d), samples %d:%d, %d of %d samples, scene %s\n", paths[i],
+               info.tile, info.rect[0], info.rect[1], info.rect[2], info.rect[3], info.sample_begin,
+               info.sample_end, info.sample_end - info.sample_begin, info.spp, info.hash);
+    }
+    printf("%d of %d parts present\n", present, count);
+    return present == count ? EXIT_OK : EXIT_INPUT;
+}
+
+static int command_merge(int argc, char **argv)
+{
+    arg_cursor args;
+    const char *out_path = NULL;
+    char **paths;
+    merge_part *parts = NULL, **order = NULL;
+    float *image = NULL, *tile_sum = NULL, *tmp[32];
+    unsigned char *covered = NULL;
+    int path_count = 0, status = 0, quiet = 0, i, j, code = EXIT_INPUT, format, levels = 0;
+    rrv_exr_options exr;
+    pending_output output;
+    int width, height, spp;
+    long long area = 0;
+
+    memset(&args, 0, sizeof args);
+    args.argc = argc;
+    args.argv = argv;
+    args.command = "merge";
+    memset(&exr, 0, sizeof exr);
+    memset(tmp, 0, sizeof tmp);
+    paths = (char **)malloc((size_t)(argc > 0 ? argc : 1) * sizeof *paths);
+    if (!paths) {
+        fprintf(stderr, "rrv: out of memory\n");
+        return EXIT_INPUT;
+    }
+    for (args.index = 0; args.index < argc; ++args.index) {
+        const char *arg = argv[args.index];
+        if (is_help_flag(arg)) {
+            fputs(merge_help, stdout);
+            free(paths);
+            return EXIT_OK;
+        } else if (strcmp(arg, "--status") == 0) {
+            status = 1;
+        } else if (strcmp(arg, "--exr-half") == 0 || strcmp(arg, "--exr-float") == 0) {
+            exr.pixel = arg[6] == 'f' ? RRV_EXR_FLOAT : RRV_EXR_HALF;
+        } else if (strcmp(arg, "-q") == 0 || strcmp(arg, "--quiet") == 0) {
+            quiet = 1;
+        } else if (is_flag(arg)) {
+            free(paths);
+            return usage_error(&args, "merge: unknown option \"%s\"", arg);
+        } else if (!status && !out_path) {
+            out_path = arg;
+        } else {
+            paths[path_count++] = argv[args.index];
+        }
+    }
+    if (status) {
+        /* --status may come after the first part */
+        if (out_path) {
+            memmove(paths + 1, paths, (size_t)path_count * sizeof *paths);
+            paths[0] = (char *)out_path;
+            ++path_count;
+        }
+        if (path_count == 0) {
+            free(paths);
+            return usage_error(&args, "merge --status needs at least one part");
+        }
+        code = merge_status(paths, path_count);
+        free(paths);
+        return code;
+    }
+    if (!out_path || path_count == 0) {
+        free(paths);
+        return usage_error(&args, "merge needs an output and at least one part: rrv merge OUT.exr PART.exr...");
+    }
+    format = has_extension(out_path, ".exr") ? OUTPUT_EXR : has_extension(out_path, ".pfm") ? OUTPUT_PFM : -1;
+    if (format < 0) {
+        free(paths);
+        return usage_error(&args, "cannot tell the format of \"%s\": the output must end in .pfm or .exr", out_path);
+    }
+    if (!check_output(out_path)) {
+        free(paths);
+        return EXIT_IO;
+    }
+
+    parts = (merge_part *)calloc((size_t)path_count, sizeof *parts);
+    order = (merge_part **)calloc((size_t)path_count, sizeof *order);
+    if (!parts || !order) {
+        fprintf(stderr, "rrv: out of memory\n");
+        goto done;
+    }
+    for (i = 0; i < path_count; ++i) {
+        parts[i].path = paths[i];
+        order[i] = &parts[i];
+        if (same_file(out_path, paths[i])) {
+            fprintf(stderr, "rrv: merge: refusing to write \"%s\": it is one of the parts\n", out_path);
+            goto done;
+        }
+        for (j = 0; j < i; ++j)
+            if (same_file(paths[i], paths[j])) {
+                fprintf(stderr, "rrv: merge: \"%s\" and \"%s\" are the same file\n", paths[j], paths[i]);
+                goto done;
+            }
+        if (!load_part(paths[i], &parts[i].info, &parts[i].sums, "merge")) goto done;
+        if (i > 0 && (strcmp(parts[i].info.hash, parts[0].info.hash) != 0 ||
+                      parts[i].info.width != parts[0].info.width || parts[i].info.height != parts[0].info.height ||
+                      parts[i].info.spp != parts[0].info.spp)) {
+            fprintf(stderr, "rrv: merge: \"%s\" is from another scene or settings than \"%s\" (%dx%d, %d spp "
+                    "and %dx%d, %d spp; their hashes differ)\n", paths[i], paths[0],
+                    parts[i].info.width, parts[i].info.height, parts[i].info.spp,
+                    parts[0].info.width, parts[0].info.height, parts[0].info.spp);
+            goto done;
+        }
+    }
+    width = parts[0].info.width;
+    height = parts[0].info.height;
+    spp = parts[0].info.spp;
+
+    /* Tiles: equal rectangles form one tile; different ones must not meet. */
+    qsort(order, (size_t)path_count, sizeof *order, compare_by_rect_then_samples);
+    for (i = 0; i < path_count; ++i)
+        for (j = i + 1; j < path_count; ++j) {
+            const part_info *a = &order[i]->info, *b = &order[j]->info;
+            int same_rect = memcmp(a->rect, b->rect, sizeof a->rect) == 0;
+            if (!rects_intersect(a->rect, b->rect)) continue;
+            if (!same_rect) {
+                fprintf(stderr, "rrv: merge: \"%s\" (tile %s) and \"%s\" (tile %s) overlap: tiles of different "
+                        "layouts share pixels; merge the parts of one layout\n", order[i]->path, a->tile,
+                        order[j]->path, b->tile);
+                goto done;
+            }
+            if (a->sample_begin < b->sample_end && b->sample_begin < a->sample_end) {
+                fprintf(stderr, "rrv: merge: \"%s\" and \"%s\" overlap: both hold samples %d:%d of tile %s\n",
+                        order[i]->path, order[j]->path,
+                        a->sample_begin > b->sample_begin ? a->sample_begin : b->sample_begin,
+                        a->sample_end < b->sample_end ? a->sample_end : b->sample_end, a->tile);
+                goto done;
+            }
+        }
+    /* Sample ranges: sorted by start, each tile's must run 0..spp unbroken. */
+    for (i = 0; i < path_count; i = j) {
+        int next = 0;
+        for (j = i; j < path_count && memcmp(order[j]->info.rect, order[i]->info.rect, sizeof order[i]->info.rect) == 0; ++j) {
+            if (order[j]->info.sample_begin != next) break;
+            next = order[j]->info.sample_end;
+        }
+        if (next != spp || (j < path_count && memcmp(order[j]->info.rect, order[i]->info.rect,
+                                                     sizeof order[i]->info.rect) == 0)) {
+            int gap_end = j < path_count && memcmp(order[j]->info.rect, order[i]->info.rect,
+                                                   sizeof order[i]->info.rect) == 0 ? order[j]->info.sample_begin : spp;
+            fprintf(stderr, "rrv: merge: samples %d:%d of tile %s (pixels %d,%d-%d,%d) are in no part: a sample "
+                    "range is missing\n", next, gap_end, order[i]->info.tile, order[i]->info.rect[0],
+                    order[i]->info.rect[1], order[i]->info.rect[2], order[i]->info.rect[3]);
+            goto done;
+        }
+        area += (long long)(order[i]->info.rect[2] - order[i]->info.rect[0]) *
+                (order[i]->info.rect[3] - order[i]->info.rect[1]);
+    }
+    if (area != (long long)width * height) {
+        /* Tiles do not overlap, so less area means a hole: find a pixel in it. */
+        int x = 0, y = 0, found = 0;
+        covered = (unsigned char *)calloc((size_t)width * (size_t)height, 1);
+        if (!covered) {
+            fprintf(stderr, "rrv: out of memory\n");
+            goto done;
+        }
+        for (i = 0; i < path_count; ++i)
+            for (y = order[i]->info.rect[1]; y < order[i]->info.rect[3]; ++y)
+                memset(covered + (size_t)y * width + order[i]->info.rect[0], 1,
+                       (size_t)(order[i]->info.rect[2] - order[i]->info.rect[0]));
+        for (y = 0; y < height && !found; ++y)
+            for (x = 0; x < width && !found; ++x) found = !covered[(size_t)y * width + x];
+        fprintf(stderr, "rrv: merge: pixel %d,%d is in no part: a tile is missing (the parts cover %lld of %dx%d "
+                "pixels)\n", x - 1, y - 1, area, width, height);
+        goto done;
+    }
+
+    image = (float *)malloc((size_t)width * (size_t)height * 3 * sizeof *image);
+    tile_sum = (float *)malloc((size_t)width * (size_t)height * 3 * sizeof *tile_sum);
+    levels = sample_tree_depth(spp);
+    if (!image || !tile_sum) {
+        fprintf(stderr, "rrv: out of memory for a %dx%d image\n", width, height);
+        goto done;
+    }
+    for (i = 0; i < path_count; i = j) {
+        const int *r = order[i]->info.rect;
+        int w = r[2] - r[0], h = r[3] - r[1], k, x, y, c;
+        size_t values = (size_t)w * (size_t)h * 3;
+        for (j = i; j < path_count && memcmp(order[j]->info.rect, r, 4 * sizeof *r) == 0; ++j) {}
+        for (k = 0; k < levels; ++k) {
+            free(tmp[k]);
+            tmp[k] = (float *)malloc(values * sizeof *tmp[k]);
+            if (!tmp[k]) {
+                fprintf(stderr, "rrv: out of memory\n");
+                goto done;
+            }
+        }
+        merge_block(order + i, j - i, 0, spp, tile_sum, tmp, values);
+        for (y = 0; y < h; ++y)
+            for (x = 0; x < w; ++x)
+                for (c = 0; c < 3; ++c)
+                    image[3 * ((size_t)(r[1] + y) * width + (size_t)(r[0] + x)) + c] =
+                        tile_sum[3 * ((size_t)y * w + x) + c] / (float)spp;
+    }
+
+    memset(&output, 0, sizeof output);
+    output.path = out_path;
+    output.format = format;
+    output.exr = &exr;
+    code = write_outputs(&output, 1, image, width, height, 0) ? EXIT_OK : EXIT_IO;
+    if (code == EXIT_OK && !quiet)
+        fprintf(stderr, "merged %d parts into %s: %dx%d, %d spp\n", path_count, out_path, width, height, spp);
+done:
+    for (i = 0; i < 32; ++i) free(tmp[i]);
+    if (parts)
+        for (i = 0; i < path_count; ++i) rrv_free(parts[i].sums);
+    free(parts);
+    free(order);
+    free(image);
+    free(tile_sum);
+    free(covered);
+    free(paths);
+    return code;
+}
+
+/* ---- rrv farm slurm ---------------------------------------------------------------- */
+
+static const char farm_help[] =
+    "usage: rrv farm slurm SCENE -o OUT.exr --tiles N|CxR [options] [-- RENDER OPTIONS]\n"
+    "\n"
+    "Writes the Slurm jobs that render SCENE as tiles and merge them into OUT:\n"
+    "  DIR/render.sbatch  a job array, task I renders tile I/N (or I/CxR) to\n"
+    "                     DIR/parts/tile_I.exr with --resume, so a task whose\n"
+    "                     part is already complete ends at once\n"
+    "  DIR/merge.sbatch   rrv merge OUT DIR/parts/tile_0.exr ...\n"
+    "  DIR/submit.sh      submits both, the merge with --dependency=afterok on\n"
+    "                     the array; run it again to resume after a failure\n"
+    "Paths in the scripts are absolute; the scene, rrv and DIR must be on a\n"
+    "file system every node sees. Options after -- go to every rrv render.\n"
+    "\n"
+    "options:\n"
+    "  -o, --output OUT      the merged image (required; .exr or .pfm)\n"
+    "  --tiles N|CxR         N bands of rows or a C by R grid (required)\n"
+    "  --dir DIR             where the scripts, parts and logs go (default OUT.farm)\n"
+    "  --partition P         sbatch --partition\n"
+    "  --cpus-per-task C     sbatch --cpus-per-task and rrv render --threads\n"
+    "  --time T              sbatch --time limit of each task, e.g. 2:00:00\n"
+    "  --rrv PATH            the rrv the nodes run (default: this one)\n";
+
+/* Appends text to a shell script quoted with single quotes. */
+static void put_quoted(FILE *f, const char *text)
+{
+    fputc('\'', f);
+    for (; *text; ++text) {
+        if (*text == '\'') fputs("'\\''", f);
+        else fputc(*text, f);
+    }
+    fputc('\'', f);
+}
+
+/* An absolute path for a file that may not exist yet (its folder must). */
+static char *absolute_path(const char *path)
+{
+    char folder[4096], *real, *out;
+    const char *name;
+    if (!split_path(path, folder, sizeof folder, &name)) return NULL;
+    real = realpath(folder, NULL);
+    if (!real) return NULL;
+    out = (char *)malloc(strlen(real) + strlen(name) + 2);
+    if (out) sprintf(out, "%s/%s", strcmp(real, "/") == 0 ? "" : real, name);
+    free(real);
+    return out;
+}
+
+static int write_script(const char *dir, const char *name, const char *text)
+{
+    char path[8192];
+    FILE *f;
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    f = fopen(path, "w");
+    if (!f || fputs(text, f) < 0 || fclose(f) != 0) {
+        fprintf(stderr, "rrv: farm: cannot write \"%s\": %s\n", path, strerror(errno));
+        return 0;
+    }
+    chmod(path, 0755);
+    return 1;
+}
+
+static int command_farm(int argc, char **argv)
+{
+    arg_cursor args;
+    const char *scene_path = NULL, *out_path = NULL, *tiles_text = NULL, *dir_arg = NULL;
+    const char *partition = NULL, *time_limit = NULL, *rrv_arg = NULL;
+    int cpus = 0, columns = 1, rows = 0, index, count, i, extra = argc;
+    char *scene = NULL, *out = NULL, *dir = NULL, *rrv_path = NULL, *text = NULL, default_dir[4200];
+    size_t text_size = 0;
+    FILE *f = NULL;
+    int code = EXIT_USAGE;
+
+    memset(&args, 0, sizeof args);
+    args.argc = argc;
+    args.argv = argv;
+    args.command = "farm";
+    if (argc > 0 && is_help_flag(argv[0])) {
+        fputs(farm_help, stdout);
+        return EXIT_OK;
+    }
+    if (argc == 0 || strcmp(argv[0], "slurm") != 0)
+        return usage_error(&args, "farm needs a scheduler: rrv farm slurm SCENE -o OUT --tiles N");
+    for (args.index = 1; args.index < argc; ++args.index) {
+        const char *arg = argv[args.index];
+        if (is_help_flag(arg)) {
+            fputs(farm_help, stdout);
+            return EXIT_OK;
+        } else if (strcmp(arg, "--") == 0) {
+            extra = args.index + 1;
+            break;
+        } else if (strcmp(arg, "-o") == 0 || strcmp(arg, "--output") == 0) {
+            if (!take_value(&args, arg, "an output path", &out_path)) return EXIT_USAGE;
+        } else if (strcmp(arg, "--tiles") == 0) {
+            if (!take_value(&args, arg, "N or CxR", &tiles_text)) return EXIT_USAGE;
+        } else if (strcmp(arg, "--dir") == 0) {
+            if (!take_value(&args, arg, "a folder", &dir_arg)) return EXIT_USAGE;
+        } else if (strcmp(arg, "--partition") == 0) {
+            if (!take_value(&args, arg, "a partition name", &partition)) return EXIT_USAGE;
+        } else if (strcmp(arg, "--time") == 0) {
+            if (!take_value(&args, arg, "a time limit", &time_limit)) return EXIT_USAGE;
+        } else if (strcmp(arg, "--rrv") == 0) {
+            if (!take_value(&args, arg, "a path to rrv", &rrv_arg)) return EXIT_USAGE;
+        } else if (strcmp(arg, "--cpus-per-task") == 0) {
+            if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer", &cpus)) return EXIT_USAGE;
+        } else if (is_flag(arg)) {
+            return usage_error(&args, "farm: unknown option \"%s\" (render options go after --)", arg);
+        } else if (scene_path) {
+            return usage_error(&args, "farm: unexpected argument \"%s\"", arg);
+        } else {
+            scene_path = arg;
+        }
+    }
+    args.index = argc;
+    if (!scene_path) return usage_error(&args, "farm slurm needs a scene file");
+    if (!out_path) return usage_error(&args, "farm slurm needs the merged image: -o OUT.exr");
+    if (!tiles_text) return usage_error(&args, "farm slurm needs --tiles N or --tiles CxR");
+    {
+        char tile_text[64];
+        snprintf(tile_text, sizeof tile_text, "0/%s", tiles_text);
+        if (strlen(tiles_text) > 40 || !parse_tile(tile_text, &index, &columns, &rows))
+            return usage_error(&args, "--tiles needs N or CxR, positive integers, got \"%s\"", tiles_text);
+    }
+    count = columns * rows;
+    if (!has_extension(out_path, ".exr") && !has_extension(out_path, ".pfm"))
+        return usage_error(&args, "cannot tell the format of \"%s\": the output must end in .pfm or .exr", out_path);
+    for (i = extra; i < argc; ++i)
+        if (strcmp(argv[i], "-o") == 0 || strcmp(argv[i], "--output") == 0 || strcmp(argv[i], "--tile") == 0 ||
+            strcmp(argv[i], "--resume") == 0 || strcmp(argv[i], "--png") == 0 || strcmp(argv[i], "--crop") == 0)
+            return usage_error(&args, "farm: %s is set by the farm, not a render option to pass", argv[i]);
+
+    code = EXIT_IO;
+    snprintf(default_dir, sizeof default_dir, "%s.farm", out_path);
+    scene = realpath(scene_path, NULL);
+    if (!scene) {
+        fprintf(stderr, "rrv: %s: cannot read scene file: %s\n", scene_path, strerror(errno));
+        code = EXIT_INPUT;
+        goto done;
+    }
+    out = absolute_path(out_path);
+    if (!dir_arg) dir_arg = default_dir;
+    if (mkdir(dir_arg, 0777) != 0 && errno != EEXIST) {
+        fprintf(stderr, "rrv: farm: cannot create \"%s\": %s\n", dir_arg, strerror(errno));
+        goto done;
+    }
+    dir = realpath(dir_arg, NULL);
+    rrv_path = rrv_arg ? realpath(rrv_arg, NULL) : realpath("/proc/self/exe", NULL);
+    if (!out || !dir || !rrv_path) {
+        fprintf(stderr, "rrv: farm: cannot resolve %s: %s\n", !out ? out_path : !dir ? dir_arg : "the rrv program",
+                strerror(errno));
+        goto done;
+    }
+    {
+        char sub[8192];
+        snprintf(sub, sizeof sub, "%s/parts", dir);
+        if (mkdir(sub, 0777) != 0 && errno != EEXIST) {
+            fprintf(stderr, "rrv: farm: cannot create \"%s\": %s\n", sub, strerror(errno));
+            goto done;
+        }
+        snprintf(sub, sizeof sub, "%s/logs", dir);
+        if (mkdir(sub, 0777) != 0 && errno != EEXIST) {
+            fprintf(stderr, "rrv: farm: cannot create \"%s\": %s\n", sub, strerror(errno));
+            goto done;
+        }
+    }
+
+    /* render.sbatch */
+    f = open_memstream(&text, &text_size);
+    if (!f) goto done;
+    fprintf(f, "#!/bin/sh\n# Written by rrv farm slurm: task I renders tile I of %s as a part.\n", tiles_text);
+    fprintf(f, "#SBATCH --job-name=rrv-tiles\n#SBATCH --array=0-%d\n", count - 1);
+    fprintf(f, "#SBATCH --output=%s/logs/tile_%%a.log\n", dir);
+    if (partition) fprintf(f, "#SBATCH --partition=%s\n", partition);
+    if (cpus) fprintf(f, "#SBATCH --cpus-per-task=%d\n", cpus);
+    if (time_limit) fprintf(f, "#SBATCH --time=%s\n", time_limit);
+    fprintf(f, "set -eu\ni=${SLURM_ARRAY_TASK_ID:?run through sbatch or set SLURM_ARRAY_TASK_ID}\n");
+    fprintf(f, "# --resume: a part already complete is kept; the part is written to a\n"
+               "# temporary file and renamed, so a killed task leaves no half part.\n");
+    fputs("exec ", f);
+    put_quoted(f, rrv_path);
+    fputs(" render ", f);
+    put_quoted(f, scene);
+    fprintf(f, " -o %s/parts/tile_\"$i\".exr --tile \"$i\"/%s --resume", dir, tiles_text);
+    if (cpus) fprintf(f, " --threads %d", cpus);
+    for (i = extra; i < argc; ++i) {
+        fputc(' ', f);
+        put_quoted(f, argv[i]);
+    }
+    fputc('\n', f);
+    if (fclose(f) != 0) { f = NULL; goto done; }
+    f = NULL;
+    if (!write_script(dir, "render.sbatch", text)) goto done;
+    free(text);
+    text = NULL;
+
+    /* merge.sbatch */
+    f = open_memstream(&text, &text_size);
+    if (!f) goto done;
+    fprintf(f, "#!/bin/sh\n# Written by rrv farm slurm: merges the %d parts (after the array, afterok).\n", count);
+    fprintf(f, "#SBATCH --job-name=rrv-merge\n#SBATCH --output=%s/logs/merge.log\n", dir);
+    if (partition) fprintf(f, "#SBATCH --partition=%s\n", partition);
+    fputs("set -eu\nexec ", f);
+    put_quoted(f, rrv_path);
+    fputs(" merge ", f);
+    put_quoted(f, out);
+    for (i = 0; i < count; ++i) fprintf(f, " \\\n    %s/parts/tile_%d.exr", dir, i);
+    fputc('\n', f);
+    if (fclose(f) != 0) { f = NULL; goto done; }
+    f = NULL;
+    if (!write_script(dir, "merge.sbatch", text)) goto done;
+    free(text);
+    text = NULL;
+
+    /* submit.sh */
+    f = open_memstream(&text, &text_size);
+    if (!f) goto done;
+    fprintf(f, "#!/bin/sh\n# Written by rrv farm slurm: submits the tiles and the merge that waits for them.\n"
+               "# Run it again after a failure: complete parts are kept.\nset -eu\n");
+    fprintf(f, "array=$(sbatch --parsable %s/render.sbatch)\narray=${array%%%%;*}\n", dir);
+    fprintf(f, "merge=$(sbatch --parsable --dependency=afterok:\"$array\" %s/merge.sbatch)\n", dir);
+    fprintf(f, "echo \"tiles: job $array (%d tasks); merge: job ${merge%%%%;*}\"\n", count);
+    if (fclose(f) != 0) { f = NULL; goto done; }
+    f = NULL;
+    if (!write_script(dir, "submit.sh", text)) goto done;
+    printf("wrote %s/render.sbatch (%d tasks), %s/merge.sbatch, %s/submit.sh\nsubmit with: sh %s/submit.sh\n",
+           dir, count, dir, dir, dir);
+    code = EXIT_OK;
+done:
+    if (f) fclose(f);
+    free(text);
+    free(scene);
+    free(out);
+    free(dir);
+    free(rrv_path);
     return code;
 }
 
@@ -1532,6 +2493,10 @@ static int show_help(const char *command)
         printf(render_help, refraction_help);
     } else if (strcmp(command, "diff") == 0) {
         fputs(diff_help, stdout);
+    } else if (strcmp(command, "merge") == 0) {
+        fputs(merge_help, stdout);
+    } else if (strcmp(command, "farm") == 0) {
+        fputs(farm_help, stdout);
     } else if (strcmp(command, "info") == 0) {
         fputs(info_help, stdout);
     } else if (strcmp(command, "trace") == 0) {
@@ -1562,6 +2527,10 @@ int main(int argc, char **argv)
         code = command_render(argc - 2, argv + 2);
     } else if (strcmp(command, "diff") == 0) {
         code = command_diff(argc - 2, argv + 2);
+    } else if (strcmp(command, "merge") == 0) {
+        code = command_merge(argc - 2, argv + 2);
+    } else if (strcmp(command, "farm") == 0) {
+        code = command_farm(argc - 2, argv + 2);
     } else if (strcmp(command, "info") == 0) {
         code = command_info(argc - 2, argv + 2);
     } else if (strcmp(command, "trace") == 0) {

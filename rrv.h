@@ -221,6 +221,7 @@
      rrv_read_pfm_memory    the same from memory
      rrv_read_exr           read a scanline RGB OpenEXR file
      rrv_read_exr_memory    the same from memory
+     rrv_exr_find_attribute an OpenEXR header attribute by name (rrv's part metadata)
      rrv_half_from_float    the IEEE half nearest a float (finite values clamped)
      rrv_crc32, rrv_adler32 the checksums the PNG and EXR writers use
      rrv_result_string      a static string for a result code
@@ -818,9 +819,18 @@ typedef struct rrv_exr_options {
     rrv_exr_compression compression;
     int display_width, display_height; /* 0: width, height of the image */
     int x, y;                          /* the image's origin in the display window */
+    /* Writer: one extra attribute of type "string" when text_name is not NULL
+       (a name of 1-63 bytes, text up to 4095 bytes, e.g. what a partial render
+       holds); the reader sets both to NULL: rrv_exr_find_attribute finds it. */
+    const char *text_name, *text;
 } rrv_exr_options;
 RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb,
                                     int width, int height, const rrv_exr_options *options);
+/* Finds the header attribute called attr_name in the OpenEXR file in data:
+   RRV_OK with its type name and value (pointers into data), RRV_ERROR_FORMAT
+   if the file or its header is malformed or has no such attribute. */
+RRV_DEF rrv_result rrv_exr_find_attribute(const void *data, size_t size, const char *attr_name,
+                                          const char **type, const void **value, size_t *value_size);
 /* The half nearest to value by the rules above, as its 16-bit pattern. */
 RRV_DEF uint16_t rrv_half_from_float(float value);
 /* Reads a single-part scanline OpenEXR file's R, G and B channels (HALF or
@@ -6643,7 +6653,7 @@ RRV_DEF uint16_t rrv_half_from_float(float value)
 #define RRV__EXR_ZIP_LINES 16
 
 typedef struct rrv__exr_header {
-    unsigned char bytes[512];
+    unsigned char bytes[512 + 64 + 8 + 4 + 4096];
     size_t size;
 } rrv__exr_header;
 
@@ -6739,6 +6749,8 @@ RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const floa
         (opt.compression != RRV_EXR_ZIP && opt.compression != RRV_EXR_NO_COMPRESSION) ||
         opt.display_width < 0 || opt.display_height < 0)
         return RRV_ERROR_ARGUMENT;
+    if (opt.text_name && (!opt.text || !opt.text_name[0] || strlen(opt.text_name) > 63 || strlen(opt.text) > 4095))
+        return RRV_ERROR_ARGUMENT;
     display_w = opt.display_width ? opt.display_width : width;
     display_h = opt.display_height ? opt.display_height : height;
     /* The data window's last pixel must be an int coordinate too. */
@@ -6794,6 +6806,7 @@ RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const floa
         rrv__put_u32_le(value, bits);
         rrv__exr_attribute(&h, "screenWindowWidth", "float", value, 4);
     }
+    if (opt.text_name) rrv__exr_attribute(&h, opt.text_name, "string", opt.text, strlen(opt.text));
     h.bytes[h.size++] = 0;
 
     raw = (unsigned char *)RRV_MALLOC(chunk_bytes);
@@ -7147,6 +7160,41 @@ typedef struct rrv__exr_channel {
 
 #define RRV__EXR_MAX_CHANNELS 64
 
+RRV_DEF rrv_result rrv_exr_find_attribute(const void *data, size_t size, const char *attr_name,
+                                          const char **type, const void **value, size_t *value_size)
+{
+    const unsigned char *p = (const unsigned char *)data;
+    size_t pos = 8;
+    if (type) *type = NULL;
+    if (value) *value = NULL;
+    if (value_size) *value_size = 0;
+    if (!attr_name || (!data && size > 0)) return RRV_ERROR_ARGUMENT;
+    if (size < 8 || p[0] != 0x76 || p[1] != 0x2f || p[2] != 0x31 || p[3] != 0x01) return RRV_ERROR_FORMAT;
+    while (pos < size && p[pos] != 0) {
+        const char *name = (const char *)p + pos, *type_name;
+        const unsigned char *end = (const unsigned char *)memchr(p + pos, 0, size - pos);
+        uint32_t n;
+        if (!end) return RRV_ERROR_FORMAT;
+        pos = (size_t)(end - p) + 1;
+        type_name = (const char *)p + pos;
+        end = pos < size ? (const unsigned char *)memchr(p + pos, 0, size - pos) : NULL;
+        if (!end) return RRV_ERROR_FORMAT;
+        pos = (size_t)(end - p) + 1;
+        if (size - pos < 4) return RRV_ERROR_FORMAT;
+        n = rrv__get_u32_le(p + pos);
+        pos += 4;
+        if (n > size - pos) return RRV_ERROR_FORMAT;
+        if (strcmp(name, attr_name) == 0) {
+            if (type) *type = type_name;
+            if (value) *value = p + pos;
+            if (value_size) *value_size = n;
+            return RRV_OK;
+        }
+        pos += n;
+    }
+    return RRV_ERROR_FORMAT;
+}
+
 RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char *name, float **rgb,
                                        int *width, int *height, rrv_exr_options *info, rrv_error *err)
 {
@@ -7371,6 +7419,7 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
         info->display_height = (int)((int64_t)disp[3] - disp[1] + 1);
         info->x = (int)((int64_t)dw[0] - disp[0]);
         info->y = (int)((int64_t)dw[1] - disp[1]);
+        info->text_name = info->text = NULL;
     }
     rrv__clear_error(err);
     return RRV_OK;

@@ -25,6 +25,13 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size)
     rrv_exr_options info;
     rrv_error err;
     rrv_result r = rrv_read_exr_memory(data, size, "fuzz.exr", &rgb, &width, &height, &info, &err);
+    const char *type;
+    const void *value;
+    size_t value_size;
+    /* Any header: a found attribute lies inside the data. */
+    if (rrv_exr_find_attribute(data, size, "rrvPart", &type, &value, &value_size) == RRV_OK &&
+        ((const unsigned char *)value < data || value_size > size - (size_t)((const unsigned char *)value - data)))
+        abort();
     if (r == RRV_OK) {
         size_t i, n;
         if (!rgb || width <= 0 || height <= 0) abort();
