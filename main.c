@@ -773,7 +773,7 @@ static void *render_worker(void *arg)
            depend on how the image was split. */
         result = rrv_render_rect(job->scene, tx0, ty0, tx1, ty1, 0, job->spp,
                                  job->sum + 3 * ((size_t)(ty0 - job->y0) * job->stride + (size_t)(tx0 - job->x0)),
-                                 job->stride, &stats);
+                                 job->stride, &stats, NULL);
 
         job_lock(job);
         if (result != RRV_OK) {

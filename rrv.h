@@ -605,9 +605,13 @@ typedef struct rrv_scene {
 
 /* ---- loading -------------------------------------------------------------- */
 
-/* Reads a whole file into a buffer allocated with RRV_MALLOC (freed by the
-   library with RRV_FREE). Return 0 on success, nonzero if it cannot be read. */
+/* Reads a whole file into a buffer of the callback's own. Return 0 on
+   success, nonzero if it cannot be read (a buffer set anyway is released).
+   The library hands every buffer back to the matching release callback
+   when it is done with it (cgltf's read/release pair); without one the
+   buffer must come from RRV_MALLOC and is freed with RRV_FREE. */
 typedef int (*rrv_read_file_func)(void *user, const char *path, void **data, size_t *size);
+typedef void (*rrv_release_file_func)(void *user, void *data);
 
 /* Sees the path of every file the loader is about to read (the scene, OBJ
    meshes, grids), spelled as it will be opened: lets a client refuse to
@@ -620,7 +624,8 @@ typedef struct rrv_load_options {
                                     this, and the grids prepare builds beyond it;
                                     0 = RRV_DEFAULT_MAX_GRID_BYTES */
     rrv_read_file_func read_file;/* NULL: stdio (unavailable with RRV_NO_STDIO) */
-    void *read_file_user;
+    void *read_file_user;        /* passed to read_file and release_file */
+    rrv_release_file_func release_file; /* NULL: RRV_FREE */
     rrv_input_func on_input;     /* NULL: not called */
     void *on_input_user;
     int max_bake_samples;        /* 0 = default. Otherwise at most this many samples
@@ -791,10 +796,12 @@ typedef struct rrv_render_stats {
    pixels between calls (tiles, threads, machines) gives bit-identical sums;
    splitting a pixel's samples between calls changes them only by float
    rounding of the additions. stats may be NULL; if not, it is added to.
-   Thread-safe for distinct pixels: the scene is only read. */
+   Thread-safe for distinct pixels: the scene is only read (give each
+   thread its own err, or NULL). */
 RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
                                    int sample_begin, int sample_end,
-                                   float *sum, int stride, rrv_render_stats *stats);
+                                   float *sum, int stride, rrv_render_stats *stats,
+                                   rrv_error *err);
 
 /* One walk of a ray through the refractive media only (absorption and
    scattering ignored), as `rrv trace` prints it. The visit callback, if not
@@ -4491,17 +4498,29 @@ static rrv_vec3 rrv__camera_ray(const rrv__camera_frame *f, const rrv_camera *ca
 
 RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
                                    int sample_begin, int sample_end,
-                                   float *sum, int stride, rrv_render_stats *stats)
+                                   float *sum, int stride, rrv_render_stats *stats,
+                                   rrv_error *err)
 {
     rrv__context ctx;
     rrv__camera_frame frame;
     double r_camera;
     int x, y, s, c;
-    if (!scene || !sum) return RRV_ERROR_ARGUMENT;
-    if (x0 < 0 || y0 < 0 || x1 > scene->camera.width || y1 > scene->camera.height || x0 > x1 || y0 > y1 ||
-        stride < x1 - x0 || sample_begin < 0 || sample_begin > sample_end)
-        return RRV_ERROR_ARGUMENT;
-    if (scene->shape_count && !scene->bvh) return RRV_ERROR_ARGUMENT; /* not prepared */
+    rrv__clear_error(err);
+    if (!scene || !sum) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_render_rect: NULL scene or sum");
+    if (x0 < 0 || y0 < 0 || x1 > scene->camera.width || y1 > scene->camera.height || x0 > x1 || y0 > y1)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
+                         "rrv_render_rect: pixels [%d,%d) x [%d,%d) are not inside the %d x %d image", x0,
+                         x1, y0, y1, scene->camera.width, scene->camera.height);
+    if (stride < x1 - x0)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
+                         "rrv_render_rect: stride %d is below the rectangle's width %d", stride, x1 - x0);
+    if (sample_begin < 0 || sample_begin > sample_end)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
+                         "rrv_render_rect: samples [%d,%d) are not a range of indices >= 0", sample_begin,
+                         sample_end);
+    if ((scene->shape_count && !scene->bvh) || (scene->medium_count && !scene->media[0].majorant))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
+                         "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
     memset(&ctx, 0, sizeof ctx);
     ctx.scene = scene;
     if (scene->settings.integrator == RRV_INTEGRATOR_REFRACTIVE) {
@@ -7628,6 +7647,8 @@ RRV_DEF rrv_result rrv_nanovdb_read_memory(const void *data, size_t size, const 
 
 static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, int text,
                                      size_t max_bytes, void **data, size_t *size, const char **why);
+static void rrv__sf_release_whole(const rrv_load_options *opt, void *data);
+static int rrv__sf_whole_is_ours(const rrv_load_options *opt);
 
 /* Errors name `name`; an unreadable file gives RRV_ERROR_IO with *why the
    reason in words, or "". The file may hold other grids too, so the limit
@@ -7649,8 +7670,9 @@ static rrv_result rrv__nv_read_file(const char *path, const char *name, const ch
     if (r == RRV_ERROR_UNSUPPORTED)
         return rrv__fail(err, r, name, 0, "this build has no stdio (RRV_NO_STDIO): set rrv_load_options.read_file");
     if (r != RRV_OK) return rrv__fail(err, r, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
-    r = rrv__nv_load((unsigned char *)data, size, 1, name, grid_name, max_bytes, grid, err, &kept);
-    if (!kept) RRV_FREE(data);
+    r = rrv__nv_load((unsigned char *)data, size, rrv__sf_whole_is_ours(opt), name, grid_name,
+                     max_bytes, grid, err, &kept);
+    if (!kept) rrv__sf_release_whole(opt, data);
     return r;
 }
 
@@ -7768,6 +7790,23 @@ static rrv_result rrv__sf_stdio_read(const char *path, size_t max_bytes, int tex
 /* RRV_OK with the whole file; RRV_ERROR_IO (*why says why, or ""),
    RRV_ERROR_LIMIT past max_bytes, RRV_ERROR_MEMORY, or RRV_ERROR_UNSUPPORTED
    when there is no way to read files at all. */
+/* Gives back a buffer rrv__sf_read_whole returned, to whoever allocated it. */
+static void rrv__sf_release_whole(const rrv_load_options *opt, void *data)
+{
+    if (!data) return;
+    if (opt && opt->read_file && opt->release_file)
+        opt->release_file(opt->read_file_user, data);
+    else
+        RRV_FREE(data);
+}
+
+/* 1 when a buffer of rrv__sf_read_whole may be kept and later freed with
+   RRV_FREE (a NanoVDB grid keeps its file's bytes). */
+static int rrv__sf_whole_is_ours(const rrv_load_options *opt)
+{
+    return !(opt && opt->read_file && opt->release_file);
+}
+
 static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, int text,
                                      size_t max_bytes, void **data, size_t *size, const char **why)
 {
@@ -7777,13 +7816,13 @@ static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *pa
     if (opt && opt->on_input) opt->on_input(opt->on_input_user, path);
     if (opt && opt->read_file) {
         if (opt->read_file(opt->read_file_user, path, data, size) != 0) {
-            if (*data) RRV_FREE(*data);
+            rrv__sf_release_whole(opt, *data);
             *data = NULL;
             return RRV_ERROR_IO;
         }
         if (!*data && *size > 0) return RRV_ERROR_IO;
         if (*size > max_bytes) {
-            RRV_FREE(*data);
+            rrv__sf_release_whole(opt, *data);
             *data = NULL;
             return RRV_ERROR_LIMIT;
         }
@@ -8137,7 +8176,7 @@ static rrv_result rrv__sf_grid_load(const char *path, const char *name, const rr
         if (r != RRV_OK)
             return rrv__fail(err, r, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
         r = rrv_grid_read_memory(data, size, name, max_bytes, nonnegative, grid, err);
-        RRV_FREE(data);
+        rrv__sf_release_whole(opt, data);
         return r;
     }
 #ifndef RRV_NO_STDIO
@@ -10057,7 +10096,7 @@ static rrv_result rrv__sf_st_mesh(rrv__sf_parser *p)
             return rrv__sf_perr(p, r, "%s", message);
         }
         r = rrv__sf_obj_parse(p, (const char *)data, size, full, scale, translate, &proto);
-        RRV_FREE(data);
+        rrv__sf_release_whole(p->opt, data);
         return r;
     } else {
         const rrv__sf_tok *toks = p->toks.v;
@@ -10708,7 +10747,7 @@ RRV_DEF rrv_result rrv_scene_load(const char *path, const rrv_load_options *opt,
         return rrv__fail(err, r, path, 0, "%s", message);
     }
     r = rrv_scene_parse((const char *)data, size, path, slash ? dir : NULL, opt, out, err);
-    RRV_FREE(data);
+    rrv__sf_release_whole(opt, data);
     return r;
 }
 
