@@ -578,11 +578,11 @@ static int write_temp(pending_output *out, const float *image, int width, int he
         return 0;
     }
     if (out->format == OUTPUT_PNG)
-        result = rrv_write_png_to(fwrite_callback, file, image, width, height, exposure);
+        result = rrv_write_png_to(fwrite_callback, file, image, width, height, exposure, NULL);
     else if (out->format == OUTPUT_EXR)
-        result = rrv_write_exr_to(fwrite_callback, file, image, width, height, out->exr);
+        result = rrv_write_exr_to(fwrite_callback, file, image, width, height, out->exr, NULL);
     else
-        result = rrv_write_pfm_to(fwrite_callback, file, image, width, height);
+        result = rrv_write_pfm_to(fwrite_callback, file, image, width, height, NULL);
     errno = 0;
     ok = result == RRV_OK && fflush(file) == 0 && fsync(fileno(file)) == 0;
     if (!ok && result == RRV_OK && errno == EINVAL) ok = 1; /* no fsync here, e.g. a pipe fs */

@@ -884,15 +884,17 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
 /* ---- image I/O ----------------------------------------------------------------
    Images are float RGB, row 0 at the top, 3 floats a pixel. */
 
-/* Return 0 on success; nonzero aborts the writer with RRV_ERROR_IO. */
+/* Return 0 on success; nonzero aborts the writer with RRV_ERROR_IO. The
+   callback writers fill err (may be NULL) like every fallible call. */
 typedef int (*rrv_write_func)(void *user, const void *data, size_t size);
 
 /* PFM: "PF\n<w> <h>\n-1.0\n", little-endian floats, rows bottom to top. */
 RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user,
-                                    const float *rgb, int width, int height);
+                                    const float *rgb, int width, int height, rrv_error *err);
 /* PNG preview: 8-bit sRGB of rgb * 2^exposure, stored (uncompressed) deflate. */
 RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
-                                    const float *rgb, int width, int height, double exposure);
+                                    const float *rgb, int width, int height, double exposure,
+                                    rrv_error *err);
 /* OpenEXR: single-part scanline file, channels B, G, R (the order the format
    requires), lineOrder INCREASING_Y, pixelAspectRatio 1, screenWindowCenter
    (0, 0), screenWindowWidth 1. A zeroed rrv_exr_options (or NULL) means
@@ -917,7 +919,8 @@ typedef struct rrv_exr_options {
     int x, y;                          /* the image's origin in the display window */
 } rrv_exr_options;
 RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb,
-                                    int width, int height, const rrv_exr_options *options);
+                                    int width, int height, const rrv_exr_options *options,
+                                    rrv_error *err);
 /* The half nearest to value by the rules above, as its 16-bit pattern. */
 RRV_DEF uint16_t rrv_half_from_float(float value);
 /* Reads a single-part scanline OpenEXR file's R, G and B channels (HALF or
@@ -5373,7 +5376,7 @@ static void rrv__piece_put(rrv__piece_writer *w, const void *data, size_t size)
 
 #define RRV__PFM_PIECE_BYTES ((size_t)64 * 1024)
 
-RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user,
+static rrv_result rrv__write_pfm_to(rrv_write_func write, void *user,
                                     const float *rgb, int width, int height)
 {
     rrv__piece_writer w;
@@ -5497,7 +5500,7 @@ static unsigned char rrv__srgb8(float value, double gain)
     return (unsigned char)(encoded * 255.0 + 0.5);
 }
 
-RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
+static rrv_result rrv__write_png_to(rrv_write_func write, void *user,
                                     const float *rgb, int width, int height, double exposure)
 {
     static const unsigned char signature[8] = { 137, 'P', 'N', 'G', '\r', '\n', 26, '\n' };
@@ -5983,7 +5986,7 @@ static void rrv__exr_zip_predict(const unsigned char *raw, size_t size, unsigned
     }
 }
 
-RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb,
+static rrv_result rrv__write_exr_to(rrv_write_func write, void *user, const float *rgb,
                                     int width, int height, const rrv_exr_options *options)
 {
     static const unsigned char magic_version[8] = { 0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0 };
@@ -6642,6 +6645,42 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
     return RRV_OK;
 }
 
+/* ---- the callback writers' public forms: the result as an rrv_error ---- */
+
+static rrv_result rrv__writer_error(rrv_result r, const char *writer, int width, int height,
+                                    rrv_error *err)
+{
+    rrv__clear_error(err);
+    if (r == RRV_OK) return r;
+    if (r == RRV_ERROR_MEMORY) return rrv__fail(err, r, NULL, 0, "%s: out of memory", writer);
+    if (r == RRV_ERROR_IO) return rrv__fail(err, r, NULL, 0, "%s: the write callback failed", writer);
+    return rrv__fail(err, r, NULL, 0,
+                     "%s: invalid arguments (a %d x %d image, a callback and pixels are needed; "
+                     "finite exposure, EXR options and sizes that fit the format)",
+                     writer, width, height);
+}
+
+RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user, const float *rgb, int width,
+                                    int height, rrv_error *err)
+{
+    return rrv__writer_error(rrv__write_pfm_to(write, user, rgb, width, height), "rrv_write_pfm_to",
+                             width, height, err);
+}
+
+RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user, const float *rgb, int width,
+                                    int height, double exposure, rrv_error *err)
+{
+    return rrv__writer_error(rrv__write_png_to(write, user, rgb, width, height, exposure),
+                             "rrv_write_png_to", width, height, err);
+}
+
+RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb, int width,
+                                    int height, const rrv_exr_options *options, rrv_error *err)
+{
+    return rrv__writer_error(rrv__write_exr_to(write, user, rgb, width, height, options),
+                             "rrv_write_exr_to", width, height, err);
+}
+
 /* ---- PFM reader ------------------------------------------------------------------ */
 
 static int rrv__pfm_is_space(unsigned char c)
@@ -6929,11 +6968,11 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
                          why[0] ? ": " : "", why);
     }
     if (format == RRV__IMAGE_PNG)
-        result = rrv_write_png_to(rrv__fwrite_callback, file, rgb, width, height, exposure);
+        result = rrv__write_png_to(rrv__fwrite_callback, file, rgb, width, height, exposure);
     else if (format == RRV__IMAGE_EXR)
-        result = rrv_write_exr_to(rrv__fwrite_callback, file, rgb, width, height, exr);
+        result = rrv__write_exr_to(rrv__fwrite_callback, file, rgb, width, height, exr);
     else
-        result = rrv_write_pfm_to(rrv__fwrite_callback, file, rgb, width, height);
+        result = rrv__write_pfm_to(rrv__fwrite_callback, file, rgb, width, height);
     closed = fclose(file) == 0;
     if (result != RRV_OK || !closed) {
         remove(temp_path);
