@@ -6903,6 +6903,63 @@ static const char *rrv__io_reason(int errnum)
     return "";
 }
 
+/* Stops a stream read early: sees the whole buffer after each piece. */
+typedef int (*rrv__stream_stop_func)(const unsigned char *data, size_t have, size_t got);
+
+/* Reads what is left of f into a buffer that starts at `first` bytes and
+   doubles as data arrives (the PFM, EXR and scene readers share it): a size
+   that a file claims is never trusted for an allocation (a folder's can be
+   2^63), and a device or pipe costs only what it delivers. At most `limit`
+   bytes are kept; with `over_is_error` one more byte is tried, and getting
+   it is RRV_ERROR_LIMIT. Pieces are at most `piece` bytes, after each of
+   which `stop` (if not NULL) may end the read. RRV_ERROR_IO keeps errno in
+   *errnum; RRV_ERROR_MEMORY; RRV_OK with *data (NULL when nothing came). */
+static rrv_result rrv__read_stream(FILE *f, size_t first, size_t piece, size_t limit,
+                                   int over_is_error, rrv__stream_stop_func stop,
+                                   unsigned char **data, size_t *size, int *errnum)
+{
+    unsigned char *buf = NULL;
+    size_t have = 0, capacity = 0;
+    size_t cap = over_is_error && limit < SIZE_MAX ? limit + 1 : limit;
+    *data = NULL;
+    *size = 0;
+    *errnum = 0;
+    for (;;) {
+        size_t want, got;
+        if (have == capacity) {
+            size_t grown = capacity ? capacity * 2 : first;
+            unsigned char *bigger;
+            if (grown > cap || grown < capacity) grown = cap; /* the cap, or doubling overflowed */
+            if (grown <= capacity) break;
+            bigger = (unsigned char *)RRV_REALLOC(buf, grown);
+            if (!bigger) {
+                RRV_FREE(buf);
+                return RRV_ERROR_MEMORY;
+            }
+            buf = bigger;
+            capacity = grown;
+        }
+        want = capacity - have < piece ? capacity - have : piece;
+        errno = 0;
+        got = fread(buf + have, 1, want, f);
+        have += got;
+        if (stop && stop(buf, have, got)) break;
+        if (over_is_error && have > limit) {
+            RRV_FREE(buf);
+            return RRV_ERROR_LIMIT;
+        }
+        if (got < want) break;
+    }
+    if (ferror(f)) {
+        *errnum = errno;
+        RRV_FREE(buf);
+        return RRV_ERROR_IO;
+    }
+    *data = buf;
+    *size = have;
+    return RRV_OK;
+}
+
 /* Opens a new temporary file next to path. The name carries a value mixed
    from the clock, the address of the stack and the attempt, so two writers
    to one path (or a leftover file) rarely meet; a name that exists is
@@ -7048,10 +7105,11 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
                                 rrv_error *err)
 {
     unsigned char header[RRV__PFM_HEADER_MAX], *data = NULL;
-    size_t header_size, have = 0, capacity = 0;
+    size_t header_size, have = 0;
     rrv__pfm_header h;
     FILE *file;
     rrv_result result;
+    int errnum;
 
     if (rgb) *rgb = NULL;
     if (width) *width = 0;
@@ -7085,33 +7143,13 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
 
     /* The buffer grows with what arrives, so a header announcing more than
        the file holds costs at most twice what the file holds. */
-    while (have < h.data_bytes) {
-        size_t want, got;
-        if (have == capacity) {
-            size_t grown = capacity ? capacity * 2 : (size_t)1 << 20;
-            unsigned char *bigger;
-            if (grown > h.data_bytes || grown < capacity) grown = h.data_bytes;
-            bigger = (unsigned char *)RRV_REALLOC(data, grown);
-            if (!bigger) {
-                RRV_FREE(data);
-                fclose(file);
-                return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory for a %dx%d image",
-                                 h.width, h.height);
-            }
-            data = bigger;
-            capacity = grown;
-        }
-        want = capacity - have;
-        got = fread(data + have, 1, want, file);
-        have += got;
-        if (got < want) break;
-    }
-    if (ferror(file)) {
-        RRV_FREE(data);
-        fclose(file);
-        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot read");
-    }
+    result = rrv__read_stream(file, (size_t)1 << 20, SIZE_MAX, h.data_bytes, 0, NULL, &data, &have,
+                              &errnum);
     fclose(file);
+    if (result == RRV_ERROR_MEMORY)
+        return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory for a %dx%d image", h.width,
+                         h.height);
+    if (result != RRV_OK) return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot read");
     if (have < h.data_bytes) {
         RRV_FREE(data);
         return rrv__pfm_truncated(err, path, &h, have);
@@ -7128,13 +7166,21 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
 /* A file can be no larger than this to be read whole. */
 #define RRV__EXR_FILE_MAX ((size_t)1 << 31)
 
+/* Ends the read after the first 8 bytes unless they start an OpenEXR file. */
+static int rrv__exr_stop(const unsigned char *data, size_t have, size_t got)
+{
+    (void)got;
+    return have == 8 && (data[0] != 0x76 || data[1] != 0x2f || data[2] != 0x31 || data[3] != 0x01);
+}
+
 RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *height,
                                 rrv_exr_options *info, rrv_error *err)
 {
     unsigned char *data = NULL;
-    size_t have = 0, capacity = 0;
+    size_t have = 0;
     FILE *file;
     rrv_result result;
+    int errnum;
     if (rgb) *rgb = NULL;
     if (width) *width = 0;
     if (height) *height = 0;
@@ -7148,39 +7194,18 @@ RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *
     }
     /* The first read is 8 bytes, so a stream that is no EXR (a device, a
        pipe) is refused without reading on. */
-    for (;;) {
-        size_t want, got;
-        if (have == capacity) {
-            size_t grown = capacity ? capacity * 2 : 8;
-            unsigned char *bigger;
-            if (capacity >= RRV__EXR_FILE_MAX) {
-                RRV_FREE(data);
-                fclose(file);
-                return rrv__fail(err, RRV_ERROR_LIMIT, path, 0, "OpenEXR file larger than %llu bytes",
-                                 (unsigned long long)RRV__EXR_FILE_MAX);
-            }
-            bigger = (unsigned char *)RRV_REALLOC(data, grown);
-            if (!bigger) {
-                RRV_FREE(data);
-                fclose(file);
-                return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory reading the file");
-            }
-            data = bigger;
-            capacity = grown;
-        }
-        want = capacity - have;
-        got = fread(data + have, 1, want, file);
-        have += got;
-        if (got < want) break;
-        if (have == 8 && (data[0] != 0x76 || data[1] != 0x2f || data[2] != 0x31 || data[3] != 0x01)) break;
-    }
-    if (ferror(file)) {
-        const char *why = rrv__io_reason(errno);
-        RRV_FREE(data);
-        fclose(file);
+    result = rrv__read_stream(file, 8, SIZE_MAX, RRV__EXR_FILE_MAX, 1, rrv__exr_stop, &data, &have,
+                              &errnum);
+    fclose(file);
+    if (result == RRV_ERROR_LIMIT)
+        return rrv__fail(err, RRV_ERROR_LIMIT, path, 0, "OpenEXR file larger than %llu bytes",
+                         (unsigned long long)RRV__EXR_FILE_MAX);
+    if (result == RRV_ERROR_MEMORY)
+        return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory reading the file");
+    if (result != RRV_OK) {
+        const char *why = rrv__io_reason(errnum);
         return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot read%s%s", why[0] ? ": " : "", why);
     }
-    fclose(file);
     result = rrv_read_exr_memory(data, have, path, rgb, width, height, info, err);
     RRV_FREE(data);
     return result;
@@ -7827,18 +7852,22 @@ static int rrv__sf_stdio_size(FILE *f, unsigned long long *size)
     return 1;
 }
 
-/* Reads a whole file in pieces that grow with what arrives: the size a file
-   claims is never trusted for an allocation (a folder's can be 2^63), and
-   nothing beyond max_bytes is read. A text file (`text`) stops after the
-   piece holding its first NUL byte: the parser refuses the file on that
-   line anyway, and a device such as /dev/zero would otherwise be read up
-   to the limit. */
+/* A text file stops after the piece holding its first NUL byte: the parser
+   refuses the file on that line anyway, and a device such as /dev/zero
+   would otherwise be read up to the limit. */
+static int rrv__sf_text_stop(const unsigned char *data, size_t have, size_t got)
+{
+    return memchr(data + have - got, '\0', got) != NULL;
+}
+
+/* A whole file, at most max_bytes of it (rrv__read_stream). */
 static rrv_result rrv__sf_stdio_read(const char *path, size_t max_bytes, int text, void **data,
                                      size_t *size, const char **why)
 {
     enum { PIECE = 64 * 1024 };
-    unsigned char *buf = NULL;
-    size_t have = 0, capacity = 0;
+    unsigned char *buf;
+    rrv_result r;
+    int errnum;
     FILE *f;
     errno = 0;
     f = fopen(path, "rb");
@@ -7846,47 +7875,12 @@ static rrv_result rrv__sf_stdio_read(const char *path, size_t max_bytes, int tex
         *why = rrv__io_reason(errno);
         return RRV_ERROR_IO;
     }
-    for (;;) {
-        size_t want, got;
-        if (capacity - have < PIECE && capacity <= max_bytes) {
-            size_t grown = capacity < PIECE ? 2 * (size_t)PIECE : capacity * 2;
-            unsigned char *bigger;
-            if (grown - 1 > max_bytes) grown = max_bytes + 1; /* +1 sees a file over the limit */
-            if (grown <= capacity) grown = SIZE_MAX;          /* doubling overflowed */
-            bigger = (unsigned char *)RRV_REALLOC(buf, grown);
-            if (!bigger) {
-                RRV_FREE(buf);
-                fclose(f);
-                return RRV_ERROR_MEMORY;
-            }
-            buf = bigger;
-            capacity = grown;
-        }
-        want = capacity - have < (size_t)PIECE ? capacity - have : (size_t)PIECE;
-        errno = 0;
-        got = fread(buf + have, 1, want, f);
-        if (text && memchr(buf + have, '\0', got)) {
-            have += got;
-            break;
-        }
-        have += got;
-        if (have > max_bytes) {
-            RRV_FREE(buf);
-            fclose(f);
-            return RRV_ERROR_LIMIT;
-        }
-        if (got < want) break;
-    }
-    if (ferror(f)) {
-        *why = rrv__io_reason(errno);
-        RRV_FREE(buf);
-        fclose(f);
-        return RRV_ERROR_IO;
-    }
+    r = rrv__read_stream(f, 2 * (size_t)PIECE, PIECE, max_bytes, 1, text ? rrv__sf_text_stop : NULL,
+                         &buf, size, &errnum);
     fclose(f);
+    if (r == RRV_ERROR_IO) *why = rrv__io_reason(errnum);
     *data = buf;
-    *size = have;
-    return RRV_OK;
+    return r;
 }
 #endif
 
