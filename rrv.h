@@ -772,7 +772,9 @@ RRV_DEF const char *rrv_nanovdb_type_name(rrv_nanovdb_type type);
    A zero that is itself wanted where the default is not zero (a black
    albedo, a scale of 0, an explicit centre at the origin) is set on the
    scene's arrays after the call; rrv_scene_prepare checks everything again.
-   Lights are shapes with a nonzero L. */
+   Lights are shapes with a nonzero L. Adding anything, or setting settings
+   or a field, releases what rrv_scene_prepare built: prepare after the last
+   edit (rrv_render_rect refuses an unprepared scene). */
 typedef enum rrv_medium_field {
     RRV_MEDIUM_DENSITY = 0,
     RRV_MEDIUM_TEMPERATURE,
@@ -7825,7 +7827,9 @@ RRV_DEF void rrv_nanovdb_free(rrv_nanovdb *grid)
 /* ==== scene file: the .rrv parser, the OBJ loader, the gridvol reader =======
    This section owns rrv_scene_load, rrv_scene_parse, rrv_scene_free,
    rrv_grid_read and rrv_grid_read_memory, the OBJ loader behind `mesh file`,
-   and the default (stdio) file reader. Every input here is untrusted: scene
+   the default (stdio) file reader, and the scene-building calls
+   (rrv_scene_create, rrv_scene_add_*, rrv_scene_set_*) with the one home of
+   every default and check, which the statements use. Every input here is untrusted: scene
    text is not NUL-terminated, every count is checked before it is multiplied
    or allocated, and every error names the file, the line and the cause. The
    grammar lives in parts/SCENE_SPEC.md and scenes/README.md. */
