@@ -768,7 +768,9 @@ RRV_DEF const char *rrv_nanovdb_type_name(rrv_nanovdb_type type);
                amplitude 1, radius half the box's smallest side; the
                centre of noise and profiles is the box's centre; blob
                weight 1; fisheye n0 2; shell edge thickness / 4;
-               temperature base 300 K, pressure base 101325 Pa
+               temperature base 300 K, pressure base 101325 Pa; the noise
+               falloff is taken as given (zero is NONE; files default to
+               SPHERE)
    A zero that is itself wanted where the default is not zero (a black
    albedo, a scale of 0, an explicit centre at the origin) is set on the
    scene's arrays after the call; rrv_scene_prepare checks everything again.
