@@ -7,6 +7,7 @@
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -143,6 +144,68 @@ static void test_refusals_name_the_object(void)
     quad.material = 0; /* the grey default, made by the first shape that needs it */
     CHECK(rrv_scene_add_shape(s, &quad, &i, &err) == RRV_OK && i == 0);
     CHECK(strcmp(s->materials[0].name, "default") == 0 && s->materials[0].albedo[0] == 0.5);
+    rrv_scene_free(s);
+}
+
+/* Values no file can spell (an enum out of range, a negative sky) are
+   refused as well, by name. */
+static void test_code_only_refusals(void)
+{
+    rrv_scene *s = new_scene();
+    rrv_settings set;
+    rrv_environment sky;
+    rrv_shape sh;
+    rrv_field f;
+    rrv_medium med;
+    rrv_error err;
+    memset(&set, 0, sizeof set);
+    memset(&sky, 0, sizeof sky);
+    memset(&sh, 0, sizeof sh);
+    memset(&f, 0, sizeof f);
+    memset(&med, 0, sizeof med);
+    set.integrator = (rrv_integrator)7;
+    expect_message(rrv_scene_set_settings(s, &set, &err), &err, RRV_ERROR_ARGUMENT,
+                   "settings: integrator 7 is not one of rrv_integrator");
+    set.integrator = RRV_INTEGRATOR_CLASSIC;
+    set.bend_tolerance = 1e-5;
+    expect_message(rrv_scene_set_settings(s, &set, &err), &err, RRV_ERROR_ARGUMENT,
+                   "settings: bendtolerance must be at least 0.0001, got 1e-05");
+    set.bend_tolerance = 0;
+    set.ambient_ior = 11;
+    expect_message(rrv_scene_set_settings(s, &set, &err), &err, RRV_ERROR_ARGUMENT,
+                   "settings: ambient: ior must be at most 10, got 11");
+    sky.kind = RRV_ENV_CONSTANT;
+    CHECK(rrv_scene_set_environment(s, &sky, &err) == RRV_OK && s->environment.L[1] == 1);
+    sky.kind = RRV_ENV_GRADIENT;
+    sky.L2[2] = -1;
+    expect_message(rrv_scene_set_environment(s, &sky, &err), &err, RRV_ERROR_ARGUMENT,
+                   "environment: radiance must be >= 0, got -1");
+    sh.kind = (rrv_shape_kind)9;
+    expect_message(rrv_scene_add_shape(s, &sh, NULL, &err), &err, RRV_ERROR_ARGUMENT,
+                   "shape 0 (triangle): kind 9 is not one of rrv_shape_kind");
+    sh.kind = RRV_SHAPE_SPHERE;
+    sh.radius = 1;
+    sh.L[0] = 1e30;
+    expect_message(rrv_scene_add_shape(s, &sh, NULL, &err), &err, RRV_ERROR_ARGUMENT,
+                   "shape 0 (sphere): L times scale must be at most 1e+20, got 1e+30");
+    med.lo = rrv__v3(-1, -1, -1);
+    med.hi = rrv__v3(1, 1, 1);
+    CHECK(rrv_scene_add_medium(s, &med, NULL, &err) == RRV_OK);
+    f.kind = (rrv_field_kind)99;
+    expect_message(rrv_scene_set_field(s, 0, RRV_MEDIUM_IOR, &f, &err), &err, RRV_ERROR_ARGUMENT,
+                   "ior of medium \"medium 0\": kind 99 is not one of rrv_field_kind");
+    f.kind = RRV_FIELD_SLAB;
+    f.gradient = 0.1;
+    expect_message(rrv_scene_set_field(s, 0, RRV_MEDIUM_IOR, &f, &err), &err, RRV_ERROR_ARGUMENT,
+                   "ior of medium \"medium 0\": slab normal must be nonzero");
+    f.normal = rrv__v3(0, 3, 4);
+    CHECK(rrv_scene_set_field(s, 0, RRV_MEDIUM_IOR, &f, &err) == RRV_OK);
+    CHECK(fabs(s->media[0].ior.normal.y - 0.6) < 1e-15 && fabs(s->media[0].ior.normal.z - 0.8) < 1e-15);
+    f.kind = RRV_FIELD_CONSTANT;
+    f.value = 0;
+    expect_message(rrv_scene_set_field(s, 0, RRV_MEDIUM_PRESSURE, &f, &err), &err, RRV_ERROR_ARGUMENT,
+                   "pressure of medium \"medium 0\": constant must be > 0, got 0");
+    CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
     rrv_scene_free(s);
 }
 
@@ -476,6 +539,7 @@ int main(void)
 {
     RUN(test_zero_means_default);
     RUN(test_refusals_name_the_object);
+    RUN(test_code_only_refusals);
     RUN(test_prepare_checks_hand_edits);
     RUN(test_code_and_file_agree);
     RUN(test_prepare_twice);
