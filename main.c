@@ -594,11 +594,11 @@ static int write_temp(pending_output *out, const float *image, int width, int he
         return 0;
     }
     if (out->format == OUTPUT_PNG)
-        result = rrv_write_png_to(fwrite_callback, file, image, width, height, exposure);
+        result = rrv_write_png_to(fwrite_callback, file, image, width, height, exposure, NULL);
     else if (out->format == OUTPUT_EXR)
-        result = rrv_write_exr_to(fwrite_callback, file, image, width, height, out->exr);
+        result = rrv_write_exr_to(fwrite_callback, file, image, width, height, out->exr, NULL);
     else
-        result = rrv_write_pfm_to(fwrite_callback, file, image, width, height);
+        result = rrv_write_pfm_to(fwrite_callback, file, image, width, height, NULL);
     errno = 0;
     ok = result == RRV_OK && fflush(file) == 0 && fsync(fileno(file)) == 0;
     if (!ok && result == RRV_OK && errno == EINVAL) ok = 1; /* no fsync here, e.g. a pipe fs */
@@ -826,7 +826,7 @@ static rrv_result sum_samples(const rrv_scene *scene, int x0, int y0, int x1, in
 {
     int w = x1 - x0, h = y1 - y0, mid, x, y, c;
     rrv_result result;
-    if (b - a == 1) return rrv_render_rect(scene, x0, y0, x1, y1, a, b, out, stride, stats);
+    if (b - a == 1) return rrv_render_rect(scene, x0, y0, x1, y1, a, b, out, stride, stats, NULL);
     mid = sample_split(a, b);
     result = sum_samples(scene, x0, y0, x1, y1, a, mid, out, stride, scratch + 3 * TILE_SIZE * TILE_SIZE, stats);
     if (result != RRV_OK) return result;

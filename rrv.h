@@ -7,6 +7,70 @@
    2023 talk), next to a classic null-scattering volume path tracer
    (Miller et al. 2019) and an eikonal ray-marching reference (Ament et al. 2014).
 
+   EXAMPLE: a Luneburg lens built in code, rendered, written as PFM. Zero
+   means default in every description. test/compile_checks.sh cuts out the
+   lines between the two rulers and builds them as C99 and as C++, then
+   runs the program.
+   ---- example ---------------------------------------------------------------
+    #define RRV_IMPLEMENTATION
+    #include "rrv.h"
+    #include <stdio.h>
+    #include <stdlib.h>
+    #include <string.h>
+
+    int main(void)
+    {
+        rrv_scene *scene = NULL;
+        rrv_camera camera;
+        rrv_settings settings;
+        rrv_environment sky;
+        rrv_medium lens;
+        rrv_field ior;
+        rrv_error err;
+        float *sum = NULL;
+        int w = 64, h = 48, spp = 4, lens_index, i;
+        memset(&camera, 0, sizeof camera);
+        memset(&settings, 0, sizeof settings);
+        memset(&sky, 0, sizeof sky);
+        memset(&lens, 0, sizeof lens);
+        memset(&ior, 0, sizeof ior);
+        camera.eye.z = 4;                        // looking at the origin
+        camera.width = w;
+        camera.height = h;
+        settings.integrator = RRV_INTEGRATOR_REFRACTIVE;
+        settings.spp = spp;
+        sky.kind = RRV_ENV_GRADIENT;             // white above, black below
+        sky.L[0] = sky.L[1] = sky.L[2] = 1;
+        strcpy(lens.name, "lens");               // a box with no density
+        lens.lo.x = lens.lo.y = lens.lo.z = -1;
+        lens.hi.x = lens.hi.y = lens.hi.z = 1;
+        ior.kind = RRV_FIELD_LUNEBURG;           // centred in the box
+        ior.radius = 1;
+        if (rrv_scene_create(&scene, &err) != RRV_OK ||
+            rrv_scene_set_camera(scene, &camera, &err) != RRV_OK ||
+            rrv_scene_set_settings(scene, &settings, &err) != RRV_OK ||
+            rrv_scene_set_environment(scene, &sky, &err) != RRV_OK ||
+            rrv_scene_add_medium(scene, &lens, &lens_index, &err) != RRV_OK ||
+            rrv_scene_set_field(scene, lens_index, RRV_MEDIUM_IOR, &ior, &err) != RRV_OK ||
+            rrv_scene_prepare(scene, &err) != RRV_OK)
+            goto fail;
+        sum = (float *)calloc((size_t)w * h * 3, sizeof *sum);
+        if (!sum) goto fail;
+        if (rrv_render_rect(scene, 0, 0, w, h, 0, spp, sum, w, NULL, &err) != RRV_OK)
+            goto fail;
+        for (i = 0; i < w * h * 3; ++i) sum[i] /= spp;
+        if (rrv_write_pfm("lens.pfm", sum, w, h, &err) != RRV_OK) goto fail;
+        free(sum);
+        rrv_scene_free(scene);
+        return 0;
+    fail:
+        fprintf(stderr, "%s:%d: %s\n", err.file, err.line, err.message);
+        free(sum);
+        rrv_scene_free(scene);
+        return 1;
+    }
+   ---- end of example --------------------------------------------------------
+
    INTEGRATORS (rrv_settings.integrator)
      classic     IOR 1 everywhere: delta tracking, ratio-tracked NEE with MIS,
                  spectral MIS for chromatic media. The production baseline.
@@ -186,7 +250,7 @@
      }
      int w = scene->camera.width, h = scene->camera.height;
      float *sum = calloc((size_t)w * h * 3, sizeof *sum);
-     rrv_render_rect(scene, 0, 0, w, h, 0, scene->settings.spp, sum, w, NULL);
+     rrv_render_rect(scene, 0, 0, w, h, 0, scene->settings.spp, sum, w, NULL, &err);
      for (size_t i = 0; i < (size_t)w * h * 3; ++i) sum[i] /= scene->settings.spp;
      rrv_write_pfm("out.pfm", sum, w, h, &err);
      free(sum);
@@ -201,6 +265,15 @@
      rrv_scene_parse        the same from text in memory
      rrv_scene_prepare      build BVH, lights, majorant and baked grids (again after edits)
      rrv_scene_free         free a scene and everything it owns
+     rrv_scene_create       an empty scene to build in code (zero means default)
+     rrv_scene_set_camera   check and set the camera
+     rrv_scene_set_settings check and set the render settings
+     rrv_scene_set_environment check and set the sky
+     rrv_scene_add_material check and add a material
+     rrv_scene_add_shape    check and add a sphere, quad or triangle (a light if L > 0)
+     rrv_scene_add_triangles check and add an indexed triangle mesh
+     rrv_scene_add_medium   check and add a medium's box and coefficients
+     rrv_scene_set_field    check and set a medium's density, temperature, pressure or IOR
      rrv_render_rect        add the radiance sums of a pixel rectangle and sample range
      rrv_trace_ray          walk one ray through the refractive media
      rrv_grid_read          read and validate a gridvol file
@@ -646,9 +719,13 @@ typedef struct rrv_scene {
 
 /* ---- loading -------------------------------------------------------------- */
 
-/* Reads a whole file into a buffer allocated with RRV_MALLOC (freed by the
-   library with RRV_FREE). Return 0 on success, nonzero if it cannot be read. */
+/* Reads a whole file into a buffer of the callback's own. Return 0 on
+   success, nonzero if it cannot be read (a buffer set anyway is released).
+   The library hands every buffer back to the matching release callback
+   when it is done with it (cgltf's read/release pair); without one the
+   buffer must come from RRV_MALLOC and is freed with RRV_FREE. */
 typedef int (*rrv_read_file_func)(void *user, const char *path, void **data, size_t *size);
+typedef void (*rrv_release_file_func)(void *user, void *data);
 
 /* Sees the path of every file the loader is about to read (the scene, OBJ
    meshes, grids), spelled as it will be opened: lets a client refuse to
@@ -661,7 +738,8 @@ typedef struct rrv_load_options {
                                     this, and the grids prepare builds beyond it;
                                     0 = RRV_DEFAULT_MAX_GRID_BYTES */
     rrv_read_file_func read_file;/* NULL: stdio (unavailable with RRV_NO_STDIO) */
-    void *read_file_user;
+    void *read_file_user;        /* passed to read_file and release_file */
+    rrv_release_file_func release_file; /* NULL: RRV_FREE */
     rrv_input_func on_input;     /* NULL: not called */
     void *on_input_user;
     int max_bake_samples;        /* 0 = default. Otherwise at most this many samples
@@ -719,6 +797,76 @@ RRV_DEF double rrv_nanovdb_sample(const rrv_nanovdb *grid, rrv_vec3 p);
 /* "float", "fp4", "fp8", "fp16" or "fpN". */
 RRV_DEF const char *rrv_nanovdb_type_name(rrv_nanovdb_type type);
 
+/* ---- building a scene in code -----------------------------------------------
+   Zero means default, as in cgltf_options and sokol_gfx's desc structs: a
+   zeroed rrv_camera, rrv_settings, rrv_material, rrv_shape, rrv_medium or
+   rrv_field asks for the defaults of the scene format (scenes/README.md), and
+   each call checks its object exactly as the parser checks a statement,
+   refusing with a message that names the object ("medium \"smoke\": g must
+   be in (-1, 1), got 1"). The descriptions are copied (blobs, grid samples
+   and NanoVDB buffers too): the caller keeps what it passed.
+   Defaults a zero asks for:
+     camera    up (0,1,0), fov 40, 320 x 240 (eye and look have none)
+     settings  spp 16, max_depth 32, bend_tolerance 0.01, step 0.01,
+               ambient_ior 1; the enums' zero members are the defaults
+     material  albedo 0.5 (diffuse) or 0.8 and albedo2 0.2 (checker),
+               checker_scale 1
+     medium    sigma_a and sigma_s 1 (when all six are zero), scale 1,
+               Lescale 1, temperaturescale 1, eta_ref 1.000292, P_ref
+               101325 Pa, T_ref 300 K, ior_scale 1
+     field     noise: octaves 5, frequency 1, lacunarity 2, gain 0.5,
+               amplitude 1, radius half the box's smallest side; the
+               centre of noise and profiles is the box's centre; blob
+               weight 1; fisheye n0 2; shell edge thickness / 4;
+               temperature base 300 K, pressure base 101325 Pa; the noise
+               falloff is taken as given (zero is NONE; files default to
+               SPHERE)
+   A zero that is itself wanted where the default is not zero (a black
+   albedo, a scale of 0, an explicit centre at the origin) is set on the
+   scene's arrays after the call; rrv_scene_prepare checks everything again.
+   Lights are shapes with a nonzero L. Adding anything, or setting settings
+   or a field, releases what rrv_scene_prepare built: prepare after the last
+   edit (rrv_render_rect refuses an unprepared scene). */
+typedef enum rrv_medium_field {
+    RRV_MEDIUM_DENSITY = 0,
+    RRV_MEDIUM_TEMPERATURE,
+    RRV_MEDIUM_PRESSURE,
+    RRV_MEDIUM_IOR
+} rrv_medium_field;
+
+/* An empty scene with the default camera and settings, named "scene" in
+   messages. Free with rrv_scene_free. */
+RRV_DEF rrv_result rrv_scene_create(rrv_scene **out, rrv_error *err);
+RRV_DEF rrv_result rrv_scene_set_camera(rrv_scene *scene, const rrv_camera *camera,
+                                        rrv_error *err);
+RRV_DEF rrv_result rrv_scene_set_settings(rrv_scene *scene, const rrv_settings *settings,
+                                          rrv_error *err);
+/* kind NONE: no sky. CONSTANT with a zero L is a sky of radiance 1. */
+RRV_DEF rrv_result rrv_scene_set_environment(rrv_scene *scene, const rrv_environment *env,
+                                             rrv_error *err);
+/* index (may be NULL) gets the position in scene->materials; the name must
+   be new (an empty name becomes "material N"). */
+RRV_DEF rrv_result rrv_scene_add_material(rrv_scene *scene, const rrv_material *material,
+                                          int *index, rrv_error *err);
+/* A sphere, quad or triangle; shape->material indexes scene->materials, and
+   a scene without materials gets the grey "default" one for index 0. */
+RRV_DEF rrv_result rrv_scene_add_shape(rrv_scene *scene, const rrv_shape *shape, int *index,
+                                       rrv_error *err);
+/* A triangle mesh: `points` holds point_count xyz triples, `indices`
+   triangle_count index triples; every triangle copies proto's material and
+   L. Zero-area triangles are dropped, as the OBJ loader drops them. */
+RRV_DEF rrv_result rrv_scene_add_triangles(rrv_scene *scene, const rrv_shape *proto,
+                                           const double *points, int point_count,
+                                           const int *indices, int triangle_count,
+                                           rrv_error *err);
+/* The medium's own fields (density, temperature, ...) are ignored: give them
+   with rrv_scene_set_field. The name must be new (empty: "medium N"). */
+RRV_DEF rrv_result rrv_scene_add_medium(rrv_scene *scene, const rrv_medium *medium, int *index,
+                                        rrv_error *err);
+/* Sets one field of medium `medium` (an index), replacing what it had. */
+RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_field which,
+                                       const rrv_field *field, rrv_error *err);
+
 /* ---- rendering -------------------------------------------------------------- */
 
 /* The limits of BOUNDS (see the manual at the top). Scenes beyond the first
@@ -766,10 +914,12 @@ typedef struct rrv_render_stats {
    pixels between calls (tiles, threads, machines) gives bit-identical sums;
    splitting a pixel's samples between calls changes them only by float
    rounding of the additions. stats may be NULL; if not, it is added to.
-   Thread-safe for distinct pixels: the scene is only read. */
+   Thread-safe for distinct pixels: the scene is only read (give each
+   thread its own err, or NULL). */
 RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
                                    int sample_begin, int sample_end,
-                                   float *sum, int stride, rrv_render_stats *stats);
+                                   float *sum, int stride, rrv_render_stats *stats,
+                                   rrv_error *err);
 
 /* One walk of a ray through the refractive media only (absorption and
    scattering ignored), as `rrv trace` prints it. The visit callback, if not
@@ -788,15 +938,17 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
 /* ---- image I/O ----------------------------------------------------------------
    Images are float RGB, row 0 at the top, 3 floats a pixel. */
 
-/* Return 0 on success; nonzero aborts the writer with RRV_ERROR_IO. */
+/* Return 0 on success; nonzero aborts the writer with RRV_ERROR_IO. The
+   callback writers fill err (may be NULL) like every fallible call. */
 typedef int (*rrv_write_func)(void *user, const void *data, size_t size);
 
 /* PFM: "PF\n<w> <h>\n-1.0\n", little-endian floats, rows bottom to top. */
 RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user,
-                                    const float *rgb, int width, int height);
+                                    const float *rgb, int width, int height, rrv_error *err);
 /* PNG preview: 8-bit sRGB of rgb * 2^exposure, filtered and deflated. */
 RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
-                                    const float *rgb, int width, int height, double exposure);
+                                    const float *rgb, int width, int height, double exposure,
+                                    rrv_error *err);
 /* OpenEXR: single-part scanline file, channels B, G, R (the order the format
    requires), lineOrder INCREASING_Y, pixelAspectRatio 1, screenWindowCenter
    (0, 0), screenWindowWidth 1. A zeroed rrv_exr_options (or NULL) means
@@ -825,7 +977,8 @@ typedef struct rrv_exr_options {
     const char *text_name, *text;
 } rrv_exr_options;
 RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb,
-                                    int width, int height, const rrv_exr_options *options);
+                                    int width, int height, const rrv_exr_options *options,
+                                    rrv_error *err);
 /* Finds the header attribute called attr_name in the OpenEXR file in data:
    RRV_OK with its type name and value (pointers into data), RRV_ERROR_FORMAT
    if the file or its header is malformed or has no such attribute. */
@@ -4401,6 +4554,8 @@ static rrv_result rrv__check_medium(const rrv_scene *scene, const rrv_medium *m,
     return RRV_OK;
 }
 
+static rrv_result rrv__scene_check(rrv_scene *scene, rrv_error *err); /* scene file section */
+
 RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
 {
     rrv_result res;
@@ -4411,17 +4566,10 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
     if (scene->medium_count > RRV__MAX_MEDIA)
         return rrv__fail(err, RRV_ERROR_LIMIT, scene->path, 0, "%d media; at most %d are supported",
                          scene->medium_count, RRV__MAX_MEDIA);
-    if (scene->settings.bend_tolerance <= 0) scene->settings.bend_tolerance = 0.01;
-    if (scene->settings.step <= 0) scene->settings.step = 0.01;
-    if (scene->settings.ambient_ior < 1.0) scene->settings.ambient_ior = 1.0;
-    /* The parser refused all of this with a line; scenes built in code get
-       the same refusals here (BOUNDS). */
-    if (!(scene->settings.ambient_ior <= RRV_MAX_IOR))
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "ambient IOR %g is above %g",
-                         scene->settings.ambient_ior, RRV_MAX_IOR);
-    if (!(rrv__maxd(rrv__max3(scene->environment.L), rrv__max3(scene->environment.L2)) <= RRV_MAX_RADIANCE))
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "environment radiance above %g",
-                         RRV_MAX_RADIANCE);
+    /* The parser refused all of this with a line; scenes built or edited in
+       code get the same refusals here (scene file section: the checks). */
+    res = rrv__scene_check(scene, err);
+    if (res != RRV_OK) return res;
     for (i = 0; i < scene->medium_count; ++i) {
         res = rrv__check_medium(scene, &scene->media[i], err);
         if (res != RRV_OK) return res;
@@ -4484,17 +4632,29 @@ static rrv_vec3 rrv__camera_ray(const rrv__camera_frame *f, const rrv_camera *ca
 
 RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
                                    int sample_begin, int sample_end,
-                                   float *sum, int stride, rrv_render_stats *stats)
+                                   float *sum, int stride, rrv_render_stats *stats,
+                                   rrv_error *err)
 {
     rrv__context ctx;
     rrv__camera_frame frame;
     double r_camera;
     int x, y, s, c;
-    if (!scene || !sum) return RRV_ERROR_ARGUMENT;
-    if (x0 < 0 || y0 < 0 || x1 > scene->camera.width || y1 > scene->camera.height || x0 > x1 || y0 > y1 ||
-        stride < x1 - x0 || sample_begin < 0 || sample_begin > sample_end)
-        return RRV_ERROR_ARGUMENT;
-    if (scene->shape_count && !scene->bvh) return RRV_ERROR_ARGUMENT; /* not prepared */
+    rrv__clear_error(err);
+    if (!scene || !sum) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_render_rect: NULL scene or sum");
+    if (x0 < 0 || y0 < 0 || x1 > scene->camera.width || y1 > scene->camera.height || x0 > x1 || y0 > y1)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
+                         "rrv_render_rect: pixels [%d,%d) x [%d,%d) are not inside the %d x %d image", x0,
+                         x1, y0, y1, scene->camera.width, scene->camera.height);
+    if (stride < x1 - x0)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
+                         "rrv_render_rect: stride %d is below the rectangle's width %d", stride, x1 - x0);
+    if (sample_begin < 0 || sample_begin > sample_end)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
+                         "rrv_render_rect: samples [%d,%d) are not a range of indices >= 0", sample_begin,
+                         sample_end);
+    if ((scene->shape_count && !scene->bvh) || (scene->medium_count && !scene->media[0].majorant))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
+                         "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
     memset(&ctx, 0, sizeof ctx);
     ctx.scene = scene;
     if (scene->settings.integrator == RRV_INTEGRATOR_REFRACTIVE) {
@@ -6011,7 +6171,7 @@ static void rrv__piece_put(rrv__piece_writer *w, const void *data, size_t size)
 
 #define RRV__PFM_PIECE_BYTES ((size_t)64 * 1024)
 
-RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user,
+static rrv_result rrv__write_pfm_to(rrv_write_func write, void *user,
                                     const float *rgb, int width, int height)
 {
     rrv__piece_writer w;
@@ -6525,7 +6685,7 @@ static unsigned char rrv__srgb8(float value, double gain)
     return (unsigned char)(encoded * 255.0 + 0.5);
 }
 
-RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user,
+static rrv_result rrv__write_png_to(rrv_write_func write, void *user,
                                     const float *rgb, int width, int height, double exposure)
 {
     static const unsigned char signature[8] = { 137, 'P', 'N', 'G', '\r', '\n', 26, '\n' };
@@ -6727,7 +6887,7 @@ static void rrv__exr_zip_predict(const unsigned char *raw, size_t size, unsigned
     }
 }
 
-RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb,
+static rrv_result rrv__write_exr_to(rrv_write_func write, void *user, const float *rgb,
                                     int width, int height, const rrv_exr_options *options)
 {
     static const unsigned char magic_version[8] = { 0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0 };
@@ -7425,6 +7585,42 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
     return RRV_OK;
 }
 
+/* ---- the callback writers' public forms: the result as an rrv_error ---- */
+
+static rrv_result rrv__writer_error(rrv_result r, const char *writer, int width, int height,
+                                    rrv_error *err)
+{
+    rrv__clear_error(err);
+    if (r == RRV_OK) return r;
+    if (r == RRV_ERROR_MEMORY) return rrv__fail(err, r, NULL, 0, "%s: out of memory", writer);
+    if (r == RRV_ERROR_IO) return rrv__fail(err, r, NULL, 0, "%s: the write callback failed", writer);
+    return rrv__fail(err, r, NULL, 0,
+                     "%s: invalid arguments (a %d x %d image, a callback and pixels are needed; "
+                     "finite exposure, EXR options and sizes that fit the format)",
+                     writer, width, height);
+}
+
+RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user, const float *rgb, int width,
+                                    int height, rrv_error *err)
+{
+    return rrv__writer_error(rrv__write_pfm_to(write, user, rgb, width, height), "rrv_write_pfm_to",
+                             width, height, err);
+}
+
+RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user, const float *rgb, int width,
+                                    int height, double exposure, rrv_error *err)
+{
+    return rrv__writer_error(rrv__write_png_to(write, user, rgb, width, height, exposure),
+                             "rrv_write_png_to", width, height, err);
+}
+
+RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb, int width,
+                                    int height, const rrv_exr_options *options, rrv_error *err)
+{
+    return rrv__writer_error(rrv__write_exr_to(write, user, rgb, width, height, options),
+                             "rrv_write_exr_to", width, height, err);
+}
+
 /* ---- PFM reader ------------------------------------------------------------------ */
 
 static int rrv__pfm_is_space(unsigned char c)
@@ -7647,6 +7843,63 @@ static const char *rrv__io_reason(int errnum)
     return "";
 }
 
+/* Stops a stream read early: sees the whole buffer after each piece. */
+typedef int (*rrv__stream_stop_func)(const unsigned char *data, size_t have, size_t got);
+
+/* Reads what is left of f into a buffer that starts at `first` bytes and
+   doubles as data arrives (the PFM, EXR and scene readers share it): a size
+   that a file claims is never trusted for an allocation (a folder's can be
+   2^63), and a device or pipe costs only what it delivers. At most `limit`
+   bytes are kept; with `over_is_error` one more byte is tried, and getting
+   it is RRV_ERROR_LIMIT. Pieces are at most `piece` bytes, after each of
+   which `stop` (if not NULL) may end the read. RRV_ERROR_IO keeps errno in
+   *errnum; RRV_ERROR_MEMORY; RRV_OK with *data (NULL when nothing came). */
+static rrv_result rrv__read_stream(FILE *f, size_t first, size_t piece, size_t limit,
+                                   int over_is_error, rrv__stream_stop_func stop,
+                                   unsigned char **data, size_t *size, int *errnum)
+{
+    unsigned char *buf = NULL;
+    size_t have = 0, capacity = 0;
+    size_t cap = over_is_error && limit < SIZE_MAX ? limit + 1 : limit;
+    *data = NULL;
+    *size = 0;
+    *errnum = 0;
+    for (;;) {
+        size_t want, got;
+        if (have == capacity) {
+            size_t grown = capacity ? capacity * 2 : first;
+            unsigned char *bigger;
+            if (grown > cap || grown < capacity) grown = cap; /* the cap, or doubling overflowed */
+            if (grown <= capacity) break;
+            bigger = (unsigned char *)RRV_REALLOC(buf, grown);
+            if (!bigger) {
+                RRV_FREE(buf);
+                return RRV_ERROR_MEMORY;
+            }
+            buf = bigger;
+            capacity = grown;
+        }
+        want = capacity - have < piece ? capacity - have : piece;
+        errno = 0;
+        got = fread(buf + have, 1, want, f);
+        have += got;
+        if (stop && stop(buf, have, got)) break;
+        if (over_is_error && have > limit) {
+            RRV_FREE(buf);
+            return RRV_ERROR_LIMIT;
+        }
+        if (got < want) break;
+    }
+    if (ferror(f)) {
+        *errnum = errno;
+        RRV_FREE(buf);
+        return RRV_ERROR_IO;
+    }
+    *data = buf;
+    *size = have;
+    return RRV_OK;
+}
+
 /* Opens a new temporary file next to path. The name carries a value mixed
    from the clock, the address of the stack and the attempt, so two writers
    to one path (or a leftover file) rarely meet; a name that exists is
@@ -7712,11 +7965,11 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
                          why[0] ? ": " : "", why);
     }
     if (format == RRV__IMAGE_PNG)
-        result = rrv_write_png_to(rrv__fwrite_callback, file, rgb, width, height, exposure);
+        result = rrv__write_png_to(rrv__fwrite_callback, file, rgb, width, height, exposure);
     else if (format == RRV__IMAGE_EXR)
-        result = rrv_write_exr_to(rrv__fwrite_callback, file, rgb, width, height, exr);
+        result = rrv__write_exr_to(rrv__fwrite_callback, file, rgb, width, height, exr);
     else
-        result = rrv_write_pfm_to(rrv__fwrite_callback, file, rgb, width, height);
+        result = rrv__write_pfm_to(rrv__fwrite_callback, file, rgb, width, height);
     closed = fclose(file) == 0;
     if (result != RRV_OK || !closed) {
         remove(temp_path);
@@ -7792,10 +8045,11 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
                                 rrv_error *err)
 {
     unsigned char header[RRV__PFM_HEADER_MAX], *data = NULL;
-    size_t header_size, have = 0, capacity = 0;
+    size_t header_size, have = 0;
     rrv__pfm_header h;
     FILE *file;
     rrv_result result;
+    int errnum;
 
     if (rgb) *rgb = NULL;
     if (width) *width = 0;
@@ -7829,33 +8083,13 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
 
     /* The buffer grows with what arrives, so a header announcing more than
        the file holds costs at most twice what the file holds. */
-    while (have < h.data_bytes) {
-        size_t want, got;
-        if (have == capacity) {
-            size_t grown = capacity ? capacity * 2 : (size_t)1 << 20;
-            unsigned char *bigger;
-            if (grown > h.data_bytes || grown < capacity) grown = h.data_bytes;
-            bigger = (unsigned char *)RRV_REALLOC(data, grown);
-            if (!bigger) {
-                RRV_FREE(data);
-                fclose(file);
-                return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory for a %dx%d image",
-                                 h.width, h.height);
-            }
-            data = bigger;
-            capacity = grown;
-        }
-        want = capacity - have;
-        got = fread(data + have, 1, want, file);
-        have += got;
-        if (got < want) break;
-    }
-    if (ferror(file)) {
-        RRV_FREE(data);
-        fclose(file);
-        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot read");
-    }
+    result = rrv__read_stream(file, (size_t)1 << 20, SIZE_MAX, h.data_bytes, 0, NULL, &data, &have,
+                              &errnum);
     fclose(file);
+    if (result == RRV_ERROR_MEMORY)
+        return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory for a %dx%d image", h.width,
+                         h.height);
+    if (result != RRV_OK) return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot read");
     if (have < h.data_bytes) {
         RRV_FREE(data);
         return rrv__pfm_truncated(err, path, &h, have);
@@ -7872,13 +8106,21 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
 /* A file can be no larger than this to be read whole. */
 #define RRV__EXR_FILE_MAX ((size_t)1 << 31)
 
+/* Ends the read after the first 8 bytes unless they start an OpenEXR file. */
+static int rrv__exr_stop(const unsigned char *data, size_t have, size_t got)
+{
+    (void)got;
+    return have == 8 && (data[0] != 0x76 || data[1] != 0x2f || data[2] != 0x31 || data[3] != 0x01);
+}
+
 RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *height,
                                 rrv_exr_options *info, rrv_error *err)
 {
     unsigned char *data = NULL;
-    size_t have = 0, capacity = 0;
+    size_t have = 0;
     FILE *file;
     rrv_result result;
+    int errnum;
     if (rgb) *rgb = NULL;
     if (width) *width = 0;
     if (height) *height = 0;
@@ -7892,39 +8134,18 @@ RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *
     }
     /* The first read is 8 bytes, so a stream that is no EXR (a device, a
        pipe) is refused without reading on. */
-    for (;;) {
-        size_t want, got;
-        if (have == capacity) {
-            size_t grown = capacity ? capacity * 2 : 8;
-            unsigned char *bigger;
-            if (capacity >= RRV__EXR_FILE_MAX) {
-                RRV_FREE(data);
-                fclose(file);
-                return rrv__fail(err, RRV_ERROR_LIMIT, path, 0, "OpenEXR file larger than %llu bytes",
-                                 (unsigned long long)RRV__EXR_FILE_MAX);
-            }
-            bigger = (unsigned char *)RRV_REALLOC(data, grown);
-            if (!bigger) {
-                RRV_FREE(data);
-                fclose(file);
-                return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory reading the file");
-            }
-            data = bigger;
-            capacity = grown;
-        }
-        want = capacity - have;
-        got = fread(data + have, 1, want, file);
-        have += got;
-        if (got < want) break;
-        if (have == 8 && (data[0] != 0x76 || data[1] != 0x2f || data[2] != 0x31 || data[3] != 0x01)) break;
-    }
-    if (ferror(file)) {
-        const char *why = rrv__io_reason(errno);
-        RRV_FREE(data);
-        fclose(file);
+    result = rrv__read_stream(file, 8, SIZE_MAX, RRV__EXR_FILE_MAX, 1, rrv__exr_stop, &data, &have,
+                              &errnum);
+    fclose(file);
+    if (result == RRV_ERROR_LIMIT)
+        return rrv__fail(err, RRV_ERROR_LIMIT, path, 0, "OpenEXR file larger than %llu bytes",
+                         (unsigned long long)RRV__EXR_FILE_MAX);
+    if (result == RRV_ERROR_MEMORY)
+        return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory reading the file");
+    if (result != RRV_OK) {
+        const char *why = rrv__io_reason(errnum);
         return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot read%s%s", why[0] ? ": " : "", why);
     }
-    fclose(file);
     result = rrv_read_exr_memory(data, have, path, rgb, width, height, info, err);
     RRV_FREE(data);
     return result;
@@ -8494,6 +8715,8 @@ RRV_DEF rrv_result rrv_nanovdb_read_memory(const void *data, size_t size, const 
 
 static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, int text,
                                      size_t max_bytes, void **data, size_t *size, const char **why);
+static void rrv__sf_release_whole(const rrv_load_options *opt, void *data);
+static int rrv__sf_whole_is_ours(const rrv_load_options *opt);
 
 /* Errors name `name`; an unreadable file gives RRV_ERROR_IO with *why the
    reason in words, or "". The file may hold other grids too, so the limit
@@ -8515,8 +8738,9 @@ static rrv_result rrv__nv_read_file(const char *path, const char *name, const ch
     if (r == RRV_ERROR_UNSUPPORTED)
         return rrv__fail(err, r, name, 0, "this build has no stdio (RRV_NO_STDIO): set rrv_load_options.read_file");
     if (r != RRV_OK) return rrv__fail(err, r, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
-    r = rrv__nv_load((unsigned char *)data, size, 1, name, grid_name, max_bytes, grid, err, &kept);
-    if (!kept) RRV_FREE(data);
+    r = rrv__nv_load((unsigned char *)data, size, rrv__sf_whole_is_ours(opt), name, grid_name,
+                     max_bytes, grid, err, &kept);
+    if (!kept) rrv__sf_release_whole(opt, data);
     return r;
 }
 
@@ -8541,7 +8765,9 @@ RRV_DEF void rrv_nanovdb_free(rrv_nanovdb *grid)
 /* ==== scene file: the .rrv parser, the OBJ loader, the gridvol reader =======
    This section owns rrv_scene_load, rrv_scene_parse, rrv_scene_free,
    rrv_grid_read and rrv_grid_read_memory, the OBJ loader behind `mesh file`,
-   and the default (stdio) file reader. Every input here is untrusted: scene
+   the default (stdio) file reader, and the scene-building calls
+   (rrv_scene_create, rrv_scene_add_*, rrv_scene_set_*) with the one home of
+   every default and check, which the statements use. Every input here is untrusted: scene
    text is not NUL-terminated, every count is checked before it is multiplied
    or allocated, and every error names the file, the line and the cause. The
    grammar lives in parts/SCENE_SPEC.md and scenes/README.md. */
@@ -8568,18 +8794,22 @@ static int rrv__sf_stdio_size(FILE *f, unsigned long long *size)
     return 1;
 }
 
-/* Reads a whole file in pieces that grow with what arrives: the size a file
-   claims is never trusted for an allocation (a folder's can be 2^63), and
-   nothing beyond max_bytes is read. A text file (`text`) stops after the
-   piece holding its first NUL byte: the parser refuses the file on that
-   line anyway, and a device such as /dev/zero would otherwise be read up
-   to the limit. */
+/* A text file stops after the piece holding its first NUL byte: the parser
+   refuses the file on that line anyway, and a device such as /dev/zero
+   would otherwise be read up to the limit. */
+static int rrv__sf_text_stop(const unsigned char *data, size_t have, size_t got)
+{
+    return memchr(data + have - got, '\0', got) != NULL;
+}
+
+/* A whole file, at most max_bytes of it (rrv__read_stream). */
 static rrv_result rrv__sf_stdio_read(const char *path, size_t max_bytes, int text, void **data,
                                      size_t *size, const char **why)
 {
     enum { PIECE = 64 * 1024 };
-    unsigned char *buf = NULL;
-    size_t have = 0, capacity = 0;
+    unsigned char *buf;
+    rrv_result r;
+    int errnum;
     FILE *f;
     errno = 0;
     f = fopen(path, "rb");
@@ -8587,53 +8817,35 @@ static rrv_result rrv__sf_stdio_read(const char *path, size_t max_bytes, int tex
         *why = rrv__io_reason(errno);
         return RRV_ERROR_IO;
     }
-    for (;;) {
-        size_t want, got;
-        if (capacity - have < PIECE && capacity <= max_bytes) {
-            size_t grown = capacity < PIECE ? 2 * (size_t)PIECE : capacity * 2;
-            unsigned char *bigger;
-            if (grown - 1 > max_bytes) grown = max_bytes + 1; /* +1 sees a file over the limit */
-            if (grown <= capacity) grown = SIZE_MAX;          /* doubling overflowed */
-            bigger = (unsigned char *)RRV_REALLOC(buf, grown);
-            if (!bigger) {
-                RRV_FREE(buf);
-                fclose(f);
-                return RRV_ERROR_MEMORY;
-            }
-            buf = bigger;
-            capacity = grown;
-        }
-        want = capacity - have < (size_t)PIECE ? capacity - have : (size_t)PIECE;
-        errno = 0;
-        got = fread(buf + have, 1, want, f);
-        if (text && memchr(buf + have, '\0', got)) {
-            have += got;
-            break;
-        }
-        have += got;
-        if (have > max_bytes) {
-            RRV_FREE(buf);
-            fclose(f);
-            return RRV_ERROR_LIMIT;
-        }
-        if (got < want) break;
-    }
-    if (ferror(f)) {
-        *why = rrv__io_reason(errno);
-        RRV_FREE(buf);
-        fclose(f);
-        return RRV_ERROR_IO;
-    }
+    r = rrv__read_stream(f, 2 * (size_t)PIECE, PIECE, max_bytes, 1, text ? rrv__sf_text_stop : NULL,
+                         &buf, size, &errnum);
     fclose(f);
+    if (r == RRV_ERROR_IO) *why = rrv__io_reason(errnum);
     *data = buf;
-    *size = have;
-    return RRV_OK;
+    return r;
 }
 #endif
 
 /* RRV_OK with the whole file; RRV_ERROR_IO (*why says why, or ""),
    RRV_ERROR_LIMIT past max_bytes, RRV_ERROR_MEMORY, or RRV_ERROR_UNSUPPORTED
    when there is no way to read files at all. */
+/* Gives back a buffer rrv__sf_read_whole returned, to whoever allocated it. */
+static void rrv__sf_release_whole(const rrv_load_options *opt, void *data)
+{
+    if (!data) return;
+    if (opt && opt->read_file && opt->release_file)
+        opt->release_file(opt->read_file_user, data);
+    else
+        RRV_FREE(data);
+}
+
+/* 1 when a buffer of rrv__sf_read_whole may be kept and later freed with
+   RRV_FREE (a NanoVDB grid keeps its file's bytes). */
+static int rrv__sf_whole_is_ours(const rrv_load_options *opt)
+{
+    return !(opt && opt->read_file && opt->release_file);
+}
+
 static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, int text,
                                      size_t max_bytes, void **data, size_t *size, const char **why)
 {
@@ -8643,13 +8855,13 @@ static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *pa
     if (opt && opt->on_input) opt->on_input(opt->on_input_user, path);
     if (opt && opt->read_file) {
         if (opt->read_file(opt->read_file_user, path, data, size) != 0) {
-            if (*data) RRV_FREE(*data);
+            rrv__sf_release_whole(opt, *data);
             *data = NULL;
             return RRV_ERROR_IO;
         }
         if (!*data && *size > 0) return RRV_ERROR_IO;
         if (*size > max_bytes) {
-            RRV_FREE(*data);
+            rrv__sf_release_whole(opt, *data);
             *data = NULL;
             return RRV_ERROR_LIMIT;
         }
@@ -9003,7 +9215,7 @@ static rrv_result rrv__sf_grid_load(const char *path, const char *name, const rr
         if (r != RRV_OK)
             return rrv__fail(err, r, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
         r = rrv_grid_read_memory(data, size, name, max_bytes, nonnegative, grid, err);
-        RRV_FREE(data);
+        rrv__sf_release_whole(opt, data);
         return r;
     }
 #ifndef RRV_NO_STDIO
@@ -9629,58 +9841,6 @@ static void rrv__sf_slot_rgb(const rrv__sf_slot *s, double *rgb)
     if (s->given) memcpy(rgb, s->v, 3 * sizeof(double));
 }
 
-static int rrv__sf_finite3(const double *v)
-{
-    int i;
-    for (i = 0; i < 3; ++i)
-        if (!(v[i] == v[i]) || v[i] > DBL_MAX || v[i] < -DBL_MAX) return 0;
-    return 1;
-}
-
-static int rrv__sf_vec_finite(rrv_vec3 v)
-{
-    double d[3];
-    d[0] = v.x;
-    d[1] = v.y;
-    d[2] = v.z;
-    return rrv__sf_finite3(d);
-}
-
-static rrv_vec3 rrv__sf_sub(rrv_vec3 a, rrv_vec3 b)
-{
-    rrv_vec3 r;
-    r.x = a.x - b.x;
-    r.y = a.y - b.y;
-    r.z = a.z - b.z;
-    return r;
-}
-
-static rrv_vec3 rrv__sf_cross3(rrv_vec3 a, rrv_vec3 b)
-{
-    rrv_vec3 r;
-    r.x = a.y * b.z - a.z * b.y;
-    r.y = a.z * b.x - a.x * b.z;
-    r.z = a.x * b.y - a.y * b.x;
-    return r;
-}
-
-static int rrv__sf_vec_zero(rrv_vec3 v) { return v.x == 0.0 && v.y == 0.0 && v.z == 0.0; }
-
-/* v divided by its largest absolute component (v itself when that is 0):
-   the direction survives, and squares of the result cannot overflow. */
-static rrv_vec3 rrv__sf_unit_max(rrv_vec3 v)
-{
-    double m = fabs(v.x);
-    if (fabs(v.y) > m) m = fabs(v.y);
-    if (fabs(v.z) > m) m = fabs(v.z);
-    if (m > 0 && m <= DBL_MAX) {
-        v.x /= m;
-        v.y /= m;
-        v.z /= m;
-    }
-    return v;
-}
-
 /* Copies a name or path token into a C string; 0 if it does not fit or
    holds a control character. */
 static int rrv__sf_tok_string(const rrv__sf_tok *t, char *out, size_t cap)
@@ -9692,6 +9852,918 @@ static int rrv__sf_tok_string(const rrv__sf_tok *t, char *out, size_t cap)
     memcpy(out, t->p, t->n);
     out[t->n] = '\0';
     return 1;
+}
+
+/* ---- building scenes in code: one home for defaults and checks -------------
+   The parser is a client of this part: a statement starts from a zeroed
+   object, lets rrv__*_def fill the defaults, writes the keys it was given
+   over them (so an explicit zero survives) and hands the object to the
+   same check and store the public rrv_scene_add_* calls use. The ranges
+   of single values are the key tables above, for files and code alike;
+   the checks here add what one key cannot say (eye against look, a box's
+   corners, a quad's area, the limits of BOUNDS). rrv_scene_prepare runs
+   every check again, so a scene edited by hand is held to the same rules. */
+
+static int rrv__finite3(const double *v)
+{
+    int i;
+    for (i = 0; i < 3; ++i)
+        if (!(v[i] == v[i]) || v[i] > DBL_MAX || v[i] < -DBL_MAX) return 0;
+    return 1;
+}
+
+static int rrv__vec_finite(rrv_vec3 v)
+{
+    double d[3];
+    d[0] = v.x;
+    d[1] = v.y;
+    d[2] = v.z;
+    return rrv__finite3(d);
+}
+
+static int rrv__vec_zero(rrv_vec3 v) { return v.x == 0.0 && v.y == 0.0 && v.z == 0.0; }
+
+/* v divided by its largest absolute component (v itself when that is 0):
+   the direction survives, and squares of the result cannot overflow. */
+static rrv_vec3 rrv__unit_max(rrv_vec3 v)
+{
+    double m = fabs(v.x);
+    if (fabs(v.y) > m) m = fabs(v.y);
+    if (fabs(v.z) > m) m = fabs(v.z);
+    return m > 0 && m <= DBL_MAX ? rrv__scale(v, 1.0 / m) : v;
+}
+
+static rrv_vec3 rrv__box_center(const rrv_medium *m)
+{
+    return rrv__v3(m->lo.x * 0.5 + m->hi.x * 0.5, m->lo.y * 0.5 + m->hi.y * 0.5,
+                   m->lo.z * 0.5 + m->hi.z * 0.5);
+}
+
+/* Who is checked, for messages: "what: problem" at file:line (line 0 and
+   RRV_ERROR_ARGUMENT for objects built in code, RRV_ERROR_PARSE for
+   statements). */
+typedef struct rrv__ck {
+    rrv_error *err;
+    const char *file;
+    int line;
+    rrv_result code;
+    char what[96];
+} rrv__ck;
+
+static void rrv__ck_init(rrv__ck *ck, rrv_error *err, const char *file, int line, rrv_result code,
+                         const char *fmt, ...)
+{
+    va_list args;
+    ck->err = err;
+    ck->file = file;
+    ck->line = line;
+    ck->code = code;
+    va_start(args, fmt);
+    vsnprintf(ck->what, sizeof ck->what, fmt, args);
+    va_end(args);
+}
+
+static rrv_result rrv__ck_fail(const rrv__ck *ck, rrv_result code, const char *fmt, ...)
+{
+    char buf[200];
+    va_list args;
+    va_start(args, fmt);
+    vsnprintf(buf, sizeof buf, fmt, args);
+    va_end(args);
+    return rrv__fail(ck->err, code ? code : ck->code, ck->file, ck->line, "%s: %s", ck->what, buf);
+}
+
+/* One value against key k of a statement's table. */
+static rrv_result rrv__ck_key(const rrv__ck *ck, const rrv__sf_key *k, double v)
+{
+    char range[96];
+    if (!(v == v) || v > DBL_MAX || v < -DBL_MAX)
+        return rrv__ck_fail(ck, RRV_OK, "%s must be finite, got %g", k->name, v);
+    if (rrv__sf_in_range(k, v)) return RRV_OK;
+    rrv__sf_range_text(k, range, sizeof range);
+    return rrv__ck_fail(ck, RRV_OK, "%s must be %s, got %.15g", k->name, range, v);
+}
+
+static rrv_result rrv__ck_key3(const rrv__ck *ck, const rrv__sf_key *k, const double *v)
+{
+    int c;
+    for (c = 0; c < 3; ++c) {
+        rrv_result r = rrv__ck_key(ck, k, v[c]);
+        if (r != RRV_OK) return r;
+    }
+    return RRV_OK;
+}
+
+static rrv_result rrv__ck_vec(const rrv__ck *ck, const rrv__sf_key *k, rrv_vec3 v)
+{
+    double d[3];
+    d[0] = v.x;
+    d[1] = v.y;
+    d[2] = v.z;
+    return rrv__ck_key3(ck, k, d);
+}
+
+#define RRV__CK(call)                                                                              \
+    do {                                                                                           \
+        rrv_result rrv__ck_r = (call);                                                             \
+        if (rrv__ck_r != RRV_OK) return rrv__ck_r;                                                 \
+    } while (0)
+
+/* -- camera -- */
+
+static void rrv__camera_def(rrv_camera *c)
+{
+    if (rrv__vec_zero(c->up)) c->up.y = 1.0;
+    if (c->fov == 0.0) c->fov = 40.0;
+    if (c->width == 0) c->width = 320;
+    if (c->height == 0) c->height = 240;
+}
+
+static rrv_result rrv__camera_check(const rrv__ck *ck, const rrv_camera *c)
+{
+    const rrv__sf_key *k = rrv__sf_camera_keys;
+    rrv_vec3 dir, d, u, x;
+    double n2, d2;
+    RRV__CK(rrv__ck_vec(ck, &k[0], c->eye));
+    RRV__CK(rrv__ck_vec(ck, &k[1], c->look));
+    RRV__CK(rrv__ck_key(ck, &k[3], c->fov));
+    RRV__CK(rrv__ck_key(ck, &k[4], (double)c->width));
+    RRV__CK(rrv__ck_key(ck, &k[4], (double)c->height));
+    dir = rrv__sub(c->look, c->eye);
+    if (rrv__vec_zero(dir) || !rrv__vec_finite(dir))
+        return rrv__ck_fail(ck, RRV_OK, "eye and look must be distinct finite points");
+    if (rrv__vec_zero(c->up) || !rrv__vec_finite(c->up))
+        return rrv__ck_fail(ck, RRV_OK, "up must be a nonzero finite vector");
+    /* Both vectors scaled to a largest component of 1 first: squaring a far
+       camera's view direction (eye at 1e200) would overflow to inf and make
+       any up look parallel. sin^2 of the angle below 1e-12 is too close to
+       parallel for a frame. */
+    d = rrv__unit_max(dir);
+    u = rrv__unit_max(c->up);
+    x = rrv__cross(d, u);
+    n2 = rrv__dot(x, x);
+    d2 = rrv__dot(d, d) * rrv__dot(u, u);
+    if (!(n2 > 1e-12 * d2)) return rrv__ck_fail(ck, RRV_OK, "up is parallel to the view direction");
+    return RRV_OK;
+}
+
+/* -- settings (`render` and `ambient`) -- */
+
+static void rrv__settings_def(rrv_settings *s)
+{
+    if (s->spp == 0) s->spp = 16;
+    if (s->max_depth == 0) s->max_depth = 32;
+    if (s->bend_tolerance == 0.0) s->bend_tolerance = 0.01;
+    if (s->step == 0.0) s->step = 0.01;
+    if (s->ambient_ior == 0.0) s->ambient_ior = 1.0;
+}
+
+static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
+                                      const rrv_settings *s)
+{
+    const rrv__sf_key *k = rrv__sf_render_keys;
+    RRV__CK(rrv__ck_key(ck, &k[0], (double)s->spp));
+    RRV__CK(rrv__ck_key(ck, &k[1], (double)s->max_depth));
+    if ((unsigned)s->integrator > (unsigned)RRV_INTEGRATOR_EIKONAL)
+        return rrv__ck_fail(ck, RRV_OK, "integrator %d is not one of rrv_integrator", (int)s->integrator);
+    RRV__CK(rrv__ck_key(ck, &k[4], s->bend_tolerance));
+    /* bounded so one event or step cannot be absurdly small (BOUNDS) */
+    if (s->bend_tolerance < 1e-4)
+        return rrv__ck_fail(ck, RRV_OK, "bendtolerance must be at least 0.0001, got %g",
+                            s->bend_tolerance);
+    RRV__CK(rrv__ck_key(ck, &k[5], s->mu_eta));
+    RRV__CK(rrv__ck_key(ck, &k[6], s->step));
+    if ((unsigned)s->stepper > (unsigned)RRV_STEPPER_RK4)
+        return rrv__ck_fail(ck, RRV_OK, "stepper %d is not one of rrv_stepper", (int)s->stepper);
+    if ((unsigned)s->refraction > (unsigned)RRV_REFRACTION_COMB)
+        return rrv__ck_fail(ck, RRV_OK, "refraction %d is not one of rrv_refraction_scheme",
+                            (int)s->refraction);
+    RRV__CK(rrv__ck_key(ck, &k[9], (double)s->majorant_cells));
+    if ((unsigned)s->ior_interpolation > (unsigned)RRV_IOR_INTERP_CUBIC)
+        return rrv__ck_fail(ck, RRV_OK, "ior_interpolation %d is not one of rrv_ior_interpolation",
+                            (int)s->ior_interpolation);
+    if ((unsigned)s->nee > (unsigned)RRV_NEE_MANIFOLD)
+        return rrv__ck_fail(ck, RRV_OK, "nee %d is not one of rrv_nee", (int)s->nee);
+    if ((unsigned)s->manifold_gauge > (unsigned)RRV_GAUGE_ISO)
+        return rrv__ck_fail(ck, RRV_OK, "manifold_gauge %d is not one of rrv_manifold_gauge",
+                            (int)s->manifold_gauge);
+    RRV__CK(rrv__ck_key(ck, &k[13], (double)s->manifold_trials));
+    RRV__CK(rrv__ck_key(ck, &k[14], s->manifold_drop));
+    if (s->max_bake_samples < 0)
+        return rrv__ck_fail(ck, RRV_OK, "max_bake_samples must be >= 0, got %d", s->max_bake_samples);
+    RRV__CK(rrv__ck_key(ambient, &rrv__sf_ambient_keys[0], s->ambient_ior));
+    if (s->ambient_ior > RRV_MAX_IOR)
+        return rrv__ck_fail(ambient, RRV_OK, "ior must be at most %g, got %g", RRV_MAX_IOR,
+                            s->ambient_ior);
+    return RRV_OK;
+}
+
+/* -- environment -- */
+
+static void rrv__environment_def(rrv_environment *e)
+{
+    if (e->kind == RRV_ENV_CONSTANT && e->L[0] == 0.0 && e->L[1] == 0.0 && e->L[2] == 0.0)
+        e->L[0] = e->L[1] = e->L[2] = 1.0;
+}
+
+static rrv_result rrv__environment_check(const rrv__ck *ck, const rrv_environment *e)
+{
+    int c;
+    if ((unsigned)e->kind > (unsigned)RRV_ENV_GRADIENT)
+        return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_environment_kind", (int)e->kind);
+    if (!rrv__finite3(e->L) || !rrv__finite3(e->L2))
+        return rrv__ck_fail(ck, RRV_OK, "radiance times scale is not finite");
+    for (c = 0; c < 3; ++c)
+        if (e->L[c] < 0.0 || e->L2[c] < 0.0)
+            return rrv__ck_fail(ck, RRV_OK, "radiance must be >= 0, got %g",
+                                e->L[c] < 0.0 ? e->L[c] : e->L2[c]);
+    if (rrv__maxd(rrv__max3(e->L), rrv__max3(e->L2)) > RRV_MAX_RADIANCE)
+        return rrv__ck_fail(ck, RRV_OK, "radiance times scale must be at most %g", RRV_MAX_RADIANCE);
+    return RRV_OK;
+}
+
+/* -- materials -- */
+
+static void rrv__material_def(rrv_material *m)
+{
+    int c, black = m->albedo[0] == 0.0 && m->albedo[1] == 0.0 && m->albedo[2] == 0.0;
+    for (c = 0; c < 3; ++c) {
+        if (black) m->albedo[c] = m->kind == RRV_MATERIAL_CHECKER ? 0.8 : 0.5;
+    }
+    if (m->kind == RRV_MATERIAL_CHECKER) {
+        if (m->albedo2[0] == 0.0 && m->albedo2[1] == 0.0 && m->albedo2[2] == 0.0)
+            m->albedo2[0] = m->albedo2[1] = m->albedo2[2] = 0.2;
+        if (m->checker_scale == 0.0) m->checker_scale = 1.0;
+    }
+}
+
+static rrv_result rrv__material_check(const rrv__ck *ck, const rrv_material *m)
+{
+    const rrv__sf_key *k = rrv__sf_checker_keys;
+    if ((unsigned)m->kind > (unsigned)RRV_MATERIAL_CHECKER)
+        return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_material_kind", (int)m->kind);
+    RRV__CK(rrv__ck_key3(ck, &k[0], m->albedo));
+    if (m->kind == RRV_MATERIAL_CHECKER) {
+        RRV__CK(rrv__ck_key3(ck, &k[1], m->albedo2));
+        RRV__CK(rrv__ck_key(ck, &k[2], m->checker_scale));
+    }
+    return RRV_OK;
+}
+
+/* -- shapes -- */
+
+static const char *rrv__shape_name(rrv_shape_kind kind)
+{
+    return kind == RRV_SHAPE_SPHERE ? "sphere" : kind == RRV_SHAPE_QUAD ? "quad" : "triangle";
+}
+
+/* L is stored premultiplied by its scale. */
+static rrv_result rrv__emission_check(const rrv__ck *ck, const double *L)
+{
+    int c;
+    if (!rrv__finite3(L)) return rrv__ck_fail(ck, RRV_OK, "L times scale is not finite");
+    for (c = 0; c < 3; ++c)
+        if (L[c] < 0.0) return rrv__ck_fail(ck, RRV_OK, "L must be >= 0, got %g", L[c]);
+    if (rrv__max3(L) > RRV_MAX_RADIANCE)
+        return rrv__ck_fail(ck, RRV_OK, "L times scale must be at most %g, got %g", RRV_MAX_RADIANCE,
+                            rrv__max3(L));
+    return RRV_OK;
+}
+
+static rrv_result rrv__shape_check(const rrv__ck *ck, const rrv_scene *scene, const rrv_shape *s)
+{
+    static const rrv__sf_key any = {"p0", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL};
+    if ((unsigned)s->kind > (unsigned)RRV_SHAPE_TRIANGLE)
+        return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_shape_kind", (int)s->kind);
+    if (s->material < 0 || s->material >= scene->material_count)
+        return rrv__ck_fail(ck, RRV_OK, "material %d is not one of the scene's %d", s->material,
+                            scene->material_count);
+    RRV__CK(rrv__emission_check(ck, s->L));
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        RRV__CK(rrv__ck_vec(ck, &rrv__sf_sphere_keys[0], s->center));
+        return rrv__ck_key(ck, &rrv__sf_sphere_keys[1], s->radius);
+    }
+    RRV__CK(rrv__ck_vec(ck, &any, s->p0));
+    if (!rrv__vec_finite(s->e1) || !rrv__vec_finite(s->e2))
+        return rrv__ck_fail(ck, RRV_OK, "edges are not finite");
+    if (rrv__vec_zero(rrv__cross(s->e1, s->e2)))
+        return rrv__ck_fail(ck, RRV_OK, s->kind == RRV_SHAPE_QUAD
+                                            ? "u and v are parallel (zero area)"
+                                            : "the points are collinear (zero area)");
+    return RRV_OK;
+}
+
+/* -- media -- */
+
+static void rrv__medium_def(rrv_medium *m)
+{
+    int c, none = 1;
+    for (c = 0; c < 3; ++c)
+        if (m->sigma_a[c] != 0.0 || m->sigma_s[c] != 0.0) none = 0;
+    for (c = 0; c < 3 && none; ++c)
+        m->sigma_a[c] = m->sigma_s[c] = 1.0;
+    if (m->scale == 0.0) m->scale = 1.0;
+    if (m->Lescale == 0.0) m->Lescale = 1.0;
+    if (m->temperaturescale == 0.0) m->temperaturescale = 1.0;
+    if (m->eta_ref == 0.0) m->eta_ref = 1.000292;
+    if (m->P_ref == 0.0) m->P_ref = 101325.0;
+    if (m->T_ref == 0.0) m->T_ref = 300.0;
+    if (m->ior_scale == 0.0) m->ior_scale = 1.0;
+}
+
+/* What a medium statement can get wrong; the fields and the limits of
+   BOUNDS are checked by rrv__field_check and rrv__check_medium. */
+static rrv_result rrv__medium_check(const rrv__ck *ck, const rrv_medium *m)
+{
+    const rrv__sf_key *k = rrv__sf_medium_keys;
+    double lo[3], hi[3];
+    int c;
+    lo[0] = m->lo.x, lo[1] = m->lo.y, lo[2] = m->lo.z;
+    hi[0] = m->hi.x, hi[1] = m->hi.y, hi[2] = m->hi.z;
+    RRV__CK(rrv__ck_key3(ck, &k[0], lo));
+    RRV__CK(rrv__ck_key3(ck, &k[0], hi));
+    for (c = 0; c < 3; ++c)
+        if (!(lo[c] < hi[c]))
+            return rrv__ck_fail(ck, RRV_OK, "box is empty along %c (%g is not below %g)", "xyz"[c],
+                                lo[c], hi[c]);
+    RRV__CK(rrv__ck_key3(ck, &k[1], m->sigma_a));
+    RRV__CK(rrv__ck_key3(ck, &k[2], m->sigma_s));
+    RRV__CK(rrv__ck_key(ck, &k[3], m->scale));
+    RRV__CK(rrv__ck_key(ck, &k[4], m->g));
+    RRV__CK(rrv__ck_key3(ck, &k[7], m->Le));
+    RRV__CK(rrv__ck_key(ck, &k[8], m->Lescale));
+    RRV__CK(rrv__ck_key(ck, &rrv__sf_temperature_extra_keys[0], m->temperatureoffset));
+    RRV__CK(rrv__ck_key(ck, &rrv__sf_temperature_extra_keys[1], m->temperaturescale));
+    RRV__CK(rrv__ck_key(ck, &rrv__sf_gas_keys[0], m->eta_ref));
+    RRV__CK(rrv__ck_key(ck, &rrv__sf_gas_keys[1], m->P_ref));
+    RRV__CK(rrv__ck_key(ck, &rrv__sf_gas_keys[2], m->T_ref));
+    RRV__CK(rrv__ck_key(ck, &rrv__sf_ior_extra_keys[0], m->ior_scale));
+    return RRV_OK;
+}
+
+/* -- fields -- */
+
+static void rrv__blob_def(rrv_blob *b)
+{
+    if (b->weight == 0.0) b->weight = 1.0;
+}
+
+/* The value a field kind adds everywhere when it does not say: the ambient
+   state of air for temperature and pressure, nothing for density and IOR. */
+static double rrv__field_base_default(rrv_medium_field which)
+{
+    return which == RRV_MEDIUM_TEMPERATURE ? 300.0 : which == RRV_MEDIUM_PRESSURE ? 101325.0 : 0.0;
+}
+
+static void rrv__field_def(rrv_field *f, rrv_medium_field which, const rrv_medium *m)
+{
+    int i;
+    switch (f->kind) {
+    case RRV_FIELD_BLOBS:
+        for (i = 0; i < f->blob_count; ++i) rrv__blob_def(&f->blobs[i]);
+        if (f->base == 0.0) f->base = rrv__field_base_default(which);
+        break;
+    case RRV_FIELD_NOISE: {
+        rrv_noise *n = &f->noise;
+        double sx = m->hi.x * 0.5 - m->lo.x * 0.5, sy = m->hi.y * 0.5 - m->lo.y * 0.5,
+               sz = m->hi.z * 0.5 - m->lo.z * 0.5;
+        if (n->octaves == 0) n->octaves = 5;
+        if (n->frequency == 0.0) n->frequency = 1.0;
+        if (n->lacunarity == 0.0) n->lacunarity = 2.0;
+        if (n->gain == 0.0) n->gain = 0.5;
+        if (rrv__vec_zero(n->center)) n->center = rrv__box_center(m);
+        if (n->radius == 0.0) n->radius = sx < sy ? (sx < sz ? sx : sz) : (sy < sz ? sy : sz);
+        if (f->amplitude == 0.0) f->amplitude = 1.0;
+        if (f->base == 0.0) f->base = rrv__field_base_default(which);
+        break;
+    }
+    case RRV_FIELD_LUNEBURG:
+    case RRV_FIELD_FISHEYE:
+    case RRV_FIELD_SLAB:
+    case RRV_FIELD_SHELL:
+        if (rrv__vec_zero(f->center)) f->center = rrv__box_center(m);
+        if (f->kind == RRV_FIELD_FISHEYE && f->n0 == 0.0) f->n0 = 2.0;
+        if (f->kind == RRV_FIELD_SHELL && f->edge == 0.0) f->edge = f->thickness / 4.0;
+        if (f->kind == RRV_FIELD_SLAB && !rrv__vec_zero(f->normal) && rrv__vec_finite(f->normal)) {
+            /* scaled first so squaring cannot overflow */
+            rrv_vec3 n = rrv__unit_max(f->normal);
+            f->normal = rrv__scale(n, 1.0 / rrv__length(n));
+        }
+        break;
+    default:
+        break;
+    }
+}
+
+/* Blobs before first_blob were checked already (the parser adds one a line). */
+static rrv_result rrv__field_check(const rrv__ck *ck, rrv_medium_field which, const rrv_medium *m,
+                                   const rrv_field *f, int first_blob)
+{
+    int i;
+    if ((unsigned)f->kind > (unsigned)RRV_FIELD_NANOVDB)
+        return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_field_kind", (int)f->kind);
+    if (f->kind >= RRV_FIELD_LUNEBURG && f->kind <= RRV_FIELD_SHELL && which != RRV_MEDIUM_IOR)
+        return rrv__ck_fail(ck, RRV_OK, "IOR profiles belong in the ior field");
+    switch (f->kind) {
+    case RRV_FIELD_CONSTANT: {
+        double v = f->value;
+        if (!(v == v) || v > DBL_MAX || v < -DBL_MAX)
+            return rrv__ck_fail(ck, RRV_OK, "constant must be finite, got %g", v);
+        if (which == RRV_MEDIUM_DENSITY && v < 0.0)
+            return rrv__ck_fail(ck, RRV_OK, "constant must be >= 0, got %.15g", v);
+        if (which == RRV_MEDIUM_PRESSURE && !(v > 0.0))
+            return rrv__ck_fail(ck, RRV_OK, "constant must be > 0, got %.15g", v);
+        if (which == RRV_MEDIUM_IOR && !(v > -1.0))
+            return rrv__ck_fail(ck, RRV_OK,
+                                "constant (the refractivity eta - 1) must be > -1, got %.15g", v);
+        if (which == RRV_MEDIUM_TEMPERATURE) {
+            double T = (v - m->temperatureoffset) * m->temperaturescale;
+            if (!(T > 0.0) || T > DBL_MAX)
+                return rrv__ck_fail(ck, RRV_OK, "constant %.15g gives T = %g K, must be > 0 and finite",
+                                    v, T);
+        }
+        return RRV_OK;
+    }
+    case RRV_FIELD_BLOBS:
+        if (f->blob_count < 1 || !f->blobs)
+            return rrv__ck_fail(ck, RRV_OK, "blobs need at least one blob");
+        if (f->blob_count > RRV_MAX_BLOBS)
+            return rrv__ck_fail(ck, RRV_ERROR_LIMIT, "more than %d blobs in one field (a grid holds more)",
+                                RRV_MAX_BLOBS);
+        for (i = first_blob; i < f->blob_count; ++i) {
+            RRV__CK(rrv__ck_vec(ck, &rrv__sf_blob_keys[0], f->blobs[i].center));
+            RRV__CK(rrv__ck_key(ck, &rrv__sf_blob_keys[1], f->blobs[i].radius));
+            RRV__CK(rrv__ck_key(ck, &rrv__sf_blob_keys[2], f->blobs[i].weight));
+        }
+        return rrv__ck_key(ck, &rrv__sf_blob_keys[3], f->base);
+    case RRV_FIELD_NOISE: {
+        const rrv__sf_key *k = rrv__sf_noise_keys;
+        const rrv_noise *n = &f->noise;
+        RRV__CK(rrv__ck_key(ck, &k[0], (double)n->octaves));
+        RRV__CK(rrv__ck_key(ck, &k[1], n->frequency));
+        RRV__CK(rrv__ck_key(ck, &k[2], n->lacunarity));
+        RRV__CK(rrv__ck_key(ck, &k[3], n->gain));
+        RRV__CK(rrv__ck_key(ck, &k[4], n->threshold));
+        if ((unsigned)n->falloff > (unsigned)RRV_FALLOFF_PLUME)
+            return rrv__ck_fail(ck, RRV_OK, "falloff %d is not one of rrv_falloff_kind", (int)n->falloff);
+        RRV__CK(rrv__ck_vec(ck, &k[7], n->center));
+        RRV__CK(rrv__ck_key(ck, &k[8], n->radius));
+        RRV__CK(rrv__ck_key(ck, &k[9], f->amplitude));
+        return rrv__ck_key(ck, &k[10], f->base);
+    }
+    case RRV_FIELD_GRID: {
+        const rrv_grid *g = &f->grid;
+        if (!g->data || g->nx < 2 || g->ny < 2 || g->nz < 2 || (g->channels != 1 && g->channels != 3))
+            return rrv__ck_fail(ck, RRV_OK, "a grid needs data, each resolution >= 2 and 1 or 3 channels");
+        if (!rrv__vec_finite(g->lo) || !rrv__vec_finite(g->hi) || !(g->lo.x < g->hi.x) ||
+            !(g->lo.y < g->hi.y) || !(g->lo.z < g->hi.z))
+            return rrv__ck_fail(ck, RRV_OK, "the grid's box is empty or not finite");
+        if (which != RRV_MEDIUM_DENSITY && g->channels != 1)
+            return rrv__ck_fail(ck, RRV_ERROR_FORMAT, "grids need 1 channel, found %d", g->channels);
+        return RRV_OK;
+    }
+    case RRV_FIELD_NANOVDB:
+        if (!f->nanovdb.buffer) return rrv__ck_fail(ck, RRV_OK, "the NanoVDB grid has no data");
+        return RRV_OK;
+    case RRV_FIELD_LUNEBURG:
+    case RRV_FIELD_FISHEYE:
+        RRV__CK(rrv__ck_vec(ck, &rrv__sf_luneburg_keys[0], f->center));
+        RRV__CK(rrv__ck_key(ck, &rrv__sf_luneburg_keys[1], f->radius));
+        return f->kind == RRV_FIELD_FISHEYE ? rrv__ck_key(ck, &rrv__sf_fisheye_keys[2], f->n0) : RRV_OK;
+    case RRV_FIELD_SLAB:
+        RRV__CK(rrv__ck_vec(ck, &rrv__sf_slab_keys[0], f->center));
+        if (rrv__vec_zero(f->normal) || !rrv__vec_finite(f->normal))
+            return rrv__ck_fail(ck, RRV_OK, "slab normal must be nonzero");
+        RRV__CK(rrv__ck_key(ck, &rrv__sf_slab_keys[2], f->gradient));
+        return rrv__ck_key(ck, &rrv__sf_slab_keys[3], f->base);
+    case RRV_FIELD_SHELL: {
+        const rrv__sf_key *k = rrv__sf_shell_keys;
+        RRV__CK(rrv__ck_vec(ck, &k[0], f->center));
+        RRV__CK(rrv__ck_key(ck, &k[1], f->radius));
+        RRV__CK(rrv__ck_key(ck, &k[2], f->thickness));
+        RRV__CK(rrv__ck_key(ck, &k[3], f->edge));
+        RRV__CK(rrv__ck_key(ck, &k[4], f->amplitude));
+        return rrv__ck_key(ck, &k[5], f->base);
+    }
+    default:
+        return RRV_OK;
+    }
+}
+
+static rrv_field *rrv__medium_field_of(rrv_medium *m, rrv_medium_field which)
+{
+    return which == RRV_MEDIUM_DENSITY       ? &m->density
+           : which == RRV_MEDIUM_TEMPERATURE ? &m->temperature
+           : which == RRV_MEDIUM_PRESSURE    ? &m->pressure
+                                             : &m->ior;
+}
+
+static const char *const rrv__medium_field_names[4] = {"density", "temperature", "pressure", "ior"};
+
+/* -- the store: checks, then appends; shared by the parser and the API -- */
+
+static rrv_scene *rrv__scene_new(const char *name)
+{
+    rrv_scene *s = (rrv_scene *)RRV_MALLOC(sizeof *s);
+    size_t n = strlen(name);
+    if (!s) return NULL;
+    memset(s, 0, sizeof *s);
+    if (n >= sizeof s->path) name += n - (sizeof s->path - 1); /* keep the file name's end */
+    memcpy(s->path, name, strlen(name) + 1);
+    rrv__camera_def(&s->camera);
+    rrv__settings_def(&s->settings);
+    return s;
+}
+
+static int rrv__name_taken(const rrv_scene *s, const char *name, int media)
+{
+    int i, n = media ? s->medium_count : s->material_count;
+    for (i = 0; i < n; ++i)
+        if (strcmp(media ? s->media[i].name : s->materials[i].name, name) == 0) return 1;
+    return 0;
+}
+
+/* An empty material or medium name becomes "material N" or "medium N". */
+static void rrv__name_default(const rrv_scene *s, char *name, int media)
+{
+    if (name[0] == '\0')
+        snprintf(name, 64, "%s %d", media ? "medium" : "material",
+                 media ? s->medium_count : s->material_count);
+}
+
+/* The name of a material or medium: printable, 1 to 63 bytes, new. */
+static rrv_result rrv__name_check(const rrv__ck *ck, const rrv_scene *s, char *name, int media)
+{
+    size_t i;
+    rrv__name_default(s, name, media);
+    for (i = 0; name[i]; ++i)
+        if ((unsigned char)name[i] < 32)
+            return rrv__ck_fail(ck, RRV_OK, "the name has a control character");
+    if (rrv__name_taken(s, name, media))
+        return rrv__fail(ck->err, ck->code, ck->file, ck->line, "%s \"%s\" defined twice",
+                         media ? "medium" : "material", name);
+    return RRV_OK;
+}
+
+static rrv_result rrv__store_material(const rrv__ck *ck, rrv_scene *s, const rrv_material *m,
+                                      int *index)
+{
+    rrv_material copy = *m;
+    copy.name[sizeof copy.name - 1] = '\0';
+    RRV__CK(rrv__name_check(ck, s, copy.name, 0));
+    RRV__CK(rrv__material_check(ck, &copy));
+    if (!rrv__sf_reserve((void **)&s->materials, &s->material_capacity, s->material_count,
+                         sizeof copy))
+        return rrv__ck_fail(ck, RRV_ERROR_MEMORY, "out of memory");
+    if (index) *index = s->material_count;
+    s->materials[s->material_count++] = copy;
+    return RRV_OK;
+}
+
+/* The implicit grey "default" material, made on first use. */
+static rrv_result rrv__default_material(const rrv__ck *ck, rrv_scene *s, int *index)
+{
+    rrv_material m;
+    int i;
+    for (i = 0; i < s->material_count; ++i)
+        if (strcmp(s->materials[i].name, "default") == 0) {
+            *index = i;
+            return RRV_OK;
+        }
+    memset(&m, 0, sizeof m);
+    memcpy(m.name, "default", 8);
+    rrv__material_def(&m);
+    return rrv__store_material(ck, s, &m, index);
+}
+
+static rrv_result rrv__store_shape(const rrv__ck *ck, rrv_scene *s, const rrv_shape *shape)
+{
+    RRV__CK(rrv__shape_check(ck, s, shape));
+    if (!rrv__sf_reserve((void **)&s->shapes, &s->shape_capacity, s->shape_count, sizeof *shape))
+        return rrv__ck_fail(ck, RRV_ERROR_MEMORY, "out of memory");
+    s->shapes[s->shape_count++] = *shape;
+    return RRV_OK;
+}
+
+/* A mesh triangle (a, b, c); zero-area ones are dropped. */
+static rrv_result rrv__store_triangle(const rrv__ck *ck, rrv_scene *s, rrv_vec3 a, rrv_vec3 b,
+                                      rrv_vec3 c, const rrv_shape *proto)
+{
+    rrv_shape t = *proto;
+    t.kind = RRV_SHAPE_TRIANGLE;
+    t.p0 = a;
+    t.e1 = rrv__sub(b, a);
+    t.e2 = rrv__sub(c, a);
+    if (!rrv__vec_finite(a) || !rrv__vec_finite(t.e1) || !rrv__vec_finite(t.e2))
+        return rrv__ck_fail(ck, RRV_OK, "a vertex is not finite after scale and translate");
+    if (rrv__vec_zero(rrv__cross(t.e1, t.e2))) return RRV_OK;
+    return rrv__store_shape(ck, s, &t);
+}
+
+static rrv_result rrv__store_medium(const rrv__ck *ck, rrv_scene *s, const rrv_medium *m, int *index)
+{
+    rrv_medium copy = *m;
+    copy.name[sizeof copy.name - 1] = '\0';
+    RRV__CK(rrv__name_check(ck, s, copy.name, 1));
+    RRV__CK(rrv__medium_check(ck, &copy));
+    if (s->medium_count >= RRV__MAX_MEDIA)
+        return rrv__fail(ck->err, RRV_ERROR_LIMIT, ck->file, ck->line,
+                         "medium: at most %d media are supported", RRV__MAX_MEDIA);
+    if (!rrv__sf_reserve((void **)&s->media, &s->medium_capacity, s->medium_count, sizeof copy))
+        return rrv__ck_fail(ck, RRV_ERROR_MEMORY, "out of memory");
+    memset(&copy.density, 0, sizeof copy.density);
+    memset(&copy.temperature, 0, sizeof copy.temperature);
+    memset(&copy.pressure, 0, sizeof copy.pressure);
+    memset(&copy.ior, 0, sizeof copy.ior);
+    copy.majorant = NULL;
+    if (index) *index = s->medium_count;
+    s->media[s->medium_count++] = copy;
+    return RRV_OK;
+}
+
+/* Every check again, for rrv_scene_prepare: a scene filled or edited by hand
+   meets the rules a file meets. Media name the lines they came from. */
+static rrv_result rrv__scene_check(rrv_scene *s, rrv_error *err)
+{
+    rrv__ck ck, ambient;
+    int i, w;
+    /* settings left zero take their defaults, as they always have here; a
+       zero fov or an eye on the look point is refused instead */
+    rrv__settings_def(&s->settings);
+    rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "camera");
+    RRV__CK(rrv__camera_check(&ck, &s->camera));
+    rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "render");
+    rrv__ck_init(&ambient, err, s->path, 0, RRV_ERROR_ARGUMENT, "ambient");
+    RRV__CK(rrv__settings_check(&ck, &ambient, &s->settings));
+    rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "environment");
+    RRV__CK(rrv__environment_check(&ck, &s->environment));
+    for (i = 0; i < s->material_count; ++i) {
+        rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "material \"%s\"", s->materials[i].name);
+        RRV__CK(rrv__material_check(&ck, &s->materials[i]));
+    }
+    for (i = 0; i < s->shape_count; ++i) {
+        rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "shape %d (%s)", i,
+                     rrv__shape_name(s->shapes[i].kind));
+        RRV__CK(rrv__shape_check(&ck, s, &s->shapes[i]));
+    }
+    for (i = 0; i < s->medium_count; ++i) {
+        rrv_medium *m = &s->media[i];
+        rrv__ck_init(&ck, err, s->path, m->line[0], m->line[0] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT,
+                     "medium \"%s\"", m->name);
+        RRV__CK(rrv__medium_check(&ck, m));
+        for (w = 0; w < 4; ++w) {
+            const rrv_field *f = rrv__medium_field_of(m, (rrv_medium_field)w);
+            if (f->kind == RRV_FIELD_NONE) continue;
+            rrv__ck_init(&ck, err, s->path, m->line[1 + w],
+                         m->line[1 + w] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, "%s of medium \"%s\"",
+                         rrv__medium_field_names[w], m->name);
+            RRV__CK(rrv__field_check(&ck, (rrv_medium_field)w, m, f, 0));
+        }
+    }
+    return RRV_OK;
+}
+
+/* -- the public calls -- */
+
+/* An edit invalidates what prepare built, and the bytes are counted anew. */
+static size_t rrv__sf_scene_bytes(const rrv_scene *s);
+static size_t rrv__sf_field_bytes(const rrv_field *f);
+static void rrv__api_edited(rrv_scene *s)
+{
+    int i, w;
+    rrv__scene_release_prepared(s);
+    s->grid_bytes = 0;
+    for (i = 0; i < s->medium_count; ++i)
+        for (w = 0; w < 4; ++w) {
+            const rrv_field *f = rrv__medium_field_of(&s->media[i], (rrv_medium_field)w);
+            s->grid_bytes += rrv__sf_field_bytes(f) - rrv__sf_blob_capacity(f->blob_count) * sizeof(rrv_blob);
+        }
+    s->bytes = rrv__sf_scene_bytes(s);
+}
+
+RRV_DEF rrv_result rrv_scene_create(rrv_scene **out, rrv_error *err)
+{
+    rrv__clear_error(err);
+    if (!out) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_create: NULL argument");
+    *out = rrv__scene_new("scene");
+    if (!*out) return rrv__fail(err, RRV_ERROR_MEMORY, "scene", 0, "out of memory");
+    (*out)->bytes = sizeof **out;
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_scene_set_camera(rrv_scene *scene, const rrv_camera *camera, rrv_error *err)
+{
+    rrv_camera c;
+    rrv__ck ck;
+    rrv__clear_error(err);
+    if (!scene || !camera)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_set_camera: NULL argument");
+    c = *camera;
+    rrv__camera_def(&c);
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "camera");
+    RRV__CK(rrv__camera_check(&ck, &c));
+    scene->camera = c;
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_scene_set_settings(rrv_scene *scene, const rrv_settings *settings,
+                                          rrv_error *err)
+{
+    rrv_settings s;
+    rrv__ck ck, ambient;
+    rrv__clear_error(err);
+    if (!scene || !settings)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_set_settings: NULL argument");
+    s = *settings;
+    rrv__settings_def(&s);
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "settings");
+    rrv__ck_init(&ambient, err, scene->path, 0, RRV_ERROR_ARGUMENT, "settings: ambient");
+    RRV__CK(rrv__settings_check(&ck, &ambient, &s));
+    rrv__api_edited(scene); /* majorant_cells and the bakes depend on settings */
+    scene->settings = s;
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_scene_set_environment(rrv_scene *scene, const rrv_environment *env,
+                                             rrv_error *err)
+{
+    rrv_environment e;
+    rrv__ck ck;
+    rrv__clear_error(err);
+    if (!scene || !env)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_set_environment: NULL argument");
+    e = *env;
+    rrv__environment_def(&e);
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "environment");
+    RRV__CK(rrv__environment_check(&ck, &e));
+    scene->environment = e;
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_scene_add_material(rrv_scene *scene, const rrv_material *material,
+                                          int *index, rrv_error *err)
+{
+    rrv_material m;
+    rrv__ck ck;
+    rrv_result r;
+    rrv__clear_error(err);
+    if (!scene || !material)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_add_material: NULL argument");
+    m = *material;
+    m.name[sizeof m.name - 1] = '\0';
+    rrv__material_def(&m);
+    rrv__name_default(scene, m.name, 0);
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "material \"%s\"", m.name);
+    r = rrv__store_material(&ck, scene, &m, index);
+    rrv__api_edited(scene);
+    return r;
+}
+
+static rrv_result rrv__api_shape_material(rrv__ck *ck, rrv_scene *scene, rrv_shape *s)
+{
+    int index;
+    if (scene->material_count > 0 || s->material != 0) return RRV_OK;
+    RRV__CK(rrv__default_material(ck, scene, &index));
+    s->material = index;
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_scene_add_shape(rrv_scene *scene, const rrv_shape *shape, int *index,
+                                       rrv_error *err)
+{
+    rrv_shape s;
+    rrv__ck ck;
+    rrv_result r;
+    rrv__clear_error(err);
+    if (!scene || !shape)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_add_shape: NULL argument");
+    s = *shape;
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "shape %d (%s)", scene->shape_count,
+                 rrv__shape_name(s.kind));
+    r = rrv__api_shape_material(&ck, scene, &s);
+    if (r == RRV_OK) r = rrv__store_shape(&ck, scene, &s);
+    if (r == RRV_OK && index) *index = scene->shape_count - 1;
+    rrv__api_edited(scene);
+    return r;
+}
+
+RRV_DEF rrv_result rrv_scene_add_triangles(rrv_scene *scene, const rrv_shape *proto,
+                                           const double *points, int point_count,
+                                           const int *indices, int triangle_count, rrv_error *err)
+{
+    rrv_shape s;
+    rrv__ck ck;
+    rrv_result r = RRV_OK;
+    int i, c;
+    rrv__clear_error(err);
+    if (!scene || !proto || (point_count > 0 && !points) || (triangle_count > 0 && !indices) ||
+        point_count < 0 || triangle_count < 0)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_add_triangles: invalid argument");
+    s = *proto;
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "mesh");
+    r = rrv__api_shape_material(&ck, scene, &s);
+    for (i = 0; i < triangle_count && r == RRV_OK; ++i) {
+        rrv_vec3 v[3];
+        for (c = 0; c < 3; ++c) {
+            int k = indices[3 * i + c];
+            if (k < 0 || k >= point_count) {
+                r = rrv__ck_fail(&ck, RRV_OK, "index %d is out of range (%d points)", k, point_count);
+                break;
+            }
+            v[c] = rrv__v3(points[3 * k], points[3 * k + 1], points[3 * k + 2]);
+        }
+        if (r == RRV_OK) r = rrv__store_triangle(&ck, scene, v[0], v[1], v[2], &s);
+    }
+    rrv__api_edited(scene);
+    return r;
+}
+
+RRV_DEF rrv_result rrv_scene_add_medium(rrv_scene *scene, const rrv_medium *medium, int *index,
+                                        rrv_error *err)
+{
+    rrv_medium m;
+    rrv__ck ck;
+    rrv_result r;
+    rrv__clear_error(err);
+    if (!scene || !medium)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_add_medium: NULL argument");
+    m = *medium;
+    m.name[sizeof m.name - 1] = '\0';
+    memset(m.line, 0, sizeof m.line);
+    rrv__medium_def(&m);
+    rrv__name_default(scene, m.name, 1);
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "medium \"%s\"", m.name);
+    r = rrv__store_medium(&ck, scene, &m, index);
+    rrv__api_edited(scene);
+    return r;
+}
+
+static void rrv__sf_field_free(rrv_field *f);
+
+/* A deep copy, so the scene owns every array it frees. */
+static int rrv__field_copy(rrv_field *dst, const rrv_field *src)
+{
+    *dst = *src;
+    dst->blobs = NULL;
+    dst->grid.data = NULL;
+    dst->nanovdb.buffer = NULL;
+    if (src->kind == RRV_FIELD_BLOBS && src->blob_count > 0 && src->blobs) {
+        size_t cap = rrv__sf_blob_capacity(src->blob_count);
+        if (src->blob_count > RRV_MAX_BLOBS) return 1; /* refused by the check */
+        dst->blobs = (rrv_blob *)RRV_MALLOC(cap * sizeof(rrv_blob));
+        if (!dst->blobs) return 0;
+        memcpy(dst->blobs, src->blobs, (size_t)src->blob_count * sizeof(rrv_blob));
+    } else {
+        dst->blob_count = 0;
+    }
+    if (src->kind == RRV_FIELD_GRID && src->grid.data && src->grid.nx > 0 && src->grid.ny > 0 &&
+        src->grid.nz > 0 && src->grid.channels > 0) {
+        size_t n = (size_t)src->grid.nx * (size_t)src->grid.ny * (size_t)src->grid.nz *
+                   (size_t)src->grid.channels;
+        dst->grid.data = (float *)RRV_MALLOC(n * sizeof(float));
+        if (!dst->grid.data) return 0;
+        memcpy(dst->grid.data, src->grid.data, n * sizeof(float));
+    }
+    if (src->kind == RRV_FIELD_NANOVDB && src->nanovdb.buffer && src->nanovdb.size > 0) {
+        dst->nanovdb.buffer = (unsigned char *)RRV_MALLOC(src->nanovdb.size);
+        if (!dst->nanovdb.buffer) return 0;
+        memcpy(dst->nanovdb.buffer, src->nanovdb.buffer, src->nanovdb.size);
+    } else {
+        dst->nanovdb.size = 0;
+    }
+    return 1;
+}
+
+RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_field which,
+                                       const rrv_field *field, rrv_error *err)
+{
+    rrv_field f;
+    rrv_medium *m;
+    rrv__ck ck;
+    rrv_result r;
+    rrv__clear_error(err);
+    if (!scene || !field || medium < 0 || medium >= scene->medium_count ||
+        (unsigned)which > (unsigned)RRV_MEDIUM_IOR)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene ? scene->path : NULL, 0,
+                         "rrv_scene_set_field: invalid argument");
+    m = &scene->media[medium];
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "%s of medium \"%s\"",
+                 rrv__medium_field_names[which], m->name);
+    if (!rrv__field_copy(&f, field)) {
+        rrv__sf_field_free(&f);
+        return rrv__ck_fail(&ck, RRV_ERROR_MEMORY, "out of memory");
+    }
+    rrv__field_def(&f, which, m);
+    r = rrv__field_check(&ck, which, m, &f, 0);
+    if (r != RRV_OK) {
+        rrv__sf_field_free(&f);
+        return r;
+    }
+    rrv__sf_field_free(rrv__medium_field_of(m, which));
+    *rrv__medium_field_of(m, which) = f;
+    m->line[1 + which] = 0;
+    rrv__api_edited(scene);
+    return RRV_OK;
 }
 
 /* ---- materials and shapes ------------------------------------------------------ */
@@ -9712,23 +10784,17 @@ static int rrv__sf_find_medium(const rrv_scene *s, const rrv__sf_tok *t)
     return -1;
 }
 
-static rrv_material *rrv__sf_new_material(rrv__sf_parser *p)
+/* Checks of the store name the statement and its line. */
+static void rrv__sf_ck(rrv__sf_parser *p, rrv__ck *ck, const char *what)
 {
-    rrv_scene *s = p->scene;
-    rrv_material *m;
-    if (!rrv__sf_reserve((void **)&s->materials, &s->material_capacity, s->material_count,
-                         sizeof *m))
-        return NULL;
-    m = &s->materials[s->material_count++];
-    memset(m, 0, sizeof *m);
-    return m;
+    rrv__ck_init(ck, p->err, p->name, p->line, RRV_ERROR_PARSE, "%s", what);
 }
 
 /* The material a shape names, or the implicit grey "default". */
 static rrv_result rrv__sf_shape_material(rrv__sf_parser *p, const char *stmt,
                                          const rrv__sf_slot *slot, int *index)
 {
-    rrv__sf_tok def;
+    rrv__ck ck;
     if (slot->given) {
         const rrv__sf_tok *t = &p->toks.v[slot->tok];
         *index = rrv__sf_find_material(p->scene, t);
@@ -9737,69 +10803,22 @@ static rrv_result rrv__sf_shape_material(rrv__sf_parser *p, const char *stmt,
             return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: material \"%.*s\" is not defined", stmt,
                                 RRV__SF_CLIP(t));
     }
-    def.p = "default";
-    def.n = 7;
-    def.quoted = 0;
-    *index = rrv__sf_find_material(p->scene, &def);
-    if (*index < 0) {
-        rrv_material *m = rrv__sf_new_material(p);
-        if (!m) return RRV__SF_OOM(p);
-        memcpy(m->name, "default", 8);
-        m->kind = RRV_MATERIAL_DIFFUSE;
-        m->albedo[0] = m->albedo[1] = m->albedo[2] = 0.5;
-        *index = p->scene->material_count - 1;
-    }
-    return RRV_OK;
-}
-
-static rrv_result rrv__sf_push_shape(rrv__sf_parser *p, const rrv_shape *shape)
-{
-    rrv_scene *s = p->scene;
-    if (!rrv__sf_reserve((void **)&s->shapes, &s->shape_capacity, s->shape_count, sizeof *shape))
-        return RRV__SF_OOM(p);
-    s->shapes[s->shape_count++] = *shape;
-    return RRV_OK;
+    rrv__sf_ck(p, &ck, stmt);
+    return rrv__default_material(&ck, p->scene, index);
 }
 
 /* Emission is stored premultiplied by its scale. */
-static rrv_result rrv__sf_emission(rrv__sf_parser *p, const char *stmt, const rrv__sf_slot *L,
-                                   const rrv__sf_slot *scale, double *out)
+static void rrv__sf_emission(const rrv__sf_slot *L, const rrv__sf_slot *scale, double *out)
 {
     double k = scale && scale->given ? scale->v[0] : 1.0;
     int c;
     for (c = 0; c < 3; ++c)
         out[c] = L->given ? L->v[c] * k : 0.0;
-    if (!rrv__sf_finite3(out))
-        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: L times scale is not finite", stmt);
-    if (rrv__max3(out) > RRV_MAX_RADIANCE)
-        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: L times scale must be at most %g, got %g", stmt,
-                            RRV_MAX_RADIANCE, rrv__max3(out));
-    return RRV_OK;
-}
-
-/* Appends triangle (a, b, c) after transforming; zero-area ones are dropped. */
-static rrv_result rrv__sf_push_triangle(rrv__sf_parser *p, const char *stmt, rrv_vec3 a, rrv_vec3 b,
-                                        rrv_vec3 c, const rrv_shape *proto)
-{
-    rrv_shape s = *proto;
-    s.kind = RRV_SHAPE_TRIANGLE;
-    s.p0 = a;
-    s.e1 = rrv__sf_sub(b, a);
-    s.e2 = rrv__sf_sub(c, a);
-    if (!rrv__sf_vec_finite(a) || !rrv__sf_vec_finite(s.e1) || !rrv__sf_vec_finite(s.e2))
-        return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                            "%s: a vertex is not finite after scale and translate", stmt);
-    if (rrv__sf_vec_zero(rrv__sf_cross3(s.e1, s.e2))) return RRV_OK;
-    return rrv__sf_push_shape(p, &s);
 }
 
 static rrv_vec3 rrv__sf_transform(rrv_vec3 v, double scale, rrv_vec3 t)
 {
-    rrv_vec3 r;
-    r.x = v.x * scale + t.x;
-    r.y = v.y * scale + t.y;
-    r.z = v.z * scale + t.z;
-    return r;
+    return rrv__add(rrv__scale(v, scale), t);
 }
 
 /* ---- OBJ ------------------------------------------------------------------------ */
@@ -9908,10 +10927,12 @@ static rrv_result rrv__sf_obj_parse(rrv__sf_parser *p, const char *text, size_t 
                 else if (k == 1)
                     first = idx;
                 else if (k >= 3) {
-                    r = rrv__sf_push_triangle(
-                        p, "mesh", rrv__sf_transform(verts.v[first], scale, translate),
-                        rrv__sf_transform(verts.v[prev], scale, translate),
-                        rrv__sf_transform(verts.v[idx], scale, translate), proto);
+                    rrv__ck ck;
+                    rrv__sf_ck(p, &ck, "mesh");
+                    r = rrv__store_triangle(&ck, p->scene,
+                                            rrv__sf_transform(verts.v[first], scale, translate),
+                                            rrv__sf_transform(verts.v[prev], scale, translate),
+                                            rrv__sf_transform(verts.v[idx], scale, translate), proto);
                 }
                 prev = idx;
             }
@@ -9928,7 +10949,7 @@ static rrv_result rrv__sf_st_camera(rrv__sf_parser *p)
 {
     rrv__sf_slot sl[RRV__SF_COUNT(rrv__sf_camera_keys)];
     rrv_camera *c = &p->scene->camera;
-    rrv_vec3 dir;
+    rrv__ck ck;
     rrv_result r;
     if (p->have_camera) return rrv__sf_perr(p, RRV_ERROR_PARSE, "camera given twice");
     p->have_camera = 1;
@@ -9943,30 +10964,15 @@ static rrv_result rrv__sf_st_camera(rrv__sf_parser *p)
         c->width = (int)sl[4].v[0];
         c->height = (int)sl[4].v[1];
     }
-    dir = rrv__sf_sub(c->look, c->eye);
-    if (rrv__sf_vec_zero(dir) || !rrv__sf_vec_finite(dir))
-        return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                            "camera: eye and look must be distinct finite points");
-    {
-        /* Both vectors scaled to a largest component of 1 first: squaring
-           a far camera's view direction (eye at 1e200) would overflow to
-           inf and make any up look parallel. */
-        rrv_vec3 d = rrv__sf_unit_max(dir), u = rrv__sf_unit_max(c->up), x = rrv__sf_cross3(d, u);
-        double n2 = x.x * x.x + x.y * x.y + x.z * x.z;
-        double d2 = (d.x * d.x + d.y * d.y + d.z * d.z) * (u.x * u.x + u.y * u.y + u.z * u.z);
-        if (rrv__sf_vec_zero(c->up) || !rrv__sf_vec_finite(c->up))
-            return rrv__sf_perr(p, RRV_ERROR_PARSE, "camera: up must be a nonzero finite vector");
-        /* sin^2 of the angle below 1e-12: too close to parallel for a frame */
-        if (!(n2 > 1e-12 * d2))
-            return rrv__sf_perr(p, RRV_ERROR_PARSE, "camera: up is parallel to the view direction");
-    }
-    return RRV_OK;
+    rrv__sf_ck(p, &ck, "camera");
+    return rrv__camera_check(&ck, c);
 }
 
 static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
 {
     rrv__sf_slot sl[RRV__SF_COUNT(rrv__sf_render_keys)];
     rrv_settings *s = &p->scene->settings;
+    rrv__ck ck, ambient;
     rrv_result r;
     if (p->have_render) return rrv__sf_perr(p, RRV_ERROR_PARSE, "render given twice");
     p->have_render = 1;
@@ -9978,9 +10984,6 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[2].given) s->seed = sl[2].u;
     if (sl[3].given) s->integrator = rrv__sf_integrators[sl[3].choice];
     if (sl[4].given) s->bend_tolerance = sl[4].v[0];
-    if (sl[4].given && sl[4].v[0] < 1e-4)
-        return rrv__sf_perr(p, RRV_ERROR_PARSE, "render: bendtolerance must be at least 0.0001, got %.*s",
-                            RRV__SF_CLIP(&p->toks.v[sl[4].tok]));
     if (sl[5].given) s->mu_eta = sl[5].v[0];
     if (sl[6].given) s->step = sl[6].v[0];
     if (sl[7].given) s->stepper = rrv__sf_steppers[sl[7].choice];
@@ -9994,26 +10997,29 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[12].given) s->manifold_gauge = sl[12].choice ? RRV_GAUGE_ISO : RRV_GAUGE_CHORD;
     if (sl[13].given) s->manifold_trials = (int)sl[13].v[0];
     if (sl[14].given) s->manifold_drop = sl[14].v[0];
-    return RRV_OK;
+    rrv__sf_ck(p, &ck, "render");
+    rrv__sf_ck(p, &ambient, "ambient");
+    return rrv__settings_check(&ck, &ambient, s);
 }
 
 static rrv_result rrv__sf_st_ambient(rrv__sf_parser *p)
 {
     rrv__sf_slot sl[1];
+    rrv__ck ck, ambient;
     rrv_result r;
     if (p->have_ambient) return rrv__sf_perr(p, RRV_ERROR_PARSE, "ambient given twice");
     p->have_ambient = 1;
     r = rrv__sf_parse_keys(p, "ambient", 1, rrv__sf_ambient_keys, 1, sl);
     if (r != RRV_OK) return r;
     p->scene->settings.ambient_ior = sl[0].v[0];
-    if (sl[0].v[0] > RRV_MAX_IOR)
-        return rrv__sf_perr(p, RRV_ERROR_PARSE, "ambient: ior must be at most %g, got %.*s", RRV_MAX_IOR,
-                            RRV__SF_CLIP(&p->toks.v[sl[0].tok]));
-    return RRV_OK;
+    rrv__sf_ck(p, &ck, "render");
+    rrv__sf_ck(p, &ambient, "ambient");
+    return rrv__settings_check(&ck, &ambient, &p->scene->settings);
 }
 
-/* A `material` or `medium` name: present, short enough, not yet used. */
-static rrv_result rrv__sf_new_name(rrv__sf_parser *p, const char *stmt, char *out, int taken)
+/* A `material` or `medium` name: present and short enough (the store
+   refuses one already used). */
+static rrv_result rrv__sf_new_name(rrv__sf_parser *p, const char *stmt, char *out)
 {
     const rrv__sf_tok *t;
     if (p->toks.n < 2) return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: missing name", stmt);
@@ -10022,20 +11028,19 @@ static rrv_result rrv__sf_new_name(rrv__sf_parser *p, const char *stmt, char *ou
         return rrv__sf_perr(p, RRV_ERROR_PARSE,
                             "%s: name \"%.*s\" must be 1 to 63 printable characters", stmt,
                             RRV__SF_CLIP(t));
-    if (taken) return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s \"%s\" defined twice", stmt, out);
     return RRV_OK;
 }
 
 static rrv_result rrv__sf_st_material(rrv__sf_parser *p)
 {
     rrv__sf_slot sl[RRV__SF_COUNT(rrv__sf_checker_keys)];
-    char name[64];
-    rrv_material *m;
+    rrv_material m;
     const rrv__sf_tok *kind;
+    rrv__ck ck;
     rrv_result r;
     int checker;
-    r = rrv__sf_new_name(p, "material", name,
-                         p->toks.n >= 2 && rrv__sf_find_material(p->scene, &p->toks.v[1]) >= 0);
+    memset(&m, 0, sizeof m);
+    r = rrv__sf_new_name(p, "material", m.name);
     if (r != RRV_OK) return r;
     if (p->toks.n < 3)
         return rrv__sf_perr(p, RRV_ERROR_PARSE, "material: missing kind (diffuse or checker)");
@@ -10055,21 +11060,15 @@ static rrv_result rrv__sf_st_material(rrv__sf_parser *p)
         r = rrv__sf_parse_keys(p, "material", 3, rrv__sf_diffuse_keys,
                                RRV__SF_COUNT(rrv__sf_diffuse_keys), sl);
     if (r != RRV_OK) return r;
-    m = rrv__sf_new_material(p);
-    if (!m) return RRV__SF_OOM(p);
-    memcpy(m->name, name, sizeof name);
+    m.kind = checker ? RRV_MATERIAL_CHECKER : RRV_MATERIAL_DIFFUSE;
+    rrv__material_def(&m);
+    rrv__sf_slot_rgb(&sl[0], m.albedo);
     if (checker) {
-        m->kind = RRV_MATERIAL_CHECKER;
-        m->albedo[0] = m->albedo[1] = m->albedo[2] = 0.8;
-        m->albedo2[0] = m->albedo2[1] = m->albedo2[2] = 0.2;
-        m->checker_scale = sl[2].given ? sl[2].v[0] : 1.0;
-        rrv__sf_slot_rgb(&sl[1], m->albedo2);
-    } else {
-        m->kind = RRV_MATERIAL_DIFFUSE;
-        m->albedo[0] = m->albedo[1] = m->albedo[2] = 0.5;
+        rrv__sf_slot_rgb(&sl[1], m.albedo2);
+        if (sl[2].given) m.checker_scale = sl[2].v[0];
     }
-    rrv__sf_slot_rgb(&sl[0], m->albedo);
-    return RRV_OK;
+    rrv__sf_ck(p, &ck, "material");
+    return rrv__store_material(&ck, p->scene, &m, NULL);
 }
 
 /* sphere, quad and triangle: the last three slots are material, L, scale. */
@@ -10084,12 +11083,13 @@ static rrv_result rrv__sf_st_primitive(rrv__sf_parser *p)
                               : stmt[0] == 'q' ? rrv__sf_quad_keys
                                                : rrv__sf_triangle_keys;
     int nkeys = stmt[0] == 's' ? RRV__SF_COUNT(rrv__sf_sphere_keys) : 6;
+    rrv__ck ck;
     rrv_result r = rrv__sf_parse_keys(p, stmt, 1, keys, nkeys, sl);
     if (r != RRV_OK) return r;
     memset(&s, 0, sizeof s);
     r = rrv__sf_shape_material(p, stmt, &sl[nkeys - 3], &s.material);
-    if (r == RRV_OK) r = rrv__sf_emission(p, stmt, &sl[nkeys - 2], &sl[nkeys - 1], s.L);
     if (r != RRV_OK) return r;
+    rrv__sf_emission(&sl[nkeys - 2], &sl[nkeys - 1], s.L);
     if (stmt[0] == 's') {
         s.kind = RRV_SHAPE_SPHERE;
         s.center = rrv__sf_slot_vec(&sl[0], 0);
@@ -10099,21 +11099,15 @@ static rrv_result rrv__sf_st_primitive(rrv__sf_parser *p)
         s.p0 = rrv__sf_slot_vec(&sl[0], 0);
         s.e1 = rrv__sf_slot_vec(&sl[1], 0);
         s.e2 = rrv__sf_slot_vec(&sl[2], 0);
-        if (rrv__sf_vec_zero(rrv__sf_cross3(s.e1, s.e2)))
-            return rrv__sf_perr(p, RRV_ERROR_PARSE, "quad: u and v are parallel (zero area)");
     } else {
         rrv_vec3 a = rrv__sf_slot_vec(&sl[0], 0);
         s.kind = RRV_SHAPE_TRIANGLE;
         s.p0 = a;
-        s.e1 = rrv__sf_sub(rrv__sf_slot_vec(&sl[1], 0), a);
-        s.e2 = rrv__sf_sub(rrv__sf_slot_vec(&sl[2], 0), a);
-        if (!rrv__sf_vec_finite(s.e1) || !rrv__sf_vec_finite(s.e2))
-            return rrv__sf_perr(p, RRV_ERROR_PARSE, "triangle: edges are not finite");
-        if (rrv__sf_vec_zero(rrv__sf_cross3(s.e1, s.e2)))
-            return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                                "triangle: the points are collinear (zero area)");
+        s.e1 = rrv__sub(rrv__sf_slot_vec(&sl[1], 0), a);
+        s.e2 = rrv__sub(rrv__sf_slot_vec(&sl[2], 0), a);
     }
-    return rrv__sf_push_shape(p, &s);
+    rrv__sf_ck(p, &ck, stmt);
+    return rrv__store_shape(&ck, p->scene, &s);
 }
 
 static rrv_result rrv__sf_st_mesh(rrv__sf_parser *p)
@@ -10122,6 +11116,7 @@ static rrv_result rrv__sf_st_mesh(rrv__sf_parser *p)
     rrv_shape proto;
     rrv_vec3 translate = {0, 0, 0};
     double scale;
+    rrv__ck ck;
     rrv_result r =
         rrv__sf_parse_keys(p, "mesh", 1, rrv__sf_mesh_keys, RRV__SF_COUNT(rrv__sf_mesh_keys), sl);
     if (r != RRV_OK) return r;
@@ -10133,7 +11128,10 @@ static rrv_result rrv__sf_st_mesh(rrv__sf_parser *p)
         return rrv__sf_perr(p, RRV_ERROR_PARSE, "mesh: \"indices\" needs \"points\"");
     memset(&proto, 0, sizeof proto);
     r = rrv__sf_shape_material(p, "mesh", &sl[4], &proto.material);
-    if (r == RRV_OK) r = rrv__sf_emission(p, "mesh", &sl[5], NULL, proto.L);
+    if (r != RRV_OK) return r;
+    rrv__sf_emission(&sl[5], NULL, proto.L);
+    rrv__sf_ck(p, &ck, "mesh");
+    r = rrv__emission_check(&ck, proto.L);
     if (r != RRV_OK) return r;
     if (sl[3].given) translate = rrv__sf_slot_vec(&sl[3], 0);
     scale = sl[6].given ? sl[6].v[0] : 1.0;
@@ -10159,7 +11157,7 @@ static rrv_result rrv__sf_st_mesh(rrv__sf_parser *p)
             return rrv__sf_perr(p, r, "%s", message);
         }
         r = rrv__sf_obj_parse(p, (const char *)data, size, full, scale, translate, &proto);
-        RRV_FREE(data);
+        rrv__sf_release_whole(p->opt, data);
         return r;
     } else {
         const rrv__sf_tok *toks = p->toks.v;
@@ -10192,7 +11190,7 @@ static rrv_result rrv__sf_st_mesh(rrv__sf_parser *p)
                 v[c].z = z;
                 v[c] = rrv__sf_transform(v[c], scale, translate);
             }
-            r = rrv__sf_push_triangle(p, "mesh", v[0], v[1], v[2], &proto);
+            r = rrv__store_triangle(&ck, p->scene, v[0], v[1], v[2], &proto);
             if (r != RRV_OK) return r;
         }
     }
@@ -10204,6 +11202,7 @@ static rrv_result rrv__sf_st_environment(rrv__sf_parser *p)
     rrv__sf_slot sl[3];
     rrv_environment *env = &p->scene->environment;
     const rrv__sf_tok *kind;
+    rrv__ck ck;
     double k;
     int c;
     rrv_result r;
@@ -10217,8 +11216,9 @@ static rrv_result rrv__sf_st_environment(rrv__sf_parser *p)
         if (r != RRV_OK) return r;
         k = sl[1].given ? sl[1].v[0] : 1.0;
         env->kind = RRV_ENV_CONSTANT;
+        rrv__environment_def(env);
         for (c = 0; c < 3; ++c)
-            env->L[c] = (sl[0].given ? sl[0].v[c] : 1.0) * k;
+            env->L[c] = (sl[0].given ? sl[0].v[c] : env->L[c]) * k;
     } else if (rrv__sf_tok_is(kind, "gradient")) {
         r = rrv__sf_parse_keys(p, "environment", 2, rrv__sf_env_gradient_keys, 3, sl);
         if (r != RRV_OK) return r;
@@ -10233,33 +11233,23 @@ static rrv_result rrv__sf_st_environment(rrv__sf_parser *p)
                             "environment: unknown kind \"%.*s\" (expected constant or gradient)",
                             RRV__SF_CLIP(kind));
     }
-    if (!rrv__sf_finite3(env->L) || !rrv__sf_finite3(env->L2))
-        return rrv__sf_perr(p, RRV_ERROR_PARSE, "environment: radiance times scale is not finite");
-    if (rrv__maxd(rrv__max3(env->L), rrv__max3(env->L2)) > RRV_MAX_RADIANCE)
-        return rrv__sf_perr(p, RRV_ERROR_PARSE, "environment: radiance times scale must be at most %g",
-                            RRV_MAX_RADIANCE);
-    return RRV_OK;
+    rrv__sf_ck(p, &ck, "environment");
+    return rrv__environment_check(&ck, env);
 }
 
 static rrv_result rrv__sf_st_medium(rrv__sf_parser *p)
 {
     rrv__sf_slot sl[RRV__SF_COUNT(rrv__sf_medium_keys)];
-    rrv_scene *s = p->scene;
-    rrv_medium *m;
-    char name[64];
+    rrv_medium m;
+    rrv__ck ck;
     int c;
-    rrv_result r = rrv__sf_new_name(p, "medium", name,
-                                    p->toks.n >= 2 && rrv__sf_find_medium(s, &p->toks.v[1]) >= 0);
+    rrv_result r;
+    memset(&m, 0, sizeof m);
+    r = rrv__sf_new_name(p, "medium", m.name);
     if (r != RRV_OK) return r;
     r = rrv__sf_parse_keys(p, "medium", 2, rrv__sf_medium_keys, RRV__SF_COUNT(rrv__sf_medium_keys),
                            sl);
     if (r != RRV_OK) return r;
-    for (c = 0; c < 3; ++c)
-        if (!(sl[0].v[c] < sl[0].v[c + 3]))
-            return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                                "medium: box is empty along %c (%.*s is not below %.*s)", "xyz"[c],
-                                RRV__SF_CLIP(&p->toks.v[sl[0].tok + (size_t)c]),
-                                RRV__SF_CLIP(&p->toks.v[sl[0].tok + (size_t)c + 3]));
     if ((sl[5].given || sl[6].given) && (sl[1].given || sl[2].given))
         return rrv__sf_perr(p, RRV_ERROR_PARSE,
                             "medium: give albedo and sigma_t, or sigma_a and sigma_s, not both");
@@ -10267,78 +11257,182 @@ static rrv_result rrv__sf_st_medium(rrv__sf_parser *p)
         return rrv__sf_perr(p, RRV_ERROR_PARSE,
                             sl[5].given ? "medium: \"albedo\" needs \"sigma_t\""
                                         : "medium: \"sigma_t\" needs \"albedo\"");
-    /* Checked here, not only by rrv_scene_prepare, so the message names the line. */
-    if (s->medium_count >= RRV__MAX_MEDIA)
-        return rrv__sf_perr(p, RRV_ERROR_LIMIT, "medium: at most %d media are supported",
-                            RRV__MAX_MEDIA);
-    if (!rrv__sf_reserve((void **)&s->media, &s->medium_capacity, s->medium_count, sizeof *m))
-        return RRV__SF_OOM(p);
-    m = &s->media[s->medium_count++];
-    memset(m, 0, sizeof *m);
-    memcpy(m->name, name, sizeof name);
-    m->lo = rrv__sf_slot_vec(&sl[0], 0);
-    m->hi = rrv__sf_slot_vec(&sl[0], 3);
+    rrv__medium_def(&m);
+    m.lo = rrv__sf_slot_vec(&sl[0], 0);
+    m.hi = rrv__sf_slot_vec(&sl[0], 3);
     for (c = 0; c < 3; ++c) {
         if (sl[5].given) {
-            m->sigma_s[c] = sl[5].v[c] * sl[6].v[c];
-            m->sigma_a[c] = sl[6].v[c] - m->sigma_s[c];
-            if (m->sigma_a[c] < 0.0) m->sigma_a[c] = 0.0; /* rounding only */
-        } else {
-            m->sigma_a[c] = sl[1].given ? sl[1].v[c] : 1.0;
-            m->sigma_s[c] = sl[2].given ? sl[2].v[c] : 1.0;
+            m.sigma_s[c] = sl[5].v[c] * sl[6].v[c];
+            m.sigma_a[c] = sl[6].v[c] - m.sigma_s[c];
+            if (m.sigma_a[c] < 0.0) m.sigma_a[c] = 0.0; /* rounding only */
         }
-        m->Le[c] = sl[7].given ? sl[7].v[c] : 0.0;
     }
-    m->scale = sl[3].given ? sl[3].v[0] : 1.0;
-    m->g = sl[4].given ? sl[4].v[0] : 0.0;
-    m->Lescale = sl[8].given ? sl[8].v[0] : 1.0;
-    m->temperatureoffset = 0.0;
-    m->temperaturescale = 1.0;
-    m->eta_ref = 1.000292;
-    m->P_ref = 101325.0;
-    m->T_ref = 300.0;
-    m->ior_scale = 1.0;
+    rrv__sf_slot_rgb(&sl[1], m.sigma_a);
+    rrv__sf_slot_rgb(&sl[2], m.sigma_s);
+    rrv__sf_slot_rgb(&sl[7], m.Le);
+    if (sl[3].given) m.scale = sl[3].v[0];
+    if (sl[4].given) m.g = sl[4].v[0];
+    if (sl[8].given) m.Lescale = sl[8].v[0];
+    m.line[0] = p->line;
+    rrv__ck_init(&ck, p->err, p->name, p->line, RRV_ERROR_PARSE, "medium \"%s\"", m.name);
+    return rrv__store_medium(&ck, p->scene, &m, NULL);
+}
+
+/* One field statement (`density | temperature | pressure | ior MEDIUM KIND
+   ...`) as the parser of its kind sees it. */
+typedef struct rrv__sf_fs {
+    const char *stmt;         /* density, temperature, pressure or ior */
+    rrv_medium_field which;
+    rrv_medium *m;
+    const rrv__sf_tok *value; /* the token after the kind: constant, grid, nanovdb */
+    const rrv__sf_slot *sl;   /* the kind's keys, in its table's order */
+    int first;                /* not a later blob line of the same field */
+} rrv__sf_fs;
+
+/* Each kind fills f (a zeroed field; for blobs, the medium's own). */
+typedef rrv_result (*rrv__sf_field_func)(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f);
+
+static rrv_result rrv__sf_field_constant(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f)
+{
+    static const rrv__sf_key any = {"constant", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL};
+    double v;
+    uint64_t u;
+    rrv_result r;
+    if (!rrv__sf_tok_number(fs->value, &v))
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: expected a number for \"constant\", got \"%.*s\"",
+                            fs->stmt, RRV__SF_CLIP(fs->value));
+    r = rrv__sf_value(p, fs->stmt, &any, fs->value, &v, &u);
+    if (r != RRV_OK) return r;
+    f->kind = RRV_FIELD_CONSTANT;
+    f->value = v;
     return RRV_OK;
 }
 
-enum { RRV__SF_F_DENSITY, RRV__SF_F_TEMPERATURE, RRV__SF_F_PRESSURE, RRV__SF_F_IOR };
-enum {
-    RRV__SF_K_CONSTANT,
-    RRV__SF_K_BLOB,
-    RRV__SF_K_NOISE,
-    RRV__SF_K_GRID,
-    RRV__SF_K_LUNEBURG,
-    RRV__SF_K_FISHEYE,
-    RRV__SF_K_SLAB,
-    RRV__SF_K_SHELL,
-    RRV__SF_K_GAS,
-    RRV__SF_K_NANOVDB,
-    RRV__SF_K_COUNT
-};
+static rrv_result rrv__sf_field_blob(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f)
+{
+    const rrv__sf_slot *sl = fs->sl;
+    rrv_blob b;
+    memset(&b, 0, sizeof b);
+    rrv__blob_def(&b);
+    b.center = rrv__sf_slot_vec(&sl[0], 0);
+    b.radius = sl[1].v[0];
+    if (sl[2].given) b.weight = sl[2].v[0];
+    if (fs->first) {
+        f->kind = RRV_FIELD_BLOBS;
+        rrv__field_def(f, fs->which, fs->m);
+        if (sl[3].given) f->base = sl[3].v[0];
+    }
+    if (f->blob_count == INT_MAX) return RRV__SF_OOM(p);
+    if (f->blob_count == 0 || (f->blob_count >= 4 && (f->blob_count & (f->blob_count - 1)) == 0)) {
+        size_t cap = rrv__sf_blob_capacity(f->blob_count + 1);
+        rrv_blob *grown;
+        if (cap > SIZE_MAX / sizeof b) return RRV__SF_OOM(p);
+        grown = (rrv_blob *)RRV_REALLOC(f->blobs, cap * sizeof b);
+        if (!grown) return RRV__SF_OOM(p);
+        f->blobs = grown;
+    }
+    f->blobs[f->blob_count++] = b;
+    return RRV_OK;
+}
 
-static const struct rrv__sf_field_kind {
-    const char *name;
-    const rrv__sf_key *keys;
-    int nkeys;
-    int ior_only;
-} rrv__sf_field_kinds[RRV__SF_K_COUNT] = {
-    {"constant", NULL, 0, 0},
-    {"blob", rrv__sf_blob_keys, RRV__SF_COUNT(rrv__sf_blob_keys), 0},
-    {"noise", rrv__sf_noise_keys, RRV__SF_COUNT(rrv__sf_noise_keys), 0},
-    {"grid", NULL, 0, 0},
-    {"luneburg", rrv__sf_luneburg_keys, RRV__SF_COUNT(rrv__sf_luneburg_keys), 1},
-    {"fisheye", rrv__sf_fisheye_keys, RRV__SF_COUNT(rrv__sf_fisheye_keys), 1},
-    {"slab", rrv__sf_slab_keys, RRV__SF_COUNT(rrv__sf_slab_keys), 1},
-    {"shell", rrv__sf_shell_keys, RRV__SF_COUNT(rrv__sf_shell_keys), 1},
-    {"gas", rrv__sf_gas_keys, RRV__SF_COUNT(rrv__sf_gas_keys), 1},
-    {"nanovdb", rrv__sf_nanovdb_keys, RRV__SF_COUNT(rrv__sf_nanovdb_keys), 0},
-};
+/* Noise and the profiles write what was given, let rrv__field_def fill the
+   rest and write it again: an explicit zero survives, and defaults that
+   follow other keys (a shell's edge) see them. */
+static void rrv__sf_noise_given(const rrv__sf_slot *sl, rrv_field *f)
+{
+    rrv_noise *n = &f->noise;
+    if (sl[0].given) n->octaves = (int)sl[0].v[0];
+    if (sl[1].given) n->frequency = sl[1].v[0];
+    if (sl[2].given) n->lacunarity = sl[2].v[0];
+    if (sl[3].given) n->gain = sl[3].v[0];
+    if (sl[4].given) n->threshold = sl[4].v[0];
+    if (sl[5].given) n->seed = (uint32_t)sl[5].v[0];
+    if (sl[6].given) n->falloff = rrv__sf_falloffs[sl[6].choice];
+    if (sl[7].given) n->center = rrv__sf_slot_vec(&sl[7], 0);
+    if (sl[8].given) n->radius = sl[8].v[0];
+    if (sl[9].given) f->amplitude = sl[9].v[0];
+    if (sl[10].given) f->base = sl[10].v[0];
+}
 
-static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const char *stmt, int which,
-                                     const rrv__sf_tok *t, rrv_field *f)
+static rrv_result rrv__sf_field_noise(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f)
+{
+    (void)p;
+    f->kind = RRV_FIELD_NOISE;
+    /* The file format's falloff is a sphere; rrv_noise's zero is NONE. */
+    f->noise.falloff = RRV_FALLOFF_SPHERE;
+    rrv__sf_noise_given(fs->sl, f);
+    rrv__field_def(f, fs->which, fs->m);
+    rrv__sf_noise_given(fs->sl, f);
+    return RRV_OK;
+}
+
+static void rrv__sf_profile_given(int kind, const rrv__sf_slot *sl, rrv_field *f)
+{
+    if (sl[0].given) f->center = rrv__sf_slot_vec(&sl[0], 0);
+    if (kind == RRV_FIELD_SLAB) {
+        f->normal = rrv__sf_slot_vec(&sl[1], 0);
+        f->gradient = sl[2].v[0];
+        if (sl[3].given) f->base = sl[3].v[0];
+        return;
+    }
+    f->radius = sl[1].v[0];
+    if (kind == RRV_FIELD_FISHEYE && sl[2].given) f->n0 = sl[2].v[0];
+    if (kind == RRV_FIELD_SHELL) {
+        f->thickness = sl[2].v[0];
+        if (sl[3].given) f->edge = sl[3].v[0];
+        f->amplitude = sl[4].v[0];
+        if (sl[5].given) f->base = sl[5].v[0];
+    }
+}
+
+static rrv_result rrv__sf_field_profile(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f,
+                                        rrv_field_kind kind)
+{
+    (void)p;
+    f->kind = kind;
+    rrv__sf_profile_given(kind, fs->sl, f);
+    rrv__field_def(f, fs->which, fs->m);
+    rrv__sf_profile_given(kind, fs->sl, f);
+    if (kind == RRV_FIELD_SLAB) rrv__field_def(f, fs->which, fs->m); /* normalise the normal */
+    return RRV_OK;
+}
+
+static rrv_result rrv__sf_field_luneburg(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f)
+{
+    return rrv__sf_field_profile(p, fs, f, RRV_FIELD_LUNEBURG);
+}
+static rrv_result rrv__sf_field_fisheye(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f)
+{
+    return rrv__sf_field_profile(p, fs, f, RRV_FIELD_FISHEYE);
+}
+static rrv_result rrv__sf_field_slab(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f)
+{
+    return rrv__sf_field_profile(p, fs, f, RRV_FIELD_SLAB);
+}
+static rrv_result rrv__sf_field_shell(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f)
+{
+    return rrv__sf_field_profile(p, fs, f, RRV_FIELD_SHELL);
+}
+
+/* `ior M gas`: the IOR follows temperature and pressure; the field stays NONE. */
+static rrv_result rrv__sf_field_gas(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f)
+{
+    const rrv__sf_slot *sl = fs->sl;
+    (void)p;
+    (void)f;
+    fs->m->ior_from_gas = 1;
+    if (sl[0].given) fs->m->eta_ref = sl[0].v[0];
+    if (sl[1].given) fs->m->P_ref = sl[1].v[0];
+    if (sl[2].given) fs->m->T_ref = sl[2].v[0];
+    return RRV_OK;
+}
+
+static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f)
 {
     char written[RRV__SF_PATH_MAX], full[RRV__SF_PATH_MAX];
     const char *why;
+    const char *stmt = fs->stmt;
+    const rrv__sf_tok *t = fs->value;
     rrv_error e;
     rrv_result r;
     if (!rrv__sf_tok_string(t, written, sizeof written) ||
@@ -10347,7 +11441,7 @@ static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const char *stmt, int wh
                             "%s: path \"%.*s\" is too long or has control characters", stmt,
                             RRV__SF_CLIP(t));
     rrv__clear_error(&e);
-    r = rrv__sf_grid_load(full, written, p->opt, which == RRV__SF_F_DENSITY, &f->grid, &e, &why);
+    r = rrv__sf_grid_load(full, written, p->opt, fs->which == RRV_MEDIUM_DENSITY, &f->grid, &e, &why);
     if (r == RRV_ERROR_IO)
         return rrv__sf_perr(p, r, "cannot read grid file \"%s\"%s%s", written, why[0] ? ": " : "", why);
     if (r == RRV_ERROR_UNSUPPORTED)
@@ -10356,7 +11450,7 @@ static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const char *stmt, int wh
     f->kind = RRV_FIELD_GRID;
     p->scene->grid_bytes += (size_t)f->grid.nx * (size_t)f->grid.ny * (size_t)f->grid.nz *
                             (size_t)f->grid.channels * sizeof(float);
-    if (which != RRV__SF_F_DENSITY && f->grid.channels != 1)
+    if (fs->which != RRV_MEDIUM_DENSITY && f->grid.channels != 1)
         return rrv__sf_perr(p, RRV_ERROR_FORMAT, "grid \"%s\": %s grids need 1 channel, found %d",
                             written, stmt, f->grid.channels);
     return RRV_OK;
@@ -10364,11 +11458,12 @@ static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const char *stmt, int wh
 
 /* `nanovdb FILE [grid NAME]`: the grid named as the statement (pbrt-v4's
    "density" and "temperature") unless `grid` names another. */
-static rrv_result rrv__sf_field_nanovdb(rrv__sf_parser *p, const char *stmt, const rrv__sf_tok *t,
-                                        const rrv__sf_slot *grid_slot, rrv_field *f)
+static rrv_result rrv__sf_field_nanovdb(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f)
 {
     char written[RRV__SF_PATH_MAX], full[RRV__SF_PATH_MAX], grid_name[256];
     const char *why;
+    const char *stmt = fs->stmt;
+    const rrv__sf_tok *t = fs->value;
     rrv_error e;
     rrv_result r;
     if (!rrv__sf_tok_string(t, written, sizeof written) ||
@@ -10376,8 +11471,8 @@ static rrv_result rrv__sf_field_nanovdb(rrv__sf_parser *p, const char *stmt, con
         return rrv__sf_perr(p, RRV_ERROR_PARSE,
                             "%s: path \"%.*s\" is too long or has control characters", stmt,
                             RRV__SF_CLIP(t));
-    if (grid_slot->given) {
-        const rrv__sf_tok *g = &p->toks.v[grid_slot->tok];
+    if (fs->sl[0].given) {
+        const rrv__sf_tok *g = &p->toks.v[fs->sl[0].tok];
         if (!rrv__sf_tok_string(g, grid_name, sizeof grid_name))
             return rrv__sf_perr(p, RRV_ERROR_PARSE,
                                 "%s: grid name \"%.*s\" is longer than 255 bytes or has control characters",
@@ -10395,267 +11490,155 @@ static rrv_result rrv__sf_field_nanovdb(rrv__sf_parser *p, const char *stmt, con
     return RRV_OK;
 }
 
-/* density | temperature | pressure | ior  MEDIUM KIND ... */
+enum {
+    RRV__SF_K_CONSTANT,
+    RRV__SF_K_BLOB,
+    RRV__SF_K_NOISE,
+    RRV__SF_K_GRID,
+    RRV__SF_K_LUNEBURG,
+    RRV__SF_K_FISHEYE,
+    RRV__SF_K_SLAB,
+    RRV__SF_K_SHELL,
+    RRV__SF_K_GAS,
+    RRV__SF_K_NANOVDB,
+    RRV__SF_K_COUNT
+};
+
+/* value: the kind takes a value token before its keys (the message when
+   it is missing). */
+static const struct rrv__sf_field_kind {
+    const char *name;
+    const rrv__sf_key *keys;
+    int nkeys;
+    int ior_only;
+    rrv__sf_field_func parse;
+    const char *value;
+} rrv__sf_field_kinds[RRV__SF_K_COUNT] = {
+    {"constant", NULL, 0, 0, rrv__sf_field_constant, "%s: \"constant\" needs 1 number, got 0"},
+    {"blob", rrv__sf_blob_keys, RRV__SF_COUNT(rrv__sf_blob_keys), 0, rrv__sf_field_blob, NULL},
+    {"noise", rrv__sf_noise_keys, RRV__SF_COUNT(rrv__sf_noise_keys), 0, rrv__sf_field_noise, NULL},
+    {"grid", NULL, 0, 0, rrv__sf_field_grid, "%s: \"grid\" needs a file path"},
+    {"luneburg", rrv__sf_luneburg_keys, RRV__SF_COUNT(rrv__sf_luneburg_keys), 1,
+     rrv__sf_field_luneburg, NULL},
+    {"fisheye", rrv__sf_fisheye_keys, RRV__SF_COUNT(rrv__sf_fisheye_keys), 1, rrv__sf_field_fisheye,
+     NULL},
+    {"slab", rrv__sf_slab_keys, RRV__SF_COUNT(rrv__sf_slab_keys), 1, rrv__sf_field_slab, NULL},
+    {"shell", rrv__sf_shell_keys, RRV__SF_COUNT(rrv__sf_shell_keys), 1, rrv__sf_field_shell, NULL},
+    {"gas", rrv__sf_gas_keys, RRV__SF_COUNT(rrv__sf_gas_keys), 1, rrv__sf_field_gas, NULL},
+    {"nanovdb", rrv__sf_nanovdb_keys, RRV__SF_COUNT(rrv__sf_nanovdb_keys), 0, rrv__sf_field_nanovdb,
+     "%s: \"nanovdb\" needs a file path"},
+};
+
+/* The keys every kind of one field takes (they set the medium), applied
+   before the kind so a temperature constant is checked with them. */
+static void rrv__sf_field_extras(const rrv__sf_fs *fs, const rrv__sf_slot *sl)
+{
+    rrv_medium *m = fs->m;
+    if (fs->which == RRV_MEDIUM_IOR && sl[0].given) m->ior_scale = sl[0].v[0];
+    if (fs->which == RRV_MEDIUM_TEMPERATURE) {
+        if (sl[0].given) m->temperatureoffset = sl[0].v[0];
+        if (sl[1].given) m->temperaturescale = sl[1].v[0];
+        /* a temperature glows unless the file says `blackbody off` */
+        if (sl[2].given)
+            m->blackbody_emission = sl[2].choice == 0;
+        else if (fs->first)
+            m->blackbody_emission = 1;
+    }
+}
+
+/* Which medium, which kind, whether this field may be given again; then the
+   kind's keys and the field's extras, the kind's parser, and the check. */
 static rrv_result rrv__sf_st_field(rrv__sf_parser *p)
 {
-    static const char *const field_names[4] = {"density", "temperature", "pressure", "ior"};
-    static const double blob_base[4] = {0.0, 300.0, 101325.0, 0.0};
+    static const char *const kinds_ior = "constant, blob, noise, grid, nanovdb, luneburg, fisheye, "
+                                         "slab, shell or gas";
+    static const char *const kinds_other = "constant, blob, noise, grid or nanovdb";
     const rrv__sf_tok *toks = p->toks.v;
     rrv__sf_key keys[RRV__SF_MAX_KEYS];
     rrv__sf_slot sl[RRV__SF_MAX_KEYS];
     const rrv__sf_key *extra = NULL;
-    int which, kind, nkeys, nextra = 0, mi, first_blob;
+    int which, kind, nkeys, nextra = 0, mi;
     size_t first = 3;
-    const char *stmt;
-    rrv_medium *m;
-    rrv_field *f;
+    rrv__sf_fs fs;
+    rrv_field *f, fresh, *target;
+    rrv__ck ck;
     rrv_result r;
-    for (which = 0; which < 3 && !rrv__sf_tok_is(&toks[0], field_names[which]); ++which) {
+    for (which = 0; which < 3 && !rrv__sf_tok_is(&toks[0], rrv__medium_field_names[which]); ++which) {
     }
-    stmt = field_names[which];
-    if (p->toks.n < 2) return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: missing medium name", stmt);
+    memset(&fs, 0, sizeof fs);
+    fs.stmt = rrv__medium_field_names[which];
+    fs.which = (rrv_medium_field)which;
+    if (p->toks.n < 2) return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: missing medium name", fs.stmt);
     mi = rrv__sf_find_medium(p->scene, &toks[1]);
     if (mi < 0)
-        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: medium \"%.*s\" is not defined", stmt,
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: medium \"%.*s\" is not defined", fs.stmt,
                             RRV__SF_CLIP(&toks[1]));
-    m = &p->scene->media[mi];
-    f = which == RRV__SF_F_DENSITY       ? &m->density
-        : which == RRV__SF_F_TEMPERATURE ? &m->temperature
-        : which == RRV__SF_F_PRESSURE    ? &m->pressure
-                                         : &m->ior;
+    fs.m = &p->scene->media[mi];
+    f = rrv__medium_field_of(fs.m, fs.which);
     if (p->toks.n < 3)
-        return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                            which == RRV__SF_F_IOR
-                                ? "%s: missing kind (constant, blob, noise, grid, nanovdb, "
-                                  "luneburg, fisheye, slab, shell or gas)"
-                                : "%s: missing kind (constant, blob, noise, grid or nanovdb)",
-                            stmt);
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: missing kind (%s)", fs.stmt,
+                            which == RRV_MEDIUM_IOR ? kinds_ior : kinds_other);
     for (kind = 0; kind < RRV__SF_K_COUNT; ++kind)
         if (rrv__sf_tok_is(&toks[2], rrv__sf_field_kinds[kind].name) &&
-            (which == RRV__SF_F_IOR || !rrv__sf_field_kinds[kind].ior_only))
+            (which == RRV_MEDIUM_IOR || !rrv__sf_field_kinds[kind].ior_only))
             break;
     if (kind == RRV__SF_K_COUNT)
-        return rrv__sf_perr(
-            p, RRV_ERROR_PARSE,
-            which == RRV__SF_F_IOR
-                ? "%s: unknown kind \"%.*s\" (expected constant, blob, noise, grid, nanovdb, "
-                  "luneburg, fisheye, slab, shell or gas)"
-                : "%s: unknown kind \"%.*s\" (expected constant, blob, noise, grid or nanovdb)",
-            stmt, RRV__SF_CLIP(&toks[2]));
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: unknown kind \"%.*s\" (expected %s)", fs.stmt,
+                            RRV__SF_CLIP(&toks[2]), which == RRV_MEDIUM_IOR ? kinds_ior : kinds_other);
     /* blob statements accumulate; anything else may be given once */
-    first_blob = f->kind != RRV_FIELD_BLOBS;
-    if (f->kind != RRV_FIELD_NONE || (which == RRV__SF_F_IOR && m->ior_from_gas)) {
+    fs.first = f->kind != RRV_FIELD_BLOBS;
+    if (f->kind != RRV_FIELD_NONE || (which == RRV_MEDIUM_IOR && fs.m->ior_from_gas)) {
         if (kind != RRV__SF_K_BLOB || f->kind != RRV_FIELD_BLOBS)
             return rrv__sf_perr(p, RRV_ERROR_PARSE,
                                 f->kind == RRV_FIELD_BLOBS || kind == RRV__SF_K_BLOB
                                     ? "%s: blob cannot be mixed with other kinds (medium \"%s\")"
                                     : "%s: given twice for medium \"%s\"",
-                                stmt, m->name);
+                                fs.stmt, fs.m->name);
     }
-    if (kind == RRV__SF_K_CONSTANT || kind == RRV__SF_K_GRID || kind == RRV__SF_K_NANOVDB) {
+    if (rrv__sf_field_kinds[kind].value) {
         double dummy;
-        if (p->toks.n < 4)
-            return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                                kind == RRV__SF_K_CONSTANT
-                                    ? "%s: \"constant\" needs 1 number, got 0"
-                                    : kind == RRV__SF_K_GRID ? "%s: \"grid\" needs a file path"
-                                                             : "%s: \"nanovdb\" needs a file path",
-                                stmt);
+        if (p->toks.n < 4) return rrv__sf_perr(p, RRV_ERROR_PARSE, rrv__sf_field_kinds[kind].value, fs.stmt);
         if (kind == RRV__SF_K_CONSTANT && p->toks.n > 4 && rrv__sf_tok_number(&toks[3], &dummy) &&
             rrv__sf_tok_number(&toks[4], &dummy)) {
             size_t end = 4;
             while (end < p->toks.n && rrv__sf_tok_number(&toks[end], &dummy))
                 ++end;
             return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: \"constant\" needs 1 number, got %llu",
-                                stmt, (unsigned long long)(end - 3));
+                                fs.stmt, (unsigned long long)(end - 3));
         }
+        fs.value = &toks[3];
         first = 4;
     }
     nkeys = rrv__sf_field_kinds[kind].nkeys;
     if (nkeys) memcpy(keys, rrv__sf_field_kinds[kind].keys, (size_t)nkeys * sizeof *keys);
-    if (which == RRV__SF_F_IOR) {
+    if (which == RRV_MEDIUM_IOR) {
         extra = rrv__sf_ior_extra_keys;
         nextra = RRV__SF_COUNT(rrv__sf_ior_extra_keys);
-    } else if (which == RRV__SF_F_TEMPERATURE) {
+    } else if (which == RRV_MEDIUM_TEMPERATURE) {
         extra = rrv__sf_temperature_extra_keys;
         nextra = RRV__SF_COUNT(rrv__sf_temperature_extra_keys);
     }
     if (nextra) memcpy(keys + nkeys, extra, (size_t)nextra * sizeof *keys);
-    r = rrv__sf_parse_keys(p, stmt, first, keys, nkeys + nextra, sl);
+    r = rrv__sf_parse_keys(p, fs.stmt, first, keys, nkeys + nextra, sl);
     if (r != RRV_OK) return r;
+    fs.sl = sl;
+    rrv__sf_field_extras(&fs, sl + nkeys);
 
-    /* the extras first: a temperature constant is checked with them */
-    if (which == RRV__SF_F_IOR && sl[nkeys].given) m->ior_scale = sl[nkeys].v[0];
-    if (which == RRV__SF_F_TEMPERATURE) {
-        if (sl[nkeys].given) m->temperatureoffset = sl[nkeys].v[0];
-        if (sl[nkeys + 1].given) m->temperaturescale = sl[nkeys + 1].v[0];
-        if (sl[nkeys + 2].given)
-            m->blackbody_emission = sl[nkeys + 2].choice == 0;
-        else if (first_blob)
-            m->blackbody_emission = 1;
+    memset(&fresh, 0, sizeof fresh);
+    target = kind == RRV__SF_K_BLOB ? f : &fresh;
+    r = rrv__sf_field_kinds[kind].parse(p, &fs, target);
+    if (r == RRV_OK && kind != RRV__SF_K_GAS) {
+        rrv__sf_ck(p, &ck, fs.stmt);
+        r = rrv__field_check(&ck, fs.which, fs.m, target,
+                             kind == RRV__SF_K_BLOB ? target->blob_count - 1 : 0);
     }
-
-    switch (kind) {
-    case RRV__SF_K_CONSTANT: {
-        static const rrv__sf_key any = {"constant", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL};
-        double v;
-        uint64_t u;
-        if (!rrv__sf_tok_number(&toks[3], &v))
-            return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                                "%s: expected a number for \"constant\", got \"%.*s\"", stmt,
-                                RRV__SF_CLIP(&toks[3]));
-        r = rrv__sf_value(p, stmt, &any, &toks[3], &v, &u);
-        if (r != RRV_OK) return r;
-        if (which == RRV__SF_F_DENSITY && v < 0.0)
-            return rrv__sf_perr(p, RRV_ERROR_PARSE, "density: constant must be >= 0, got %.*s",
-                                RRV__SF_CLIP(&toks[3]));
-        if (which == RRV__SF_F_PRESSURE && !(v > 0.0))
-            return rrv__sf_perr(p, RRV_ERROR_PARSE, "pressure: constant must be > 0, got %.*s",
-                                RRV__SF_CLIP(&toks[3]));
-        if (which == RRV__SF_F_IOR && !(v > -1.0))
-            return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                                "ior: constant (the refractivity eta - 1) must be > -1, got %.*s",
-                                RRV__SF_CLIP(&toks[3]));
-        if (which == RRV__SF_F_TEMPERATURE) {
-            double T = (v - m->temperatureoffset) * m->temperaturescale;
-            if (!(T > 0.0) || T > DBL_MAX)
-                return rrv__sf_perr(
-                    p, RRV_ERROR_PARSE,
-                    "temperature: constant %.*s gives T = %g K, must be > 0 and finite",
-                    RRV__SF_CLIP(&toks[3]), T);
-        }
-        f->kind = RRV_FIELD_CONSTANT;
-        f->value = v;
-        return RRV_OK;
+    if (target == &fresh) {
+        if (r == RRV_OK)
+            *f = fresh;
+        else
+            rrv__sf_field_free(&fresh);
     }
-    case RRV__SF_K_GRID:
-        return rrv__sf_field_grid(p, stmt, which, &toks[3], f);
-    case RRV__SF_K_NANOVDB:
-        return rrv__sf_field_nanovdb(p, stmt, &toks[3], &sl[0], f);
-    case RRV__SF_K_BLOB: {
-        rrv_blob *b;
-        if (f->blob_count == INT_MAX) return RRV__SF_OOM(p);
-        if (f->blob_count == 0 ||
-            (f->blob_count >= 4 && (f->blob_count & (f->blob_count - 1)) == 0)) {
-            size_t cap = rrv__sf_blob_capacity(f->blob_count + 1);
-            if (cap > SIZE_MAX / sizeof *b) return RRV__SF_OOM(p);
-            b = (rrv_blob *)RRV_REALLOC(f->blobs, cap * sizeof *b);
-            if (!b) return RRV__SF_OOM(p);
-            f->blobs = b;
-        }
-        b = &f->blobs[f->blob_count++];
-        b->center = rrv__sf_slot_vec(&sl[0], 0);
-        b->radius = sl[1].v[0];
-        b->weight = sl[2].given ? sl[2].v[0] : 1.0;
-        if (first_blob) {
-            f->kind = RRV_FIELD_BLOBS;
-            f->base = sl[3].given ? sl[3].v[0] : blob_base[which];
-        }
-        return RRV_OK;
-    }
-    case RRV__SF_K_NOISE: {
-        rrv_noise *n = &f->noise;
-        double sx = m->hi.x * 0.5 - m->lo.x * 0.5, sy = m->hi.y * 0.5 - m->lo.y * 0.5,
-               sz = m->hi.z * 0.5 - m->lo.z * 0.5;
-        f->kind = RRV_FIELD_NOISE;
-        n->octaves = sl[0].given ? (int)sl[0].v[0] : 5;
-        n->frequency = sl[1].given ? sl[1].v[0] : 1.0;
-        n->lacunarity = sl[2].given ? sl[2].v[0] : 2.0;
-        n->gain = sl[3].given ? sl[3].v[0] : 0.5;
-        n->threshold = sl[4].given ? sl[4].v[0] : 0.0;
-        n->seed = sl[5].given ? (uint32_t)sl[5].v[0] : 0u;
-        n->falloff = sl[6].given ? rrv__sf_falloffs[sl[6].choice] : RRV_FALLOFF_SPHERE;
-        if (sl[7].given)
-            n->center = rrv__sf_slot_vec(&sl[7], 0);
-        else {
-            n->center.x = m->lo.x * 0.5 + m->hi.x * 0.5;
-            n->center.y = m->lo.y * 0.5 + m->hi.y * 0.5;
-            n->center.z = m->lo.z * 0.5 + m->hi.z * 0.5;
-        }
-        n->radius =
-            sl[8].given ? sl[8].v[0] : (sx < sy ? (sx < sz ? sx : sz) : (sy < sz ? sy : sz));
-        f->amplitude = sl[9].given ? sl[9].v[0] : 1.0;
-        f->base = sl[10].given ? sl[10].v[0] : blob_base[which];
-        return RRV_OK;
-    }
-    case RRV__SF_K_GAS:
-        m->ior_from_gas = 1;
-        if (sl[0].given) m->eta_ref = sl[0].v[0];
-        if (sl[1].given) m->P_ref = sl[1].v[0];
-        if (sl[2].given) m->T_ref = sl[2].v[0];
-        return RRV_OK;
-    default: /* the IOR profiles share center (slot 0) */
-        if (sl[0].given)
-            f->center = rrv__sf_slot_vec(&sl[0], 0);
-        else {
-            f->center.x = m->lo.x * 0.5 + m->hi.x * 0.5;
-            f->center.y = m->lo.y * 0.5 + m->hi.y * 0.5;
-            f->center.z = m->lo.z * 0.5 + m->hi.z * 0.5;
-        }
-        if (kind == RRV__SF_K_LUNEBURG) {
-            f->kind = RRV_FIELD_LUNEBURG;
-            f->radius = sl[1].v[0];
-        } else if (kind == RRV__SF_K_FISHEYE) {
-            f->kind = RRV_FIELD_FISHEYE;
-            f->radius = sl[1].v[0];
-            f->n0 = sl[2].given ? sl[2].v[0] : 2.0;
-        } else if (kind == RRV__SF_K_SLAB) {
-            rrv_vec3 nrm = rrv__sf_slot_vec(&sl[1], 0);
-            /* scaled first so squaring cannot overflow */
-            double big = fabs(nrm.x) > fabs(nrm.y) ? fabs(nrm.x) : fabs(nrm.y), len;
-            if (fabs(nrm.z) > big) big = fabs(nrm.z);
-            if (!(big > 0.0))
-                return rrv__sf_perr(p, RRV_ERROR_PARSE, "ior: slab normal must be nonzero");
-            nrm.x /= big;
-            nrm.y /= big;
-            nrm.z /= big;
-            len = sqrt(nrm.x * nrm.x + nrm.y * nrm.y + nrm.z * nrm.z);
-            f->normal.x = nrm.x / len;
-            f->normal.y = nrm.y / len;
-            f->normal.z = nrm.z / len;
-            f->kind = RRV_FIELD_SLAB;
-            f->gradient = sl[2].v[0];
-            f->base = sl[3].given ? sl[3].v[0] : 0.0;
-        } else {
-            f->kind = RRV_FIELD_SHELL;
-            f->radius = sl[1].v[0];
-            f->thickness = sl[2].v[0];
-            f->edge = sl[3].given ? sl[3].v[0] : f->thickness / 4.0;
-            f->amplitude = sl[4].v[0];
-            f->base = sl[5].given ? sl[5].v[0] : 0.0;
-        }
-        return RRV_OK;
-    }
-}
-
-/* ---- limits (BOUNDS): the statements record their lines, rrv_scene_prepare
-   checks the limits once the whole medium is known and names the line ---- */
-
-static rrv_result rrv__sf_st_medium_checked(rrv__sf_parser *p)
-{
-    rrv_result r = rrv__sf_st_medium(p);
-    if (r == RRV_OK) p->scene->media[p->scene->medium_count - 1].line[0] = p->line;
-    return r;
-}
-
-static rrv_result rrv__sf_st_field_checked(rrv__sf_parser *p)
-{
-    static const char *const names[4] = {"density", "temperature", "pressure", "ior"};
-    rrv_result r;
-    int which = 0, mi = p->toks.n >= 2 ? rrv__sf_find_medium(p->scene, &p->toks.v[1]) : -1;
-    while (which < 3 && !rrv__sf_tok_is(&p->toks.v[0], names[which])) ++which;
-    /* Each lookup sums every blob, and so does every majorant cell's bound:
-       a file of blob lines must not make every lookup cost its length. */
-    if (mi >= 0 && p->toks.n >= 3 && rrv__sf_tok_is(&p->toks.v[2], "blob")) {
-        const rrv_medium *m = &p->scene->media[mi];
-        const rrv_field *f = which == 0 ? &m->density : which == 1 ? &m->temperature
-                           : which == 2 ? &m->pressure : &m->ior;
-        if (f->kind == RRV_FIELD_BLOBS && f->blob_count >= RRV_MAX_BLOBS)
-            return rrv__sf_perr(p, RRV_ERROR_LIMIT, "%s: more than %d blobs in one field (a grid holds more)",
-                                names[which], RRV_MAX_BLOBS);
-    }
-    r = rrv__sf_st_field(p);
-    if (r == RRV_OK) p->scene->media[rrv__sf_find_medium(p->scene, &p->toks.v[1])].line[1 + which] = p->line;
+    if (r == RRV_OK) fs.m->line[1 + which] = p->line;
     return r;
 }
 
@@ -10668,9 +11651,9 @@ static const struct rrv__sf_statement {
     {"ambient", rrv__sf_st_ambient},         {"material", rrv__sf_st_material},
     {"sphere", rrv__sf_st_primitive},        {"quad", rrv__sf_st_primitive},
     {"triangle", rrv__sf_st_primitive},      {"mesh", rrv__sf_st_mesh},
-    {"environment", rrv__sf_st_environment}, {"medium", rrv__sf_st_medium_checked},
-    {"density", rrv__sf_st_field_checked},   {"temperature", rrv__sf_st_field_checked},
-    {"pressure", rrv__sf_st_field_checked},  {"ior", rrv__sf_st_field_checked},
+    {"environment", rrv__sf_st_environment}, {"medium", rrv__sf_st_medium},
+    {"density", rrv__sf_st_field},           {"temperature", rrv__sf_st_field},
+    {"pressure", rrv__sf_st_field},          {"ior", rrv__sf_st_field},
 };
 
 /* ---- scene ---------------------------------------------------------------------- */
@@ -10769,27 +11752,8 @@ RRV_DEF rrv_result rrv_scene_parse(const char *text, size_t size, const char *na
     if (!out || (!text && size > 0))
         return rrv__fail(err, RRV_ERROR_ARGUMENT, name, 0, "rrv_scene_parse: NULL argument");
     *out = NULL;
-    s = (rrv_scene *)RRV_MALLOC(sizeof *s);
+    s = rrv__scene_new(name);
     if (!s) return rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory");
-    memset(s, 0, sizeof *s);
-    {
-        size_t n = strlen(name);
-        if (n >= sizeof s->path) name += n - (sizeof s->path - 1); /* keep the file name end */
-        memcpy(s->path, name, strlen(name) + 1);
-    }
-    s->camera.up.y = 1.0;
-    s->camera.fov = 40.0;
-    s->camera.width = 320;
-    s->camera.height = 240;
-    s->settings.spp = 16;
-    s->settings.max_depth = 32;
-    s->settings.integrator = RRV_INTEGRATOR_CLASSIC;
-    s->settings.bend_tolerance = 0.01;
-    s->settings.step = 0.01;
-    s->settings.stepper = RRV_STEPPER_DEFAULT;
-    s->settings.refraction = RRV_REFRACTION_DEFAULT;
-    s->settings.majorant_cells = 0;
-    s->settings.ambient_ior = 1.0;
     s->max_grid_bytes = opt ? opt->max_grid_bytes : 0;
     if (opt && opt->max_bake_samples > 0) s->settings.max_bake_samples = opt->max_bake_samples;
     memset(&p, 0, sizeof p);
@@ -10844,7 +11808,7 @@ RRV_DEF rrv_result rrv_scene_load(const char *path, const rrv_load_options *opt,
         return rrv__fail(err, r, path, 0, "%s", message);
     }
     r = rrv_scene_parse((const char *)data, size, path, slash ? dir : NULL, opt, out, err);
-    RRV_FREE(data);
+    rrv__sf_release_whole(opt, data);
     return r;
 }
 

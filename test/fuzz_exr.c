@@ -43,7 +43,7 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size)
         info.pixel = RRV_EXR_FLOAT;
         if (width < 4096 && (long long)info.x + width - 1 <= INT_MAX &&
             (long long)info.y + height - 1 <= INT_MAX &&
-            rrv_write_exr_to(discard, NULL, rgb, width, height, &info) != RRV_OK)
+            rrv_write_exr_to(discard, NULL, rgb, width, height, &info, NULL) != RRV_OK)
             abort();
         rrv_free(rgb);
     } else if (rgb != NULL || width != 0 || height != 0 || err.message[0] == '\0') {

@@ -53,12 +53,12 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size)
     /* grey images store 1 float a pixel, colour 3; both must fit in the input */
     if (!rgb || w <= 0 || h <= 0 || (size_t)w * (size_t)h * (data[1] == 'F' ? 12u : 4u) > size) abort();
     floats = (size_t)w * (size_t)h * 3;
-    if (rrv_write_pfm_to(sink_write, &pfm, rgb, w, h) != RRV_OK) abort();
+    if (rrv_write_pfm_to(sink_write, &pfm, rgb, w, h, NULL) != RRV_OK) abort();
     if (rrv_read_pfm_memory(pfm.data, pfm.size, "again.pfm", &again, &w2, &h2, &err) != RRV_OK) abort();
     if (w2 != w || h2 != h || memcmp(rgb, again, floats * sizeof(float)) != 0) abort();
     /* Any exposure the image itself suggests, so odd gains are tried too. */
     exposure = isfinite(rgb[0]) ? rgb[0] : 0.0;
-    if (rrv_write_png_to(sink_write, &png, rgb, w, h, exposure) != RRV_OK) abort();
+    if (rrv_write_png_to(sink_write, &png, rgb, w, h, exposure, NULL) != RRV_OK) abort();
     if (png.size < 8 + 25 + 12 || memcmp(png.data + 1, "PNG", 3) != 0) abort();
     free(pfm.data);
     free(png.data);

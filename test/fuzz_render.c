@@ -67,7 +67,7 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size)
             scene->settings.integrator = (rrv_integrator)((integrator + k) % 3);
             scene->settings.refraction = (rrv_refraction_scheme)((scheme + k / 3) % 4);
             scene->settings.stepper = (rrv_stepper)((stepper + k / 3) % 3);
-            if (rrv_render_rect(scene, x, y, x + 1, y + 1, 0, 1, pixel, 1, &stats) != RRV_OK) __builtin_trap();
+            if (rrv_render_rect(scene, x, y, x + 1, y + 1, 0, 1, pixel, 1, &stats, NULL) != RRV_OK) __builtin_trap();
             for (c = 0; c < 3; ++c)
                 if (!isfinite(pixel[c])) __builtin_trap();
             if (stats.events > FUZZ_MAX_EVENTS) __builtin_trap();

@@ -120,7 +120,7 @@ int main(int argc, char **argv)
                 double e = pixels[k] / 255.0;
                 rgb[k] = (float)(e <= 0.04045 ? e / 12.92 : pow((e + 0.055) / 1.055, 2.4));
             }
-            if (rrv_write_png_to(append, &fresh, rgb, width, height, 0.0) == RRV_OK)
+            if (rrv_write_png_to(append, &fresh, rgb, width, height, 0.0, NULL) == RRV_OK)
                 again = decode(fresh.data, fresh.size, &width2, &height2, new_blocks);
             if (!again || width2 != width || height2 != height
                 || memcmp(again, pixels, 3 * (size_t)width * (size_t)height) != 0) {

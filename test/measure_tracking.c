@@ -77,7 +77,7 @@ int main(int argc, char **argv)
     for (run = 0; run < 3; ++run) {
         memset(&stats, 0, sizeof stats);
         t = seconds();
-        rrv_render_rect(scene, 0, 0, w, h, 0, spp, sum, w, &stats);
+        rrv_render_rect(scene, 0, 0, w, h, 0, spp, sum, w, &stats, NULL);
         t = seconds() - t;
         if (t < best) best = t;
     }

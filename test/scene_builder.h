@@ -1,52 +1,70 @@
-/* Builds scenes in code for tests that must not depend on the parser. The
-   arrays are allocated with malloc, as RRV_MALLOC does by default, so
+/* Builds scenes in code for tests that must not depend on the parser,
+   through the public scene-building API, so the defaults are the library's
+   own. Shapes and blobs are appended raw for the caller to fill in (a
+   zeroed sphere would be refused by rrv_scene_add_shape); rrv_scene_prepare
+   checks them. The arrays use malloc, as RRV_MALLOC does by default, so
    rrv_scene_free releases them. */
 #ifndef RRV_TEST_SCENE_BUILDER_H
 #define RRV_TEST_SCENE_BUILDER_H
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+static void tb_must(rrv_result r, const rrv_error *err)
+{
+    if (r != RRV_OK) {
+        fprintf(stderr, "scene_builder: %s\n", err->message);
+        abort();
+    }
+}
+
 static rrv_scene *tb_scene(int width, int height)
 {
-    rrv_scene *s = (rrv_scene *)calloc(1, sizeof *s);
-    s->camera.eye = rrv__v3(0, 0, -5);
-    s->camera.look = rrv__v3(0, 0, 0);
-    s->camera.up = rrv__v3(0, 1, 0);
-    s->camera.fov = 30;
-    s->camera.width = width;
-    s->camera.height = height;
-    s->settings.spp = 16;
-    s->settings.max_depth = 64;
-    s->settings.bend_tolerance = 0.002;
-    s->settings.step = 0.01;
-    s->settings.ambient_ior = 1.0;
+    rrv_scene *s;
+    rrv_camera cam;
+    rrv_settings set;
+    rrv_material grey;
+    rrv_error err;
+    memset(&cam, 0, sizeof cam);
+    memset(&set, 0, sizeof set);
+    memset(&grey, 0, sizeof grey);
+    tb_must(rrv_scene_create(&s, &err), &err);
+    cam.eye = rrv__v3(0, 0, -5);
+    cam.fov = 30;
+    cam.width = width;
+    cam.height = height;
+    tb_must(rrv_scene_set_camera(s, &cam, &err), &err);
+    set.max_depth = 64;
+    set.bend_tolerance = 0.002;
+    tb_must(rrv_scene_set_settings(s, &set, &err), &err);
+    strcpy(grey.name, "grey"); /* albedo 0.5, the default */
+    tb_must(rrv_scene_add_material(s, &grey, NULL, &err), &err);
     strcpy(s->path, "test");
-    s->materials = (rrv_material *)calloc(1, sizeof(rrv_material));
-    s->material_count = s->material_capacity = 1;
-    s->materials[0].albedo[0] = s->materials[0].albedo[1] = s->materials[0].albedo[2] = 0.5;
     return s;
 }
 
+/* A box of constant density 1. Coefficients that are both zero are set
+   after adding: to rrv_scene_add_medium they would mean the default. */
 static rrv_medium *tb_medium(rrv_scene *s, rrv_vec3 lo, rrv_vec3 hi, double sigma_a, double sigma_s)
 {
+    rrv_medium desc;
+    rrv_field density;
+    rrv_error err;
     rrv_medium *m;
-    s->media = (rrv_medium *)realloc(s->media, (size_t)(s->medium_count + 1) * sizeof(rrv_medium));
-    m = &s->media[s->medium_count++];
-    s->medium_capacity = s->medium_count;
-    memset(m, 0, sizeof *m);
-    m->lo = lo;
-    m->hi = hi;
-    m->sigma_a[0] = m->sigma_a[1] = m->sigma_a[2] = sigma_a;
-    m->sigma_s[0] = m->sigma_s[1] = m->sigma_s[2] = sigma_s;
-    m->scale = 1;
-    m->Lescale = 1;
-    m->temperaturescale = 1;
-    m->eta_ref = 1.000292;
-    m->P_ref = 101325;
-    m->T_ref = 300;
-    m->ior_scale = 1;
-    m->density.kind = RRV_FIELD_CONSTANT;
-    m->density.value = 1;
+    int i, c;
+    memset(&desc, 0, sizeof desc);
+    memset(&density, 0, sizeof density);
+    desc.lo = lo;
+    desc.hi = hi;
+    tb_must(rrv_scene_add_medium(s, &desc, &i, &err), &err);
+    density.kind = RRV_FIELD_CONSTANT;
+    density.value = 1;
+    tb_must(rrv_scene_set_field(s, i, RRV_MEDIUM_DENSITY, &density, &err), &err);
+    m = &s->media[i];
+    for (c = 0; c < 3; ++c) {
+        m->sigma_a[c] = sigma_a;
+        m->sigma_s[c] = sigma_s;
+    }
     return m;
 }
 

@@ -75,7 +75,7 @@ static image_mean render_mean(rrv_scene *s, int spp_per_chunk, int chunks)
     for (k = 0; k < chunks; ++k) {
         double m = 0;
         memset(img, 0, n * sizeof(float));
-        rrv_render_rect(s, 0, 0, w, h, k * spp_per_chunk, (k + 1) * spp_per_chunk, img, w, NULL);
+        rrv_render_rect(s, 0, 0, w, h, k * spp_per_chunk, (k + 1) * spp_per_chunk, img, w, NULL, NULL);
         for (i = 0; i < n; ++i) m += img[i];
         m /= (double)n * spp_per_chunk;
         if (k == 0) memcpy(out.first, img, n * sizeof(float));

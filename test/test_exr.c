@@ -281,7 +281,7 @@ done:
 static int write_exr(const float *rgb, int width, int height, const rrv_exr_options *opt, byte_sink *sink)
 {
     sink_init(sink, (size_t)-1);
-    return rrv_write_exr_to(sink_write, sink, rgb, width, height, opt) == RRV_OK;
+    return rrv_write_exr_to(sink_write, sink, rgb, width, height, opt, NULL) == RRV_OK;
 }
 
 /* ---- tests ------------------------------------------------------------------------ */
@@ -475,29 +475,29 @@ static void exr_refuses_bad_arguments(void)
     rrv_exr_options opt;
     byte_sink sink;
     sink_init(&sink, (size_t)-1);
-    CHECK(rrv_write_exr_to(NULL, &sink, rgb, 2, 2, NULL) == RRV_ERROR_ARGUMENT);
-    CHECK(rrv_write_exr_to(sink_write, &sink, NULL, 2, 2, NULL) == RRV_ERROR_ARGUMENT);
-    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 0, 2, NULL) == RRV_ERROR_ARGUMENT);
-    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, -1, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_exr_to(NULL, &sink, rgb, 2, 2, NULL, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_exr_to(sink_write, &sink, NULL, 2, 2, NULL, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 0, 2, NULL, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, -1, NULL, NULL) == RRV_ERROR_ARGUMENT);
     memset(&opt, 0, sizeof opt);
     opt.pixel = (rrv_exr_pixel)7;
-    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 2, &opt) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 2, &opt, NULL) == RRV_ERROR_ARGUMENT);
     memset(&opt, 0, sizeof opt);
     opt.compression = (rrv_exr_compression)9;
-    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 2, &opt) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 2, &opt, NULL) == RRV_ERROR_ARGUMENT);
     memset(&opt, 0, sizeof opt);
     opt.display_width = -1;
-    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 2, &opt) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 2, &opt, NULL) == RRV_ERROR_ARGUMENT);
     memset(&opt, 0, sizeof opt);
     opt.x = INT_MAX; /* the data window's last column would not be an int */
-    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 2, &opt) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 2, &opt, NULL) == RRV_ERROR_ARGUMENT);
     opt.x = INT_MAX - 1;
-    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 2, &opt) == RRV_OK);
+    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 2, &opt, NULL) == RRV_OK);
     /* A ZIP chunk of 16 float lines must have an int32 size: caught before
        anything is read from the (here too small) buffer. */
     memset(&opt, 0, sizeof opt);
     opt.pixel = RRV_EXR_FLOAT;
-    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, INT32_MAX / 190, 1, &opt) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, INT32_MAX / 190, 1, &opt, NULL) == RRV_ERROR_ARGUMENT);
     free(sink.data);
 }
 
@@ -517,7 +517,7 @@ static void exr_write_failures(void)
         CHECK(rgb && write_exr(rgb, width, height, &opt, &full));
         for (cut = 0; cut < full.size; cut += 97) {
             sink_init(&sink, cut);
-            if (rrv_write_exr_to(sink_write, &sink, rgb, width, height, &opt) != RRV_ERROR_IO) ++bad;
+            if (rrv_write_exr_to(sink_write, &sink, rgb, width, height, &opt, NULL) != RRV_ERROR_IO) ++bad;
             free(sink.data);
         }
         CHECKF(bad == 0, "%d cuts not reported", bad);

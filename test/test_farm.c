@@ -292,7 +292,7 @@ static void exr_text_attribute_round_trips(void)
     opt.text_name = "rrvPart";
     opt.text = "line one\nline two\n";
     sink.size = 0;
-    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 1, &opt) == RRV_OK);
+    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 1, &opt, NULL) == RRV_OK);
     CHECK(rrv_exr_find_attribute(sink.data, sink.size, "rrvPart", &type, &value, &size) == RRV_OK &&
           strcmp(type, "string") == 0 && size == strlen(opt.text) && memcmp(value, opt.text, size) == 0);
     CHECK(rrv_exr_find_attribute(sink.data, sink.size, "rrvOther", &type, &value, &size) == RRV_ERROR_FORMAT &&
@@ -307,7 +307,7 @@ static void exr_text_attribute_round_trips(void)
                "cut at %u", (unsigned)cut);
     }
     opt.text_name = "";
-    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 1, &opt) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_exr_to(sink_write, &sink, rgb, 2, 1, &opt, NULL) == RRV_ERROR_ARGUMENT);
 }
 
 int main(int argc, char **argv)

@@ -301,7 +301,7 @@ static void check_pfm_round_trip(int width, int height)
     rgb[0] = 12345.5f; /* the top-left pixel, which PFM stores in its last row */
 
     sink_init(&sink, (size_t)-1);
-    r = rrv_write_pfm_to(sink_write, &sink, rgb, width, height);
+    r = rrv_write_pfm_to(sink_write, &sink, rgb, width, height, NULL);
     CHECKF(r == RRV_OK, "%dx%d: %s", width, height, rrv_result_string(r));
     snprintf(header, sizeof header, "PF\n%d %d\n-1.0\n", width, height);
     header_len = strlen(header);
@@ -522,7 +522,7 @@ static void test_pfm_malformed(void)
     /* Every proper prefix of a good file is truncated. */
     for (i = 0; i < sizeof pixels / sizeof pixels[0]; ++i) pixels[i] = (float)i;
     sink_init(&good, (size_t)-1);
-    CHECK(rrv_write_pfm_to(sink_write, &good, pixels, 3, 2) == RRV_OK);
+    CHECK(rrv_write_pfm_to(sink_write, &good, pixels, 3, 2, NULL) == RRV_OK);
     for (i = 0; i < good.size; ++i) {
         char label[64];
         snprintf(label, sizeof label, "prefix of %lu bytes", (unsigned long)i);
@@ -716,7 +716,7 @@ static void write_and_check_png(const float *rgb, int width, int height, double 
     byte_sink sink;
     rrv_result r;
     sink_init(&sink, (size_t)-1);
-    r = rrv_write_png_to(sink_write, &sink, rgb, width, height, exposure);
+    r = rrv_write_png_to(sink_write, &sink, rgb, width, height, exposure, NULL);
     CHECKF(r == RRV_OK, "%s: %s", label, rrv_result_string(r));
     if (r == RRV_OK) check_png(&sink, rgb, width, height, exposure, stats, label);
     sink_free(&sink);
@@ -777,12 +777,12 @@ static void test_png_structure(void)
 
         /* streamed in pieces, not handed over as one block */
         sink_init(&sink, (size_t)-1);
-        CHECK(rrv_write_png_to(sink_write, &sink, big, 200, 120, 0.0) == RRV_OK);
+        CHECK(rrv_write_png_to(sink_write, &sink, big, 200, 120, 0.0, NULL) == RRV_OK);
         CHECKF(sink.calls >= 4 && sink.largest_write < sink.size / 2,
                "%d calls, largest %lu of %lu", sink.calls, (unsigned long)sink.largest_write, (unsigned long)sink.size);
         sink_free(&sink);
         sink_init(&sink, (size_t)-1);
-        CHECK(rrv_write_pfm_to(sink_write, &sink, big, 200, 120) == RRV_OK);
+        CHECK(rrv_write_pfm_to(sink_write, &sink, big, 200, 120, NULL) == RRV_OK);
         CHECKF(sink.calls >= 2 && sink.largest_write < sink.size,
                "%d calls, largest %lu of %lu", sink.calls, (unsigned long)sink.largest_write, (unsigned long)sink.size);
         sink_free(&sink);
@@ -841,11 +841,11 @@ static void test_writer_failures(void)
 
     if (!img) { CHECK(img != NULL); return; }
     sink_init(&sink, (size_t)-1);
-    CHECK(rrv_write_pfm_to(sink_write, &sink, img, 200, 120) == RRV_OK);
+    CHECK(rrv_write_pfm_to(sink_write, &sink, img, 200, 120, NULL) == RRV_OK);
     total_pfm = sink.size;
     sink_free(&sink);
     sink_init(&sink, (size_t)-1);
-    CHECK(rrv_write_png_to(sink_write, &sink, img, 200, 120, 0.0) == RRV_OK);
+    CHECK(rrv_write_png_to(sink_write, &sink, img, 200, 120, 0.0, NULL) == RRV_OK);
     total_png = sink.size;
     sink_free(&sink);
 
@@ -857,8 +857,8 @@ static void test_writer_failures(void)
             rrv_result r;
             if (fail_after >= total) continue;
             sink_init(&sink, fail_after);
-            r = kind ? rrv_write_png_to(sink_write, &sink, img, 200, 120, 0.0)
-                     : rrv_write_pfm_to(sink_write, &sink, img, 200, 120);
+            r = kind ? rrv_write_png_to(sink_write, &sink, img, 200, 120, 0.0, NULL)
+                     : rrv_write_pfm_to(sink_write, &sink, img, 200, 120, NULL);
             CHECKF(r == RRV_ERROR_IO, "%s failing after %lu bytes: %s", kind ? "PNG" : "PFM",
                    (unsigned long)fail_after, rrv_result_string(r));
             CHECKF(sink.calls_after_failure == 0, "%s: %d writes after the failure", kind ? "PNG" : "PFM",
@@ -866,22 +866,22 @@ static void test_writer_failures(void)
             sink_free(&sink);
         }
         sink_init(&sink, total);
-        CHECK((kind ? rrv_write_png_to(sink_write, &sink, img, 200, 120, 0.0)
-                    : rrv_write_pfm_to(sink_write, &sink, img, 200, 120)) == RRV_OK);
+        CHECK((kind ? rrv_write_png_to(sink_write, &sink, img, 200, 120, 0.0, NULL)
+                    : rrv_write_pfm_to(sink_write, &sink, img, 200, 120, NULL)) == RRV_OK);
         sink_free(&sink);
     }
 
     sink_init(&sink, (size_t)-1);
-    CHECK(rrv_write_pfm_to(NULL, &sink, pixel, 1, 1) == RRV_ERROR_ARGUMENT);
-    CHECK(rrv_write_pfm_to(sink_write, &sink, NULL, 1, 1) == RRV_ERROR_ARGUMENT);
-    CHECK(rrv_write_pfm_to(sink_write, &sink, pixel, 0, 1) == RRV_ERROR_ARGUMENT);
-    CHECK(rrv_write_pfm_to(sink_write, &sink, pixel, 1, -1) == RRV_ERROR_ARGUMENT);
-    CHECK(rrv_write_png_to(NULL, &sink, pixel, 1, 1, 0.0) == RRV_ERROR_ARGUMENT);
-    CHECK(rrv_write_png_to(sink_write, &sink, NULL, 1, 1, 0.0) == RRV_ERROR_ARGUMENT);
-    CHECK(rrv_write_png_to(sink_write, &sink, pixel, -3, 1, 0.0) == RRV_ERROR_ARGUMENT);
-    CHECK(rrv_write_png_to(sink_write, &sink, pixel, 1, 0, 0.0) == RRV_ERROR_ARGUMENT);
-    CHECK(rrv_write_png_to(sink_write, &sink, pixel, 1, 1, NAN) == RRV_ERROR_ARGUMENT);
-    CHECK(rrv_write_png_to(sink_write, &sink, pixel, 1, 1, INFINITY) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_pfm_to(NULL, &sink, pixel, 1, 1, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_pfm_to(sink_write, &sink, NULL, 1, 1, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_pfm_to(sink_write, &sink, pixel, 0, 1, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_pfm_to(sink_write, &sink, pixel, 1, -1, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_png_to(NULL, &sink, pixel, 1, 1, 0.0, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_png_to(sink_write, &sink, NULL, 1, 1, 0.0, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_png_to(sink_write, &sink, pixel, -3, 1, 0.0, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_png_to(sink_write, &sink, pixel, 1, 0, 0.0, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_png_to(sink_write, &sink, pixel, 1, 1, NAN, NULL) == RRV_ERROR_ARGUMENT);
+    CHECK(rrv_write_png_to(sink_write, &sink, pixel, 1, 1, INFINITY, NULL) == RRV_ERROR_ARGUMENT);
     CHECKF(sink.calls == 0, "%d writes for rejected arguments", sink.calls);
     sink_free(&sink);
 
@@ -965,7 +965,7 @@ static void test_pfm_png_files(void)
     CHECKF(r == RRV_OK, "%s", err.message);
     read_file_bytes(png_path, &from_file);
     sink_init(&from_callback, (size_t)-1);
-    CHECK(rrv_write_png_to(sink_write, &from_callback, first, 7, 5, 0.5) == RRV_OK);
+    CHECK(rrv_write_png_to(sink_write, &from_callback, first, 7, 5, 0.5, NULL) == RRV_OK);
     CHECK(from_file.size == from_callback.size && from_file.size > 0
           && memcmp(from_file.data, from_callback.data, from_file.size) == 0);
     check_png(&from_file, first, 7, 5, 0.5, NULL, "PNG file");
@@ -1051,7 +1051,7 @@ static void test_pfm_file_reader_bounds(void)
 
     /* data after the announced pixels is left unread */
     sink_init(&s, (size_t)-1);
-    CHECK(rrv_write_pfm_to(sink_write, &s, pixel, 1, 1) == RRV_OK);
+    CHECK(rrv_write_pfm_to(sink_write, &s, pixel, 1, 1, NULL) == RRV_OK);
     sink_append_text(&s, "trailing bytes that are not pixels");
     CHECK(write_bytes_file(path, s.data, s.size));
     sink_free(&s);
@@ -1101,7 +1101,7 @@ static void test_pfm_file_reader_bounds(void)
             alarm(30);
             if (!f) _exit(1);
             sink_init(&s, (size_t)-1);
-            if (rrv_write_pfm_to(sink_write, &s, pixel, 1, 1) != RRV_OK) _exit(1);
+            if (rrv_write_pfm_to(sink_write, &s, pixel, 1, 1, NULL) != RRV_OK) _exit(1);
             fwrite(s.data, 1, s.size, f);
             for (;;) fwrite(junk, 1, sizeof junk, f); /* until the reader closes */
         } else if (child > 0) {

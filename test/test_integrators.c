@@ -69,7 +69,7 @@ static stats pixel_samples_cut(rrv_scene *s, int spp, int channel, rrv_render_st
     stats st = {0, 0, 0};
     for (k = 0; k < spp; ++k) {
         memset(img, 0, (size_t)w * h * 3 * sizeof(float));
-        rrv_render_rect(s, 0, 0, w, h, k, k + 1, img, w, rs);
+        rrv_render_rect(s, 0, 0, w, h, k, k + 1, img, w, rs, NULL);
         for (i = 0; i < w * h; ++i) stats_add(&st, img[3 * i + channel]);
     }
     free(img);
@@ -263,11 +263,11 @@ static void test_no_ior_renders_alike(void)
     s->settings.max_depth = 16;
     prepare(s);
     use(s, &methods[0]);
-    rrv_render_rect(s, 0, 0, 10, 10, 0, 8, ref, 10, NULL);
+    rrv_render_rect(s, 0, 0, 10, 10, 0, 8, ref, 10, NULL, NULL);
     for (i = 1; i < METHOD_COUNT; ++i) {
         memset(img, 0, n * sizeof(float));
         use(s, &methods[i]);
-        rrv_render_rect(s, 0, 0, 10, 10, 0, 8, img, 10, NULL);
+        rrv_render_rect(s, 0, 0, 10, 10, 0, 8, img, 10, NULL, NULL);
         CHECKF(memcmp(img, ref, n * sizeof(float)) == 0, "%s renders a scene without IOR differently from classic",
                methods[i].name);
     }

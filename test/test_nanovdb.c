@@ -284,7 +284,7 @@ static void render(const char *density, float *sum, int *w, int *h)
     *w = s->camera.width;
     *h = s->camera.height;
     memset(sum, 0, sizeof(float) * 3 * 24 * 16);
-    CHECK(rrv_render_rect(s, 0, 0, *w, *h, 0, s->settings.spp, sum, *w, NULL) == RRV_OK);
+    CHECK(rrv_render_rect(s, 0, 0, *w, *h, 0, s->settings.spp, sum, *w, NULL, NULL) == RRV_OK);
     rrv_scene_free(s);
 }
 
@@ -335,7 +335,7 @@ static void render_haze(const char *temperature, float *sum, int *w, int *h)
     *h = s->camera.height;
     CHECK(s->media[0].majorant && s->media[0].majorant->refraction.data != NULL);
     memset(sum, 0, sizeof(float) * 3 * 24 * 16);
-    CHECK(rrv_render_rect(s, 0, 0, *w, *h, 0, s->settings.spp, sum, *w, NULL) == RRV_OK);
+    CHECK(rrv_render_rect(s, 0, 0, *w, *h, 0, s->settings.spp, sum, *w, NULL, NULL) == RRV_OK);
     rrv_scene_free(s);
 }
 

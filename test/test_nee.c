@@ -72,7 +72,7 @@ static void block_samples_rect(const rrv_scene *s, int spp, int x0, int y0, int 
     float *img = (float *)malloc((size_t)w * h * 3 * sizeof(float));
     for (k = 0; k < spp; ++k) {
         memset(img, 0, (size_t)w * h * 3 * sizeof(float));
-        rrv_render_rect(s, x0, y0, x1, y1, k, k + 1, img, w, rs);
+        rrv_render_rect(s, x0, y0, x1, y1, k, k + 1, img, w, rs, NULL);
         for (y = 0; y < h; ++y)
             for (x = 0; x < w; ++x)
                 stats_add(&blocks[((y + y0) / bh) * per_row + (x + x0) / bw], img[3 * (y * w + x) + 1]);
@@ -511,9 +511,9 @@ static void test_classic_ignores_nee(void)
     y = (float *)calloc(n, sizeof *y);
     s->settings.integrator = RRV_INTEGRATOR_CLASSIC;
     s->settings.nee = RRV_NEE_STRAIGHT;
-    rrv_render_rect(s, 0, 0, w, h, 0, 2, x, w, NULL);
+    rrv_render_rect(s, 0, 0, w, h, 0, 2, x, w, NULL, NULL);
     s->settings.nee = RRV_NEE_NONE;
-    rrv_render_rect(s, 0, 0, w, h, 0, 2, y, w, NULL);
+    rrv_render_rect(s, 0, 0, w, h, 0, 2, y, w, NULL, NULL);
     for (i = 0; i < n; ++i)
         if (x[i] != y[i]) break;
     CHECKF(i == n, "classic with nee none differs at value %lu", (unsigned long)i);

@@ -222,7 +222,7 @@ static stats render_statistics(rrv_scene *s, int spp, int channel)
     stats st = {0, 0, 0};
     for (k = 0; k < spp; ++k) {
         memset(img, 0, (size_t)w * h * 3 * sizeof(float));
-        rrv_render_rect(s, 0, 0, w, h, k, k + 1, img, w, NULL);
+        rrv_render_rect(s, 0, 0, w, h, k, k + 1, img, w, NULL, NULL);
         for (i = 0; i < w * h; ++i) stats_add(&st, img[3 * i + channel]);
     }
     free(img);
@@ -274,11 +274,11 @@ static void test_tiles_are_bit_identical(void)
     s->environment.kind = RRV_ENV_GRADIENT;
     s->environment.L[2] = 1; s->environment.L2[0] = 0.5;
     CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
-    rrv_render_rect(s, 0, 0, w, h, 0, 8, full, w, NULL);
+    rrv_render_rect(s, 0, 0, w, h, 0, 8, full, w, NULL, NULL);
     for (y = 0; y < h; y += 5)
         for (x = 0; x < w; x += 7)
             rrv_render_rect(s, x, y, x + 7 > w ? w : x + 7, y + 5 > h ? h : y + 5, 0, 8,
-                            tiled + 3 * (y * w + x), w, NULL);
+                            tiled + 3 * (y * w + x), w, NULL, NULL);
     CHECK(memcmp(full, tiled, (size_t)w * h * 3 * sizeof(float)) == 0);
     {
         double total = 0;
@@ -370,7 +370,7 @@ static long furnace_shortfall(rrv_scene *s, int spp, rrv_render_stats *st, doubl
     float *img = (float *)calloc((size_t)w * h * 3, sizeof(float));
     double missing = 0;
     memset(st, 0, sizeof *st);
-    rrv_render_rect(s, 0, 0, w, h, 0, spp, img, w, st);
+    rrv_render_rect(s, 0, 0, w, h, 0, spp, img, w, st, NULL);
     *worst = 0;
     for (i = 0; i < w * h * 3; i += 3) {
         missing += spp - img[i + 1];
@@ -487,7 +487,7 @@ static void test_majorant_follows_large_voxels(void)
                 loaded += mg->density_max[(z * mg->n[1] + y) * mg->n[0] + x] > 0;
     CHECKF(loaded == 8, "%d cells carry the sample", loaded);
     memset(&st, 0, sizeof st);
-    rrv_render_rect(s, 0, 0, 8, 8, 0, 16, img, 8, &st);
+    rrv_render_rect(s, 0, 0, 8, 8, 0, 16, img, 8, &st, NULL);
     /* measured 4.3e3 events a sample here (with 4^3 cells: 3.3e5, and 80
        of the 1024 paths cut); the check allows 10 times that, none cut */
     CHECKF(st.events < 43000 * st.samples && st.paths_cut == 0, "%lu events in %lu samples, %lu cut",
@@ -620,7 +620,7 @@ static void test_hostile_numbers_stay_finite(void)
     CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
     s->environment.L[0] = s->environment.L[1] = s->environment.L[2] = RRV_MAX_SAMPLE;
     for (i = 0; i < 12; ++i) img[i] = 0.999f * FLT_MAX;
-    rrv_render_rect(s, 0, 0, 2, 2, 0, 1 << 20, img, 2, NULL); /* adds 1e36 a pixel */
+    rrv_render_rect(s, 0, 0, 2, 2, 0, 1 << 20, img, 2, NULL, NULL); /* adds 1e36 a pixel */
     for (i = 0; i < 12; ++i) finite &= img[i] == FLT_MAX;
     CHECK(finite);
     {
@@ -628,7 +628,7 @@ static void test_hostile_numbers_stay_finite(void)
         memset(&st, 0, sizeof st);
         for (i = 0; i < 12; ++i) img[i] = 0;
         s->environment.L[1] = 10 * RRV_MAX_SAMPLE;
-        rrv_render_rect(s, 0, 0, 2, 2, 0, 8, img, 2, &st);
+        rrv_render_rect(s, 0, 0, 2, 2, 0, 8, img, 2, &st, NULL);
         CHECK(st.nonfinite == 32 && img[0] == 0);
     }
     s->environment.L[1] = 2 * RRV_MAX_RADIANCE;

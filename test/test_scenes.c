@@ -79,7 +79,7 @@ static void check_render(rrv_scene *scene, const char *name, rrv_integrator inte
     if (!sum) return;
     scene->settings.integrator = integrator;
     start = clock();
-    res = rrv_render_rect(scene, 0, 0, w, h, 0, TEST_SPP, sum, w, &stats);
+    res = rrv_render_rect(scene, 0, 0, w, h, 0, TEST_SPP, sum, w, &stats, NULL);
     printf("  %-24s %-10s %7.2f s  %10lu events\n", name, integrator_name(integrator),
            (double)(clock() - start) / CLOCKS_PER_SEC, (unsigned long)stats.events);
     CHECKF(res == RRV_OK, "%s, %s: rrv_render_rect returned %s", name, integrator_name(integrator),

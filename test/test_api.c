@@ -1,0 +1,550 @@
+/* The scene-building API: zero means the scene format's defaults, every
+   refusal names its object, rrv_scene_prepare holds hand-edited scenes to
+   the same checks and may be called again, a scene built in code renders
+   bit-identically to the same scene parsed from text, the file-read
+   callback gets every buffer back through its release pair, and
+   rrv_render_rect says what is wrong. Run from the repository root. */
+#define RRV_IMPLEMENTATION
+#include "../rrv.h"
+#include "check.h"
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+static rrv_scene *new_scene(void)
+{
+    rrv_scene *s = NULL;
+    rrv_camera cam;
+    rrv_error err;
+    memset(&cam, 0, sizeof cam);
+    CHECK(rrv_scene_create(&s, &err) == RRV_OK);
+    cam.eye.z = 5;
+    cam.width = 8;
+    cam.height = 6;
+    CHECK(rrv_scene_set_camera(s, &cam, &err) == RRV_OK);
+    return s;
+}
+
+static void expect_message(rrv_result r, const rrv_error *err, rrv_result code, const char *message)
+{
+    CHECKF(r == code, "result %d, expected %d (%s)", (int)r, (int)code, err->message);
+    CHECKF(strcmp(err->message, message) == 0, "got \"%s\", expected \"%s\"", err->message, message);
+}
+
+static void test_zero_means_default(void)
+{
+    rrv_scene *s = new_scene();
+    rrv_settings set;
+    rrv_material mat;
+    rrv_medium med;
+    rrv_field noise;
+    rrv_error err;
+    int i;
+    memset(&set, 0, sizeof set);
+    memset(&mat, 0, sizeof mat);
+    memset(&med, 0, sizeof med);
+    memset(&noise, 0, sizeof noise);
+    CHECK(s->camera.fov == 40 && s->camera.up.y == 1 && s->camera.width == 8);
+    CHECK(rrv_scene_set_settings(s, &set, &err) == RRV_OK);
+    CHECK(s->settings.spp == 16 && s->settings.max_depth == 32 && s->settings.bend_tolerance == 0.01 &&
+          s->settings.step == 0.01 && s->settings.ambient_ior == 1);
+    mat.kind = RRV_MATERIAL_CHECKER;
+    CHECK(rrv_scene_add_material(s, &mat, &i, &err) == RRV_OK && i == 0);
+    CHECK(s->materials[0].albedo[1] == 0.8 && s->materials[0].albedo2[2] == 0.2 &&
+          s->materials[0].checker_scale == 1 && strcmp(s->materials[0].name, "material 0") == 0);
+    med.lo = rrv__v3(-1, -2, -3);
+    med.hi = rrv__v3(1, 2, 5);
+    CHECK(rrv_scene_add_medium(s, &med, &i, &err) == RRV_OK && i == 0);
+    CHECK(s->media[0].scale == 1 && s->media[0].sigma_a[2] == 1 && s->media[0].sigma_s[0] == 1 &&
+          s->media[0].Lescale == 1 && s->media[0].eta_ref == 1.000292 && s->media[0].P_ref == 101325 &&
+          s->media[0].T_ref == 300 && s->media[0].ior_scale == 1 && s->media[0].temperaturescale == 1);
+    noise.kind = RRV_FIELD_NOISE;
+    CHECK(rrv_scene_set_field(s, 0, RRV_MEDIUM_TEMPERATURE, &noise, &err) == RRV_OK);
+    {
+        const rrv_field *f = &s->media[0].temperature;
+        CHECK(f->noise.octaves == 5 && f->noise.frequency == 1 && f->noise.lacunarity == 2 &&
+              f->noise.gain == 0.5 && f->amplitude == 1 && f->base == 300);
+        CHECK(f->noise.center.x == 0 && f->noise.center.y == 0 && f->noise.center.z == 1);
+        CHECK(f->noise.radius == 1); /* half the smallest side */
+    }
+    CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+    rrv_scene_free(s);
+}
+
+static void test_refusals_name_the_object(void)
+{
+    rrv_scene *s = new_scene();
+    rrv_camera cam;
+    rrv_medium med;
+    rrv_shape quad;
+    rrv_field f;
+    rrv_material mat;
+    rrv_error err;
+    int i;
+    memset(&cam, 0, sizeof cam);
+    CHECK(rrv_scene_set_camera(s, &cam, &err) == RRV_ERROR_ARGUMENT);
+    expect_message(RRV_ERROR_ARGUMENT, &err, RRV_ERROR_ARGUMENT,
+                   "camera: eye and look must be distinct finite points");
+    cam.eye.z = 1;
+    cam.fov = 180;
+    expect_message(rrv_scene_set_camera(s, &cam, &err), &err, RRV_ERROR_ARGUMENT,
+                   "camera: fov must be in (0, 180), got 180");
+    cam.fov = 0;
+    cam.up = rrv__v3(0, 0, 2);
+    expect_message(rrv_scene_set_camera(s, &cam, &err), &err, RRV_ERROR_ARGUMENT,
+                   "camera: up is parallel to the view direction");
+    CHECK(s->camera.eye.z == 5); /* a refused camera changes nothing */
+
+    memset(&med, 0, sizeof med);
+    strcpy(med.name, "smoke");
+    med.lo = rrv__v3(1, -1, -1);
+    med.hi = rrv__v3(-1, 1, 1);
+    expect_message(rrv_scene_add_medium(s, &med, &i, &err), &err, RRV_ERROR_ARGUMENT,
+                   "medium \"smoke\": box is empty along x (1 is not below -1)");
+    med.lo.x = -1;
+    med.hi.x = 1;
+    med.g = 1;
+    expect_message(rrv_scene_add_medium(s, &med, &i, &err), &err, RRV_ERROR_ARGUMENT,
+                   "medium \"smoke\": g must be in (-1, 1), got 1");
+    med.g = 0;
+    med.scale = -1;
+    expect_message(rrv_scene_add_medium(s, &med, &i, &err), &err, RRV_ERROR_ARGUMENT,
+                   "medium \"smoke\": scale must be >= 0, got -1");
+    CHECK(s->medium_count == 0);
+    med.scale = 0;
+    CHECK(rrv_scene_add_medium(s, &med, &i, &err) == RRV_OK && i == 0);
+    expect_message(rrv_scene_add_medium(s, &med, &i, &err), &err, RRV_ERROR_ARGUMENT,
+                   "medium \"smoke\" defined twice");
+
+    memset(&f, 0, sizeof f);
+    f.kind = RRV_FIELD_CONSTANT;
+    f.value = -1;
+    expect_message(rrv_scene_set_field(s, 0, RRV_MEDIUM_DENSITY, &f, &err), &err, RRV_ERROR_ARGUMENT,
+                   "density of medium \"smoke\": constant must be >= 0, got -1");
+    f.kind = RRV_FIELD_LUNEBURG;
+    f.radius = 1;
+    expect_message(rrv_scene_set_field(s, 0, RRV_MEDIUM_PRESSURE, &f, &err), &err, RRV_ERROR_ARGUMENT,
+                   "pressure of medium \"smoke\": IOR profiles belong in the ior field");
+
+    memset(&mat, 0, sizeof mat);
+    mat.albedo[1] = 1.5;
+    expect_message(rrv_scene_add_material(s, &mat, &i, &err), &err, RRV_ERROR_ARGUMENT,
+                   "material \"material 0\": albedo must be in [0, 1], got 1.5");
+
+    memset(&quad, 0, sizeof quad);
+    quad.kind = RRV_SHAPE_QUAD;
+    quad.e1 = rrv__v3(1, 0, 0);
+    quad.e2 = rrv__v3(2, 0, 0);
+    expect_message(rrv_scene_add_shape(s, &quad, &i, &err), &err, RRV_ERROR_ARGUMENT,
+                   "shape 0 (quad): u and v are parallel (zero area)");
+    quad.e2 = rrv__v3(0, 1, 0);
+    quad.material = 3;
+    expect_message(rrv_scene_add_shape(s, &quad, &i, &err), &err, RRV_ERROR_ARGUMENT,
+                   "shape 0 (quad): material 3 is not one of the scene's 1");
+    quad.material = 0; /* the grey default, made by the first shape that needs it */
+    CHECK(rrv_scene_add_shape(s, &quad, &i, &err) == RRV_OK && i == 0);
+    CHECK(strcmp(s->materials[0].name, "default") == 0 && s->materials[0].albedo[0] == 0.5);
+    rrv_scene_free(s);
+}
+
+/* Values no file can spell (an enum out of range, a negative sky) are
+   refused as well, by name. */
+static void test_code_only_refusals(void)
+{
+    rrv_scene *s = new_scene();
+    rrv_settings set;
+    rrv_environment sky;
+    rrv_shape sh;
+    rrv_field f;
+    rrv_medium med;
+    rrv_error err;
+    memset(&set, 0, sizeof set);
+    memset(&sky, 0, sizeof sky);
+    memset(&sh, 0, sizeof sh);
+    memset(&f, 0, sizeof f);
+    memset(&med, 0, sizeof med);
+    set.integrator = (rrv_integrator)7;
+    expect_message(rrv_scene_set_settings(s, &set, &err), &err, RRV_ERROR_ARGUMENT,
+                   "settings: integrator 7 is not one of rrv_integrator");
+    set.integrator = RRV_INTEGRATOR_CLASSIC;
+    set.bend_tolerance = 1e-5;
+    expect_message(rrv_scene_set_settings(s, &set, &err), &err, RRV_ERROR_ARGUMENT,
+                   "settings: bendtolerance must be at least 0.0001, got 1e-05");
+    set.bend_tolerance = 0;
+    set.ambient_ior = 11;
+    expect_message(rrv_scene_set_settings(s, &set, &err), &err, RRV_ERROR_ARGUMENT,
+                   "settings: ambient: ior must be at most 10, got 11");
+    sky.kind = RRV_ENV_CONSTANT;
+    CHECK(rrv_scene_set_environment(s, &sky, &err) == RRV_OK && s->environment.L[1] == 1);
+    sky.kind = RRV_ENV_GRADIENT;
+    sky.L2[2] = -1;
+    expect_message(rrv_scene_set_environment(s, &sky, &err), &err, RRV_ERROR_ARGUMENT,
+                   "environment: radiance must be >= 0, got -1");
+    sh.kind = (rrv_shape_kind)9;
+    expect_message(rrv_scene_add_shape(s, &sh, NULL, &err), &err, RRV_ERROR_ARGUMENT,
+                   "shape 0 (triangle): kind 9 is not one of rrv_shape_kind");
+    sh.kind = RRV_SHAPE_SPHERE;
+    sh.radius = 1;
+    sh.L[0] = 1e30;
+    expect_message(rrv_scene_add_shape(s, &sh, NULL, &err), &err, RRV_ERROR_ARGUMENT,
+                   "shape 0 (sphere): L times scale must be at most 1e+20, got 1e+30");
+    med.lo = rrv__v3(-1, -1, -1);
+    med.hi = rrv__v3(1, 1, 1);
+    CHECK(rrv_scene_add_medium(s, &med, NULL, &err) == RRV_OK);
+    f.kind = (rrv_field_kind)99;
+    expect_message(rrv_scene_set_field(s, 0, RRV_MEDIUM_IOR, &f, &err), &err, RRV_ERROR_ARGUMENT,
+                   "ior of medium \"medium 0\": kind 99 is not one of rrv_field_kind");
+    f.kind = RRV_FIELD_SLAB;
+    f.gradient = 0.1;
+    expect_message(rrv_scene_set_field(s, 0, RRV_MEDIUM_IOR, &f, &err), &err, RRV_ERROR_ARGUMENT,
+                   "ior of medium \"medium 0\": slab normal must be nonzero");
+    f.normal = rrv__v3(0, 3, 4);
+    CHECK(rrv_scene_set_field(s, 0, RRV_MEDIUM_IOR, &f, &err) == RRV_OK);
+    CHECK(fabs(s->media[0].ior.normal.y - 0.6) < 1e-15 && fabs(s->media[0].ior.normal.z - 0.8) < 1e-15);
+    f.kind = RRV_FIELD_CONSTANT;
+    f.value = 0;
+    expect_message(rrv_scene_set_field(s, 0, RRV_MEDIUM_PRESSURE, &f, &err), &err, RRV_ERROR_ARGUMENT,
+                   "pressure of medium \"medium 0\": constant must be > 0, got 0");
+    CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+    rrv_scene_free(s);
+}
+
+static void test_prepare_checks_hand_edits(void)
+{
+    rrv_scene *s = new_scene();
+    rrv_medium med;
+    rrv_error err;
+    memset(&med, 0, sizeof med);
+    med.lo = rrv__v3(-1, -1, -1);
+    med.hi = rrv__v3(1, 1, 1);
+    CHECK(rrv_scene_add_medium(s, &med, NULL, &err) == RRV_OK);
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    s->camera.look = s->camera.eye;
+    expect_message(rrv_scene_prepare(s, &err), &err, RRV_ERROR_ARGUMENT,
+                   "camera: eye and look must be distinct finite points");
+    s->camera.look = rrv__v3(0, 0, 0);
+    s->camera.fov = 0;
+    expect_message(rrv_scene_prepare(s, &err), &err, RRV_ERROR_ARGUMENT,
+                   "camera: fov must be in (0, 180), got 0");
+    s->camera.fov = 180;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_ERROR_ARGUMENT);
+    s->camera.fov = 40;
+    s->media[0].hi.y = -2;
+    expect_message(rrv_scene_prepare(s, &err), &err, RRV_ERROR_ARGUMENT,
+                   "medium \"medium 0\": box is empty along y (-1 is not below -2)");
+    s->media[0].hi.y = 1;
+    s->media[0].sigma_a[0] = -1;
+    expect_message(rrv_scene_prepare(s, &err), &err, RRV_ERROR_ARGUMENT,
+                   "medium \"medium 0\": sigma_a must be >= 0, got -1");
+    s->media[0].sigma_a[0] = 0; /* an explicit zero, set after adding */
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK && s->media[0].sigma_a[0] == 0);
+    rrv_scene_free(s);
+}
+
+/* The same scene as text and in code: every default and every stored value
+   must agree, so the two render bit-identically. */
+static const char scene_text[] =
+    "camera eye 0 0.5 4 look 0 0 0 fov 35 resolution 12 9\n"
+    "render integrator refractive spp 2 seed 7\n"
+    "environment gradient top 1 1 1 bottom 0.1 0.1 0.2\n"
+    "material red diffuse albedo 0.8 0.2 0.2\n"
+    "quad origin -3 -1 -3 u 6 0 0 v 0 0 6 material red\n"
+    "sphere center 0 3 0 radius 0.5 L 4 4 4\n"
+    "medium puff box -1 -1 -1 1 1 1 sigma_a 0.5 0.5 0.5\n"
+    "density puff noise octaves 3\n"
+    "ior puff luneburg radius 0.9\n";
+
+static rrv_scene *scene_in_code(void)
+{
+    rrv_scene *s = NULL;
+    rrv_camera cam;
+    rrv_settings set;
+    rrv_environment sky;
+    rrv_material red;
+    rrv_shape quad, light;
+    rrv_medium puff;
+    rrv_field density, ior;
+    rrv_error err;
+    int m;
+    memset(&cam, 0, sizeof cam);
+    memset(&set, 0, sizeof set);
+    memset(&sky, 0, sizeof sky);
+    memset(&red, 0, sizeof red);
+    memset(&quad, 0, sizeof quad);
+    memset(&light, 0, sizeof light);
+    memset(&puff, 0, sizeof puff);
+    memset(&density, 0, sizeof density);
+    memset(&ior, 0, sizeof ior);
+    cam.eye = rrv__v3(0, 0.5, 4);
+    cam.fov = 35;
+    cam.width = 12;
+    cam.height = 9;
+    set.integrator = RRV_INTEGRATOR_REFRACTIVE;
+    set.spp = 2;
+    set.seed = 7;
+    sky.kind = RRV_ENV_GRADIENT;
+    sky.L[0] = sky.L[1] = sky.L[2] = 1;
+    sky.L2[0] = sky.L2[1] = 0.1;
+    sky.L2[2] = 0.2;
+    strcpy(red.name, "red");
+    red.albedo[0] = 0.8;
+    red.albedo[1] = red.albedo[2] = 0.2;
+    quad.kind = RRV_SHAPE_QUAD;
+    quad.p0 = rrv__v3(-3, -1, -3);
+    quad.e1 = rrv__v3(6, 0, 0);
+    quad.e2 = rrv__v3(0, 0, 6);
+    light.kind = RRV_SHAPE_SPHERE;
+    light.center = rrv__v3(0, 3, 0);
+    light.radius = 0.5;
+    light.material = 1; /* the parser made "default" second */
+    light.L[0] = light.L[1] = light.L[2] = 4;
+    strcpy(puff.name, "puff");
+    puff.lo = rrv__v3(-1, -1, -1);
+    puff.hi = rrv__v3(1, 1, 1);
+    puff.sigma_a[0] = puff.sigma_a[1] = puff.sigma_a[2] = 0.5;
+    /* in code a zero sigma_s beside a nonzero sigma_a is a zero; the file's
+       unsaid sigma_s is 1 */
+    puff.sigma_s[0] = puff.sigma_s[1] = puff.sigma_s[2] = 1;
+    density.kind = RRV_FIELD_NOISE;
+    density.noise.octaves = 3;
+    density.noise.falloff = RRV_FALLOFF_SPHERE;
+    ior.kind = RRV_FIELD_LUNEBURG;
+    ior.radius = 0.9;
+    if (rrv_scene_create(&s, &err) != RRV_OK || rrv_scene_set_camera(s, &cam, &err) != RRV_OK ||
+        rrv_scene_set_settings(s, &set, &err) != RRV_OK ||
+        rrv_scene_set_environment(s, &sky, &err) != RRV_OK ||
+        rrv_scene_add_material(s, &red, NULL, &err) != RRV_OK ||
+        rrv_scene_add_shape(s, &quad, NULL, &err) != RRV_OK) {
+        CHECKF(0, "%s", err.message);
+        return s;
+    }
+    {
+        rrv_material grey;
+        memset(&grey, 0, sizeof grey);
+        strcpy(grey.name, "default");
+        CHECK(rrv_scene_add_material(s, &grey, NULL, &err) == RRV_OK);
+    }
+    CHECK(rrv_scene_add_shape(s, &light, NULL, &err) == RRV_OK);
+    CHECK(rrv_scene_add_medium(s, &puff, &m, &err) == RRV_OK);
+    CHECK(rrv_scene_set_field(s, m, RRV_MEDIUM_DENSITY, &density, &err) == RRV_OK);
+    CHECK(rrv_scene_set_field(s, m, RRV_MEDIUM_IOR, &ior, &err) == RRV_OK);
+    CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+    return s;
+}
+
+static float *render(const rrv_scene *s)
+{
+    int w = s->camera.width, h = s->camera.height;
+    float *sum = (float *)calloc((size_t)w * h * 3, sizeof *sum);
+    rrv_error err;
+    CHECKF(rrv_render_rect(s, 0, 0, w, h, 0, s->settings.spp, sum, w, NULL, &err) == RRV_OK, "%s",
+           err.message);
+    return sum;
+}
+
+static void test_code_and_file_agree(void)
+{
+    rrv_scene *parsed = NULL, *built = scene_in_code();
+    rrv_error err;
+    float *a, *b;
+    size_t n;
+    CHECKF(rrv_scene_parse(scene_text, sizeof scene_text - 1, "agree.rrv", NULL, NULL, &parsed, &err) ==
+               RRV_OK,
+           "%s", err.message);
+    if (!parsed || !built) return;
+    CHECK(parsed->material_count == built->material_count && parsed->shape_count == built->shape_count);
+    CHECK(memcmp(&parsed->settings, &built->settings, sizeof parsed->settings) == 0);
+    CHECK(memcmp(&parsed->camera, &built->camera, sizeof parsed->camera) == 0);
+    n = (size_t)parsed->camera.width * parsed->camera.height * 3;
+    a = render(parsed);
+    b = render(built);
+    CHECK(memcmp(a, b, n * sizeof *a) == 0);
+    {
+        double total = 0;
+        size_t i;
+        for (i = 0; i < n; ++i) total += a[i];
+        CHECK(total > 0); /* the comparison is of an image, not of zeros */
+    }
+    free(a);
+    free(b);
+    rrv_scene_free(parsed);
+    rrv_scene_free(built);
+}
+
+static void test_prepare_twice(void)
+{
+    rrv_scene *s = scene_in_code();
+    rrv_error err;
+    size_t bytes = s->bytes, n = (size_t)s->camera.width * s->camera.height * 3;
+    float *a = render(s), *b;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    CHECK(s->bytes == bytes);
+    b = render(s);
+    CHECK(memcmp(a, b, n * sizeof *a) == 0);
+    free(a);
+    free(b);
+    rrv_scene_free(s);
+}
+
+static void test_render_rect_errors(void)
+{
+    rrv_scene *s = scene_in_code();
+    rrv_medium extra;
+    float sum[3 * 12 * 9];
+    rrv_error err;
+    expect_message(rrv_render_rect(s, 0, 0, 13, 9, 0, 1, sum, 13, NULL, &err), &err, RRV_ERROR_ARGUMENT,
+                   "rrv_render_rect: pixels [0,13) x [0,9) are not inside the 12 x 9 image");
+    expect_message(rrv_render_rect(s, 0, 0, 12, 9, 0, 1, sum, 11, NULL, &err), &err, RRV_ERROR_ARGUMENT,
+                   "rrv_render_rect: stride 11 is below the rectangle's width 12");
+    expect_message(rrv_render_rect(s, 0, 0, 12, 9, 2, 1, sum, 12, NULL, &err), &err, RRV_ERROR_ARGUMENT,
+                   "rrv_render_rect: samples [2,1) are not a range of indices >= 0");
+    memset(&extra, 0, sizeof extra);
+    extra.lo = rrv__v3(2, 2, 2);
+    extra.hi = rrv__v3(3, 3, 3);
+    CHECK(rrv_scene_add_medium(s, &extra, NULL, &err) == RRV_OK);
+    CHECK(rrv_render_rect(s, 0, 0, 12, 9, 0, 1, sum, 12, NULL, &err) == RRV_ERROR_ARGUMENT);
+    CHECK(strstr(err.message, "not prepared") != NULL);
+    CHECK(rrv_render_rect(s, 0, 0, 12, 9, 0, 1, sum, 12, NULL, NULL) == RRV_ERROR_ARGUMENT);
+    rrv_scene_free(s);
+}
+
+static void test_fields_and_meshes_are_copied(void)
+{
+    rrv_scene *s = new_scene();
+    rrv_medium med;
+    rrv_field f;
+    rrv_blob blobs[2];
+    rrv_shape proto;
+    rrv_error err;
+    /* a square of two triangles, a degenerate third dropped */
+    static const double points[] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
+    static const int tris[] = {0, 1, 2, 0, 2, 3, 0, 1, 1};
+    static const int bad[] = {0, 1, 4};
+    memset(&med, 0, sizeof med);
+    memset(&f, 0, sizeof f);
+    memset(blobs, 0, sizeof blobs);
+    memset(&proto, 0, sizeof proto);
+    med.lo = rrv__v3(-1, -1, -1);
+    med.hi = rrv__v3(1, 1, 1);
+    CHECK(rrv_scene_add_medium(s, &med, NULL, &err) == RRV_OK);
+    blobs[0].radius = blobs[1].radius = 0.3;
+    blobs[1].weight = 2;
+    f.kind = RRV_FIELD_BLOBS;
+    f.blobs = blobs;
+    f.blob_count = 2;
+    CHECK(rrv_scene_set_field(s, 0, RRV_MEDIUM_DENSITY, &f, &err) == RRV_OK);
+    blobs[0].radius = -5; /* the caller's array, not the scene's */
+    CHECK(s->media[0].density.blobs != blobs && s->media[0].density.blobs[0].radius == 0.3);
+    CHECK(s->media[0].density.blobs[0].weight == 1 && s->media[0].density.blobs[1].weight == 2);
+    CHECK(rrv_scene_add_triangles(s, &proto, points, 4, tris, 3, &err) == RRV_OK);
+    CHECK(s->shape_count == 2 && s->shapes[1].kind == RRV_SHAPE_TRIANGLE);
+    expect_message(rrv_scene_add_triangles(s, &proto, points, 4, bad, 1, &err), &err, RRV_ERROR_ARGUMENT,
+                   "mesh: index 4 is out of range (4 points)");
+    CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+    rrv_scene_free(s);
+}
+
+/* read_file hands out buffers of its own (16 bytes into a block, so that
+   RRV_FREE on one would be caught); release_file must get each back. */
+typedef struct files {
+    int reads, releases;
+} files;
+
+static const unsigned char *grid_bytes(size_t *size)
+{
+    static unsigned char g[48 + 8 * 4];
+    static const float box[6] = {-1, -1, -1, 1, 1, 1};
+    int i;
+    memset(g, 0, sizeof g);
+    memcpy(g, "VOL", 3);
+    g[3] = 3;
+    g[4] = 1;                                 /* float32 */
+    g[8] = 2, g[12] = 2, g[16] = 2, g[20] = 1; /* 2 x 2 x 2, 1 channel */
+    for (i = 0; i < 6; ++i) {
+        uint32_t u;
+        memcpy(&u, &box[i], 4);
+        g[24 + 4 * i] = (unsigned char)u, g[25 + 4 * i] = (unsigned char)(u >> 8);
+        g[26 + 4 * i] = (unsigned char)(u >> 16), g[27 + 4 * i] = (unsigned char)(u >> 24);
+    }
+    for (i = 0; i < 8; ++i) {
+        float v = 0.5f;
+        uint32_t u;
+        memcpy(&u, &v, 4);
+        g[48 + 4 * i] = (unsigned char)u, g[49 + 4 * i] = (unsigned char)(u >> 8);
+        g[50 + 4 * i] = (unsigned char)(u >> 16), g[51 + 4 * i] = (unsigned char)(u >> 24);
+    }
+    *size = sizeof g;
+    return g;
+}
+
+static int files_read(void *user, const char *path, void **data, size_t *size)
+{
+    static const char scene[] = "camera eye 0 0 5 look 0 0 0 resolution 4 3\n"
+                                "mesh file tri.obj\n"
+                                "medium m box -1 -1 -1 1 1 1\n"
+                                "density m grid g.vol\n";
+    static const char obj[] = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    static const char broken[] = "camera eye 0 0 5 look 0 0 0\nmesh file tri.obj\nmesh file gone.obj\n";
+    files *fs = (files *)user;
+    const void *src;
+    size_t n;
+    unsigned char *block;
+    if (strcmp(path, "dir/s.rrv") == 0)
+        src = scene, n = sizeof scene - 1;
+    else if (strcmp(path, "dir/broken.rrv") == 0)
+        src = broken, n = sizeof broken - 1;
+    else if (strcmp(path, "dir/tri.obj") == 0)
+        src = obj, n = sizeof obj - 1;
+    else if (strcmp(path, "dir/g.vol") == 0)
+        src = grid_bytes(&n);
+    else
+        return 1;
+    block = (unsigned char *)malloc(n + 16);
+    if (!block) return 1;
+    memcpy(block + 16, src, n);
+    *data = block + 16;
+    *size = n;
+    fs->reads++;
+    return 0;
+}
+
+static void files_release(void *user, void *data)
+{
+    ((files *)user)->releases++;
+    free((unsigned char *)data - 16);
+}
+
+static void test_read_release_pair(void)
+{
+    files fs = {0, 0};
+    rrv_load_options opt;
+    rrv_scene *s = NULL;
+    rrv_error err;
+    memset(&opt, 0, sizeof opt);
+    opt.read_file = files_read;
+    opt.release_file = files_release;
+    opt.read_file_user = &fs;
+    CHECKF(rrv_scene_load("dir/s.rrv", &opt, &s, &err) == RRV_OK, "%s", err.message);
+    CHECK(fs.reads == 3 && fs.releases == 3);
+    CHECK(s && s->shape_count == 1 && s->media[0].density.kind == RRV_FIELD_GRID);
+    rrv_scene_free(s);
+    /* a load that fails halfway gives back what it read too */
+    fs.reads = fs.releases = 0;
+    CHECK(rrv_scene_load("dir/broken.rrv", &opt, &s, &err) == RRV_ERROR_IO && s == NULL);
+    CHECK(err.line == 3 && fs.reads == 2 && fs.releases == 2);
+}
+
+int main(void)
+{
+    RUN(test_zero_means_default);
+    RUN(test_refusals_name_the_object);
+    RUN(test_code_only_refusals);
+    RUN(test_prepare_checks_hand_edits);
+    RUN(test_code_and_file_agree);
+    RUN(test_prepare_twice);
+    RUN(test_render_rect_errors);
+    RUN(test_fields_and_meshes_are_copied);
+    RUN(test_read_release_pair);
+    return CHECK_EXIT_CODE();
+}
