@@ -1879,6 +1879,8 @@ enum { RRV__DENSITY, RRV__TEMPERATURE, RRV__PRESSURE, RRV__IOR, RRV__FIELD_KINDS
 struct rrv__majorant_grid {
     int n[3];
     rrv_vec3 lo, hi, cell;
+    rrv_vec3 inv_cell;     /* 1 / cell: a point's cell by multiplication */
+    rrv_vec3 refraction_scale; /* (n - 1) / (hi - lo) of the refraction grid */
     double sigma_t_max;    /* max over channels of (sigma_a + sigma_s) * scale */
     float *density_max;    /* per cell */
     float *grad_max;       /* per cell max |grad r|, NULL if the medium does not refract */
@@ -1948,16 +1950,6 @@ static double rrv__pressure(const rrv_medium *m, rrv_vec3 p)
 
 /* Refractivity eta - 1 of a refractive medium at p, including its artist
    scale; Hauf-Grigull for a gas: r = r_ref (P / P_ref) (T_ref / T). */
-/* Trilinear interpolation of the first `channels` channels of a grid at p
-   (inside its box). */
-static void rrv__grid_sample_all(const rrv_grid *g, rrv_vec3 p, int channels, double *out)
-{
-    rrv__grid_cell cell;
-    int c;
-    rrv__grid_locate(g, p, &cell);
-    for (c = 0; c < channels; ++c) out[c] = rrv__grid_blend(g, &cell, c);
-}
-
 /* Cubic B-spline weights of the four coefficients around a point at
    fraction t of its cell, and their derivatives in t. */
 static void rrv__bspline_weights(double t, double w[4], double dw[4])
@@ -2018,10 +2010,49 @@ static const rrv_grid *rrv__refraction_grid_at(const rrv_medium *m, rrv_vec3 p)
     return g && (g->data || m->majorant->cubic) && rrv__inside_box(p, g->lo, g->hi) ? g : NULL;
 }
 
+/* The trilinear blend of one channel at d (the lower corner), in double as
+   rrv__grid_blend. */
+static double rrv__blend8(const float *d, size_t sx, size_t sy, size_t sz, const double t[3])
+{
+    double c00 = (double)d[0] + t[0] * ((double)d[sx] - d[0]);
+    double c10 = (double)d[sy] + t[0] * ((double)d[sy + sx] - d[sy]);
+    double c01 = (double)d[sz] + t[0] * ((double)d[sz + sx] - d[sz]);
+    double c11 = (double)d[sz + sy] + t[0] * ((double)d[sz + sy + sx] - d[sz + sy]);
+    c00 += t[1] * (c10 - c00);
+    c01 += t[1] * (c11 - c01);
+    return c00 + t[2] * (c01 - c00);
+}
+
+/* The baked 4-channel refraction grid at p inside it: one location for all
+   channels, found by multiplying with the precomputed sample density (the
+   comb's kicks spent most of their lookup in rrv__grid_locate's divisions
+   and per-channel set-up). */
+static double rrv__refraction_lookup(const struct rrv__majorant_grid *mg, rrv_vec3 p, rrv_vec3 *grad)
+{
+    const rrv_grid *g = &mg->refraction;
+    const float *d;
+    double u[3], t[3];
+    int n[3], i[3], a;
+    size_t sy = 4 * (size_t)g->nx, sz = sy * (size_t)g->ny;
+    u[0] = (p.x - g->lo.x) * mg->refraction_scale.x;
+    u[1] = (p.y - g->lo.y) * mg->refraction_scale.y;
+    u[2] = (p.z - g->lo.z) * mg->refraction_scale.z;
+    n[0] = g->nx; n[1] = g->ny; n[2] = g->nz;
+    for (a = 0; a < 3; ++a) {
+        i[a] = (int)u[a];
+        if (i[a] > n[a] - 2) i[a] = n[a] - 2;
+        if (i[a] < 0) i[a] = 0;
+        t[a] = u[a] - i[a];
+    }
+    d = g->data + 4 * (size_t)i[0] + sy * (size_t)i[1] + sz * (size_t)i[2];
+    if (grad) *grad = rrv__v3(rrv__blend8(d + 1, 4, sy, sz, t), rrv__blend8(d + 2, 4, sy, sz, t),
+                              rrv__blend8(d + 3, 4, sy, sz, t));
+    return rrv__blend8(d, 4, sy, sz, t);
+}
+
 /* The baked refractivity (and gradient if grad) at p inside the baked grid. */
 static double rrv__baked_refractivity(const rrv_medium *m, const rrv_grid *baked, rrv_vec3 p, rrv_vec3 *grad)
 {
-    double v[4];
     if (m->majorant->cubic) {
         /* The floor keeps eta > 0 where the spline overshoots a sharp
            feature; it lies far below any sample and is never met by a
@@ -2029,9 +2060,8 @@ static double rrv__baked_refractivity(const rrv_medium *m, const rrv_grid *baked
         double r = rrv__cubic_eval(baked, m->majorant->cubic, p, grad);
         return r > m->majorant->cubic_floor ? r : m->majorant->cubic_floor;
     }
-    rrv__grid_sample_all(baked, p, grad ? 4 : 1, v);
-    if (grad) *grad = rrv__v3(v[1], v[2], v[3]);
-    return v[0];
+    (void)baked;
+    return rrv__refraction_lookup(m->majorant, p, grad);
 }
 
 static double rrv__refractivity(const rrv_medium *m, rrv_vec3 p, double ambient_r)
@@ -2769,6 +2799,9 @@ static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, si
     g->refraction = *lattice;
     g->refraction.channels = 4;
     g->refraction.data = data;
+    g->refraction_scale = rrv__v3((lattice->nx - 1) / (lattice->hi.x - lattice->lo.x),
+                                  (lattice->ny - 1) / (lattice->hi.y - lattice->lo.y),
+                                  (lattice->nz - 1) / (lattice->hi.z - lattice->lo.z));
     *bytes += count * 4 * sizeof(float);
     return RRV_OK;
 }
@@ -2826,6 +2859,7 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
     g->lo = m->lo;
     g->hi = m->hi;
     g->cell = rrv__v3((m->hi.x - m->lo.x) / g->n[0], (m->hi.y - m->lo.y) / g->n[1], (m->hi.z - m->lo.z) / g->n[2]);
+    g->inv_cell = rrv__v3(1.0 / g->cell.x, 1.0 / g->cell.y, 1.0 / g->cell.z);
     {
         rrv_result res = rrv__check_built_grid(scene, m, "majorant grid", cells, sizeof(float) * (refracts ? 2 : 1), err);
         if (res != RRV_OK) return res;
@@ -2980,7 +3014,7 @@ static size_t rrv__majorant_cell(const struct rrv__majorant_grid *g, rrv_vec3 p,
     int a;
     for (a = 0; a < 3; ++a) {
         /* clamped before the cast: a far point must not overflow the int */
-        double c = floor((rrv__axis(p, a) - rrv__axis(g->lo, a)) / rrv__axis(g->cell, a));
+        double c = floor((rrv__axis(p, a) - rrv__axis(g->lo, a)) * rrv__axis(g->inv_cell, a));
         cell[a] = !(c >= 0) ? 0 : c > g->n[a] - 1 ? g->n[a] - 1 : (int)c;
     }
     return ((size_t)cell[2] * (size_t)g->n[1] + (size_t)cell[1]) * (size_t)g->n[0] + (size_t)cell[0];
@@ -3017,14 +3051,15 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
     for (a = 0; a < 3; ++a) {
         double lo = rrv__axis(g->lo, a), cs = rrv__axis(g->cell, a), da = rrv__axis(d, a);
         int c = it->cell[a];
+        double ia = rrv__axis(inv, a);
         if (da > 0) {
             it->step[a] = 1;
-            it->t_next[a] = (lo + (c + 1) * cs - rrv__axis(o, a)) / da;
-            it->t_delta[a] = cs / da;
+            it->t_next[a] = (lo + (c + 1) * cs - rrv__axis(o, a)) * ia;
+            it->t_delta[a] = cs * ia;
         } else if (da < 0) {
             it->step[a] = -1;
-            it->t_next[a] = (lo + c * cs - rrv__axis(o, a)) / da;
-            it->t_delta[a] = -cs / da;
+            it->t_next[a] = (lo + c * cs - rrv__axis(o, a)) * ia;
+            it->t_delta[a] = -cs * ia;
         } else {
             it->step[a] = 0;
             it->t_next[a] = DBL_MAX;
@@ -3370,6 +3405,8 @@ typedef struct rrv__bender {
     int reflected;     /* the last face crossed reflected the ray */
     int combing;       /* comb: a comb is running (its first half kick is done) */
     double chord;      /* comb: length of the chord behind the next point */
+    rrv__support_view ahead; /* END_KICK: the supports seen from the segment's end
+                                along its direction (the same line as the segment's) */
 } rrv__bender;
 
 static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
@@ -3450,22 +3487,30 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     return nd;
 }
 
-/* Comb spacing at x: the inverse of the refraction event rate of the cell
-   (fixed mu_eta, or max |grad r| / tolerance), never more than a cell so a
-   step cannot jump over a region of strong gradient. */
-static double rrv__comb_spacing(const rrv_scene *scene, rrv_vec3 x)
+/* Comb spacing from x along d: the distance at which the refraction event
+   rate (fixed mu_eta, or max |grad r| / tolerance per majorant cell),
+   integrated along the majorant DDA, reaches tau. Each chord then bends the
+   ray by about the tolerance at most, however many cells it spans, and
+   cells where the gradient vanishes cost no kick: a ray through a weak or
+   empty part of a support runs straight to its face (it was once a kick
+   per cell). A strong cell cannot be jumped over, its rate adds up. */
+static double rrv__comb_spacing(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double tau)
 {
     int i;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
-        const struct rrv__majorant_grid *g = m->majorant;
-        double rate, cell;
-        int c[3];
+        rrv__majorant_iterator it;
+        rrv__majorant_segment seg;
         if (!rrv__medium_refracts(m) || !rrv__inside_box(x, m->lo, m->hi)) continue;
-        if (scene->settings.mu_eta > 0) return 1.0 / scene->settings.mu_eta;
-        rate = g->grad_max[rrv__majorant_cell(g, x, c)] / scene->settings.bend_tolerance;
-        cell = fmin(g->cell.x, fmin(g->cell.y, g->cell.z));
-        return rate * cell > 1.0 ? 1.0 / rate : cell;
+        if (scene->settings.mu_eta > 0) return tau / scene->settings.mu_eta;
+        if (!rrv__majorant_iterator_start(&it, m, 1, &scene->settings, x, d, DBL_MAX)) return DBL_MAX;
+        it.density_weight = 0.0;
+        while (rrv__majorant_iterator_next(&it, &seg)) {
+            double depth = seg.majorant * (seg.t1 - seg.t0);
+            if (depth >= tau) return seg.t0 + tau / seg.majorant;
+            tau -= depth;
+        }
+        return DBL_MAX;
     }
     return fmin(scene->settings.step, 1.0);
 }
@@ -3512,12 +3557,24 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
         b->combing = 1;
     }
     rrv__look_along(scene, x, *d, &after);
-    b->segment = fmin(ahead, after.t_face);
-    b->end = b->segment == after.t_face ? RRV__END_FACE : RRV__END_KICK;
+    /* a point within rounding of the face is the face (the view's distance
+       to it may come from the previous chord's look, a few ulps off) */
+    if (after.t_face <= ahead + RRV__EDGE_NUDGE * (1.0 + ahead)) {
+        b->segment = after.t_face;
+        b->end = RRV__END_FACE;
+    } else {
+        b->segment = ahead;
+        b->end = RRV__END_KICK;
+    }
     b->normal = after.normal;
     b->surface_free = after.inside && after.surface_free;
     b->chord = b->segment;
     b->pending = 1;
+    /* The kick point ahead lies on this line before its nearest face: what
+       it sees along the line is this view moved up by the chord, so the
+       next kick needs no second look. */
+    b->ahead = after;
+    if (b->ahead.t_face < DBL_MAX) b->ahead.t_face -= b->segment;
 }
 
 /* One eikonal step of at most h from x that stops short of the next face
@@ -3565,7 +3622,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     } else if (b->scheme == RRV_REFRACTION_COMB) {
         /* the first point a uniformly random fraction of a spacing ahead, so
            the comb does not alias with pixels */
-        rrv__comb_step(b, scene, o, d, rrv__comb_spacing(scene, o) * (1.0 - rrv__uniform(rng)), &view);
+        rrv__comb_step(b, scene, o, d, rrv__comb_spacing(scene, o, *d, 1.0 - rrv__uniform(rng)), &view);
     }
 }
 
@@ -3580,10 +3637,9 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
         b->pending = 0;
         break;
     case RRV__END_KICK: {
-        rrv__support_view view;
-        rrv__look_along(scene, *o, *d, &view);
+        rrv__support_view view = b->ahead;
         if (view.inside) {
-            rrv__comb_step(b, scene, *o, d, rrv__comb_spacing(scene, *o), &view);
+            rrv__comb_step(b, scene, *o, d, rrv__comb_spacing(scene, *o, *d, 1.0), &view);
         } else {
             /* a kick that turned the chord out through a face it grazed:
                the comb ends here, without an interface to refract */
