@@ -2045,9 +2045,23 @@ static double rrv__refraction_lookup(const struct rrv__majorant_grid *mg, rrv_ve
         t[a] = u[a] - i[a];
     }
     d = g->data + 4 * (size_t)i[0] + sy * (size_t)i[1] + sz * (size_t)i[2];
-    if (grad) *grad = rrv__v3(rrv__blend8(d + 1, 4, sy, sz, t), rrv__blend8(d + 2, 4, sy, sz, t),
-                              rrv__blend8(d + 3, 4, sy, sz, t));
-    return rrv__blend8(d, 4, sy, sz, t);
+    if (!grad) return rrv__blend8(d, 4, sy, sz, t);
+    {
+        /* the four channels side by side, so the compiler can blend them as one vector */
+        double v[4];
+        int c;
+        for (c = 0; c < 4; ++c) {
+            double c00 = (double)d[c] + t[0] * ((double)d[4 + c] - d[c]);
+            double c10 = (double)d[sy + c] + t[0] * ((double)d[sy + 4 + c] - d[sy + c]);
+            double c01 = (double)d[sz + c] + t[0] * ((double)d[sz + 4 + c] - d[sz + c]);
+            double c11 = (double)d[sz + sy + c] + t[0] * ((double)d[sz + sy + 4 + c] - d[sz + sy + c]);
+            c00 += t[1] * (c10 - c00);
+            c01 += t[1] * (c11 - c01);
+            v[c] = c00 + t[2] * (c01 - c00);
+        }
+        *grad = rrv__v3(v[1], v[2], v[3]);
+        return v[0];
+    }
 }
 
 /* The baked refractivity (and gradient if grad) at p inside the baked grid. */
@@ -3013,9 +3027,10 @@ static size_t rrv__majorant_cell(const struct rrv__majorant_grid *g, rrv_vec3 p,
 {
     int a;
     for (a = 0; a < 3; ++a) {
-        /* clamped before the cast: a far point must not overflow the int */
-        double c = floor((rrv__axis(p, a) - rrv__axis(g->lo, a)) * rrv__axis(g->inv_cell, a));
-        cell[a] = !(c >= 0) ? 0 : c > g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+        /* clamped before the cast: a far point must not overflow the int;
+           the cast of a non-negative value is its floor */
+        double c = (rrv__axis(p, a) - rrv__axis(g->lo, a)) * rrv__axis(g->inv_cell, a);
+        cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
     }
     return ((size_t)cell[2] * (size_t)g->n[1] + (size_t)cell[1]) * (size_t)g->n[0] + (size_t)cell[0];
 }
@@ -3250,7 +3265,8 @@ static int rrv__box_interval(rrv_vec3 lo_box, rrv_vec3 hi_box, rrv_vec3 o, rrv_v
         if (da == 0) {
             if (oa < rrv__axis(lo_box, a) || oa > rrv__axis(hi_box, a)) return 0;
         } else {
-            double ta = (rrv__axis(lo_box, a) - oa) / da, tb = (rrv__axis(hi_box, a) - oa) / da;
+            double ia = 1.0 / da;
+            double ta = (rrv__axis(lo_box, a) - oa) * ia, tb = (rrv__axis(hi_box, a) - oa) * ia;
             if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
             if (ta > lo) { lo = ta; axis_lo = a; }
             if (tb < hi) { hi = tb; axis_hi = a; }
@@ -3487,6 +3503,53 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     return nd;
 }
 
+/* The distance from x (inside the grid's box) along d at which the
+   integral of the cells' max |grad r| reaches bend; DBL_MAX if the ray
+   leaves the box first. A DDA of its own: the comb calls it at every kick,
+   where rrv__majorant_iterator_start's box clipping and per-segment
+   bookkeeping cost more than the walk itself. */
+static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x, rrv_vec3 d, double bend)
+{
+    int cell[3], step[3], a;
+    double t_next[3], t_delta[3], t = 0;
+    size_t idx, stride[3];
+    stride[0] = 1;
+    stride[1] = (size_t)g->n[0];
+    stride[2] = stride[1] * (size_t)g->n[1];
+    idx = rrv__majorant_cell(g, x, cell);
+    for (a = 0; a < 3; ++a) {
+        double da = rrv__axis(d, a), cs = rrv__axis(g->cell, a), lo = rrv__axis(g->lo, a), xa = rrv__axis(x, a);
+        if (da > 0) {
+            step[a] = 1;
+            t_next[a] = (lo + (cell[a] + 1) * cs - xa) / da;
+            t_delta[a] = cs / da;
+        } else if (da < 0) {
+            step[a] = -1;
+            t_next[a] = (lo + cell[a] * cs - xa) / da;
+            t_delta[a] = -cs / da;
+        } else {
+            step[a] = 0;
+            t_next[a] = t_delta[a] = DBL_MAX;
+        }
+        if (t_next[a] < 0) t_next[a] = 0;
+    }
+    for (;;) {
+        double g_cell = g->grad_max[idx], t1;
+        a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+        t1 = t_next[a];
+        if (g_cell > 0) {
+            double depth = g_cell * (t1 - t);
+            if (depth >= bend) return t + bend / g_cell;
+            bend -= depth;
+        }
+        t = t1;
+        cell[a] += step[a];
+        if (cell[a] < 0 || cell[a] >= g->n[a]) return DBL_MAX;
+        idx = step[a] > 0 ? idx + stride[a] : idx - stride[a];
+        t_next[a] += t_delta[a];
+    }
+}
+
 /* Comb spacing from x along d: the distance at which the refraction event
    rate (fixed mu_eta, or max |grad r| / tolerance per majorant cell),
    integrated along the majorant DDA, reaches tau. Each chord then bends the
@@ -3499,18 +3562,9 @@ static double rrv__comb_spacing(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, 
     int i;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
-        rrv__majorant_iterator it;
-        rrv__majorant_segment seg;
         if (!rrv__medium_refracts(m) || !rrv__inside_box(x, m->lo, m->hi)) continue;
         if (scene->settings.mu_eta > 0) return tau / scene->settings.mu_eta;
-        if (!rrv__majorant_iterator_start(&it, m, 1, &scene->settings, x, d, DBL_MAX)) return DBL_MAX;
-        it.density_weight = 0.0;
-        while (rrv__majorant_iterator_next(&it, &seg)) {
-            double depth = seg.majorant * (seg.t1 - seg.t0);
-            if (depth >= tau) return seg.t0 + tau / seg.majorant;
-            tau -= depth;
-        }
-        return DBL_MAX;
+        return rrv__rate_distance(m->majorant, x, d, tau * scene->settings.bend_tolerance);
     }
     return fmin(scene->settings.step, 1.0);
 }
@@ -4244,6 +4298,23 @@ static int rrv__russian_roulette(rrv__camera_path *cp, rrv__rng *rng)
     return rrv__max3(cp->path.beta) > 0;
 }
 
+/* Might the chord o + t d, t in [0, len], meet a medium with extinction?
+   Its bounding box against the media's boxes: no divisions, and a false
+   yes only costs the ordinary walk. */
+static int rrv__chord_meets_extinction(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, double len)
+{
+    rrv_vec3 e = rrv__madd(o, d, len), lo = rrv__vmin(o, e), hi = rrv__vmax(o, e);
+    int i;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        if (m->majorant->empty) continue;
+        if (lo.x <= m->hi.x && hi.x >= m->lo.x && lo.y <= m->hi.y && hi.y >= m->lo.y && lo.z <= m->hi.z &&
+            hi.z >= m->lo.z)
+            return 1;
+    }
+    return 0;
+}
+
 /* One camera path from o along d; its radiance into L. */
 static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng *rng, double L[3])
 {
@@ -4299,6 +4370,16 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                 cp.touched = 1;
             }
             rrv__finish_segment(&cp.path.bender, scene, &cp.o, &cp.d, rng);
+            /* Chords with nothing to meet (no surface reaches the support,
+               no medium with extinction near them) go from kick to kick
+               here: delta tracking and the ray cast would find nothing. */
+            while (ctx->comb && cp.path.bender.pending && cp.path.bender.end == RRV__END_KICK &&
+                   cp.path.bender.surface_free && cp.steps < ctx->step_bound &&
+                   !rrv__chord_meets_extinction(scene, cp.o, cp.d, cp.path.bender.segment)) {
+                ++cp.steps;
+                ++ctx->stats.events;
+                rrv__finish_segment(&cp.path.bender, scene, &cp.o, &cp.d, rng);
+            }
             /* A reflection at an interface is a specular vertex of the path
                and counts toward its depth: light trapped by total internal
                reflection in a lossless box would otherwise bounce forever. */
