@@ -572,6 +572,14 @@ typedef struct rrv_medium {
     struct rrv__majorant_grid *majorant;
 } rrv_medium;
 
+/* Runs task(task_ctx, i) for every i in [0, count), in any order and on any
+   threads, and returns once all have run. rrv_scene_prepare splits its bakes
+   into such tasks; each writes only its own samples, so the scene is the
+   same for any split and thread count. The library starts no threads: a
+   client that has them passes this (main.c does, with POSIX threads). */
+typedef void (*rrv_parallel_for_func)(void *user, int count, void (*task)(void *task_ctx, int index),
+                                      void *task_ctx);
+
 struct rrv__bvh_node;
 
 typedef struct rrv_scene {
@@ -591,6 +599,8 @@ typedef struct rrv_scene {
                                               build (majorant, bakes); set by the
                                               loader from rrv_load_options, 0 =
                                               RRV_DEFAULT_MAX_GRID_BYTES */
+    rrv_parallel_for_func parallel_for;    /* from rrv_load_options; NULL: serial */
+    void *parallel_for_user;
     char path[256];                        /* the file it came from, for messages */
 } rrv_scene;
 
@@ -623,6 +633,9 @@ typedef struct rrv_load_options {
                                     smoother and the majorants looser (still bounds).
                                     Kept in scene->settings.max_bake_samples, so a
                                     later rrv_scene_prepare keeps it. */
+    rrv_parallel_for_func parallel_for; /* NULL: prepare runs serially. Kept in
+                                    the scene (as max_bake_samples is). */
+    void *parallel_for_user;
 } rrv_load_options;
 
 #define RRV_DEFAULT_MAX_GRID_BYTES ((size_t)2 << 30)
@@ -2579,6 +2592,37 @@ static rrv_vec3 rrv__lattice_point(rrv_vec3 lo, rrv_vec3 hi, const int n[3], int
    octave's wavelength (at two, trilinear interpolation of T and of r = k/T
    already disagreed by 10% in the bending of heat haze), at most 128
    samples an axis (8 MiB a field) or settings.max_bake_samples. */
+/* Set-up work split into independent tasks: the client's parallel_for, or
+   a plain loop. */
+static void rrv__parallel_for(const rrv_scene *scene, int count, void (*task)(void *, int), void *ctx)
+{
+    int i;
+    if (scene->parallel_for && count > 1) {
+        scene->parallel_for(scene->parallel_for_user, count, task, ctx);
+        return;
+    }
+    for (i = 0; i < count; ++i) task(ctx, i);
+}
+
+typedef struct rrv__noise_bake {
+    const rrv_field *f;
+    const rrv_medium *m;
+    int n[3];
+    float *data;
+} rrv__noise_bake;
+
+/* One z slice of a noise bake. */
+static void rrv__bake_noise_slice(void *ctx, int z)
+{
+    const rrv__noise_bake *job = (const rrv__noise_bake *)ctx;
+    size_t i = (size_t)z * (size_t)job->n[1] * (size_t)job->n[0];
+    int x, y;
+    for (y = 0; y < job->n[1]; ++y)
+        for (x = 0; x < job->n[0]; ++x)
+            job->data[i++] =
+                (float)rrv__field_eval(job->f, rrv__lattice_point(job->m->lo, job->m->hi, job->n, x, y, z), 0, 0.0);
+}
+
 static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, const rrv_field *f, rrv_field *out,
                                   size_t *bytes, rrv_error *err)
 {
@@ -2586,9 +2630,9 @@ static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, c
     double finest = nz->frequency * pow(nz->lacunarity, nz->octaves - 1);
     rrv_vec3 ext = rrv__sub(m->hi, m->lo);
     double longest = rrv__maxd(ext.x, rrv__maxd(ext.y, ext.z));
-    int cap = scene->settings.max_bake_samples, n[3], a, x, y, z;
+    int cap = scene->settings.max_bake_samples, n[3], a;
     double voxel;
-    size_t count, i = 0;
+    size_t count;
     float *data;
     cap = cap <= 0 || cap > 128 ? 128 : cap < 2 ? 2 : cap;
     voxel = rrv__maxd(0.25 / finest, longest / (cap - 1));
@@ -2603,11 +2647,14 @@ static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, c
     }
     data = (float *)RRV_MALLOC(count * sizeof(float));
     if (!data) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory baking a noise field");
-    for (z = 0; z < n[2]; ++z)
-        for (y = 0; y < n[1]; ++y)
-            for (x = 0; x < n[0]; ++x) {
-                data[i++] = (float)rrv__field_eval(f, rrv__lattice_point(m->lo, m->hi, n, x, y, z), 0, 0.0);
-            }
+    {
+        rrv__noise_bake job;
+        job.f = f;
+        job.m = m;
+        for (a = 0; a < 3; ++a) job.n[a] = n[a];
+        job.data = data;
+        rrv__parallel_for(scene, n[2], rrv__bake_noise_slice, &job);
+    }
     memset(out, 0, sizeof *out);
     out->kind = RRV_FIELD_GRID;
     out->grid.nx = n[0];
@@ -2820,11 +2867,40 @@ static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, si
     return RRV_OK;
 }
 
+typedef struct rrv__majorant_bake {
+    const rrv_medium *m;
+    struct rrv__majorant_grid *g;
+    double ambient_r;
+} rrv__majorant_bake;
+
+/* The bounds of one z layer of majorant cells. */
+static void rrv__majorant_slice(void *ctx, int z)
+{
+    const rrv__majorant_bake *job = (const rrv__majorant_bake *)ctx;
+    const rrv_medium *m = job->m;
+    struct rrv__majorant_grid *g = job->g;
+    size_t c = (size_t)z * (size_t)g->n[1] * (size_t)g->n[0];
+    int x, y;
+    for (y = 0; y < g->n[1]; ++y)
+        for (x = 0; x < g->n[0]; ++x, ++c) {
+            rrv_vec3 lo = rrv__v3(m->lo.x + x * g->cell.x, m->lo.y + y * g->cell.y, m->lo.z + z * g->cell.z);
+            rrv_vec3 hi = rrv__add(lo, g->cell);
+            double d = rrv__mind(rrv__field_bound(rrv__field_of(m, RRV__DENSITY), lo, hi), FLT_MAX);
+            /* Round the float bound up so it stays a bound (the loader
+               refused densities beyond float). */
+            float df = (float)d;
+            if ((double)df < d) df = nextafterf(df, FLT_MAX);
+            g->density_max[c] = df > 0 ? df : 0.0f;
+            if (g->grad_max)
+                g->grad_max[c] = (float)rrv__mind(rrv__cell_gradient_bound(m, lo, hi, job->ambient_r), FLT_MAX);
+        }
+}
+
 static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, size_t *baked_bytes, rrv_error *err)
 {
     struct rrv__majorant_grid *g;
     size_t cells, c;
-    int x, y, z, refracts = rrv__medium_refracts(m);
+    int x, refracts = rrv__medium_refracts(m);
     int forced = scene->settings.majorant_cells;
     g = (struct rrv__majorant_grid *)RRV_MALLOC(sizeof *g);
     if (!g) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
@@ -2881,25 +2957,17 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
     g->density_max = (float *)RRV_MALLOC(cells * sizeof(float) * (refracts ? 2 : 1));
     if (!g->density_max) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
     g->grad_max = refracts ? g->density_max + cells : NULL;
-    c = 0;
-    for (z = 0; z < g->n[2]; ++z)
-        for (y = 0; y < g->n[1]; ++y)
-            for (x = 0; x < g->n[0]; ++x, ++c) {
-                rrv_vec3 lo = rrv__v3(m->lo.x + x * g->cell.x, m->lo.y + y * g->cell.y, m->lo.z + z * g->cell.z);
-                rrv_vec3 hi = rrv__add(lo, g->cell);
-                double d = rrv__mind(rrv__field_bound(rrv__field_of(m, RRV__DENSITY), lo, hi), FLT_MAX);
-                /* Round the float bound up so it stays a bound (the loader
-                   refused densities beyond float). */
-                float df = (float)d;
-                if ((double)df < d) df = nextafterf(df, FLT_MAX);
-                g->density_max[c] = df > 0 ? df : 0.0f;
-                g->density_peak = g->density_max[c] > g->density_peak ? g->density_max[c] : g->density_peak;
-                if (refracts) {
-                    g->grad_max[c] = (float)rrv__mind(
-                        rrv__cell_gradient_bound(m, lo, hi, scene->settings.ambient_ior - 1.0), FLT_MAX);
-                    g->grad_peak = g->grad_max[c] > g->grad_peak ? g->grad_max[c] : g->grad_peak;
-                }
-            }
+    {
+        rrv__majorant_bake job;
+        job.m = m;
+        job.g = g;
+        job.ambient_r = scene->settings.ambient_ior - 1.0;
+        rrv__parallel_for(scene, g->n[2], rrv__majorant_slice, &job);
+    }
+    for (c = 0; c < cells; ++c) {
+        g->density_peak = g->density_max[c] > g->density_peak ? g->density_max[c] : g->density_peak;
+        if (refracts) g->grad_peak = g->grad_max[c] > g->grad_peak ? g->grad_max[c] : g->grad_peak;
+    }
     g->empty = 1;
     for (c = 0; c < cells; ++c)
         if (g->density_max[c] > 0 && g->sigma_t_max > 0) { g->empty = 0; break; }
@@ -9984,6 +10052,10 @@ RRV_DEF rrv_result rrv_scene_parse(const char *text, size_t size, const char *na
     s->settings.ambient_ior = 1.0;
     s->max_grid_bytes = opt ? opt->max_grid_bytes : 0;
     if (opt && opt->max_bake_samples > 0) s->settings.max_bake_samples = opt->max_bake_samples;
+    if (opt) {
+        s->parallel_for = opt->parallel_for;
+        s->parallel_for_user = opt->parallel_for_user;
+    }
     memset(&p, 0, sizeof p);
     p.scene = s;
     p.name = s->path;
