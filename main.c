@@ -85,6 +85,8 @@ static const char render_help[] =
     "                         refracting media), none (lights count only where\n"
     "                         the bent path hits them: unbiased, noisier) or\n"
     "                         shoot (eikonal: connections along bent rays)\n"
+    "  --sampler NAME         pcg or sobol (Owen-scrambled, per pixel); default:\n"
+    "                         the scene's, else pcg\n"
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop (an EXR\n"
@@ -991,6 +993,8 @@ typedef struct render_options {
     int has_integrator;
     rrv_nee nee;
     int has_nee;
+    rrv_sampler sampler;
+    int has_sampler;
     int threads;
     double exposure;
     int crop[4], has_crop;
@@ -1058,6 +1062,13 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
             else if (strcmp(mode, "shoot") == 0) opt->nee = RRV_NEE_SHOOT;
             else return usage_error(&args, "--nee needs none, straight or shoot, got \"%s\"", mode);
             opt->has_nee = 1;
+        } else if (strcmp(arg, "--sampler") == 0) {
+            const char *name;
+            if (!take_value(&args, arg, "pcg or sobol", &name)) return EXIT_USAGE;
+            if (strcmp(name, "pcg") == 0) opt->sampler = RRV_SAMPLER_PCG;
+            else if (strcmp(name, "sobol") == 0) opt->sampler = RRV_SAMPLER_SOBOL;
+            else return usage_error(&args, "--sampler needs pcg or sobol, got \"%s\"", name);
+            opt->has_sampler = 1;
         } else if (strcmp(arg, "--threads") == 0) {
             if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer",
                           &opt->threads))
@@ -1176,6 +1187,7 @@ static int command_render(int argc, char **argv)
     if (opt.has_seed) scene->settings.seed = opt.seed;
     if (opt.has_integrator) scene->settings.integrator = opt.integrator;
     if (opt.has_nee) scene->settings.nee = opt.nee;
+    if (opt.has_sampler) scene->settings.sampler = opt.sampler;
     if (!apply_refraction_options(scene, &opt.refraction)) {
         rrv_scene_free(scene);
         return EXIT_INPUT;

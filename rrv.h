@@ -522,6 +522,15 @@ typedef enum rrv_nee {
                             straight NEE only where it is exact (see manual) */
 } rrv_nee;
 
+/* Where a pixel's samples take their random numbers. */
+typedef enum rrv_sampler {
+    RRV_SAMPLER_DEFAULT = 0, /* PCG for now */
+    RRV_SAMPLER_PCG,         /* an independent PCG32 stream per (pixel, sample) */
+    RRV_SAMPLER_SOBOL        /* the first RRV_SOBOL_DIMENSIONS numbers of a sample
+                                from Owen-scrambled Sobol pairs per pixel, the
+                                rest from the PCG32 stream */
+} rrv_sampler;
+
 typedef struct rrv_settings {
     int spp;              /* samples per pixel, >= 1 */
     int max_depth;        /* scattering/bounce vertices per path, >= 1 */
@@ -539,6 +548,7 @@ typedef struct rrv_settings {
     int max_bake_samples; /* caps what prepare builds per axis (see rrv_load_options);
                              0 = no cap beyond the defaults */
     rrv_nee nee;          /* refractive and eikonal: light sampling */
+    rrv_sampler sampler;
 } rrv_settings;
 
 struct rrv__majorant_grid;
@@ -962,7 +972,14 @@ static rrv_vec3 rrv__from_frame(rrv_vec3 n, double x, double y, double z)
 /* PCG32 (O'Neill 2014): small state, good statistics, and independent
    streams, so each (pixel, sample) owns one and images do not depend on
    how the work is split between threads. */
-typedef struct rrv__rng { uint64_t state, inc; } rrv__rng;
+typedef struct rrv__rng {
+    uint64_t state, inc;
+    /* Sobol sampler (rrv__sobol_start): the sample's index in its pixel, the
+       pixel's scramble seed, the next dimension, how many come from Sobol,
+       and the second coordinate of the pair last drawn */
+    uint32_t sobol_index, sobol_seed, sobol_y;
+    int dim, sobol_dims;
+} rrv__rng;
 
 static uint32_t rrv__next_u32(rrv__rng *rng)
 {
@@ -990,12 +1007,87 @@ static void rrv__rng_seed(rrv__rng *rng, uint64_t seed, uint64_t stream_a, uint6
     rrv__next_u32(rng);
     rng->state += key;
     rrv__next_u32(rng);
+    rng->dim = rng->sobol_dims = 0;
+}
+
+/* ---- the Sobol sampler: Owen-scrambled Sobol pairs (Burley 2020) ----------
+   Sample s of a pixel takes its dimensions two at a time from the first two
+   Sobol dimensions, a (0,2)-sequence, at index s shuffled by a nested
+   uniform (Owen) scramble of its own per pair, each coordinate Owen-scrambled
+   too. Every single sample is then uniform in the unit square and pairs are
+   independent, so estimates stay unbiased; across a pixel's samples each
+   pair is stratified. Everything is a hash of (seed, pixel, s): images are
+   the same for any split into tiles, sample ranges and threads. */
+#define RRV_SOBOL_DIMENSIONS 16
+
+static uint32_t rrv__reverse_bits(uint32_t x)
+{
+    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+    x = ((x >> 4) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4);
+    x = ((x >> 8) & 0x00FF00FFu) | ((x & 0x00FF00FFu) << 8);
+    return (x >> 16) | (x << 16);
+}
+
+/* A nested uniform scramble of the binary digits of x (most significant
+   first): each digit is flipped by a hash of the digits above it. The hash
+   is the Laine-Karras style one Burley (2020) tuned, on the reversed bits,
+   where carries run from low to high, i.e. from the top digits down. */
+static uint32_t rrv__owen_scramble(uint32_t x, uint32_t seed)
+{
+    x = rrv__reverse_bits(x);
+    x += seed;
+    x ^= x * 0x6c50b47cu;
+    x ^= x * 0xb82f1e52u;
+    x ^= x * 0xc7afe638u;
+    x ^= x * 0x8d22f6e6u;
+    return rrv__reverse_bits(x);
+}
+
+/* Sobol's second dimension: its generator matrix is Pascal's triangle mod 2
+   (primitive polynomial x + 1), column k being v_k = v_{k-1} ^ (v_{k-1} >> 1). */
+static uint32_t rrv__sobol_1(uint32_t i)
+{
+    uint32_t v = 0x80000000u, r = 0;
+    for (; i; i >>= 1, v ^= v >> 1)
+        if (i & 1u) r ^= v;
+    return r;
+}
+
+static uint32_t rrv__hash32(uint32_t a, uint32_t b)
+{
+    return (uint32_t)(rrv__mix64(((uint64_t)a << 32) | b) >> 32);
+}
+
+/* Makes the next RRV_SOBOL_DIMENSIONS numbers drawn from rng those of
+   sample `index` of the pixel whose scramble seed is `seed`. */
+static void rrv__sobol_start(rrv__rng *rng, uint32_t seed, uint32_t index)
+{
+    rng->sobol_seed = seed;
+    rng->sobol_index = index;
+    rng->dim = 0;
+    rng->sobol_dims = RRV_SOBOL_DIMENSIONS;
+}
+
+static double rrv__sobol_next(rrv__rng *rng)
+{
+    int d = rng->dim++;
+    uint32_t pair, i, x;
+    if (d & 1) return rng->sobol_y * (1.0 / 4294967296.0);
+    pair = rrv__hash32(rng->sobol_seed, (uint32_t)d);
+    i = rrv__owen_scramble(rng->sobol_index, pair);
+    x = rrv__owen_scramble(rrv__reverse_bits(i), rrv__hash32(pair, 1u));
+    rng->sobol_y = rrv__owen_scramble(rrv__sobol_1(i), rrv__hash32(pair, 2u));
+    return x * (1.0 / 4294967296.0);
 }
 
 /* Uniform in [0,1): 53 random bits, so that -log(1-u) never sees 1. */
 static double rrv__uniform(rrv__rng *rng)
 {
-    uint64_t hi = rrv__next_u32(rng) >> 5, lo = rrv__next_u32(rng) >> 6;
+    uint64_t hi, lo;
+    if (rng->dim < rng->sobol_dims) return rrv__sobol_next(rng);
+    hi = rrv__next_u32(rng) >> 5;
+    lo = rrv__next_u32(rng) >> 6;
     return (double)(hi * 67108864.0 + lo) * (1.0 / 9007199254740992.0);
 }
 
@@ -4631,7 +4723,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     rrv__context ctx;
     rrv__camera_frame frame;
     double r_camera;
-    int x, y, s, c;
+    int x, y, s, c, sobol;
     if (!scene || !sum) return RRV_ERROR_ARGUMENT;
     if (x0 < 0 || y0 < 0 || x1 > scene->camera.width || y1 > scene->camera.height || x0 > x1 || y0 > y1 ||
         stride < x1 - x0 || sample_begin < 0 || sample_begin > sample_end)
@@ -4639,6 +4731,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     if (scene->shape_count && !scene->bvh) return RRV_ERROR_ARGUMENT; /* not prepared */
     memset(&ctx, 0, sizeof ctx);
     ctx.scene = scene;
+    sobol = scene->settings.sampler == RRV_SAMPLER_SOBOL;
     if (scene->settings.integrator == RRV_INTEGRATOR_REFRACTIVE) {
         ctx.comb = rrv__resolve_scheme(scene->settings.refraction) == RRV_REFRACTION_COMB;
         ctx.refract_nulls = !ctx.comb;
@@ -4665,6 +4758,8 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
                 double L[3];
                 rrv_vec3 d;
                 rrv__rng_seed(&rng, scene->settings.seed, pixel, (uint64_t)s);
+                if (sobol) rrv__sobol_start(&rng, (uint32_t)(rrv__mix64(scene->settings.seed ^ rrv__mix64(pixel)) >> 32),
+                                            (uint32_t)s);
                 double jy = rrv__uniform(&rng), jx = rrv__uniform(&rng); /* in this order on every compiler */
                 d = rrv__camera_ray(&frame, &scene->camera, x + jx, y + jy);
                 rrv__trace_path(&ctx, frame.eye, d, &rng, L);
@@ -8576,6 +8671,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"majorantcells", RRV__SF_INT, 1, 0, 0.0, 256.0, NULL},
     {"iorinterp", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "trilinear|cubic"},
     {"nee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "none|straight|shoot"},
+    {"sampler", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "pcg|sobol"},
 };
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
@@ -9254,6 +9350,7 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[9].given) s->majorant_cells = (int)sl[9].v[0];
     if (sl[10].given) s->ior_interpolation = sl[10].choice ? RRV_IOR_INTERP_CUBIC : RRV_IOR_INTERP_TRILINEAR;
     if (sl[11].given) s->nee = sl[11].choice == 0 ? RRV_NEE_NONE : sl[11].choice == 1 ? RRV_NEE_STRAIGHT : RRV_NEE_SHOOT;
+    if (sl[12].given) s->sampler = sl[12].choice == 0 ? RRV_SAMPLER_PCG : RRV_SAMPLER_SOBOL;
     return RRV_OK;
 }
 
