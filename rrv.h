@@ -1777,7 +1777,12 @@ static double rrv__lattice(uint32_t x, uint32_t y, uint32_t z, uint32_t seed)
    the old int-then-unsigned conversion gave, so images did not change). */
 static uint32_t rrv__lattice_coord(double f)
 {
-    double m = fmod(f, 4294967296.0);
+    double m;
+    /* the usual case without fmod (a fifth of a noise bake once): an
+       integer this small converts exactly, and its low 32 bits are the
+       residue modulo 2^32 */
+    if (f > -4503599627370496.0 && f < 4503599627370496.0) return (uint32_t)(uint64_t)(int64_t)f;
+    m = fmod(f, 4294967296.0);
     if (m < 0) m += 4294967296.0;
     return m >= 0 && m < 4294967296.0 ? (uint32_t)m : 0u;
 }
