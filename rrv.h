@@ -3430,8 +3430,7 @@ static int rrv__box_interval(rrv_vec3 lo_box, rrv_vec3 hi_box, rrv_vec3 o, rrv_v
         if (da == 0) {
             if (oa < rrv__axis(lo_box, a) || oa > rrv__axis(hi_box, a)) return 0;
         } else {
-            double ia = 1.0 / da;
-            double ta = (rrv__axis(lo_box, a) - oa) * ia, tb = (rrv__axis(hi_box, a) - oa) * ia;
+            double ta = (rrv__axis(lo_box, a) - oa) / da, tb = (rrv__axis(hi_box, a) - oa) / da;
             if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
             if (ta > lo) { lo = ta; axis_lo = a; }
             if (tb < hi) { hi = tb; axis_hi = a; }
