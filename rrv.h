@@ -1029,34 +1029,32 @@ static uint32_t rrv__reverse_bits(uint32_t x)
     return (x >> 16) | (x << 16);
 }
 
-/* A nested uniform scramble of the binary digits of x (most significant
-   first): each digit is flipped by a hash of the digits above it. The hash
-   is the Laine-Karras style one Burley (2020) tuned, on the reversed bits,
-   where carries run from low to high, i.e. from the top digits down. */
-static uint32_t rrv__owen_scramble(uint32_t x, uint32_t seed)
+/* A nested uniform scramble of binary digits held reversed (the first
+   digit in bit 0): each digit is flipped by a hash of the digits before it.
+   The Laine-Karras style hash Burley (2020) tuned: carries of the additions
+   and products run from bit 0 up, i.e. from the first digits on. */
+static uint32_t rrv__owen_reversed(uint32_t x, uint32_t seed)
 {
-    x = rrv__reverse_bits(x);
     x += seed;
     x ^= x * 0x6c50b47cu;
     x ^= x * 0xb82f1e52u;
     x ^= x * 0xc7afe638u;
     x ^= x * 0x8d22f6e6u;
-    return rrv__reverse_bits(x);
+    return x;
 }
 
-/* Sobol's second dimension: its generator matrix is Pascal's triangle mod 2
-   (primitive polynomial x + 1), column k being v_k = v_{k-1} ^ (v_{k-1} >> 1). */
-static uint32_t rrv__sobol_1(uint32_t i)
+/* Sobol's second dimension, its digits reversed (digit r in bit r): the
+   generator matrix is Pascal's triangle mod 2 (polynomial x + 1), and by
+   Lucas' theorem digit r is the XOR of the index bits k whose binary
+   digits contain r's, a superset sum taken in five shifts. */
+static uint32_t rrv__sobol_1_reversed(uint32_t i)
 {
-    uint32_t v = 0x80000000u, r = 0;
-    for (; i; i >>= 1, v ^= v >> 1)
-        if (i & 1u) r ^= v;
-    return r;
-}
-
-static uint32_t rrv__hash32(uint32_t a, uint32_t b)
-{
-    return (uint32_t)(rrv__mix64(((uint64_t)a << 32) | b) >> 32);
+    i ^= (i >> 1) & 0x55555555u;
+    i ^= (i >> 2) & 0x33333333u;
+    i ^= (i >> 4) & 0x0F0F0F0Fu;
+    i ^= (i >> 8) & 0x00FF00FFu;
+    i ^= (i >> 16) & 0x0000FFFFu;
+    return i;
 }
 
 /* Makes the next RRV_SOBOL_DIMENSIONS numbers drawn from rng those of
@@ -1069,15 +1067,18 @@ static void rrv__sobol_start(rrv__rng *rng, uint32_t seed, uint32_t index)
     rng->sobol_dims = RRV_SOBOL_DIMENSIONS;
 }
 
+/* Dimension 0 of Sobol is the index with its bits reversed, so in reversed
+   form the shuffled index i is its own first coordinate. */
 static double rrv__sobol_next(rrv__rng *rng)
 {
     int d = rng->dim++;
-    uint32_t pair, i, x;
+    uint64_t h;
+    uint32_t i, x;
     if (d & 1) return rng->sobol_y * (1.0 / 4294967296.0);
-    pair = rrv__hash32(rng->sobol_seed, (uint32_t)d);
-    i = rrv__owen_scramble(rng->sobol_index, pair);
-    x = rrv__owen_scramble(rrv__reverse_bits(i), rrv__hash32(pair, 1u));
-    rng->sobol_y = rrv__owen_scramble(rrv__sobol_1(i), rrv__hash32(pair, 2u));
+    h = rrv__mix64(((uint64_t)rng->sobol_seed << 32) | (uint32_t)d);
+    i = rrv__reverse_bits(rrv__owen_reversed(rrv__reverse_bits(rng->sobol_index), (uint32_t)h));
+    x = rrv__reverse_bits(rrv__owen_reversed(i, (uint32_t)(h >> 32)));
+    rng->sobol_y = rrv__reverse_bits(rrv__owen_reversed(rrv__sobol_1_reversed(i), (uint32_t)(h >> 16) * 0x9E3779B9u));
     return x * (1.0 / 4294967296.0);
 }
 
