@@ -3586,6 +3586,7 @@ typedef struct rrv__bender {
     int reflected;     /* the last face crossed reflected the ray */
     int combing;       /* comb: a comb is running (its first half kick is done) */
     double chord;      /* comb: length of the chord behind the next point */
+    int entering;      /* comb: the next point is where cells with a gradient begin */
     rrv__support_view ahead; /* END_KICK: the supports seen from the segment's end
                                 along its direction (the same line as the segment's) */
 } rrv__bender;
@@ -3668,20 +3669,32 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     return nd;
 }
 
-/* The distance from x (inside the grid's box) along d at which the
-   integral of the cells' max |grad r| reaches bend; DBL_MAX if the ray
-   leaves the box first. A DDA of its own: the comb calls it at every kick,
-   where rrv__majorant_iterator_start's box clipping and per-segment
-   bookkeeping cost more than the walk itself. */
-static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x, rrv_vec3 d, double bend)
+/* The comb spacing from x (inside the grid's box) along d, tau spacings
+   of the first cell with a gradient: cells where max |grad r| is 0 are
+   crossed without a kick (a ray through the empty part of a support runs
+   straight to its face; it once paid a kick per cell), and in a cell with a
+   gradient the spacing is the inverse of its rate, at most a cell. The rate
+   alone, integrated along the ray, would place fewer kicks still, but then
+   where a kick falls hangs on the bounds, which two copies of one grid (a
+   NanoVDB file and a gridvol) round differently. DBL_MAX if the ray leaves
+   the box first. A DDA of its own: the comb calls it at every kick. */
+static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x, rrv_vec3 d, double tau,
+                                 double inv_tolerance, int *entering)
 {
     int cell[3], step[3], a;
-    double t_next[3], t_delta[3], t = 0;
+    double t_next[3], t_delta[3], t = 0, cell_min = fmin(g->cell.x, fmin(g->cell.y, g->cell.z));
     size_t idx, stride[3];
     stride[0] = 1;
     stride[1] = (size_t)g->n[0];
     stride[2] = stride[1] * (size_t)g->n[1];
+    double h = 0;
+    int in_gradient;
     idx = rrv__majorant_cell(g, x, cell);
+    in_gradient = g->grad_max[idx] > 0;
+    if (in_gradient) {
+        double rate = g->grad_max[idx] * inv_tolerance;
+        h = tau * (rate * cell_min > 1.0 ? 1.0 / rate : cell_min);
+    }
     for (a = 0; a < 3; ++a) {
         double da = rrv__axis(d, a), cs = rrv__axis(g->cell, a), lo = rrv__axis(g->lo, a), xa = rrv__axis(x, a);
         if (da > 0) {
@@ -3698,38 +3711,42 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
         }
         if (t_next[a] < 0) t_next[a] = 0;
     }
+    /* A kick stands for the chords on both sides of it, so a chord must not
+       carry a gradient into a stretch without one: where the ray passes
+       from cells with a gradient to cells without, or back, a point falls
+       on the face between them (where the gradient is 0). */
     for (;;) {
-        double g_cell = g->grad_max[idx], t1;
         a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
-        t1 = t_next[a];
-        if (g_cell > 0) {
-            double depth = g_cell * (t1 - t);
-            if (depth >= bend) return t + bend / g_cell;
-            bend -= depth;
-        }
-        t = t1;
+        t = t_next[a];
+        if (in_gradient && h <= t) return h;
         cell[a] += step[a];
-        if (cell[a] < 0 || cell[a] >= g->n[a]) return DBL_MAX;
+        if (cell[a] < 0 || cell[a] >= g->n[a]) return in_gradient ? h : DBL_MAX;
         idx = step[a] > 0 ? idx + stride[a] : idx - stride[a];
+        if ((g->grad_max[idx] > 0) != in_gradient && t > RRV__EDGE_NUDGE * (1.0 + rrv__length(x))) {
+            *entering = !in_gradient;
+            return t;
+        }
+        if (!in_gradient && g->grad_max[idx] > 0) {
+            /* x lay on the face (within rounding): start the cell's spacing here */
+            double rate = g->grad_max[idx] * inv_tolerance;
+            in_gradient = 1;
+            h = t + tau * (rate * cell_min > 1.0 ? 1.0 / rate : cell_min);
+        }
         t_next[a] += t_delta[a];
     }
 }
 
-/* Comb spacing from x along d: the distance at which the refraction event
-   rate (fixed mu_eta, or max |grad r| / tolerance per majorant cell),
-   integrated along the majorant DDA, reaches tau. Each chord then bends the
-   ray by about the tolerance at most, however many cells it spans, and
-   cells where the gradient vanishes cost no kick: a ray through a weak or
-   empty part of a support runs straight to its face (it was once a kick
-   per cell). A strong cell cannot be jumped over, its rate adds up. */
-static double rrv__comb_spacing(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double tau)
+/* Comb spacing from x along d, tau spacings: 1 / mu_eta when it is fixed,
+   else from the majorant cells' gradient bounds (rrv__rate_distance). */
+static double rrv__comb_spacing(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double tau, int *entering)
 {
     int i;
+    *entering = 0;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
         if (!rrv__medium_refracts(m) || !rrv__inside_box(x, m->lo, m->hi)) continue;
         if (scene->settings.mu_eta > 0) return tau / scene->settings.mu_eta;
-        return rrv__rate_distance(m->majorant, x, d, tau * scene->settings.bend_tolerance);
+        return rrv__rate_distance(m->majorant, x, d, tau, 1.0 / scene->settings.bend_tolerance, entering);
     }
     return fmin(scene->settings.step, 1.0);
 }
@@ -3841,7 +3858,8 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     } else if (b->scheme == RRV_REFRACTION_COMB) {
         /* the first point a uniformly random fraction of a spacing ahead, so
            the comb does not alias with pixels */
-        rrv__comb_step(b, scene, o, d, rrv__comb_spacing(scene, o, *d, 1.0 - rrv__uniform(rng)), &view);
+        double h = rrv__comb_spacing(scene, o, *d, 1.0 - rrv__uniform(rng), &b->entering);
+        rrv__comb_step(b, scene, o, d, h, &view);
     }
 }
 
@@ -3858,7 +3876,12 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     case RRV__END_KICK: {
         rrv__support_view view = b->ahead;
         if (view.inside) {
-            rrv__comb_step(b, scene, *o, d, rrv__comb_spacing(scene, *o, *d, 1.0), &view);
+            /* entering cells with a gradient from a stretch without: the
+               first point a random fraction of a spacing in, as at a
+               segment's start, so the comb does not alias with pixels */
+            double tau = b->entering ? 1.0 - rrv__uniform(rng) : 1.0;
+            double h = rrv__comb_spacing(scene, *o, *d, tau, &b->entering);
+            rrv__comb_step(b, scene, *o, d, h, &view);
         } else {
             /* a kick that turned the chord out through a face it grazed:
                the comb ends here, without an interface to refract */
