@@ -91,6 +91,8 @@ static const char render_help[] =
     "                         shoot (eikonal: connections along bent rays) or\n"
     "                         manifold (a chain of refraction vertices solved by\n"
     "                         Newton; scene keys manifoldgauge, manifoldtrials)\n"
+    "  --sampler NAME         pcg or sobol (Owen-scrambled, per pixel); default:\n"
+    "                         the scene's, else pcg\n"
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop (an EXR\n"
@@ -655,15 +657,74 @@ static int finish_stdout(int code)
     return code;
 }
 
-/* inputs, if not NULL, collects every file the load read, the scene first. */
+static int default_thread_count(void);
+
+#if RRV_THREADS
+/* The tasks of one rrv_load_options.parallel_for call, handed out in turn. */
+typedef struct setup_pool {
+    void (*task)(void *, int);
+    void *ctx;
+    int count, next;
+    pthread_mutex_t lock;
+} setup_pool;
+
+static void *setup_worker(void *arg)
+{
+    setup_pool *pool = (setup_pool *)arg;
+    for (;;) {
+        int i;
+        pthread_mutex_lock(&pool->lock);
+        i = pool->next++;
+        pthread_mutex_unlock(&pool->lock);
+        if (i >= pool->count) return NULL;
+        pool->task(pool->ctx, i);
+    }
+}
+#endif
+
+/* rrv_load_options.parallel_for: the scene's bakes on `*(int *)user`
+   threads, this one among them; serially when threads cannot start. The
+   count lives as long as the process, since the scene keeps the pointer for
+   the prepare that the refraction options may ask for again. */
+static int setup_threads = 1;
+
+static void setup_parallel_for(void *user, int count, void (*task)(void *, int), void *ctx)
+{
+    int threads = *(const int *)user, i;
+#if RRV_THREADS
+    pthread_t ids[MAX_THREADS];
+    setup_pool pool;
+    int started = 0;
+    if (threads > count) threads = count;
+    if (threads > 1 && pthread_mutex_init(&pool.lock, NULL) == 0) {
+        pool.task = task;
+        pool.ctx = ctx;
+        pool.count = count;
+        pool.next = 0;
+        while (started < threads - 1 && pthread_create(&ids[started], NULL, setup_worker, &pool) == 0) ++started;
+        setup_worker(&pool);
+        for (i = 0; i < started; ++i) pthread_join(ids[i], NULL);
+        pthread_mutex_destroy(&pool.lock);
+        return;
+    }
+#endif
+    (void)threads;
+    for (i = 0; i < count; ++i) task(ctx, i);
+}
+
+/* inputs, if not NULL, collects every file the load read, the scene first.
+   threads: for the set-up, 0 = the number of online CPUs. */
 static int load_scene(const char *path, size_t max_grid_bytes, input_list *inputs,
-                      rrv_scene **scene)
+                      rrv_scene **scene, int threads)
 {
     rrv_load_options options;
     rrv_error err;
     memset(&options, 0, sizeof options);
     memset(&err, 0, sizeof err);
     options.max_grid_bytes = max_grid_bytes;
+    setup_threads = threads > 0 ? threads : default_thread_count();
+    options.parallel_for = setup_parallel_for;
+    options.parallel_for_user = &setup_threads;
     if (inputs) {
         options.on_input = record_input;
         options.on_input_user = inputs;
@@ -1245,6 +1306,8 @@ typedef struct render_options {
     int has_integrator;
     rrv_nee nee;
     int has_nee;
+    rrv_sampler sampler;
+    int has_sampler;
     int threads;
     double exposure;
     int crop[4], has_crop;
@@ -1316,6 +1379,13 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
             else if (strcmp(mode, "manifold") == 0) opt->nee = RRV_NEE_MANIFOLD;
             else return usage_error(&args, "--nee needs none, straight, shoot or manifold, got \"%s\"", mode);
             opt->has_nee = 1;
+        } else if (strcmp(arg, "--sampler") == 0) {
+            const char *name;
+            if (!take_value(&args, arg, "pcg or sobol", &name)) return EXIT_USAGE;
+            if (strcmp(name, "pcg") == 0) opt->sampler = RRV_SAMPLER_PCG;
+            else if (strcmp(name, "sobol") == 0) opt->sampler = RRV_SAMPLER_SOBOL;
+            else return usage_error(&args, "--sampler needs pcg or sobol, got \"%s\"", name);
+            opt->has_sampler = 1;
         } else if (strcmp(arg, "--threads") == 0) {
             if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer",
                           &opt->threads))
@@ -1442,7 +1512,7 @@ static int command_render(int argc, char **argv)
     if (!check_output(opt.pfm_path) || (opt.png_path && !check_output(opt.png_path)))
         return EXIT_IO;
     memset(&inputs, 0, sizeof inputs);
-    if (!load_scene(opt.scene_path, opt.max_grid_bytes, &inputs, &scene)) {
+    if (!load_scene(opt.scene_path, opt.max_grid_bytes, &inputs, &scene, opt.threads)) {
         free_inputs(&inputs);
         return EXIT_INPUT;
     }
@@ -1463,6 +1533,7 @@ static int command_render(int argc, char **argv)
     if (opt.has_seed) scene->settings.seed = opt.seed;
     if (opt.has_integrator) scene->settings.integrator = opt.integrator;
     if (opt.has_nee) scene->settings.nee = opt.nee;
+    if (opt.has_sampler) scene->settings.sampler = opt.sampler;
     if (!apply_refraction_options(scene, &opt.refraction)) {
         free_inputs(&inputs);
         rrv_scene_free(scene);
@@ -2341,7 +2412,7 @@ static int command_info(int argc, char **argv)
         }
     }
     if (!scene_path) return usage_error(&args, "info needs a scene file");
-    if (!load_scene(scene_path, max_grid_bytes, NULL, &scene)) return EXIT_INPUT;
+    if (!load_scene(scene_path, max_grid_bytes, NULL, &scene, 0)) return EXIT_INPUT;
 
     for (i = 0; i < scene->shape_count; ++i)
         if ((unsigned)scene->shapes[i].kind < 3) kind_counts[scene->shapes[i].kind]++;
@@ -2449,7 +2520,7 @@ static int command_trace(int argc, char **argv)
     direction.y = ray[4] / length;
     direction.z = ray[5] / length;
 
-    if (!load_scene(scene_path, max_grid_bytes, NULL, &scene)) return EXIT_INPUT;
+    if (!load_scene(scene_path, max_grid_bytes, NULL, &scene, 0)) return EXIT_INPUT;
     if (!apply_refraction_options(scene, &refraction)) {
         rrv_scene_free(scene);
         return EXIT_INPUT;

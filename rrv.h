@@ -640,6 +640,15 @@ typedef enum rrv_manifold_gauge {
                               paper's; undefined where grad eta ~ 0) */
 } rrv_manifold_gauge;
 
+/* Where a pixel's samples take their random numbers. */
+typedef enum rrv_sampler {
+    RRV_SAMPLER_DEFAULT = 0, /* PCG for now */
+    RRV_SAMPLER_PCG,         /* an independent PCG32 stream per (pixel, sample) */
+    RRV_SAMPLER_SOBOL        /* the first RRV_SOBOL_DIMENSIONS numbers of a sample
+                                from Owen-scrambled Sobol pairs per pixel, the
+                                rest from the PCG32 stream */
+} rrv_sampler;
+
 typedef struct rrv_settings {
     int spp;              /* samples per pixel, >= 1 */
     int max_depth;        /* scattering/bounce vertices per path, >= 1 */
@@ -662,6 +671,7 @@ typedef struct rrv_settings {
                              recurs); M > 0 = M solves, distinct roots summed (biased) */
     double manifold_drop; /* nee manifold: leave out comb planes across which eta
                              along the chord changes by less than this (0: none; biased) */
+    rrv_sampler sampler;
 } rrv_settings;
 
 struct rrv__majorant_grid;
@@ -695,6 +705,14 @@ typedef struct rrv_medium {
     struct rrv__majorant_grid *majorant;
 } rrv_medium;
 
+/* Runs task(task_ctx, i) for every i in [0, count), in any order and on any
+   threads, and returns once all have run. rrv_scene_prepare splits its bakes
+   into such tasks; each writes only its own samples, so the scene is the
+   same for any split and thread count. The library starts no threads: a
+   client that has them passes this (main.c does, with POSIX threads). */
+typedef void (*rrv_parallel_for_func)(void *user, int count, void (*task)(void *task_ctx, int index),
+                                      void *task_ctx);
+
 struct rrv__bvh_node;
 
 typedef struct rrv_scene {
@@ -714,6 +732,8 @@ typedef struct rrv_scene {
                                               build (majorant, bakes); set by the
                                               loader from rrv_load_options, 0 =
                                               RRV_DEFAULT_MAX_GRID_BYTES */
+    rrv_parallel_for_func parallel_for;    /* from rrv_load_options; NULL: serial */
+    void *parallel_for_user;
     char path[256];                        /* the file it came from, for messages */
 } rrv_scene;
 
@@ -751,6 +771,9 @@ typedef struct rrv_load_options {
                                     smoother and the majorants looser (still bounds).
                                     Kept in scene->settings.max_bake_samples, so a
                                     later rrv_scene_prepare keeps it. */
+    rrv_parallel_for_func parallel_for; /* NULL: prepare runs serially. Kept in
+                                    the scene (as max_bake_samples is). */
+    void *parallel_for_user;
 } rrv_load_options;
 
 #define RRV_DEFAULT_MAX_GRID_BYTES ((size_t)2 << 30)
@@ -1161,7 +1184,14 @@ static rrv_vec3 rrv__from_frame(rrv_vec3 n, double x, double y, double z)
 /* PCG32 (O'Neill 2014): small state, good statistics, and independent
    streams, so each (pixel, sample) owns one and images do not depend on
    how the work is split between threads. */
-typedef struct rrv__rng { uint64_t state, inc; } rrv__rng;
+typedef struct rrv__rng {
+    uint64_t state, inc;
+    /* Sobol sampler (rrv__sobol_start): the sample's index in its pixel, the
+       pixel's scramble seed, the next dimension, how many come from Sobol,
+       and the second coordinate of the pair last drawn */
+    uint32_t sobol_index, sobol_seed, sobol_y;
+    int dim, sobol_dims;
+} rrv__rng;
 
 static uint32_t rrv__next_u32(rrv__rng *rng)
 {
@@ -1189,12 +1219,88 @@ static void rrv__rng_seed(rrv__rng *rng, uint64_t seed, uint64_t stream_a, uint6
     rrv__next_u32(rng);
     rng->state += key;
     rrv__next_u32(rng);
+    rng->dim = rng->sobol_dims = 0;
+}
+
+/* ---- the Sobol sampler: Owen-scrambled Sobol pairs (Burley 2020) ----------
+   Sample s of a pixel takes its dimensions two at a time from the first two
+   Sobol dimensions, a (0,2)-sequence, at index s shuffled by a nested
+   uniform (Owen) scramble of its own per pair, each coordinate Owen-scrambled
+   too. Every single sample is then uniform in the unit square and pairs are
+   independent, so estimates stay unbiased; across a pixel's samples each
+   pair is stratified. Everything is a hash of (seed, pixel, s): images are
+   the same for any split into tiles, sample ranges and threads. */
+#define RRV_SOBOL_DIMENSIONS 16
+
+static uint32_t rrv__reverse_bits(uint32_t x)
+{
+    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+    x = ((x >> 4) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4);
+    x = ((x >> 8) & 0x00FF00FFu) | ((x & 0x00FF00FFu) << 8);
+    return (x >> 16) | (x << 16);
+}
+
+/* A nested uniform scramble of binary digits held reversed (the first
+   digit in bit 0): each digit is flipped by a hash of the digits before it.
+   The Laine-Karras style hash Burley (2020) tuned: carries of the additions
+   and products run from bit 0 up, i.e. from the first digits on. */
+static uint32_t rrv__owen_reversed(uint32_t x, uint32_t seed)
+{
+    x += seed;
+    x ^= x * 0x6c50b47cu;
+    x ^= x * 0xb82f1e52u;
+    x ^= x * 0xc7afe638u;
+    x ^= x * 0x8d22f6e6u;
+    return x;
+}
+
+/* Sobol's second dimension, its digits reversed (digit r in bit r): the
+   generator matrix is Pascal's triangle mod 2 (polynomial x + 1), and by
+   Lucas' theorem digit r is the XOR of the index bits k whose binary
+   digits contain r's, a superset sum taken in five shifts. */
+static uint32_t rrv__sobol_1_reversed(uint32_t i)
+{
+    i ^= (i >> 1) & 0x55555555u;
+    i ^= (i >> 2) & 0x33333333u;
+    i ^= (i >> 4) & 0x0F0F0F0Fu;
+    i ^= (i >> 8) & 0x00FF00FFu;
+    i ^= (i >> 16) & 0x0000FFFFu;
+    return i;
+}
+
+/* Makes the next RRV_SOBOL_DIMENSIONS numbers drawn from rng those of
+   sample `index` of the pixel whose scramble seed is `seed`. */
+static void rrv__sobol_start(rrv__rng *rng, uint32_t seed, uint32_t index)
+{
+    rng->sobol_seed = seed;
+    rng->sobol_index = index;
+    rng->dim = 0;
+    rng->sobol_dims = RRV_SOBOL_DIMENSIONS;
+}
+
+/* Dimension 0 of Sobol is the index with its bits reversed, so in reversed
+   form the shuffled index i is its own first coordinate. */
+static double rrv__sobol_next(rrv__rng *rng)
+{
+    int d = rng->dim++;
+    uint64_t h;
+    uint32_t i, x;
+    if (d & 1) return rng->sobol_y * (1.0 / 4294967296.0);
+    h = rrv__mix64(((uint64_t)rng->sobol_seed << 32) | (uint32_t)d);
+    i = rrv__reverse_bits(rrv__owen_reversed(rrv__reverse_bits(rng->sobol_index), (uint32_t)h));
+    x = rrv__reverse_bits(rrv__owen_reversed(i, (uint32_t)(h >> 32)));
+    rng->sobol_y = rrv__reverse_bits(rrv__owen_reversed(rrv__sobol_1_reversed(i), (uint32_t)(h >> 16) * 0x9E3779B9u));
+    return x * (1.0 / 4294967296.0);
 }
 
 /* Uniform in [0,1): 53 random bits, so that -log(1-u) never sees 1. */
 static double rrv__uniform(rrv__rng *rng)
 {
-    uint64_t hi = rrv__next_u32(rng) >> 5, lo = rrv__next_u32(rng) >> 6;
+    uint64_t hi, lo;
+    if (rng->dim < rng->sobol_dims) return rrv__sobol_next(rng);
+    hi = rrv__next_u32(rng) >> 5;
+    lo = rrv__next_u32(rng) >> 6;
     return (double)(hi * 67108864.0 + lo) * (1.0 / 9007199254740992.0);
 }
 
@@ -1884,7 +1990,12 @@ static double rrv__lattice(uint32_t x, uint32_t y, uint32_t z, uint32_t seed)
    the old int-then-unsigned conversion gave, so images did not change). */
 static uint32_t rrv__lattice_coord(double f)
 {
-    double m = fmod(f, 4294967296.0);
+    double m;
+    /* the usual case without fmod (a fifth of a noise bake once): an
+       integer this small converts exactly, and its low 32 bits are the
+       residue modulo 2^32 */
+    if (f > -4503599627370496.0 && f < 4503599627370496.0) return (uint32_t)(uint64_t)(int64_t)f;
+    m = fmod(f, 4294967296.0);
     if (m < 0) m += 4294967296.0;
     return m >= 0 && m < 4294967296.0 ? (uint32_t)m : 0u;
 }
@@ -2091,6 +2202,8 @@ enum { RRV__DENSITY, RRV__TEMPERATURE, RRV__PRESSURE, RRV__IOR, RRV__FIELD_KINDS
 struct rrv__majorant_grid {
     int n[3];
     rrv_vec3 lo, hi, cell;
+    rrv_vec3 inv_cell;     /* 1 / cell: a point's cell by multiplication */
+    rrv_vec3 refraction_scale; /* (n - 1) / (hi - lo) of the refraction grid */
     double sigma_t_max;    /* max over channels of (sigma_a + sigma_s) * scale */
     float *density_max;    /* per cell */
     float *grad_max;       /* per cell max |grad r|, NULL if the medium does not refract */
@@ -2160,16 +2273,6 @@ static double rrv__pressure(const rrv_medium *m, rrv_vec3 p)
 
 /* Refractivity eta - 1 of a refractive medium at p, including its artist
    scale; Hauf-Grigull for a gas: r = r_ref (P / P_ref) (T_ref / T). */
-/* Trilinear interpolation of the first `channels` channels of a grid at p
-   (inside its box). */
-static void rrv__grid_sample_all(const rrv_grid *g, rrv_vec3 p, int channels, double *out)
-{
-    rrv__grid_cell cell;
-    int c;
-    rrv__grid_locate(g, p, &cell);
-    for (c = 0; c < channels; ++c) out[c] = rrv__grid_blend(g, &cell, c);
-}
-
 /* Cubic B-spline weights of the four coefficients around a point at
    fraction t of its cell, and their derivatives in t. */
 static void rrv__bspline_weights(double t, double w[4], double dw[4])
@@ -2230,10 +2333,63 @@ static const rrv_grid *rrv__refraction_grid_at(const rrv_medium *m, rrv_vec3 p)
     return g && (g->data || m->majorant->cubic) && rrv__inside_box(p, g->lo, g->hi) ? g : NULL;
 }
 
+/* The trilinear blend of one channel at d (the lower corner), in double as
+   rrv__grid_blend. */
+static double rrv__blend8(const float *d, size_t sx, size_t sy, size_t sz, const double t[3])
+{
+    double c00 = (double)d[0] + t[0] * ((double)d[sx] - d[0]);
+    double c10 = (double)d[sy] + t[0] * ((double)d[sy + sx] - d[sy]);
+    double c01 = (double)d[sz] + t[0] * ((double)d[sz + sx] - d[sz]);
+    double c11 = (double)d[sz + sy] + t[0] * ((double)d[sz + sy + sx] - d[sz + sy]);
+    c00 += t[1] * (c10 - c00);
+    c01 += t[1] * (c11 - c01);
+    return c00 + t[2] * (c01 - c00);
+}
+
+/* The baked 4-channel refraction grid at p inside it: one location for all
+   channels, found by multiplying with the precomputed sample density (the
+   comb's kicks spent most of their lookup in rrv__grid_locate's divisions
+   and per-channel set-up). */
+static double rrv__refraction_lookup(const struct rrv__majorant_grid *mg, rrv_vec3 p, rrv_vec3 *grad)
+{
+    const rrv_grid *g = &mg->refraction;
+    const float *d;
+    double u[3], t[3];
+    int n[3], i[3], a;
+    size_t sy = 4 * (size_t)g->nx, sz = sy * (size_t)g->ny;
+    u[0] = (p.x - g->lo.x) * mg->refraction_scale.x;
+    u[1] = (p.y - g->lo.y) * mg->refraction_scale.y;
+    u[2] = (p.z - g->lo.z) * mg->refraction_scale.z;
+    n[0] = g->nx; n[1] = g->ny; n[2] = g->nz;
+    for (a = 0; a < 3; ++a) {
+        i[a] = (int)u[a];
+        if (i[a] > n[a] - 2) i[a] = n[a] - 2;
+        if (i[a] < 0) i[a] = 0;
+        t[a] = u[a] - i[a];
+    }
+    d = g->data + 4 * (size_t)i[0] + sy * (size_t)i[1] + sz * (size_t)i[2];
+    if (!grad) return rrv__blend8(d, 4, sy, sz, t);
+    {
+        /* the four channels side by side, so the compiler can blend them as one vector */
+        double v[4];
+        int c;
+        for (c = 0; c < 4; ++c) {
+            double c00 = (double)d[c] + t[0] * ((double)d[4 + c] - d[c]);
+            double c10 = (double)d[sy + c] + t[0] * ((double)d[sy + 4 + c] - d[sy + c]);
+            double c01 = (double)d[sz + c] + t[0] * ((double)d[sz + 4 + c] - d[sz + c]);
+            double c11 = (double)d[sz + sy + c] + t[0] * ((double)d[sz + sy + 4 + c] - d[sz + sy + c]);
+            c00 += t[1] * (c10 - c00);
+            c01 += t[1] * (c11 - c01);
+            v[c] = c00 + t[2] * (c01 - c00);
+        }
+        *grad = rrv__v3(v[1], v[2], v[3]);
+        return v[0];
+    }
+}
+
 /* The baked refractivity (and gradient if grad) at p inside the baked grid. */
 static double rrv__baked_refractivity(const rrv_medium *m, const rrv_grid *baked, rrv_vec3 p, rrv_vec3 *grad)
 {
-    double v[4];
     if (m->majorant->cubic) {
         /* The floor keeps eta > 0 where the spline overshoots a sharp
            feature; it lies far below any sample and is never met by a
@@ -2241,9 +2397,8 @@ static double rrv__baked_refractivity(const rrv_medium *m, const rrv_grid *baked
         double r = rrv__cubic_eval(baked, m->majorant->cubic, p, grad);
         return r > m->majorant->cubic_floor ? r : m->majorant->cubic_floor;
     }
-    rrv__grid_sample_all(baked, p, grad ? 4 : 1, v);
-    if (grad) *grad = rrv__v3(v[1], v[2], v[3]);
-    return v[0];
+    (void)baked;
+    return rrv__refraction_lookup(m->majorant, p, grad);
 }
 
 static double rrv__refractivity(const rrv_medium *m, rrv_vec3 p, double ambient_r)
@@ -2747,6 +2902,37 @@ static rrv_vec3 rrv__lattice_point(rrv_vec3 lo, rrv_vec3 hi, const int n[3], int
    octave's wavelength (at two, trilinear interpolation of T and of r = k/T
    already disagreed by 10% in the bending of heat haze), at most 128
    samples an axis (8 MiB a field) or settings.max_bake_samples. */
+/* Set-up work split into independent tasks: the client's parallel_for, or
+   a plain loop. */
+static void rrv__parallel_for(const rrv_scene *scene, int count, void (*task)(void *, int), void *ctx)
+{
+    int i;
+    if (scene->parallel_for && count > 1) {
+        scene->parallel_for(scene->parallel_for_user, count, task, ctx);
+        return;
+    }
+    for (i = 0; i < count; ++i) task(ctx, i);
+}
+
+typedef struct rrv__noise_bake {
+    const rrv_field *f;
+    const rrv_medium *m;
+    int n[3];
+    float *data;
+} rrv__noise_bake;
+
+/* One z slice of a noise bake. */
+static void rrv__bake_noise_slice(void *ctx, int z)
+{
+    const rrv__noise_bake *job = (const rrv__noise_bake *)ctx;
+    size_t i = (size_t)z * (size_t)job->n[1] * (size_t)job->n[0];
+    int x, y;
+    for (y = 0; y < job->n[1]; ++y)
+        for (x = 0; x < job->n[0]; ++x)
+            job->data[i++] =
+                (float)rrv__field_eval(job->f, rrv__lattice_point(job->m->lo, job->m->hi, job->n, x, y, z), 0, 0.0);
+}
+
 static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, const rrv_field *f, rrv_field *out,
                                   size_t *bytes, rrv_error *err)
 {
@@ -2754,9 +2940,9 @@ static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, c
     double finest = nz->frequency * pow(nz->lacunarity, nz->octaves - 1);
     rrv_vec3 ext = rrv__sub(m->hi, m->lo);
     double longest = rrv__maxd(ext.x, rrv__maxd(ext.y, ext.z));
-    int cap = scene->settings.max_bake_samples, n[3], a, x, y, z;
+    int cap = scene->settings.max_bake_samples, n[3], a;
     double voxel;
-    size_t count, i = 0;
+    size_t count;
     float *data;
     cap = cap <= 0 || cap > 128 ? 128 : cap < 2 ? 2 : cap;
     voxel = rrv__maxd(0.25 / finest, longest / (cap - 1));
@@ -2771,11 +2957,14 @@ static rrv_result rrv__bake_noise(const rrv_scene *scene, const rrv_medium *m, c
     }
     data = (float *)RRV_MALLOC(count * sizeof(float));
     if (!data) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory baking a noise field");
-    for (z = 0; z < n[2]; ++z)
-        for (y = 0; y < n[1]; ++y)
-            for (x = 0; x < n[0]; ++x) {
-                data[i++] = (float)rrv__field_eval(f, rrv__lattice_point(m->lo, m->hi, n, x, y, z), 0, 0.0);
-            }
+    {
+        rrv__noise_bake job;
+        job.f = f;
+        job.m = m;
+        for (a = 0; a < 3; ++a) job.n[a] = n[a];
+        job.data = data;
+        rrv__parallel_for(scene, n[2], rrv__bake_noise_slice, &job);
+    }
     memset(out, 0, sizeof *out);
     out->kind = RRV_FIELD_GRID;
     out->grid.nx = n[0];
@@ -2981,15 +3170,47 @@ static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, si
     g->refraction = *lattice;
     g->refraction.channels = 4;
     g->refraction.data = data;
+    g->refraction_scale = rrv__v3((lattice->nx - 1) / (lattice->hi.x - lattice->lo.x),
+                                  (lattice->ny - 1) / (lattice->hi.y - lattice->lo.y),
+                                  (lattice->nz - 1) / (lattice->hi.z - lattice->lo.z));
     *bytes += count * 4 * sizeof(float);
     return RRV_OK;
+}
+
+typedef struct rrv__majorant_bake {
+    const rrv_medium *m;
+    struct rrv__majorant_grid *g;
+    double ambient_r;
+} rrv__majorant_bake;
+
+/* The bounds of one z layer of majorant cells. */
+static void rrv__majorant_slice(void *ctx, int z)
+{
+    const rrv__majorant_bake *job = (const rrv__majorant_bake *)ctx;
+    const rrv_medium *m = job->m;
+    struct rrv__majorant_grid *g = job->g;
+    size_t c = (size_t)z * (size_t)g->n[1] * (size_t)g->n[0];
+    int x, y;
+    for (y = 0; y < g->n[1]; ++y)
+        for (x = 0; x < g->n[0]; ++x, ++c) {
+            rrv_vec3 lo = rrv__v3(m->lo.x + x * g->cell.x, m->lo.y + y * g->cell.y, m->lo.z + z * g->cell.z);
+            rrv_vec3 hi = rrv__add(lo, g->cell);
+            double d = rrv__mind(rrv__field_bound(rrv__field_of(m, RRV__DENSITY), lo, hi), FLT_MAX);
+            /* Round the float bound up so it stays a bound (the loader
+               refused densities beyond float). */
+            float df = (float)d;
+            if ((double)df < d) df = nextafterf(df, FLT_MAX);
+            g->density_max[c] = df > 0 ? df : 0.0f;
+            if (g->grad_max)
+                g->grad_max[c] = (float)rrv__mind(rrv__cell_gradient_bound(m, lo, hi, job->ambient_r), FLT_MAX);
+        }
 }
 
 static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, size_t *baked_bytes, rrv_error *err)
 {
     struct rrv__majorant_grid *g;
     size_t cells, c;
-    int x, y, z, refracts = rrv__medium_refracts(m);
+    int x, refracts = rrv__medium_refracts(m);
     int forced = scene->settings.majorant_cells;
     g = (struct rrv__majorant_grid *)RRV_MALLOC(sizeof *g);
     if (!g) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
@@ -3038,6 +3259,7 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
     g->lo = m->lo;
     g->hi = m->hi;
     g->cell = rrv__v3((m->hi.x - m->lo.x) / g->n[0], (m->hi.y - m->lo.y) / g->n[1], (m->hi.z - m->lo.z) / g->n[2]);
+    g->inv_cell = rrv__v3(1.0 / g->cell.x, 1.0 / g->cell.y, 1.0 / g->cell.z);
     {
         rrv_result res = rrv__check_built_grid(scene, m, "majorant grid", cells, sizeof(float) * (refracts ? 2 : 1), err);
         if (res != RRV_OK) return res;
@@ -3045,25 +3267,17 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
     g->density_max = (float *)RRV_MALLOC(cells * sizeof(float) * (refracts ? 2 : 1));
     if (!g->density_max) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
     g->grad_max = refracts ? g->density_max + cells : NULL;
-    c = 0;
-    for (z = 0; z < g->n[2]; ++z)
-        for (y = 0; y < g->n[1]; ++y)
-            for (x = 0; x < g->n[0]; ++x, ++c) {
-                rrv_vec3 lo = rrv__v3(m->lo.x + x * g->cell.x, m->lo.y + y * g->cell.y, m->lo.z + z * g->cell.z);
-                rrv_vec3 hi = rrv__add(lo, g->cell);
-                double d = rrv__mind(rrv__field_bound(rrv__field_of(m, RRV__DENSITY), lo, hi), FLT_MAX);
-                /* Round the float bound up so it stays a bound (the loader
-                   refused densities beyond float). */
-                float df = (float)d;
-                if ((double)df < d) df = nextafterf(df, FLT_MAX);
-                g->density_max[c] = df > 0 ? df : 0.0f;
-                g->density_peak = g->density_max[c] > g->density_peak ? g->density_max[c] : g->density_peak;
-                if (refracts) {
-                    g->grad_max[c] = (float)rrv__mind(
-                        rrv__cell_gradient_bound(m, lo, hi, scene->settings.ambient_ior - 1.0), FLT_MAX);
-                    g->grad_peak = g->grad_max[c] > g->grad_peak ? g->grad_max[c] : g->grad_peak;
-                }
-            }
+    {
+        rrv__majorant_bake job;
+        job.m = m;
+        job.g = g;
+        job.ambient_r = scene->settings.ambient_ior - 1.0;
+        rrv__parallel_for(scene, g->n[2], rrv__majorant_slice, &job);
+    }
+    for (c = 0; c < cells; ++c) {
+        g->density_peak = g->density_max[c] > g->density_peak ? g->density_max[c] : g->density_peak;
+        if (refracts) g->grad_peak = g->grad_max[c] > g->grad_peak ? g->grad_max[c] : g->grad_peak;
+    }
     g->empty = 1;
     for (c = 0; c < cells; ++c)
         if (g->density_max[c] > 0 && g->sigma_t_max > 0) { g->empty = 0; break; }
@@ -3191,9 +3405,10 @@ static size_t rrv__majorant_cell(const struct rrv__majorant_grid *g, rrv_vec3 p,
 {
     int a;
     for (a = 0; a < 3; ++a) {
-        /* clamped before the cast: a far point must not overflow the int */
-        double c = floor((rrv__axis(p, a) - rrv__axis(g->lo, a)) / rrv__axis(g->cell, a));
-        cell[a] = !(c >= 0) ? 0 : c > g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+        /* clamped before the cast: a far point must not overflow the int;
+           the cast of a non-negative value is its floor */
+        double c = (rrv__axis(p, a) - rrv__axis(g->lo, a)) * rrv__axis(g->inv_cell, a);
+        cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
     }
     return ((size_t)cell[2] * (size_t)g->n[1] + (size_t)cell[1]) * (size_t)g->n[0] + (size_t)cell[0];
 }
@@ -3229,14 +3444,15 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
     for (a = 0; a < 3; ++a) {
         double lo = rrv__axis(g->lo, a), cs = rrv__axis(g->cell, a), da = rrv__axis(d, a);
         int c = it->cell[a];
+        double ia = rrv__axis(inv, a);
         if (da > 0) {
             it->step[a] = 1;
-            it->t_next[a] = (lo + (c + 1) * cs - rrv__axis(o, a)) / da;
-            it->t_delta[a] = cs / da;
+            it->t_next[a] = (lo + (c + 1) * cs - rrv__axis(o, a)) * ia;
+            it->t_delta[a] = cs * ia;
         } else if (da < 0) {
             it->step[a] = -1;
-            it->t_next[a] = (lo + c * cs - rrv__axis(o, a)) / da;
-            it->t_delta[a] = -cs / da;
+            it->t_next[a] = (lo + c * cs - rrv__axis(o, a)) * ia;
+            it->t_delta[a] = -cs * ia;
         } else {
             it->step[a] = 0;
             it->t_next[a] = DBL_MAX;
@@ -3582,6 +3798,9 @@ typedef struct rrv__bender {
     int reflected;     /* the last face crossed reflected the ray */
     int combing;       /* comb: a comb is running (its first half kick is done) */
     double chord;      /* comb: length of the chord behind the next point */
+    int entering;      /* comb: the next point is where cells with a gradient begin */
+    rrv__support_view ahead; /* END_KICK: the supports seen from the segment's end
+                                along its direction (the same line as the segment's) */
 } rrv__bender;
 
 static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
@@ -3662,22 +3881,84 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     return nd;
 }
 
-/* Comb spacing at x: the inverse of the refraction event rate of the cell
-   (fixed mu_eta, or max |grad r| / tolerance), never more than a cell so a
-   step cannot jump over a region of strong gradient. */
-static double rrv__comb_spacing(const rrv_scene *scene, rrv_vec3 x)
+/* The comb spacing from x (inside the grid's box) along d, tau spacings
+   of the first cell with a gradient: cells where max |grad r| is 0 are
+   crossed without a kick (a ray through the empty part of a support runs
+   straight to its face; it once paid a kick per cell), and in a cell with a
+   gradient the spacing is the inverse of its rate, at most a cell. The rate
+   alone, integrated along the ray, would place fewer kicks still, but then
+   where a kick falls hangs on the bounds, which two copies of one grid (a
+   NanoVDB file and a gridvol) round differently. DBL_MAX if the ray leaves
+   the box first. A DDA of its own: the comb calls it at every kick. */
+static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x, rrv_vec3 d, double tau,
+                                 double inv_tolerance, int *entering)
+{
+    int cell[3], step[3], a;
+    double t_next[3], t_delta[3], t = 0, cell_min = fmin(g->cell.x, fmin(g->cell.y, g->cell.z));
+    size_t idx, stride[3];
+    stride[0] = 1;
+    stride[1] = (size_t)g->n[0];
+    stride[2] = stride[1] * (size_t)g->n[1];
+    double h = 0;
+    int in_gradient;
+    idx = rrv__majorant_cell(g, x, cell);
+    in_gradient = g->grad_max[idx] > 0;
+    if (in_gradient) {
+        double rate = g->grad_max[idx] * inv_tolerance;
+        h = tau * (rate * cell_min > 1.0 ? 1.0 / rate : cell_min);
+    }
+    for (a = 0; a < 3; ++a) {
+        double da = rrv__axis(d, a), cs = rrv__axis(g->cell, a), lo = rrv__axis(g->lo, a), xa = rrv__axis(x, a);
+        if (da > 0) {
+            step[a] = 1;
+            t_next[a] = (lo + (cell[a] + 1) * cs - xa) / da;
+            t_delta[a] = cs / da;
+        } else if (da < 0) {
+            step[a] = -1;
+            t_next[a] = (lo + cell[a] * cs - xa) / da;
+            t_delta[a] = -cs / da;
+        } else {
+            step[a] = 0;
+            t_next[a] = t_delta[a] = DBL_MAX;
+        }
+        if (t_next[a] < 0) t_next[a] = 0;
+    }
+    /* A kick stands for the chords on both sides of it, so a chord must not
+       carry a gradient into a stretch without one: where the ray passes
+       from cells with a gradient to cells without, or back, a point falls
+       on the face between them (where the gradient is 0). */
+    for (;;) {
+        a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+        t = t_next[a];
+        if (in_gradient && h <= t) return h;
+        cell[a] += step[a];
+        if (cell[a] < 0 || cell[a] >= g->n[a]) return in_gradient ? h : DBL_MAX;
+        idx = step[a] > 0 ? idx + stride[a] : idx - stride[a];
+        if ((g->grad_max[idx] > 0) != in_gradient && t > RRV__EDGE_NUDGE * (1.0 + rrv__length(x))) {
+            *entering = !in_gradient;
+            return t;
+        }
+        if (!in_gradient && g->grad_max[idx] > 0) {
+            /* x lay on the face (within rounding): start the cell's spacing here */
+            double rate = g->grad_max[idx] * inv_tolerance;
+            in_gradient = 1;
+            h = t + tau * (rate * cell_min > 1.0 ? 1.0 / rate : cell_min);
+        }
+        t_next[a] += t_delta[a];
+    }
+}
+
+/* Comb spacing from x along d, tau spacings: 1 / mu_eta when it is fixed,
+   else from the majorant cells' gradient bounds (rrv__rate_distance). */
+static double rrv__comb_spacing(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double tau, int *entering)
 {
     int i;
+    *entering = 0;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
-        const struct rrv__majorant_grid *g = m->majorant;
-        double rate, cell;
-        int c[3];
         if (!rrv__medium_refracts(m) || !rrv__inside_box(x, m->lo, m->hi)) continue;
-        if (scene->settings.mu_eta > 0) return 1.0 / scene->settings.mu_eta;
-        rate = g->grad_max[rrv__majorant_cell(g, x, c)] / scene->settings.bend_tolerance;
-        cell = fmin(g->cell.x, fmin(g->cell.y, g->cell.z));
-        return rate * cell > 1.0 ? 1.0 / rate : cell;
+        if (scene->settings.mu_eta > 0) return tau / scene->settings.mu_eta;
+        return rrv__rate_distance(m->majorant, x, d, tau, 1.0 / scene->settings.bend_tolerance, entering);
     }
     return fmin(scene->settings.step, 1.0);
 }
@@ -3724,12 +4005,24 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
         b->combing = 1;
     }
     rrv__look_along(scene, x, *d, &after);
-    b->segment = fmin(ahead, after.t_face);
-    b->end = b->segment == after.t_face ? RRV__END_FACE : RRV__END_KICK;
+    /* a point within rounding of the face is the face (the view's distance
+       to it may come from the previous chord's look, a few ulps off) */
+    if (after.t_face <= ahead + RRV__EDGE_NUDGE * (1.0 + ahead)) {
+        b->segment = after.t_face;
+        b->end = RRV__END_FACE;
+    } else {
+        b->segment = ahead;
+        b->end = RRV__END_KICK;
+    }
     b->normal = after.normal;
     b->surface_free = after.inside && after.surface_free;
     b->chord = b->segment;
     b->pending = 1;
+    /* The kick point ahead lies on this line before its nearest face: what
+       it sees along the line is this view moved up by the chord, so the
+       next kick needs no second look. */
+    b->ahead = after;
+    if (b->ahead.t_face < DBL_MAX) b->ahead.t_face -= b->segment;
 }
 
 /* One eikonal step of at most h from x that stops short of the next face
@@ -3777,7 +4070,8 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     } else if (b->scheme == RRV_REFRACTION_COMB) {
         /* the first point a uniformly random fraction of a spacing ahead, so
            the comb does not alias with pixels */
-        rrv__comb_step(b, scene, o, d, rrv__comb_spacing(scene, o) * (1.0 - rrv__uniform(rng)), &view);
+        double h = rrv__comb_spacing(scene, o, *d, 1.0 - rrv__uniform(rng), &b->entering);
+        rrv__comb_step(b, scene, o, d, h, &view);
     }
 }
 
@@ -3792,10 +4086,14 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
         b->pending = 0;
         break;
     case RRV__END_KICK: {
-        rrv__support_view view;
-        rrv__look_along(scene, *o, *d, &view);
+        rrv__support_view view = b->ahead;
         if (view.inside) {
-            rrv__comb_step(b, scene, *o, d, rrv__comb_spacing(scene, *o), &view);
+            /* entering cells with a gradient from a stretch without: the
+               first point a random fraction of a spacing in, as at a
+               segment's start, so the comb does not alias with pixels */
+            double tau = b->entering ? 1.0 - rrv__uniform(rng) : 1.0;
+            double h = rrv__comb_spacing(scene, *o, *d, tau, &b->entering);
+            rrv__comb_step(b, scene, *o, d, h, &view);
         } else {
             /* a kick that turned the chord out through a face it grazed:
                the comb ends here, without an interface to refract */
@@ -4404,6 +4702,23 @@ static int rrv__russian_roulette(rrv__camera_path *cp, rrv__rng *rng)
     return rrv__max3(cp->path.beta) > 0;
 }
 
+/* Might the chord o + t d, t in [0, len], meet a medium with extinction?
+   Its bounding box against the media's boxes: no divisions, and a false
+   yes only costs the ordinary walk. */
+static int rrv__chord_meets_extinction(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, double len)
+{
+    rrv_vec3 e = rrv__madd(o, d, len), lo = rrv__vmin(o, e), hi = rrv__vmax(o, e);
+    int i;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        if (m->majorant->empty) continue;
+        if (lo.x <= m->hi.x && hi.x >= m->lo.x && lo.y <= m->hi.y && hi.y >= m->lo.y && lo.z <= m->hi.z &&
+            hi.z >= m->lo.z)
+            return 1;
+    }
+    return 0;
+}
+
 /* One camera path from o along d; its radiance into L. */
 static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng *rng, double L[3])
 {
@@ -4459,6 +4774,16 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                 cp.touched = 1;
             }
             rrv__finish_segment(&cp.path.bender, scene, &cp.o, &cp.d, rng);
+            /* Chords with nothing to meet (no surface reaches the support,
+               no medium with extinction near them) go from kick to kick
+               here: delta tracking and the ray cast would find nothing. */
+            while (ctx->comb && cp.path.bender.pending && cp.path.bender.end == RRV__END_KICK &&
+                   cp.path.bender.surface_free && cp.steps < ctx->step_bound &&
+                   !rrv__chord_meets_extinction(scene, cp.o, cp.d, cp.path.bender.segment)) {
+                ++cp.steps;
+                ++ctx->stats.events;
+                rrv__finish_segment(&cp.path.bender, scene, &cp.o, &cp.d, rng);
+            }
             /* A reflection at an interface is a specular vertex of the path
                and counts toward its depth: light trapped by total internal
                reflection in a lossless box would otherwise bounce forever. */
@@ -4638,7 +4963,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     rrv__context ctx;
     rrv__camera_frame frame;
     double r_camera;
-    int x, y, s, c;
+    int x, y, s, c, sobol;
     rrv__clear_error(err);
     if (!scene || !sum) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_render_rect: NULL scene or sum");
     if (x0 < 0 || y0 < 0 || x1 > scene->camera.width || y1 > scene->camera.height || x0 > x1 || y0 > y1)
@@ -4657,6 +4982,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
                          "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
     memset(&ctx, 0, sizeof ctx);
     ctx.scene = scene;
+    sobol = scene->settings.sampler == RRV_SAMPLER_SOBOL;
     if (scene->settings.integrator == RRV_INTEGRATOR_REFRACTIVE) {
         ctx.comb = rrv__resolve_scheme(scene->settings.refraction) == RRV_REFRACTION_COMB;
         ctx.refract_nulls = !ctx.comb;
@@ -4684,6 +5010,8 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
                 double L[3];
                 rrv_vec3 d;
                 rrv__rng_seed(&rng, scene->settings.seed, pixel, (uint64_t)s);
+                if (sobol) rrv__sobol_start(&rng, (uint32_t)(rrv__mix64(scene->settings.seed ^ rrv__mix64(pixel)) >> 32),
+                                            (uint32_t)s);
                 double jy = rrv__uniform(&rng), jx = rrv__uniform(&rng); /* in this order on every compiler */
                 d = rrv__camera_ray(&frame, &scene->camera, x + jx, y + jy);
                 rrv__trace_path(&ctx, frame.eye, d, &rng, L);
@@ -9522,6 +9850,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"manifoldgauge", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "chord|iso"},
     {"manifoldtrials", RRV__SF_INT, 1, 0, 0.0, 1024.0, NULL},
     {"manifolddrop", RRV__SF_NUM, 1, 0, 0.0, 1.0, NULL},
+    {"sampler", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "pcg|sobol"},
 };
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
@@ -10044,6 +10373,8 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
                             (int)s->ior_interpolation);
     if ((unsigned)s->nee > (unsigned)RRV_NEE_MANIFOLD)
         return rrv__ck_fail(ck, RRV_OK, "nee %d is not one of rrv_nee", (int)s->nee);
+    if ((unsigned)s->sampler > (unsigned)RRV_SAMPLER_SOBOL)
+        return rrv__ck_fail(ck, RRV_OK, "sampler %d is not one of rrv_sampler", (int)s->sampler);
     if ((unsigned)s->manifold_gauge > (unsigned)RRV_GAUGE_ISO)
         return rrv__ck_fail(ck, RRV_OK, "manifold_gauge %d is not one of rrv_manifold_gauge",
                             (int)s->manifold_gauge);
@@ -10997,6 +11328,7 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[12].given) s->manifold_gauge = sl[12].choice ? RRV_GAUGE_ISO : RRV_GAUGE_CHORD;
     if (sl[13].given) s->manifold_trials = (int)sl[13].v[0];
     if (sl[14].given) s->manifold_drop = sl[14].v[0];
+    if (sl[15].given) s->sampler = sl[15].choice == 0 ? RRV_SAMPLER_PCG : RRV_SAMPLER_SOBOL;
     rrv__sf_ck(p, &ck, "render");
     rrv__sf_ck(p, &ambient, "ambient");
     return rrv__settings_check(&ck, &ambient, s);
@@ -11756,6 +12088,10 @@ RRV_DEF rrv_result rrv_scene_parse(const char *text, size_t size, const char *na
     if (!s) return rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory");
     s->max_grid_bytes = opt ? opt->max_grid_bytes : 0;
     if (opt && opt->max_bake_samples > 0) s->settings.max_bake_samples = opt->max_bake_samples;
+    if (opt) {
+        s->parallel_for = opt->parallel_for;
+        s->parallel_for_user = opt->parallel_for_user;
+    }
     memset(&p, 0, sizeof p);
     p.scene = s;
     p.name = s->path;

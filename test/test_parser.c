@@ -443,6 +443,12 @@ static void test_render_and_seed(void)
     r = parse_str("camera eye 0 0 1 look 0 0 0\nrender refraction comb stepper default\n", NULL, &s, &err);
     CHECK(r == RRV_OK && s->settings.refraction == RRV_REFRACTION_COMB && s->settings.stepper == RRV_STEPPER_DEFAULT);
     rrv_scene_free(s);
+    r = parse_str("camera eye 0 0 1 look 0 0 0\nrender sampler sobol\n", NULL, &s, &err);
+    CHECK(r == RRV_OK && s->settings.sampler == RRV_SAMPLER_SOBOL);
+    rrv_scene_free(s);
+    r = parse_str("camera eye 0 0 1 look 0 0 0\nrender sampler pcg\n", NULL, &s, &err);
+    CHECK(r == RRV_OK && s->settings.sampler == RRV_SAMPLER_PCG);
+    rrv_scene_free(s);
 }
 
 static void test_statement_errors(void)

@@ -231,7 +231,7 @@ static stats render_statistics(rrv_scene *s, int spp, int channel)
 
 /* An albedo-1 medium in a uniform environment neither adds nor removes
    light: every pixel sees the environment radiance. */
-static void furnace(double s0, double s1, double s2, int spp, double max_se)
+static void furnace_with(double s0, double s1, double s2, int spp, double max_se, rrv_sampler sampler)
 {
     rrv_scene *s = tb_scene(8, 8);
     rrv_error err;
@@ -242,6 +242,7 @@ static void furnace(double s0, double s1, double s2, int spp, double max_se)
     s->environment.kind = RRV_ENV_CONSTANT;
     s->environment.L[0] = s->environment.L[1] = s->environment.L[2] = 0.75;
     s->settings.max_depth = 1000;
+    s->settings.sampler = sampler;
     CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
     for (c = 0; c < 3; ++c) {
         stats st = render_statistics(s, spp, c);
@@ -253,13 +254,78 @@ static void furnace(double s0, double s1, double s2, int spp, double max_se)
     rrv_scene_free(s);
 }
 
+static void furnace(double s0, double s1, double s2, int spp, double max_se)
+{
+    furnace_with(s0, s1, s2, spp, max_se, RRV_SAMPLER_PCG);
+}
+
 static void test_white_furnace(void) { furnace(2.0, 2.0, 2.0, 64, 0.01); }
+
+/* The Sobol sampler's samples are stratified within a pixel, not
+   independent, so the standard error taken as if they were overstates the
+   error of the mean: the bound is conservative, and still catches a bias. */
+static void test_white_furnace_sobol(void) { furnace_with(2.0, 2.0, 2.0, 64, 0.01, RRV_SAMPLER_SOBOL); }
+
+/* Owen-scrambled Sobol pairs: the first 2^m samples of any pixel form a
+   (0,m,2)-net in every pair of dimensions (each of the 2^m elementary
+   intervals of every shape holds one point), and one sample, over pixels,
+   is uniform with its coordinates uncorrelated (within 4 standard errors). */
+static void test_sobol_sampler(void)
+{
+    enum { M = 8, N = 1 << M, DIMS = RRV_SOBOL_DIMENSIONS };
+    static double pts[N][DIMS];
+    int pixel, i, d, a, bad = 0;
+    for (pixel = 0; pixel < 3; ++pixel) {
+        for (i = 0; i < N; ++i) {
+            rrv__rng rng;
+            rrv__rng_seed(&rng, 1, (uint64_t)pixel, (uint64_t)i);
+            rrv__sobol_start(&rng, 0x9e3779b9u * (uint32_t)(pixel + 1), (uint32_t)i);
+            for (d = 0; d < DIMS; ++d) pts[i][d] = rrv__uniform(&rng);
+        }
+        for (d = 0; d < DIMS; d += 2)
+            for (a = 0; a <= M; ++a) {
+                static int count[N];
+                memset(count, 0, sizeof count);
+                for (i = 0; i < N; ++i) {
+                    int cx = (int)(pts[i][d] * (1 << a)), cy = (int)(pts[i][d + 1] * (1 << (M - a)));
+                    ++count[(cx << (M - a)) | cy];
+                }
+                for (i = 0; i < N; ++i) bad += count[i] != 1;
+            }
+    }
+    CHECKF(bad == 0, "%d elementary intervals without exactly one point", bad);
+    {
+        int n = 200000;
+        double sum[DIMS], prod[DIMS];
+        memset(sum, 0, sizeof sum);
+        memset(prod, 0, sizeof prod);
+        for (pixel = 0; pixel < n; ++pixel) {
+            rrv__rng rng;
+            double u[DIMS + 1];
+            rrv__rng_seed(&rng, 1, (uint64_t)pixel, 5);
+            rrv__sobol_start(&rng, (uint32_t)(rrv__mix64((uint64_t)pixel) >> 32), 5);
+            for (d = 0; d <= DIMS; ++d) u[d] = rrv__uniform(&rng); /* the last from PCG */
+            for (d = 0; d < DIMS; ++d) {
+                CHECK(u[d] >= 0 && u[d] < 1);
+                sum[d] += u[d];
+                prod[d] += u[d] * u[d + 1];
+            }
+        }
+        for (d = 0; d < DIMS; ++d) {
+            /* mean 1/2 (sd sqrt(1/12)); E[u_d u_{d+1}] = 1/4 (sd sqrt(7/144)) */
+            CHECKF(fabs(sum[d] / n - 0.5) < 4 * sqrt(1.0 / 12 / n), "dimension %d: mean %g", d, sum[d] / n);
+            CHECKF(fabs(prod[d] / n - 0.25) < 4 * sqrt(7.0 / 144 / n), "dimensions %d, %d: E[uv] %g", d, d + 1,
+                   prod[d] / n);
+        }
+    }
+}
+
 
 /* Chromatic extinction reweights each channel at every collision, so the
    estimate is noisier: more samples for a comparable bound. */
 static void test_white_furnace_chromatic(void) { furnace(1.0, 2.0, 4.0, 1024, 0.02); }
 
-static void test_tiles_are_bit_identical(void)
+static void tiles_are_bit_identical(rrv_sampler sampler)
 {
     rrv_scene *s = tb_scene(20, 12);
     rrv_error err;
@@ -273,6 +339,7 @@ static void test_tiles_are_bit_identical(void)
     q->L[0] = q->L[1] = q->L[2] = 3; /* emits downward: e1 x e2 points -y */
     s->environment.kind = RRV_ENV_GRADIENT;
     s->environment.L[2] = 1; s->environment.L2[0] = 0.5;
+    s->settings.sampler = sampler;
     CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
     rrv_render_rect(s, 0, 0, w, h, 0, 8, full, w, NULL, NULL);
     for (y = 0; y < h; y += 5)
@@ -288,6 +355,12 @@ static void test_tiles_are_bit_identical(void)
     free(full);
     free(tiled);
     rrv_scene_free(s);
+}
+
+static void test_tiles_are_bit_identical(void)
+{
+    tiles_are_bit_identical(RRV_SAMPLER_PCG);
+    tiles_are_bit_identical(RRV_SAMPLER_SOBOL);
 }
 
 static void test_grid_gradient_stencil(void)
@@ -669,6 +742,8 @@ int main(int argc, char **argv)
     RUN(test_transmittance_grid_ramp);
     RUN(test_white_furnace);
     RUN(test_white_furnace_chromatic);
+    RUN(test_white_furnace_sobol);
+    RUN(test_sobol_sampler);
     RUN(test_tiles_are_bit_identical);
     RUN(test_grid_gradient_stencil);
     RUN(test_blackbody);
