@@ -1,4 +1,4 @@
-/* rrv.h 0.3.0 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.4.0 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -359,6 +359,11 @@
        (eta_c / eta_e)^2; thermal emission follows Kirchhoff (above).
 
    HISTORY
+     0.4.0  scenes built in code (rrv_scene_create and friends: zero means
+            default, one check per object, the parser a client); nee manifold
+            (the paper's refractive ratio tracking); Sobol sampler; parallel
+            set-up (parallel_for); cheaper comb spacing; errors from
+            rrv_render_rect and the writers; deflated PNG; EXR attributes
      0.3.0  boundaries: support faces are sharp interfaces (Snell, Fresnel,
             total internal reflection) in every integrator; work bounds and
             load-time limits; nee none|straight|shoot; OpenEXR in and out;
@@ -375,7 +380,7 @@
 #include <stdint.h>
 
 #define RRV_VERSION_MAJOR 0
-#define RRV_VERSION_MINOR 3
+#define RRV_VERSION_MINOR 4
 #define RRV_VERSION_PATCH 0
 
 #ifndef RRV_DEF

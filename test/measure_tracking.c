@@ -1,5 +1,5 @@
-/* How far tracking is from the cost of its memory reads, on scenes/plume.rrv
-   (issue 11, part 5). Not a test: make test builds it so it cannot rot;
+/* How far tracking is from the cost of its memory reads, on scenes/plume.rrv.
+   Not a test: make test builds it so it cannot rot;
    `make bench` runs it from the repository root:
      build/measure_tracking [SPP]
    It prints
