@@ -8552,7 +8552,6 @@ typedef struct rrv__nv_check {
     rrv_error *err;
 } rrv__nv_check;
 
-static const char *const rrv__nv_level_names[3] = {"leaf", "lower node", "upper node"};
 static const char *const rrv__nv_level_plurals[3] = {"leaves", "lower nodes", "upper nodes"};
 /* Child offsets beyond this are refused before they are added to a
    position (< 2^62 too), so the sum cannot overflow. */

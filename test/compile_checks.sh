@@ -24,6 +24,13 @@ if ${CC:-cc} -std=c99 -O2 -c rrv_impl.c -o "$build/rrv_impl_symbols.o" 2>/dev/nu
 else
     echo "FAIL exports_only_rrv_symbols (rrv_impl.c does not compile)"
 fi
+# An embedded or sandboxed build without FILE* I/O (RRV_NO_STDIO) must stay
+# warning-free too: its code paths differ, so nothing else compiles them.
+printf '#define RRV_NO_STDIO\n#define RRV_IMPLEMENTATION\n#include "rrv.h"\n' > "$build/nostdio_check.c"
+if out=$(${CC:-cc} -std=c99 -Wall -Wextra -pedantic -Werror -I. -c "$build/nostdio_check.c" -o "$build/nostdio_check.o" 2>&1)
+then echo "PASS header_compiles_without_stdio"
+else printf '%s\n' "$out" | head -20; echo "FAIL header_compiles_without_stdio"
+fi
 # gcc and clang once drew random numbers in different orders (two draws as
 # arguments of one call): both builds must render the same bytes.
 if command -v gcc >/dev/null 2>&1 && command -v clang >/dev/null 2>&1; then
