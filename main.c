@@ -2065,18 +2065,25 @@ static char *absolute_path(const char *path)
     return out;
 }
 
-static int write_script(const char *dir, const char *name, const char *text)
+/* Ends the memory stream *f holding a script and writes it as dir/name,
+   executable; the stream and its text are released either way. */
+static int finish_script(const char *dir, const char *name, FILE **f, char **text)
 {
     char path[8192];
-    FILE *f;
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    f = fopen(path, "w");
-    if (!f || fputs(text, f) < 0 || fclose(f) != 0) {
-        fprintf(stderr, "rrv: farm: cannot write \"%s\": %s\n", path, strerror(errno));
-        return 0;
+    FILE *out;
+    int ok = fclose(*f) == 0;
+    *f = NULL;
+    if (ok) {
+        snprintf(path, sizeof path, "%s/%s", dir, name);
+        out = fopen(path, "w");
+        ok = out != NULL && fputs(*text, out) >= 0;
+        if (out && fclose(out) != 0) ok = 0;
+        if (!ok) fprintf(stderr, "rrv: farm: cannot write \"%s\": %s\n", path, strerror(errno));
+        else chmod(path, 0755);
     }
-    chmod(path, 0755);
-    return 1;
+    free(*text);
+    *text = NULL;
+    return ok;
 }
 
 static int command_farm(int argc, char **argv)
@@ -2206,11 +2213,7 @@ static int command_farm(int argc, char **argv)
         put_quoted(f, argv[i]);
     }
     fputc('\n', f);
-    if (fclose(f) != 0) { f = NULL; goto done; }
-    f = NULL;
-    if (!write_script(dir, "render.sbatch", text)) goto done;
-    free(text);
-    text = NULL;
+    if (!finish_script(dir, "render.sbatch", &f, &text)) goto done;
 
     /* merge.sbatch */
     f = open_memstream(&text, &text_size);
@@ -2224,11 +2227,7 @@ static int command_farm(int argc, char **argv)
     put_quoted(f, out);
     for (i = 0; i < count; ++i) fprintf(f, " \\\n    %s/parts/tile_%d.exr", dir, i);
     fputc('\n', f);
-    if (fclose(f) != 0) { f = NULL; goto done; }
-    f = NULL;
-    if (!write_script(dir, "merge.sbatch", text)) goto done;
-    free(text);
-    text = NULL;
+    if (!finish_script(dir, "merge.sbatch", &f, &text)) goto done;
 
     /* submit.sh */
     f = open_memstream(&text, &text_size);
@@ -2238,9 +2237,7 @@ static int command_farm(int argc, char **argv)
     fprintf(f, "array=$(sbatch --parsable %s/render.sbatch)\narray=${array%%%%;*}\n", dir);
     fprintf(f, "merge=$(sbatch --parsable --dependency=afterok:\"$array\" %s/merge.sbatch)\n", dir);
     fprintf(f, "echo \"tiles: job $array (%d tasks); merge: job ${merge%%%%;*}\"\n", count);
-    if (fclose(f) != 0) { f = NULL; goto done; }
-    f = NULL;
-    if (!write_script(dir, "submit.sh", text)) goto done;
+    if (!finish_script(dir, "submit.sh", &f, &text)) goto done;
     printf("wrote %s/render.sbatch (%d tasks), %s/merge.sbatch, %s/submit.sh\nsubmit with: sh %s/submit.sh\n",
            dir, count, dir, dir, dir);
     code = EXIT_OK;
