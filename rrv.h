@@ -5710,6 +5710,7 @@ typedef struct rrv__chain {
     int n;                                /* inner vertices x[1..n] */
     int iso;                              /* gauge ISO, else CHORD */
     int failed;                           /* a projection onto an isosurface failed */
+    double h;                             /* spacing of the comb planes */
     rrv_vec3 c, c1, c2;                   /* chord direction and its frame */
     rrv_vec3 s1, s2;                      /* the light's tangent frame at y */
     double t[RRV__CHAIN_MAX];             /* vertex k's comb plane: (x - x0).c = t */
@@ -5882,28 +5883,105 @@ static int rrv__project_iso(const rrv_scene *scene, rrv_vec3 *x, double level)
     return 0;
 }
 
+/* The gradient a vertex at x kicks with, and (dg) its derivative. Where
+   the IOR's support is a sphere (Luneburg, fish-eye) grad eta jumps to 0
+   on it, and a vertex crossing it would change the path's end by its
+   whole kick at once; so there the gradient is smeared over the band
+   |r - R| < h (h the chain's spacing): the gradient at the nearest point
+   of the sphere's inside times a smoothstep from 1 at R - h to 0 at
+   R + h, which keeps the integral of the gradient along a path the
+   same. */
+static rrv_vec3 rrv__chain_gradient(const rrv_scene *scene, rrv_vec3 x, double h, double dg[9])
+{
+    rrv_vec3 g;
+    int i, j;
+    for (i = scene->medium_count - 1; i >= 0; --i) {
+        const rrv_medium *m = &scene->media[i];
+        if (!rrv__medium_refracts(m)) continue;
+        if (rrv__has_sphere_support(m)) {
+            rrv_vec3 d = rrv__sub(x, m->ior.center), n;
+            double R = m->ior.radius, r = rrv__length(d), inside = R * (1.0 - 1e-9), t, phi, dphi;
+            if (!(r < R + h)) continue;
+            if (r > R - h) {
+                rrv_vec3 xc = r > inside ? rrv__madd(m->ior.center, d, inside / r) : x;
+                double H[9], P[9];
+                t = (R + h - r) / (2.0 * h);
+                phi = t * t * (3.0 - 2.0 * t);
+                dphi = -6.0 * t * (1.0 - t) / (2.0 * h); /* d phi / dr */
+                n = rrv__scale(d, 1.0 / r);
+                rrv__eta_gradient(scene, xc, &g);
+                if (dg) {
+                    /* d g(xc) / dx = H(xc) dxc/dx, dxc/dx = (inside / r) (I - n n^T) outside */
+                    rrv__scene_hessian(scene, xc, H);
+                    if (r > inside) {
+                        rrv__m3_proj(P, n, inside / r);
+                        rrv__m3_mul(H, P, dg);
+                    } else {
+                        memcpy(dg, H, sizeof H);
+                    }
+                    for (j = 0; j < 9; ++j) dg[j] *= phi;
+                    rrv__m3_outer(dg, g, n, dphi);
+                }
+                return rrv__scale(g, phi);
+            }
+        } else if (!rrv__inside_box(x, m->lo, m->hi)) {
+            continue;
+        }
+        break;
+    }
+    rrv__eta_gradient(scene, x, &g);
+    if (dg) rrv__scene_hessian(scene, x, dg);
+    return g;
+}
+
+/* The length of path a vertex stands for: between the planes half a
+   spacing before and after its own, h/2 (1/ci + 1/co) for segments whose
+   directions have cosines ci, co with the chord; half the two segments
+   beside it where they join comb planes, but not the long first and last
+   segments, which run outside the support. DBL_MAX where a segment runs
+   back along the chord. */
+static double rrv__chain_share(const rrv__chain *ch, double ci, double co)
+{
+    if (!(ci > 1e-3) || !(co > 1e-3)) return DBL_MAX;
+    return 0.5 * ch->h * (1.0 / ci + 1.0 / co);
+}
+
+/* The direction vertex k sends the ray on: the leapfrog kick of the ray
+   equation, p = eta_behind w_in + grad eta(x_k) h_bar, h_bar its share
+   of the path (the comb integrator's own kick), and |p|. */
+static rrv_vec3 rrv__chain_kick(const rrv__chain *ch, int k, rrv_vec3 wi, double h_bar, double *length)
+{
+    rrv_vec3 p = rrv__madd(rrv__scale(wi, ch->em[k - 1]), ch->g[k], h_bar);
+    *length = rrv__length(p);
+    return rrv__scale(p, 1.0 / *length);
+}
+
 /* The residual of vertex k and, with jac, its three Jacobian blocks (and E
-   at the last vertex). eta, g and the basis of k-1, k, k+1 must be set. */
+   at the last vertex). eta, g and the basis of k-1, k, k+1 must be set.
+   The kick is smooth in the positions: Snell's law about the isosurface
+   normal, with the IOR ratio between segment midpoints, is as accurate
+   away from grazing but near a turning point (where the ray runs along an
+   isosurface, as every ray through a lens does once) its square root's
+   derivative diverges and total internal reflection makes the map jump by
+   ~sqrt(2 |ratio - 1|), leaving gaps no Newton step can close (measured
+   on the lens caustic: most solves that hit the iteration cap had their
+   worst vertex there). */
 static void rrv__chain_vertex(const rrv_scene *scene, rrv__chain *ch, int k, int jac)
 {
     rrv_vec3 a = rrv__sub(ch->x[k], ch->x[k - 1]), b = rrv__sub(ch->x[k + 1], ch->x[k]);
-    double la = rrv__length(a), lb = rrv__length(b), ep = ch->em[k - 1], ei = ch->em[k];
-    rrv_vec3 wi = rrv__scale(a, 1.0 / la), wo = rrv__scale(b, 1.0 / lb), n = ch->nrm[k], r, t1, t2;
-    double Pa[9], Pb[9], DN[9], dr[3][9], eta = ep / ei, cn = 0, D = 0, beta = 0, s = 1;
-    int j, q, mode = 0; /* 0 passes straight on, 1 refracts, 2 reflects (total internal reflection) */
-    if (ch->snell[k]) {
-        cn = rrv__dot(wi, n);
-        s = cn >= 0 ? 1.0 : -1.0;
-        D = 1.0 - eta * eta * (1.0 - cn * cn);
-        mode = D >= 0 ? 1 : 2;
-    }
-    if (mode == 1) {
-        beta = s * sqrt(D) - eta * cn;
-        r = rrv__add(rrv__scale(wi, eta), rrv__scale(n, beta));
-    } else if (mode == 2) {
-        r = rrv__madd(wi, n, -2.0 * cn);
-    } else {
-        r = wi;
+    double la = rrv__length(a), lb = rrv__length(b), ep = ch->em[k - 1], lp, ci, co, h_bar;
+    rrv_vec3 wi = rrv__scale(a, 1.0 / la), wo = rrv__scale(b, 1.0 / lb), r, t1, t2;
+    double Pa[9], Pb[9], Q[9], H[9], dr[3][9];
+    int j, q;
+    ci = rrv__dot(wi, ch->c);
+    co = rrv__dot(wo, ch->c);
+    h_bar = rrv__chain_share(ch, ci, co);
+    r = rrv__chain_kick(ch, k, wi, h_bar, &lp);
+    if (!(lp > 1e-9 * ep) || !(h_bar < DBL_MAX)) {
+        /* the kick stops the ray, or the chain runs back along the chord:
+           unusable */
+        ch->r[k][0] = ch->r[k][1] = DBL_MAX;
+        return;
     }
     rrv__frame(r, &t1, &t2);
     {
@@ -5914,43 +5992,24 @@ static void rrv__chain_vertex(const rrv_scene *scene, rrv__chain *ch, int k, int
     if (!jac) return;
     rrv__m3_proj(Pa, wi, 1.0 / la);
     rrv__m3_proj(Pb, wo, 1.0 / lb);
-    for (j = 0; j < 9; ++j) DN[j] = 0;
-    if (mode) rrv__vertex_normal(scene, ch->x[k], ch->g[k], &n, DN);
-    /* dr with respect to x_k-1, x_k, x_k+1 (q = 0, 1, 2) */
+    rrv__m3_proj(Q, r, 1.0 / lp);
+    rrv__chain_gradient(scene, ch->x[k], ch->h, H);
+    /* dr = Q dp with respect to x_k-1, x_k, x_k+1 (q = 0, 1, 2):
+       dp = ep dwi + wi d(ep) + g d(h_bar) + h_bar H dx_k */
     for (q = 0; q < 3; ++q) {
-        double dwi[9], dn[9], sw = q == 0 ? -1.0 : q == 1 ? 1.0 : 0.0;
-        rrv_vec3 deta = rrv__v3(0, 0, 0), dcn[3];
-        int i;
-        for (j = 0; j < 9; ++j) {
-            dwi[j] = sw * Pa[j];
-            dn[j] = q == 1 ? DN[j] : 0.0;
+        double dp[9], sw = q == 0 ? -1.0 : q == 1 ? 1.0 : 0.0;
+        rrv_vec3 dep = rrv__v3(0, 0, 0), dh;
+        for (j = 0; j < 9; ++j) dp[j] = ep * sw * Pa[j] + (q == 1 ? h_bar * H[j] : 0.0);
+        if (q <= 1) dep = rrv__scale(ch->gm[k - 1], q == 0 ? ch->wa[k - 1] : ch->wb[k - 1]);
+        /* h_bar = h/2 (1/ci + 1/co), dci = c^T dwi, c^T Pa = (c - ci wi)^T / la */
+        {
+            rrv_vec3 pa = rrv__scale(rrv__madd(ch->c, wi, -ci), 1.0 / la), pb = rrv__scale(rrv__madd(ch->c, wo, -co), 1.0 / lb);
+            double fa = -0.5 * ch->h / (ci * ci), fb = -0.5 * ch->h / (co * co);
+            dh = q == 0 ? rrv__scale(pa, -fa) : q == 1 ? rrv__sub(rrv__scale(pa, fa), rrv__scale(pb, fb)) : rrv__scale(pb, fb);
         }
-        /* d eta = eta (d ep / ep - d ei / ei) */
-        if (q <= 1) deta = rrv__madd(deta, ch->gm[k - 1], (q == 0 ? ch->wa[k - 1] : ch->wb[k - 1]) * eta / ep);
-        if (q >= 1) deta = rrv__madd(deta, ch->gm[k], -(q == 1 ? ch->wa[k] : ch->wb[k]) * eta / ei);
-        /* dcn = n^T dwi + wi^T dn, as a row: column i of the sum */
-        for (i = 0; i < 3; ++i) {
-            rrv_vec3 colw = rrv__v3(dwi[i], dwi[3 + i], dwi[6 + i]), coln = rrv__v3(dn[i], dn[3 + i], dn[6 + i]);
-            double v = rrv__dot(n, colw) + rrv__dot(wi, coln);
-            if (i == 0) dcn[0] = rrv__v3(v, 0, 0);
-            else if (i == 1) dcn[0].y = v;
-            else dcn[0].z = v;
-        }
-        if (mode == 1) {
-            /* r = eta wi + beta n, beta = s sqrt(D) - eta cn, D = 1 - eta^2 (1 - cn^2) */
-            rrv_vec3 dD = rrv__add(rrv__scale(deta, 2.0 * eta * (cn * cn - 1.0)), rrv__scale(dcn[0], 2.0 * eta * eta * cn));
-            rrv_vec3 dbeta = rrv__sub(rrv__sub(rrv__scale(dD, D > 0 ? s / (2.0 * sqrt(D)) : 0.0), rrv__scale(deta, cn)),
-                                      rrv__scale(dcn[0], eta));
-            for (j = 0; j < 9; ++j) dr[q][j] = eta * dwi[j] + beta * dn[j];
-            rrv__m3_outer(dr[q], wi, deta, 1.0);
-            rrv__m3_outer(dr[q], n, dbeta, 1.0);
-        } else if (mode == 2) {
-            /* r = wi - 2 cn n */
-            for (j = 0; j < 9; ++j) dr[q][j] = dwi[j] - 2.0 * cn * dn[j];
-            rrv__m3_outer(dr[q], n, dcn[0], -2.0);
-        } else {
-            memcpy(dr[q], dwi, sizeof dwi);
-        }
+        rrv__m3_outer(dp, wi, dep, 1.0);
+        rrv__m3_outer(dp, ch->g[k], dh, 1.0);
+        rrv__m3_mul(Q, dp, dr[q]);
     }
     /* d(residual) = t . (dwo - (wo.r) dr): the frame's own turn multiplies
        the residual, zero at a root */
@@ -5980,12 +6039,14 @@ static double rrv__chain_eval(const rrv_scene *scene, rrv__chain *ch, int jac, d
     ch->eta[0] = rrv__eta_gradient(scene, ch->x[0], &ch->g[0]);
     for (k = 1; k <= ch->n; ++k) {
         double gl;
-        ch->eta[k] = rrv__eta_gradient(scene, ch->x[k], &ch->g[k]);
-        gl = rrv__length(ch->g[k]);
-        ch->snell[k] = rrv__vertex_normal(scene, ch->x[k], ch->g[k], &ch->nrm[k], NULL);
+        rrv_vec3 g;
+        ch->eta[k] = rrv__eta_gradient(scene, ch->x[k], &g);
+        ch->g[k] = rrv__chain_gradient(scene, ch->x[k], ch->h, NULL);
+        gl = rrv__length(g);
+        ch->snell[k] = rrv__vertex_normal(scene, ch->x[k], g, &ch->nrm[k], NULL);
         if (ch->iso) {
             if (!ch->snell[k]) return DBL_MAX;
-            rrv__frame(rrv__scale(ch->g[k], 1.0 / gl), &ch->b1[k], &ch->b2[k]);
+            rrv__frame(rrv__scale(g, 1.0 / gl), &ch->b1[k], &ch->b2[k]);
         } else {
             ch->b1[k] = ch->c1;
             ch->b2[k] = ch->c2;
@@ -6038,6 +6099,7 @@ static void rrv__chain_setup(const rrv_scene *scene, rrv_vec3 x0, rrv_vec3 y, rr
     long count, i;
     int m;
     ch->n = 0;
+    ch->h = h;
     ch->iso = iso;
     ch->failed = 0;
     ch->c = rrv__scale(d, 1.0 / L);
@@ -6063,6 +6125,7 @@ static void rrv__chain_setup(const rrv_scene *scene, rrv_vec3 x0, rrv_vec3 y, rr
     if (!(lo < hi)) { ch->x[1] = y; return; }
     count = (long)ceil((hi - lo) / h);
     if (count > RRV__CHAIN_MAX) { count = RRV__CHAIN_MAX; h = (hi - lo) / RRV__CHAIN_MAX; }
+    ch->h = h;
     for (i = 0; i < count; ++i) {
         double t = lo + ((double)i + u) * h;
         rrv_vec3 g, p = rrv__madd(x0, ch->c, t);
@@ -6106,63 +6169,115 @@ static void rrv__chain_seed(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w)
    shot would; far simpler than bending a guessed curve into a ray.
    ISO vertices are then projected onto their isosurfaces. A ray that turns
    back along the chord fails the seed. */
-static void rrv__chain_trace(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w)
+static rrv_vec3 rrv__chain_trace(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w)
 {
     rrv_vec3 x0 = ch->x[0], x = x0, d = w, g;
     double e_prev = rrv__eta_gradient(scene, x0, &g);
     int k;
     ch->failed = 0;
     for (k = 1; k <= ch->n; ++k) {
-        double dc = rrv__dot(d, ch->c), s, e_next, next, cn, eta, D;
-        rrv_vec3 n;
-        if (!(dc > 1e-6)) { ch->failed = 1; return; }
+        double dc = rrv__dot(d, ch->c), s, e_next, next;
+        if (!(dc > 1e-6)) { ch->failed = 1; return d; }
         s = (ch->t[k - 1] - rrv__dot(rrv__sub(x, x0), ch->c)) / dc;
         x = rrv__madd(x, d, s);
         ch->x[k] = x;
         next = (k < ch->n ? ch->t[k] : rrv__dot(rrv__sub(ch->x[ch->n + 1], x0), ch->c)) - ch->t[k - 1];
         e_next = rrv__eta_gradient(scene, rrv__madd(x, d, 0.5 * next / dc), NULL);
-        if (rrv__vertex_normal(scene, x, (rrv__eta_gradient(scene, x, &g), g), &n, NULL)) {
-            cn = rrv__dot(d, n);
-            eta = e_prev / e_next;
-            D = 1.0 - eta * eta * (1.0 - cn * cn);
-            d = D >= 0 ? rrv__normalize(rrv__add(rrv__scale(d, eta), rrv__scale(n, (cn >= 0 ? 1.0 : -1.0) * sqrt(D) - eta * cn)))
-                       : rrv__madd(d, n, -2.0 * cn);
-        }
+        g = rrv__chain_gradient(scene, x, ch->h, NULL);
+        d = rrv__normalize(rrv__madd(rrv__scale(d, e_prev), g, ch->h / dc));
         e_prev = e_next;
         if (ch->iso && !rrv__project_iso(scene, &ch->x[k], ch->level[k])) ch->failed = 1;
     }
+    return d;
+}
+
+/* Where the chain traced from w misses y, in the plane through y
+   perpendicular to the chord (frame c1, c2); 0 when the trace fails or
+   turns away from y. */
+static int rrv__chain_miss(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, double miss[2])
+{
+    rrv_vec3 d = rrv__chain_trace(scene, ch, w), y = ch->x[ch->n + 1], xn = ch->x[ch->n], p;
+    double dc = rrv__dot(d, ch->c);
+    if (ch->failed || !(dc > 1e-6)) return 0;
+    p = rrv__madd(xn, d, rrv__dot(rrv__sub(y, xn), ch->c) / dc);
+    miss[0] = rrv__dot(rrv__sub(p, y), ch->c1);
+    miss[1] = rrv__dot(rrv__sub(p, y), ch->c2);
+    return miss[0] < DBL_MAX && miss[1] < DBL_MAX && miss[0] > -DBL_MAX && miss[1] > -DBL_MAX;
+}
+
+/* Seeds the chain by shooting: Newton on the initial direction of the
+   traced chain (its 2x2 Jacobian by differences of traces) until the trace
+   passes y within a small fraction of the spacing, the step halved when
+   the miss grows. The traced chain satisfies every vertex's constraint, so
+   the chain's own Newton has only the last bit of the miss to close, from
+   the right basin: a parabola, or a trace that misses y by much, leaves
+   the whole bend to Newton on a hundred unknowns, which the lens caustic
+   measured converging from only ~50 % of seeds. Leaves the chain traced
+   from the best direction found; returns 0 if no trace reached y's plane. */
+static int rrv__chain_aim(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, int *iterations)
+{
+    double miss[2], best = DBL_MAX, step = 1.0;
+    rrv_vec3 e1, e2, best_w = w;
+    int it;
+    *iterations = 0;
+    if (ch->n == 0) { rrv__chain_trace(scene, ch, w); return 1; }
+    for (it = 0; it < 12; ++it) {
+        ++*iterations;
+        double m1[2], m2[2], J[4], Ji[4], len, eps = 1e-6, da, db;
+        if (!rrv__chain_miss(scene, ch, w, miss) || !(miss[0] * miss[0] + miss[1] * miss[1] < best * best)) {
+            if (best == DBL_MAX) return 0;
+            step *= 0.5;
+            if (step < 1e-3) break;
+            w = best_w;
+            rrv__chain_miss(scene, ch, w, miss);
+        } else {
+            best = sqrt(miss[0] * miss[0] + miss[1] * miss[1]);
+            best_w = w;
+            if (best < 1e-3 * ch->h) break;
+            if (it) step = fmin(1.0, 2.0 * step);
+        }
+        rrv__frame(w, &e1, &e2);
+        if (!rrv__chain_miss(scene, ch, rrv__normalize(rrv__madd(w, e1, eps)), m1) ||
+            !rrv__chain_miss(scene, ch, rrv__normalize(rrv__madd(w, e2, eps)), m2))
+            break;
+        J[0] = (m1[0] - miss[0]) / eps;
+        J[1] = (m2[0] - miss[0]) / eps;
+        J[2] = (m1[1] - miss[1]) / eps;
+        J[3] = (m2[1] - miss[1]) / eps;
+        if (!rrv__m2_inverse(J, Ji)) break;
+        da = -(Ji[0] * miss[0] + Ji[1] * miss[1]);
+        db = -(Ji[2] * miss[0] + Ji[3] * miss[1]);
+        len = sqrt(da * da + db * db);
+        /* no turn of more than 0.2 rad at once */
+        if (len > 0.2) { da *= 0.2 / len; db *= 0.2 / len; }
+        w = rrv__normalize(rrv__add(w, rrv__add(rrv__scale(e1, step * da), rrv__scale(e2, step * db))));
+    }
+    rrv__chain_trace(scene, ch, best_w);
+    return !ch->failed;
 }
 
 typedef struct rrv__mroot {
     rrv_vec3 w0;      /* initial direction */
     double density;   /* dw0 / dA_y, sr per m^2 */
     int iterations;
+    int why;          /* DEBUG */
+    int worst;
 } rrv__mroot;
 
 /* Is the converged chain a physical path, and no chord crosses a sharp
-   interface? The constraint admits the reflected direction as well as the
-   refracted one. A vertex may reflect only where refraction is impossible
-   (total internal reflection) or where the normal momentum it reverses,
-   eta |w_in.n|, is at most the kick grad eta gives over the vertex's share
-   of the chain, |grad eta| (l_in + l_out) / 2: that is how a discrete
-   chain turns a ray around where it grazes an isosurface (its apex in a
-   lens, where the continuous ray's normal momentum passes through zero);
-   a larger reversal would be a mirror, which a smooth medium is not. */
+   interface? The constraint admits the direction opposite to the kicked
+   one as well: a vertex must send the ray on forward. */
 static int rrv__chain_physical(const rrv_scene *scene, const rrv__chain *ch)
 {
     int k;
     for (k = 1; k <= ch->n; ++k) {
-        rrv_vec3 wi = rrv__normalize(rrv__sub(ch->x[k], ch->x[k - 1]));
-        rrv_vec3 wo = rrv__normalize(rrv__sub(ch->x[k + 1], ch->x[k]));
-        if (ch->snell[k]) {
-            double ci = rrv__dot(wi, ch->nrm[k]), ratio = ch->em[k - 1] / ch->em[k];
-            double share = 0.5 * (rrv__length(rrv__sub(ch->x[k], ch->x[k - 1])) + rrv__length(rrv__sub(ch->x[k + 1], ch->x[k])));
-            if (!(ci * rrv__dot(wo, ch->nrm[k]) > 0) && !(ratio * ratio * (1.0 - ci * ci) > 1.0) &&
-                !(ch->em[k - 1] * fabs(ci) <= rrv__length(ch->g[k]) * share))
-                return 0;
-        } else if (!(rrv__dot(wi, wo) > 0)) {
-            return 0;
-        }
+        rrv_vec3 a = rrv__sub(ch->x[k], ch->x[k - 1]), b = rrv__sub(ch->x[k + 1], ch->x[k]), wi, r;
+        double lp, share;
+        wi = rrv__normalize(a);
+        share = rrv__chain_share(ch, rrv__dot(wi, ch->c), rrv__dot(rrv__normalize(b), ch->c));
+        if (!(share < DBL_MAX)) return 0;
+        r = rrv__chain_kick(ch, k, wi, share, &lp);
+        if (!(rrv__dot(b, r) > 0)) return 0;
     }
     for (k = 0; k <= ch->n; ++k) {
         rrv_vec3 x = ch->x[k], d = rrv__sub(ch->x[k + 1], x);
@@ -6195,13 +6310,14 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
     double prev = DBL_MAX, step = 1.0, L = rrv__length(rrv__sub(ch->x[ch->n + 1], ch->x[0]));
     int it, k, have_prev = 0, n = ch->n;
     root->iterations = 0;
+    root->why = 0;
     for (it = 0; it < RRV__MANIFOLD_ITERATIONS; ++it) {
         double largest, norm = rrv__chain_eval(scene, ch, 1, &largest), big = 0;
         root->iterations = it + 1;
         if (!(norm < prev)) {
-            if (!have_prev) return 0;
+            if (!have_prev) { root->why = 1; return 0; }
             step *= 0.5;
-            if (step < 1e-6) return 0;
+            if (step < 1e-6) { root->why = 2; return 0; }
             rrv__chain_move(scene, ch, xs, sb1, sb2, du, step);
             continue;
         }
@@ -6210,7 +6326,7 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
             rrv_vec3 x1, w0, e1, e2, dw[2];
             double D[4], l01;
             int j;
-            if (!rrv__chain_physical(scene, ch)) return 0;
+            if (!rrv__chain_physical(scene, ch)) { root->why = 3; return 0; }
             if (n > 0) {
                 for (k = 1; k <= n; ++k) du[k][0] = du[k][1] = du[k][2] = du[k][3] = 0;
                 for (j = 0; j < 4; ++j) du[n][j] = -ch->E[j];
@@ -6237,7 +6353,7 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
             du[k][0] = -ch->r[k][0];
             du[k][2] = -ch->r[k][1];
         }
-        if (!rrv__chain_thomas(ch, du, 1, Cp)) return 0;
+        if (!rrv__chain_thomas(ch, du, 1, Cp)) { root->why = 4; return 0; }
         for (k = 1; k <= n; ++k) big = fmax(big, sqrt(du[k][0] * du[k][0] + du[k][2] * du[k][2]));
         if (big > 0.25 * L)
             for (k = 1; k <= n; ++k) { du[k][0] *= 0.25 * L / big; du[k][2] *= 0.25 * L / big; }
@@ -6249,6 +6365,8 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
         memcpy(sb2, ch->b2, sizeof(rrv_vec3) * (size_t)(n + 2));
         rrv__chain_move(scene, ch, xs, sb1, sb2, du, step);
     }
+    root->why = 5;
+    { double w = 0; for (k = 1; k <= n; ++k) if (fabs(ch->r[k][0]) + fabs(ch->r[k][1]) > w) { w = fabs(ch->r[k][0]) + fabs(ch->r[k][1]); root->worst = k; } }
     return 0;
 }
 
@@ -6331,9 +6449,11 @@ static rrv_vec3 rrv__chain_seed_direction(const rrv__chain *ch, rrv__rng *rng)
 static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, rrv__mroot *root)
 {
     int found;
-    if (rrv__uniform(rng) < 0.5) rrv__chain_seed(ctx->scene, ch, rrv__chain_seed_direction(ch, rng));
-    else rrv__chain_trace(ctx->scene, ch, rrv__chain_seed_direction(ch, rng));
+    rrv_vec3 w = rrv__chain_seed_direction(ch, rng);
+    int aimed;
+    if (!rrv__chain_aim(ctx->scene, ch, w, &aimed)) rrv__chain_seed(ctx->scene, ch, w);
     found = rrv__manifold_solve(ctx->scene, ch, root);
+    root->iterations += aimed;
     ++ctx->stats.solves;
     ctx->stats.solve_iterations += (uint64_t)root->iterations;
     if (found) {
