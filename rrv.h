@@ -4137,6 +4137,7 @@ typedef struct rrv__context {
     double thermal_scale;    /* blackbody radiance at the camera over that in
                                 ambient air: (eta_camera / eta_ambient)^2 */
     long step_bound;         /* rrv__step_bound: loop iterations between real vertices */
+    struct rrv__chain *chain; /* nee manifold's scratch (rrv__chain_new), NULL otherwise */
     rrv_render_stats stats;
 } rrv__context;
 
@@ -4541,6 +4542,9 @@ static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv_
 static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
 static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                               rrv__rng *rng);
+#define RRV__CHAIN_MAX 512 /* comb planes a manifold chain may have (more: wider spacing) */
+static struct rrv__chain *rrv__chain_new(int cap);
+static void rrv__chain_delete(struct rrv__chain *ch);
 static int rrv__solver_supports_scene(const rrv_scene *scene);
 
 /* Curved NEE from a vertex, or the count of vertices that could not. */
@@ -4999,6 +5003,8 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.partition = ctx.bends && (scene->settings.nee == RRV_NEE_SHOOT || scene->settings.nee == RRV_NEE_MANIFOLD);
     ctx.shoot = ctx.partition && scene->settings.nee == RRV_NEE_SHOOT && ctx.eikonal && rrv__solver_supports_scene(scene);
     ctx.manifold = ctx.partition && scene->settings.nee == RRV_NEE_MANIFOLD && rrv__solver_supports_scene(scene);
+    if (ctx.manifold && !(ctx.chain = rrv__chain_new(RRV__CHAIN_MAX)))
+        return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "rrv_render_rect: out of memory for nee manifold's chain");
     rrv__camera_setup(&scene->camera, &frame);
     r_camera = ctx.bends ? rrv__scene_refractivity(scene, frame.eye, NULL) : 0.0;
     ctx.eta_camera2 = (1.0 + r_camera) * (1.0 + r_camera);
@@ -5054,6 +5060,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
         stats->solve_trials += ctx.stats.solve_trials;
         stats->solves_unsupported += ctx.stats.solves_unsupported;
     }
+    rrv__chain_delete(ctx.chain);
     return RRV_OK;
 }
 
@@ -5700,7 +5707,6 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
    the derivative of the last residual with respect to y gives dx_1/dy and
    so the density of the connection, dw0/dA_y = |det (dw0/dy)|. */
 
-#define RRV__CHAIN_MAX 256        /* comb planes a chain may have (more: wider spacing) */
 #define RRV__MANIFOLD_TOL 1e-9    /* max |residual| at a root (eta radians) */
 #define RRV__MANIFOLD_FLAT 1e-9   /* |grad eta| below which a vertex has no isosurface */
 #define RRV__MANIFOLD_ROOTS 8     /* distinct roots the fixed-trial variant keeps */
@@ -5708,26 +5714,77 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
 
 typedef struct rrv__chain {
     int n;                                /* inner vertices x[1..n] */
+    int cap;                              /* most inner vertices the arrays hold */
     int iso;                              /* gauge ISO, else CHORD */
     int failed;                           /* a projection onto an isosurface failed */
     double h;                             /* spacing of the comb planes */
+    double lo, hi;                        /* the chord's part the planes cover: (x - x0).c in [lo, hi] */
     rrv_vec3 c, c1, c2;                   /* chord direction and its frame */
     rrv_vec3 s1, s2;                      /* the light's tangent frame at y */
-    double t[RRV__CHAIN_MAX];             /* vertex k's comb plane: (x - x0).c = t */
-    double level[RRV__CHAIN_MAX + 2];     /* ISO: eta of vertex k's isosurface */
-    rrv_vec3 x[RRV__CHAIN_MAX + 2];       /* x[0] = x0, x[n + 1] = y */
-    double eta[RRV__CHAIN_MAX + 2];       /* at vertex k */
-    rrv_vec3 g[RRV__CHAIN_MAX + 2];
-    double em[RRV__CHAIN_MAX + 2];        /* of segment k: at its midpoint, at x0 for the first, y for the last */
-    rrv_vec3 gm[RRV__CHAIN_MAX + 2];
-    double wa[RRV__CHAIN_MAX + 2], wb[RRV__CHAIN_MAX + 2]; /* d em_k = gm_k . (wa dx_k + wb dx_k+1) */
-    rrv_vec3 b1[RRV__CHAIN_MAX + 2], b2[RRV__CHAIN_MAX + 2]; /* gauge basis */
-    double r[RRV__CHAIN_MAX + 2][2];      /* residual of vertex k */
-    double A[RRV__CHAIN_MAX + 2][4], B[RRV__CHAIN_MAX + 2][4], C[RRV__CHAIN_MAX + 2][4]; /* d r_k / d u_k-1, u_k, u_k+1 */
+    /* arrays of cap + 2 entries, one allocation (rrv__chain_new) */
+    double *t;                            /* vertex k's comb plane: (x - x0).c = t[k - 1] */
+    double *level;                        /* ISO: eta of vertex k's isosurface */
+    rrv_vec3 *x;                          /* x[0] = x0, x[n + 1] = y */
+    double *eta;                          /* at vertex k */
+    rrv_vec3 *g;                          /* the gradient vertex k kicks with */
+    double *em;                           /* of segment k: at its midpoint, at x0 for the first, y for the last */
+    rrv_vec3 *gm;
+    double *wa, *wb;                      /* d em_k = gm_k . (wa dx_k + wb dx_k+1) */
+    rrv_vec3 *b1, *b2;                    /* gauge basis */
+    double (*r)[2];                       /* residual of vertex k */
+    double (*A)[4], (*B)[4], (*C)[4];     /* d r_k / d u_k-1, u_k, u_k+1 */
     double E[4];                          /* d r_n / d(y in the light's frame) */
-    int snell[RRV__CHAIN_MAX + 2];        /* vertex k refracts about nrm[k] */
-    rrv_vec3 nrm[RRV__CHAIN_MAX + 2];
+    int *snell;                           /* ISO: vertex k has an isosurface normal nrm[k] */
+    rrv_vec3 *nrm;
+    /* the solver's workspace: positions and bases a step starts from, the
+       step, Thomas's eliminated upper blocks */
+    rrv_vec3 *xs, *sb1, *sb2;
+    double (*du)[4], (*Cp)[4];
 } rrv__chain;
+
+/* A chain for up to cap inner vertices in one RRV_MALLOC block (a render
+   context holds one: ~230 KB at RRV__CHAIN_MAX, too much for a thread's
+   stack); NULL when out of memory. */
+static rrv__chain *rrv__chain_new(int cap)
+{
+    size_t slots = (size_t)cap + 2, doubles = 28, vectors = 9;
+    size_t bytes = sizeof(rrv__chain) + slots * (doubles * sizeof(double) + vectors * sizeof(rrv_vec3) + sizeof(int));
+    rrv__chain *ch = cap >= 0 ? (rrv__chain *)RRV_MALLOC(bytes) : NULL;
+    double *d;
+    rrv_vec3 *v;
+    if (!ch) return NULL;
+    memset(ch, 0, sizeof *ch);
+    ch->cap = cap;
+    /* doubles first (the struct ends on a pointer, so they are aligned), then vectors, then ints */
+    d = (double *)(void *)(ch + 1);
+    ch->t = d; d += slots;
+    ch->level = d; d += slots;
+    ch->eta = d; d += slots;
+    ch->em = d; d += slots;
+    ch->wa = d; d += slots;
+    ch->wb = d; d += slots;
+    ch->r = (double (*)[2])d; d += 2 * slots;
+    ch->A = (double (*)[4])d; d += 4 * slots;
+    ch->B = (double (*)[4])d; d += 4 * slots;
+    ch->C = (double (*)[4])d; d += 4 * slots;
+    ch->du = (double (*)[4])d; d += 4 * slots;
+    ch->Cp = (double (*)[4])d; d += 4 * slots;
+    v = (rrv_vec3 *)(void *)d;
+    ch->x = v; v += slots;
+    ch->g = v; v += slots;
+    ch->gm = v; v += slots;
+    ch->b1 = v; v += slots;
+    ch->b2 = v; v += slots;
+    ch->nrm = v; v += slots;
+    ch->xs = v; v += slots;
+    ch->sb1 = v; v += slots;
+    ch->sb2 = v; v += slots;
+    ch->snell = (int *)(void *)v;
+    return ch;
+}
+
+static void rrv__chain_delete(rrv__chain *ch) { RRV_FREE(ch); }
+
 
 /* 3x3 matrices row-major: M = s (I - w w^T), M += s a b^T, M = P Q. */
 static void rrv__m3_proj(double M[9], rrv_vec3 w, double s)
@@ -5934,16 +5991,27 @@ static rrv_vec3 rrv__chain_gradient(const rrv_scene *scene, rrv_vec3 x, double h
     return g;
 }
 
-/* The length of path a vertex stands for: between the planes half a
-   spacing before and after its own, h/2 (1/ci + 1/co) for segments whose
-   directions have cosines ci, co with the chord; half the two segments
-   beside it where they join comb planes, but not the long first and last
-   segments, which run outside the support. DBL_MAX where a segment runs
-   back along the chord. */
-static double rrv__chain_share(const rrv__chain *ch, double ci, double co)
+/* The chord lengths vertex k stands for behind and ahead of its plane:
+   half the way to the planes beside it, and for the first and last the
+   way to where the support begins and ends along the chord (or to x0, y
+   inside it), so the vertices' kicks cover the support once; not the long
+   first and last segments, which mostly run outside the support. */
+static void rrv__chain_reach(const rrv__chain *ch, int k, double *back, double *ahead)
 {
+    *back = k == 1 ? ch->t[0] - ch->lo : 0.5 * (ch->t[k - 1] - ch->t[k - 2]);
+    *ahead = k == ch->n ? ch->hi - ch->t[k - 1] : 0.5 * (ch->t[k] - ch->t[k - 1]);
+}
+
+/* The length of path vertex k stands for, back / ci + ahead / co for
+   segments whose directions have cosines ci, co with the chord (half the
+   two segments beside it where they join comb planes); DBL_MAX where a
+   segment runs back along the chord. */
+static double rrv__chain_share(const rrv__chain *ch, int k, double ci, double co)
+{
+    double back, ahead;
     if (!(ci > 1e-3) || !(co > 1e-3)) return DBL_MAX;
-    return 0.5 * ch->h * (1.0 / ci + 1.0 / co);
+    rrv__chain_reach(ch, k, &back, &ahead);
+    return back / ci + ahead / co;
 }
 
 /* The direction vertex k sends the ray on: the leapfrog kick of the ray
@@ -5975,7 +6043,7 @@ static void rrv__chain_vertex(const rrv_scene *scene, rrv__chain *ch, int k, int
     int j, q;
     ci = rrv__dot(wi, ch->c);
     co = rrv__dot(wo, ch->c);
-    h_bar = rrv__chain_share(ch, ci, co);
+    h_bar = rrv__chain_share(ch, k, ci, co);
     r = rrv__chain_kick(ch, k, wi, h_bar, &lp);
     if (!(lp > 1e-9 * ep) || !(h_bar < DBL_MAX)) {
         /* the kick stops the ray, or the chain runs back along the chord:
@@ -6004,7 +6072,10 @@ static void rrv__chain_vertex(const rrv_scene *scene, rrv__chain *ch, int k, int
         /* h_bar = h/2 (1/ci + 1/co), dci = c^T dwi, c^T Pa = (c - ci wi)^T / la */
         {
             rrv_vec3 pa = rrv__scale(rrv__madd(ch->c, wi, -ci), 1.0 / la), pb = rrv__scale(rrv__madd(ch->c, wo, -co), 1.0 / lb);
-            double fa = -0.5 * ch->h / (ci * ci), fb = -0.5 * ch->h / (co * co);
+            double back, ahead, fa, fb;
+            rrv__chain_reach(ch, k, &back, &ahead);
+            fa = -back / (ci * ci);
+            fb = -ahead / (co * co);
             dh = q == 0 ? rrv__scale(pa, -fa) : q == 1 ? rrv__sub(rrv__scale(pa, fa), rrv__scale(pb, fb)) : rrv__scale(pb, fb);
         }
         rrv__m3_outer(dp, wi, dep, 1.0);
@@ -6122,9 +6193,11 @@ static void rrv__chain_setup(const rrv_scene *scene, rrv_vec3 x0, rrv_vec3 y, rr
     }
     lo = fmax(lo, 0.0);
     hi = fmin(hi, L);
+    ch->lo = lo;
+    ch->hi = hi;
     if (!(lo < hi)) { ch->x[1] = y; return; }
     count = (long)ceil((hi - lo) / h);
-    if (count > RRV__CHAIN_MAX) { count = RRV__CHAIN_MAX; h = (hi - lo) / RRV__CHAIN_MAX; }
+    if (count > ch->cap) { count = ch->cap; h = (hi - lo) / (ch->cap > 0 ? ch->cap : 1); }
     ch->h = h;
     for (i = 0; i < count; ++i) {
         double t = lo + ((double)i + u) * h;
@@ -6184,7 +6257,11 @@ static rrv_vec3 rrv__chain_trace(const rrv_scene *scene, rrv__chain *ch, rrv_vec
         next = (k < ch->n ? ch->t[k] : rrv__dot(rrv__sub(ch->x[ch->n + 1], x0), ch->c)) - ch->t[k - 1];
         e_next = rrv__eta_gradient(scene, rrv__madd(x, d, 0.5 * next / dc), NULL);
         g = rrv__chain_gradient(scene, x, ch->h, NULL);
-        d = rrv__normalize(rrv__madd(rrv__scale(d, e_prev), g, ch->h / dc));
+        {
+            double back, ahead;
+            rrv__chain_reach(ch, k, &back, &ahead);
+            d = rrv__normalize(rrv__madd(rrv__scale(d, e_prev), g, (back + ahead) / dc));
+        }
         e_prev = e_next;
         if (ch->iso && !rrv__project_iso(scene, &ch->x[k], ch->level[k])) ch->failed = 1;
     }
@@ -6274,7 +6351,7 @@ static int rrv__chain_physical(const rrv_scene *scene, const rrv__chain *ch)
         rrv_vec3 a = rrv__sub(ch->x[k], ch->x[k - 1]), b = rrv__sub(ch->x[k + 1], ch->x[k]), wi, r;
         double lp, share;
         wi = rrv__normalize(a);
-        share = rrv__chain_share(ch, rrv__dot(wi, ch->c), rrv__dot(rrv__normalize(b), ch->c));
+        share = rrv__chain_share(ch, k, rrv__dot(wi, ch->c), rrv__dot(rrv__normalize(b), ch->c));
         if (!(share < DBL_MAX)) return 0;
         r = rrv__chain_kick(ch, k, wi, share, &lp);
         if (!(rrv__dot(b, r) > 0)) return 0;
@@ -6305,19 +6382,18 @@ static int rrv__chain_physical(const rrv_scene *scene, const rrv__chain *ch)
    root is not a physical path, or the Jacobian is singular there. */
 static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroot *root)
 {
-    rrv_vec3 xs[RRV__CHAIN_MAX + 2], sb1[RRV__CHAIN_MAX + 2], sb2[RRV__CHAIN_MAX + 2];
-    double du[RRV__CHAIN_MAX + 2][4], Cp[RRV__CHAIN_MAX + 2][4];
+    rrv_vec3 *xs = ch->xs, *sb1 = ch->sb1, *sb2 = ch->sb2;
+    double (*du)[4] = ch->du, (*Cp)[4] = ch->Cp;
     double prev = DBL_MAX, step = 1.0, L = rrv__length(rrv__sub(ch->x[ch->n + 1], ch->x[0]));
     int it, k, have_prev = 0, n = ch->n;
     root->iterations = 0;
-    root->why = 0;
     for (it = 0; it < RRV__MANIFOLD_ITERATIONS; ++it) {
         double largest, norm = rrv__chain_eval(scene, ch, 1, &largest), big = 0;
         root->iterations = it + 1;
         if (!(norm < prev)) {
-            if (!have_prev) { root->why = 1; return 0; }
+            if (!have_prev) return 0;
             step *= 0.5;
-            if (step < 1e-6) { root->why = 2; return 0; }
+            if (step < 1e-6) return 0;
             rrv__chain_move(scene, ch, xs, sb1, sb2, du, step);
             continue;
         }
@@ -6326,7 +6402,7 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
             rrv_vec3 x1, w0, e1, e2, dw[2];
             double D[4], l01;
             int j;
-            if (!rrv__chain_physical(scene, ch)) { root->why = 3; return 0; }
+            if (!rrv__chain_physical(scene, ch)) return 0;
             if (n > 0) {
                 for (k = 1; k <= n; ++k) du[k][0] = du[k][1] = du[k][2] = du[k][3] = 0;
                 for (j = 0; j < 4; ++j) du[n][j] = -ch->E[j];
@@ -6353,7 +6429,7 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
             du[k][0] = -ch->r[k][0];
             du[k][2] = -ch->r[k][1];
         }
-        if (!rrv__chain_thomas(ch, du, 1, Cp)) { root->why = 4; return 0; }
+        if (!rrv__chain_thomas(ch, du, 1, Cp)) return 0;
         for (k = 1; k <= n; ++k) big = fmax(big, sqrt(du[k][0] * du[k][0] + du[k][2] * du[k][2]));
         if (big > 0.25 * L)
             for (k = 1; k <= n; ++k) { du[k][0] *= 0.25 * L / big; du[k][2] *= 0.25 * L / big; }
@@ -6365,8 +6441,6 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
         memcpy(sb2, ch->b2, sizeof(rrv_vec3) * (size_t)(n + 2));
         rrv__chain_move(scene, ch, xs, sb1, sb2, du, step);
     }
-    root->why = 5;
-    { double w = 0; for (k = 1; k <= n; ++k) if (fabs(ch->r[k][0]) + fabs(ch->r[k][1]) > w) { w = fabs(ch->r[k][0]) + fabs(ch->r[k][1]); root->worst = k; } }
     return 0;
 }
 
@@ -6476,20 +6550,20 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
 {
     const rrv_scene *scene = ctx->scene;
     const rrv_settings *st = &scene->settings;
-    rrv__chain ch;
+    rrv__chain *ch = ctx->chain;
     rrv__mroot root, again;
     rrv_vec3 y, ny, roots[RRV__MANIFOLD_ROOTS];
     double pdf_area, carried[3], k;
     const rrv_shape *s = rrv__pick_area_light(scene, rng, &y, &ny, &pdf_area);
     int c, count, nroots = 0, trial;
-    if (!s) return;
+    if (!s || !ch) return;
     rrv__chain_setup(scene, x0, y, ny, st->manifold_gauge == RRV_GAUGE_ISO, st->manifold_drop, rrv__uniform(rng),
-                     &ch);
+                     ch);
     if (st->manifold_trials <= 0) {
-        if (!rrv__manifold_try(ctx, &ch, rng, &root)) return;
-        if (!rrv__chain_carry(ctx, &ch, v, rng, carried)) return;
+        if (!rrv__manifold_try(ctx, ch, rng, &root)) return;
+        if (!rrv__chain_carry(ctx, ch, v, rng, carried)) return;
         for (count = 1; count < RRV__SOLVE_TRIALS; ++count)
-            if (rrv__manifold_try(ctx, &ch, rng, &again) &&
+            if (rrv__manifold_try(ctx, ch, rng, &again) &&
                 rrv__length(rrv__sub(again.w0, root.w0)) < RRV__SOLVE_SAME_ROOT)
                 break;
         ctx->stats.solve_trials += (uint64_t)count;
@@ -6500,12 +6574,12 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
     }
     for (trial = 0; trial < st->manifold_trials; ++trial) {
         int i;
-        if (!rrv__manifold_try(ctx, &ch, rng, &root)) continue;
+        if (!rrv__manifold_try(ctx, ch, rng, &root)) continue;
         for (i = 0; i < nroots; ++i)
             if (rrv__length(rrv__sub(roots[i], root.w0)) < RRV__SOLVE_SAME_ROOT) break;
         if (i < nroots || nroots == RRV__MANIFOLD_ROOTS) continue;
         roots[nroots++] = root.w0;
-        if (!rrv__chain_carry(ctx, &ch, v, rng, carried)) continue;
+        if (!rrv__chain_carry(ctx, ch, v, rng, carried)) continue;
         ctx->stats.solve_trials += (uint64_t)st->manifold_trials;
         ++ctx->stats.solve_connections;
         k = root.density / pdf_area * rrv__eta_scale(ctx, y) * rrv__path_mis(path);

@@ -662,11 +662,29 @@ static int manifold_root(const rrv_scene *s, rrv_vec3 x0, rrv_vec3 y, rrv_vec3 n
     int k;
     rrv__chain_setup(s, x0, y, ny, iso, 0.0, u, ch);
     for (k = 0; k < tries; ++k) {
-        if (rrv__uniform(rng) < 0.5) rrv__chain_seed(s, ch, rrv__chain_seed_direction(ch, rng));
-        else rrv__chain_trace(s, ch, rrv__chain_seed_direction(ch, rng));
+        rrv_vec3 w = rrv__chain_seed_direction(ch, rng);
+        int aimed;
+        if (!rrv__chain_aim(s, ch, w, &aimed)) rrv__chain_seed(s, ch, w);
         if (rrv__manifold_solve(s, ch, root)) return 1;
     }
     return 0;
+}
+
+/* Copies the state of chain src into dst (whose cap must hold it): the
+   arrays, not the pointers to them. */
+static void chain_copy(rrv__chain *dst, const rrv__chain *src)
+{
+    rrv__chain keep = *dst;
+    size_t slots = (size_t)src->n + 2;
+    *dst = *src;
+    dst->cap = keep.cap;
+#define CHAIN_FIELD(f) dst->f = keep.f; memcpy(dst->f, src->f, slots * sizeof *src->f);
+    CHAIN_FIELD(t) CHAIN_FIELD(level) CHAIN_FIELD(x) CHAIN_FIELD(eta) CHAIN_FIELD(g)
+    CHAIN_FIELD(em) CHAIN_FIELD(gm) CHAIN_FIELD(wa) CHAIN_FIELD(wb) CHAIN_FIELD(b1)
+    CHAIN_FIELD(b2) CHAIN_FIELD(r) CHAIN_FIELD(A) CHAIN_FIELD(B) CHAIN_FIELD(C)
+    CHAIN_FIELD(snell) CHAIN_FIELD(nrm)
+    dst->xs = keep.xs; dst->sb1 = keep.sb1; dst->sb2 = keep.sb2; dst->du = keep.du; dst->Cp = keep.Cp;
+#undef CHAIN_FIELD
 }
 
 /* The chain's root against the closed form of the Luneburg two-point
@@ -683,7 +701,7 @@ static void test_manifold_luneburg_two_point(void)
                                      {0.5, 0.0, 0.0, -0.5, 0.1, 0.0},
                                      {0.2, 0.1, -0.3, 0.1, -0.4, 0.5}};
     rrv_scene *s = lens_scene(0.004, RRV_STEPPER_RK4);
-    static rrv__chain ch;
+    rrv__chain *ch = rrv__chain_new(RRV__CHAIN_MAX);
     rrv__rng rng;
     int i, k;
     rrv__rng_seed(&rng, 15, 0, 0);
@@ -697,13 +715,13 @@ static void test_manifold_luneburg_two_point(void)
             int j;
             ++tried;
             /* the light frame perpendicular to the arriving direction */
-            if (!manifold_root(s, x0, x1, want.w1, 0, (k + 0.5) / 10.0, 8, &rng, &ch, &got)) continue;
+            if (!manifold_root(s, x0, x1, want.w1, 0, (k + 0.5) / 10.0, 8, &rng, ch, &got)) continue;
             ++converged;
             for (j = 0; j < 3 && rrv__length(rrv__sub(got.w0, want.w0)) < 1e-3; ++j) {
                 /* re-solved with the frame of the chain's own arrival */
-                rrv_vec3 w1 = rrv__normalize(rrv__sub(ch.x[ch.n + 1], ch.x[ch.n]));
-                rrv__frame(w1, &ch.s1, &ch.s2);
-                if (!rrv__manifold_solve(s, &ch, &got)) break;
+                rrv_vec3 w1 = rrv__normalize(rrv__sub(ch->x[ch->n + 1], ch->x[ch->n]));
+                rrv__frame(w1, &ch->s1, &ch->s2);
+                if (!rrv__manifold_solve(s, ch, &got)) break;
             }
             if (rrv__length(rrv__sub(got.w0, want.w0)) < 1e-3) {
                 double ew = rrv__length(rrv__sub(got.w0, want.w0)), ed = fabs(1.0 / got.density / want.det - 1.0);
@@ -715,9 +733,10 @@ static void test_manifold_luneburg_two_point(void)
         }
         SAY("  manifold Luneburg two-point %d: %d of %d converged (8 seeds each), %d to the closed-form root, w0 off "
             "by %.1e, |det J_perp| by %.1e (%d vertices)\n",
-            i, converged, tried, found, worst_w, worst_det, ch.n);
+            i, converged, tried, found, worst_w, worst_det, ch->n);
         CHECKF(found >= 5, "point %d: the closed-form root found for only %d of 10 comb offsets", i, found);
     }
+    rrv__chain_delete(ch);
     rrv_scene_free(s);
 }
 
@@ -730,7 +749,7 @@ static void test_manifold_straight_chains(void)
     static const double pts[2][6] = {{0.2, 0.1, 3.0, -0.1, 0.3, 5.0}, {3.0, 0.2, 2.0, 3.1, -0.1, -2.0}};
     static const int vertices[2] = {0, 200};
     rrv_scene *s = lens_scene(0.01, RRV_STEPPER_RK4);
-    static rrv__chain ch;
+    rrv__chain *ch = rrv__chain_new(RRV__CHAIN_MAX);
     rrv__rng rng;
     int i;
     rrv__rng_seed(&rng, 29, 0, 0);
@@ -739,18 +758,19 @@ static void test_manifold_straight_chains(void)
         rrv_vec3 ny = rrv__normalize(rrv__v3(0.3, 0.2, -1.0)), d = rrv__sub(y, x0);
         double r = rrv__length(d), want = fabs(rrv__dot(ny, d)) / (r * r * r);
         rrv__mroot root;
-        if (!manifold_root(s, x0, y, ny, 0, 0.5, 8, &rng, &ch, &root)) {
+        if (!manifold_root(s, x0, y, ny, 0, 0.5, 8, &rng, ch, &root)) {
             CHECKF(0, "straight chain %d: no root", i);
             continue;
         }
-        SAY("  manifold straight chain %d: %d vertices, w0 off by %.1e, density %.9f vs %.9f\n", i, ch.n,
+        SAY("  manifold straight chain %d: %d vertices, w0 off by %.1e, density %.9f vs %.9f\n", i, ch->n,
             rrv__length(rrv__sub(root.w0, rrv__scale(d, 1.0 / r))), root.density, want);
         /* 0 planes; 200 at spacing 0.01 over the sphere's 2 m (the cap of
-           256 is not reached) */
-        CHECKF(ch.n == vertices[i], "chain %d: %d vertices", i, ch.n);
+           RRV__CHAIN_MAX is not reached) */
+        CHECKF(ch->n == vertices[i], "chain %d: %d vertices", i, ch->n);
         CHECK(rrv__length(rrv__sub(root.w0, rrv__scale(d, 1.0 / r))) < 1e-9);
         CHECKF(fabs(root.density / want - 1.0) < 1e-9, "chain %d: density %.12g, straight %.12g", i, root.density, want);
     }
+    rrv__chain_delete(ch);
     rrv_scene_free(s);
 }
 
@@ -762,7 +782,7 @@ static void test_manifold_straight_chains(void)
    the ISO gauge shares the residuals and differs only in the basis). */
 static void manifold_differences(rrv_scene *s, rrv_vec3 x0, rrv_vec3 y, int iso, const char *name)
 {
-    static rrv__chain ch, c2;
+    rrv__chain *ch = rrv__chain_new(RRV__CHAIN_MAX), *c2 = rrv__chain_new(RRV__CHAIN_MAX);
     rrv__mroot root;
     rrv__rng rng;
     const rrv_vec3 ny = rrv__normalize(rrv__v3(0.2, -0.1, -1.0));
@@ -770,30 +790,32 @@ static void manifold_differences(rrv_scene *s, rrv_vec3 x0, rrv_vec3 y, int iso,
     int k, l, q, j, sg;
     rrv_vec3 e1, e2, w[2][2];
     rrv__rng_seed(&rng, 17, 0, 0);
-    if (!manifold_root(s, x0, y, ny, iso, 0.5, 40, &rng, &ch, &root)) {
+    if (!manifold_root(s, x0, y, ny, iso, 0.5, 40, &rng, ch, &root)) {
         CHECKF(0, "%s: no root", name);
+        rrv__chain_delete(ch);
+        rrv__chain_delete(c2);
         return;
     }
-    rrv__chain_eval(s, &ch, 1, &largest);
-    for (k = 1; k <= ch.n; ++k) {
+    rrv__chain_eval(s, ch, 1, &largest);
+    for (k = 1; k <= ch->n; ++k) {
         for (l = 0; l < 2; ++l) {
             const double eps = 1e-6;
             double fd[3][2] = {{0, 0}, {0, 0}, {0, 0}};
             for (sg = -1; sg <= 1; sg += 2) {
-                c2 = ch;
-                c2.x[k] = rrv__madd(ch.x[k], l ? ch.b2[k] : ch.b1[k], sg * eps);
-                if (iso) rrv__project_iso(s, &c2.x[k], c2.level[k]);
-                rrv__chain_eval(s, &c2, 0, &largest);
+                chain_copy(c2, ch);
+                c2->x[k] = rrv__madd(ch->x[k], l ? ch->b2[k] : ch->b1[k], sg * eps);
+                if (iso) rrv__project_iso(s, &c2->x[k], c2->level[k]);
+                rrv__chain_eval(s, c2, 0, &largest);
                 for (q = -1; q <= 1; ++q)
-                    if (k + q >= 1 && k + q <= ch.n)
-                        for (j = 0; j < 2; ++j) fd[q + 1][j] += sg * c2.r[k + q][j] / (2 * eps);
+                    if (k + q >= 1 && k + q <= ch->n)
+                        for (j = 0; j < 2; ++j) fd[q + 1][j] += sg * c2->r[k + q][j] / (2 * eps);
             }
             for (j = 0; j < 2; ++j) {
                 /* r_k-1 depends on u_k through C_k-1, r_k through B_k, r_k+1 through A_k+1 */
-                if (k > 1) worst = fmax(worst, fabs(fd[0][j] - ch.C[k - 1][2 * j + l]));
-                worst = fmax(worst, fabs(fd[1][j] - ch.B[k][2 * j + l]));
-                if (k < ch.n) worst = fmax(worst, fabs(fd[2][j] - ch.A[k + 1][2 * j + l]));
-                scale = fmax(scale, fabs(ch.B[k][2 * j + l]));
+                if (k > 1) worst = fmax(worst, fabs(fd[0][j] - ch->C[k - 1][2 * j + l]));
+                worst = fmax(worst, fabs(fd[1][j] - ch->B[k][2 * j + l]));
+                if (k < ch->n) worst = fmax(worst, fabs(fd[2][j] - ch->A[k + 1][2 * j + l]));
+                scale = fmax(scale, fabs(ch->B[k][2 * j + l]));
             }
         }
     }
@@ -801,9 +823,9 @@ static void manifold_differences(rrv_scene *s, rrv_vec3 x0, rrv_vec3 y, int iso,
     for (j = 0; j < 2; ++j)
         for (sg = 0; sg < 2; ++sg) {
             rrv__mroot moved;
-            c2 = ch;
-            c2.x[c2.n + 1] = rrv__madd(y, j ? ch.s2 : ch.s1, sg ? 1e-5 : -1e-5);
-            CHECKF(rrv__manifold_solve(s, &c2, &moved), "%s: no root after moving y", name);
+            chain_copy(c2, ch);
+            c2->x[c2->n + 1] = rrv__madd(y, j ? ch->s2 : ch->s1, sg ? 1e-5 : -1e-5);
+            CHECKF(rrv__manifold_solve(s, c2, &moved), "%s: no root after moving y", name);
             w[j][sg] = moved.w0;
         }
     for (j = 0; j < 2; ++j) {
@@ -813,7 +835,7 @@ static void manifold_differences(rrv_scene *s, rrv_vec3 x0, rrv_vec3 y, int iso,
     }
     fd_density = fabs(D[0] * D[3] - D[1] * D[2]);
     SAY("  manifold differences %-16s %d vertices: blocks off by %.1e of %.1f, density %.6f vs %.6f (%.1e)\n", name,
-        ch.n, worst, scale, root.density, fd_density, fabs(fd_density / root.density - 1.0));
+        ch->n, worst, scale, root.density, fd_density, fabs(fd_density / root.density - 1.0));
     /* central differences at 1e-6: measured 1e-6 of the largest block in
        the lens, 3e-5 in the blobs (whose third derivatives are larger); of
        the re-solved root at 1e-5: ~1e-9 (the solve's tolerance is 1e-9) */
@@ -821,6 +843,8 @@ static void manifold_differences(rrv_scene *s, rrv_vec3 x0, rrv_vec3 y, int iso,
            scale);
     CHECKF(fabs(fd_density / root.density - 1.0) < 1e-4, "%s: density %g, differences %g", name, root.density,
            fd_density);
+    rrv__chain_delete(ch);
+    rrv__chain_delete(c2);
 }
 
 static void test_manifold_against_differences(void)
@@ -842,40 +866,44 @@ static void test_manifold_against_differences(void)
    halving with h). Returns the relative difference. */
 static double manifold_reciprocity(rrv_scene *s, rrv_vec3 x0, rrv_vec3 y, const char *name)
 {
-    static rrv__chain there, back;
+    rrv__chain *there = rrv__chain_new(RRV__CHAIN_MAX), *back = rrv__chain_new(RRV__CHAIN_MAX);
     rrv__mroot rt, rb;
     rrv__rng rng;
     double eta0 = 1.0 + rrv__scene_refractivity(s, x0, NULL), eta1 = 1.0 + rrv__scene_refractivity(s, y, NULL);
-    double lhs, rhs;
+    double lhs, rhs = 0, result = 1;
     int j;
     rrv__rng_seed(&rng, 19, 0, 0);
-    if (!manifold_root(s, x0, y, rrv__normalize(rrv__sub(y, x0)), 0, 0.5, 40, &rng, &there, &rt)) {
+    if (!manifold_root(s, x0, y, rrv__normalize(rrv__sub(y, x0)), 0, 0.5, 40, &rng, there, &rt)) {
         CHECKF(0, "%s: no root", name);
-        return 1;
+        goto done;
     }
     /* back: the same planes, seeded with the path reversed */
-    rrv__chain_setup(s, y, x0, rrv__normalize(rrv__sub(x0, y)), 0, 0.0, 0.5, &back);
-    back.n = there.n;
-    for (j = 0; j < there.n; ++j) back.t[j] = rrv__length(rrv__sub(y, x0)) - there.t[there.n - 1 - j];
-    for (j = 0; j <= there.n + 1; ++j) back.x[j] = there.x[there.n + 1 - j];
-    if (!rrv__manifold_solve(s, &back, &rb)) {
+    rrv__chain_setup(s, y, x0, rrv__normalize(rrv__sub(x0, y)), 0, 0.0, 0.5, back);
+    back->n = there->n;
+    for (j = 0; j < there->n; ++j) back->t[j] = rrv__length(rrv__sub(y, x0)) - there->t[there->n - 1 - j];
+    for (j = 0; j <= there->n + 1; ++j) back->x[j] = there->x[there->n + 1 - j];
+    if (!rrv__manifold_solve(s, back, &rb)) {
         CHECKF(0, "%s: no root back", name);
-        return 1;
+        goto done;
     }
     /* the densities per unit area perpendicular to each arriving chord */
     for (j = 0; j < 3; ++j) {
-        rrv__frame(rrv__normalize(rrv__sub(there.x[there.n + 1], there.x[there.n])), &there.s1, &there.s2);
-        rrv__frame(rrv__normalize(rrv__sub(back.x[back.n + 1], back.x[back.n])), &back.s1, &back.s2);
-        CHECK(rrv__manifold_solve(s, &there, &rt) && rrv__manifold_solve(s, &back, &rb));
+        rrv__frame(rrv__normalize(rrv__sub(there->x[there->n + 1], there->x[there->n])), &there->s1, &there->s2);
+        rrv__frame(rrv__normalize(rrv__sub(back->x[back->n + 1], back->x[back->n])), &back->s1, &back->s2);
+        CHECK(rrv__manifold_solve(s, there, &rt) && rrv__manifold_solve(s, back, &rb));
     }
     lhs = eta1 * eta1 / rt.density;
     rhs = eta0 * eta0 / rb.density;
     SAY("  manifold reciprocity %-10s eta0 %.4f eta1 %.4f: %.7f vs %.7f (%.1e), %d vertices\n", name, eta0, eta1, lhs,
-        rhs, fabs(lhs / rhs - 1.0), there.n);
-    CHECK(there.n == back.n);
+        rhs, fabs(lhs / rhs - 1.0), there->n);
+    CHECK(there->n == back->n);
     /* w0 there is the reverse of the arrival back */
-    CHECK(rrv__length(rrv__add(rt.w0, rrv__normalize(rrv__sub(back.x[back.n + 1], back.x[back.n])))) < 1e-6);
-    return fabs(lhs / rhs - 1.0);
+    CHECK(rrv__length(rrv__add(rt.w0, rrv__normalize(rrv__sub(back->x[back->n + 1], back->x[back->n])))) < 1e-6);
+    result = fabs(lhs / rhs - 1.0);
+done:
+    rrv__chain_delete(there);
+    rrv__chain_delete(back);
+    return result;
 }
 
 static void test_manifold_reciprocity(void)
@@ -1061,10 +1089,11 @@ static void test_partition_manifold(void)
     rrv__context ctx;
     rrv__rng rng;
     rrv__vertex_bsdf vb;
-    static rrv__chain ch;
+    rrv__chain *ch = rrv__chain_new(RRV__CHAIN_MAX);
     int k, straight = 0, curved = 0;
     if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
         CHECKF(0, "parse: %s", err.message);
+        rrv__chain_delete(ch);
         return;
     }
     solver_context(&ctx, s);
@@ -1084,20 +1113,21 @@ static void test_partition_manifold(void)
         ls.wi = rrv__normalize(rrv__sub(y, x0));
         ls.dist = rrv__length(rrv__sub(y, x0));
         allowed = rrv__straight_allowed(&ctx, x0, &ls);
-        rrv__chain_setup(s, x0, y, rrv__v3(0, -1, 0), 0, 0.0, rrv__uniform(&rng), &ch);
-        rrv__chain_seed(s, &ch, ls.wi);
-        found = rrv__manifold_solve(s, &ch, &root);
-        carries = found && rrv__chain_carry(&ctx, &ch, &vb, &rng, carried);
+        rrv__chain_setup(s, x0, y, rrv__v3(0, -1, 0), 0, 0.0, rrv__uniform(&rng), ch);
+        rrv__chain_seed(s, ch, ls.wi);
+        found = rrv__manifold_solve(s, ch, &root);
+        carries = found && rrv__chain_carry(&ctx, ch, &vb, &rng, carried);
         if (allowed) {
             ++straight;
             CHECKF(found && !carries && rrv__length(rrv__sub(root.w0, ls.wi)) < 1e-9,
-                   "straight connection %d (%d vertices): found %d, carried %d", k, ch.n, found, carries);
+                   "straight connection %d (%d vertices): found %d, carried %d", k, ch->n, found, carries);
         } else if (carries) {
             ++curved;
         }
     }
     SAY("  manifold partition: %d straight connections, %d curved roots carried of 300\n", straight, curved);
     CHECK(straight > 50 && curved > 30);
+    rrv__chain_delete(ch);
     rrv_scene_free(s);
 }
 
