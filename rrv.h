@@ -5740,14 +5740,15 @@ typedef struct rrv__chain {
        step, Thomas's eliminated upper blocks */
     rrv_vec3 *xs, *sb1, *sb2;
     double (*du)[4], (*Cp)[4];
+    double (*gn)[2], (*sd)[2], (*jv)[2]; /* Newton step, gradient, products with J */
 } rrv__chain;
 
 /* A chain for up to cap inner vertices in one RRV_MALLOC block (a render
-   context holds one: ~230 KB at RRV__CHAIN_MAX, too much for a thread's
+   context holds one: ~250 KB at RRV__CHAIN_MAX, too much for a thread's
    stack); NULL when out of memory. */
 static rrv__chain *rrv__chain_new(int cap)
 {
-    size_t slots = (size_t)cap + 2, doubles = 28, vectors = 9;
+    size_t slots = (size_t)cap + 2, doubles = 34, vectors = 9;
     size_t bytes = sizeof(rrv__chain) + slots * (doubles * sizeof(double) + vectors * sizeof(rrv_vec3) + sizeof(int));
     rrv__chain *ch = cap >= 0 ? (rrv__chain *)RRV_MALLOC(bytes) : NULL;
     double *d;
@@ -5769,6 +5770,9 @@ static rrv__chain *rrv__chain_new(int cap)
     ch->C = (double (*)[4])d; d += 4 * slots;
     ch->du = (double (*)[4])d; d += 4 * slots;
     ch->Cp = (double (*)[4])d; d += 4 * slots;
+    ch->gn = (double (*)[2])d; d += 2 * slots;
+    ch->sd = (double (*)[2])d; d += 2 * slots;
+    ch->jv = (double (*)[2])d; d += 2 * slots;
     v = (rrv_vec3 *)(void *)d;
     ch->x = v; v += slots;
     ch->g = v; v += slots;
@@ -6310,7 +6314,7 @@ static int rrv__chain_aim(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, in
         } else {
             best = sqrt(miss[0] * miss[0] + miss[1] * miss[1]);
             best_w = w;
-            if (best < 1e-3 * ch->h) break;
+            if (best < 0.1 * ch->h) break;
             if (it) step = fmin(1.0, 2.0 * step);
         }
         rrv__frame(w, &e1, &e2);
@@ -6337,8 +6341,6 @@ typedef struct rrv__mroot {
     rrv_vec3 w0;      /* initial direction */
     double density;   /* dw0 / dA_y, sr per m^2 */
     int iterations;
-    int why;          /* DEBUG */
-    int worst;
 } rrv__mroot;
 
 /* Is the converged chain a physical path, and no chord crosses a sharp
@@ -6373,74 +6375,178 @@ static int rrv__chain_physical(const rrv_scene *scene, const rrv__chain *ch)
     return 1;
 }
 
-/* Newton's method on the chain from its seeded positions: the full step
-   J du = -r (block Thomas), halved on a worse or unusable step and
-   doubled up to 1 on success (the step control of Specular Manifold
-   Sampling's solver), no vertex moved more than a quarter of the chord at
-   once. At most RRV__SOLVE_ITERATIONS evaluations. Returns 1 with the
-   root's initial direction and density, 0 when it did not converge, the
-   root is not a physical path, or the Jacobian is singular there. */
+/* out = J v, or J^T v with transpose, for 2-vectors v[1..n] in the gauge
+   coordinates (O(n): J is block tridiagonal). */
+static void rrv__chain_apply(const rrv__chain *ch, double (*v)[2], double (*out)[2], int transpose)
+{
+    int k, n = ch->n;
+    for (k = 1; k <= n; ++k) {
+        const double *M[3], *x[3];
+        double o0 = 0, o1 = 0;
+        int m, count = 0;
+        /* the blocks of row k of J, or of column k for J^T */
+        M[count] = ch->B[k]; x[count++] = v[k];
+        if (!transpose) {
+            if (k > 1) { M[count] = ch->A[k]; x[count++] = v[k - 1]; }
+            if (k < n) { M[count] = ch->C[k]; x[count++] = v[k + 1]; }
+        } else {
+            if (k < n) { M[count] = ch->A[k + 1]; x[count++] = v[k + 1]; }
+            if (k > 1) { M[count] = ch->C[k - 1]; x[count++] = v[k - 1]; }
+        }
+        for (m = 0; m < count; ++m) {
+            if (!transpose) {
+                o0 += M[m][0] * x[m][0] + M[m][1] * x[m][1];
+                o1 += M[m][2] * x[m][0] + M[m][3] * x[m][1];
+            } else {
+                o0 += M[m][0] * x[m][0] + M[m][2] * x[m][1];
+                o1 += M[m][1] * x[m][0] + M[m][3] * x[m][1];
+            }
+        }
+        out[k][0] = o0;
+        out[k][1] = o1;
+    }
+}
+
+/* The geometry term at a root: dx_1/dy from J Z = -E (E in the last row)
+   by the same elimination, turned into dw0/dy. Returns 0 where J is
+   singular (a caustic) or the density is not finite and positive. */
+static int rrv__chain_density(rrv__chain *ch, rrv__mroot *root)
+{
+    double (*du)[4] = ch->du, D[4], l01;
+    rrv_vec3 x1 = ch->x[1], w0, e1, e2, dw[2];
+    int j, k, n = ch->n;
+    if (n > 0) {
+        for (k = 1; k <= n; ++k) du[k][0] = du[k][1] = du[k][2] = du[k][3] = 0;
+        for (j = 0; j < 4; ++j) du[n][j] = -ch->E[j];
+        if (!rrv__chain_thomas(ch, du, 2, ch->Cp)) return 0;
+    }
+    l01 = rrv__length(rrv__sub(x1, ch->x[0]));
+    w0 = rrv__scale(rrv__sub(x1, ch->x[0]), 1.0 / l01);
+    rrv__frame(w0, &e1, &e2);
+    for (j = 0; j < 2; ++j) {
+        rrv_vec3 dx = n > 0 ? rrv__add(rrv__scale(ch->b1[1], du[1][j]), rrv__scale(ch->b2[1], du[1][2 + j]))
+                            : (j ? ch->s2 : ch->s1);
+        dw[j] = rrv__scale(rrv__madd(dx, w0, -rrv__dot(dx, w0)), 1.0 / l01);
+    }
+    D[0] = rrv__dot(e1, dw[0]);
+    D[1] = rrv__dot(e1, dw[1]);
+    D[2] = rrv__dot(e2, dw[0]);
+    D[3] = rrv__dot(e2, dw[1]);
+    root->w0 = w0;
+    root->density = fabs(D[0] * D[3] - D[1] * D[2]);
+    return root->density < DBL_MAX && root->density > 0;
+}
+
+/* Trust-region Gauss-Newton (Powell's dogleg) on the chain from its seeded
+   positions, all in O(n): the Newton step J du = -r by block Thomas where
+   it lies inside the trust radius, else the dogleg path from the Cauchy
+   point (along -J^T r) toward it, cut at the radius. The radius is the
+   damping: halved on a step that does not lower |r| (the step is undone),
+   also on one that lowers it much less than the linear model predicted,
+   doubled (up to the chord's length a vertex) on one that the model
+   predicted well and that reached it. A singular or ill-conditioned pivot
+   block fails the solve (rrv__chain_thomas), and so does a chain that is
+   not usable (rrv__chain_eval: a segment running back, non-finite values).
+   At most RRV__MANIFOLD_ITERATIONS evaluations of the chain, each
+   counted. Returns 1 with the root's initial direction and density, 0
+   when it did not converge to RRV__MANIFOLD_TOL, the root is not a
+   physical path, or the Jacobian is singular there. */
 static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroot *root)
 {
     rrv_vec3 *xs = ch->xs, *sb1 = ch->sb1, *sb2 = ch->sb2;
-    double (*du)[4] = ch->du, (*Cp)[4] = ch->Cp;
-    double prev = DBL_MAX, step = 1.0, L = rrv__length(rrv__sub(ch->x[ch->n + 1], ch->x[0]));
-    int it, k, have_prev = 0, n = ch->n;
-    root->iterations = 0;
-    for (it = 0; it < RRV__MANIFOLD_ITERATIONS; ++it) {
-        double largest, norm = rrv__chain_eval(scene, ch, 1, &largest), big = 0;
-        root->iterations = it + 1;
-        if (!(norm < prev)) {
-            if (!have_prev) return 0;
-            step *= 0.5;
-            if (step < 1e-6) return 0;
-            rrv__chain_move(scene, ch, xs, sb1, sb2, du, step);
-            continue;
-        }
+    double (*du)[4] = ch->du, (*gn)[2] = ch->gn, (*sd)[2] = ch->sd, (*jv)[2] = ch->jv;
+    int it = 1, k, n = ch->n;
+    double L = rrv__length(rrv__sub(ch->x[n + 1], ch->x[0])), scale = sqrt(n > 0 ? (double)n : 1.0);
+    double radius = 0.25 * L * scale, largest, norm = rrv__chain_eval(scene, ch, 1, &largest);
+    root->iterations = 1;
+    if (!(norm < DBL_MAX)) return 0;
+    for (;;) {
+        double lgn = 0, lp, pred = 0, f2 = norm * norm, trial, rho;
         if (largest < RRV__MANIFOLD_TOL) {
-            /* the geometry term: dx_1/dy from J Z = -E, E in the last row */
-            rrv_vec3 x1, w0, e1, e2, dw[2];
-            double D[4], l01;
-            int j;
-            if (!rrv__chain_physical(scene, ch)) return 0;
-            if (n > 0) {
-                for (k = 1; k <= n; ++k) du[k][0] = du[k][1] = du[k][2] = du[k][3] = 0;
-                for (j = 0; j < 4; ++j) du[n][j] = -ch->E[j];
-                if (!rrv__chain_thomas(ch, du, 2, Cp)) return 0;
-            }
-            x1 = ch->x[1];
-            l01 = rrv__length(rrv__sub(x1, ch->x[0]));
-            w0 = rrv__scale(rrv__sub(x1, ch->x[0]), 1.0 / l01);
-            rrv__frame(w0, &e1, &e2);
-            for (j = 0; j < 2; ++j) {
-                rrv_vec3 dx = n > 0 ? rrv__add(rrv__scale(ch->b1[1], du[1][j]), rrv__scale(ch->b2[1], du[1][2 + j]))
-                                    : (j ? ch->s2 : ch->s1);
-                dw[j] = rrv__scale(rrv__madd(dx, w0, -rrv__dot(dx, w0)), 1.0 / l01);
-            }
-            D[0] = rrv__dot(e1, dw[0]);
-            D[1] = rrv__dot(e1, dw[1]);
-            D[2] = rrv__dot(e2, dw[0]);
-            D[3] = rrv__dot(e2, dw[1]);
-            root->w0 = w0;
-            root->density = fabs(D[0] * D[3] - D[1] * D[2]);
-            return root->density < DBL_MAX && root->density > 0;
+            root->iterations = it;
+            return rrv__chain_physical(scene, ch) && rrv__chain_density(ch, root);
         }
+        if (it >= RRV__MANIFOLD_ITERATIONS) break;
         for (k = 1; k <= n; ++k) {
             du[k][0] = -ch->r[k][0];
             du[k][2] = -ch->r[k][1];
         }
-        if (!rrv__chain_thomas(ch, du, 1, Cp)) return 0;
-        for (k = 1; k <= n; ++k) big = fmax(big, sqrt(du[k][0] * du[k][0] + du[k][2] * du[k][2]));
-        if (big > 0.25 * L)
-            for (k = 1; k <= n; ++k) { du[k][0] *= 0.25 * L / big; du[k][2] *= 0.25 * L / big; }
-        if (have_prev) step = fmin(1.0, 2.0 * step);
-        have_prev = 1;
-        prev = norm;
+        if (!rrv__chain_thomas(ch, du, 1, ch->Cp)) break;
+        for (k = 1; k <= n; ++k) {
+            gn[k][0] = du[k][0];
+            gn[k][1] = du[k][2];
+            lgn += gn[k][0] * gn[k][0] + gn[k][1] * gn[k][1];
+        }
+        lgn = sqrt(lgn);
+        if (lgn <= radius) {
+            lp = lgn;
+        } else {
+            /* g = J^T r, the Cauchy point -alpha g with alpha = |g|^2 / |J g|^2 */
+            double g2 = 0, jg2 = 0, alpha;
+            rrv__chain_apply(ch, ch->r, sd, 1);
+            rrv__chain_apply(ch, sd, jv, 0);
+            for (k = 1; k <= n; ++k) {
+                g2 += sd[k][0] * sd[k][0] + sd[k][1] * sd[k][1];
+                jg2 += jv[k][0] * jv[k][0] + jv[k][1] * jv[k][1];
+            }
+            if (!(g2 > 0) || !(jg2 > 0) || !(g2 < DBL_MAX) || !(jg2 < DBL_MAX)) break;
+            alpha = g2 / jg2;
+            if (alpha * sqrt(g2) >= radius) {
+                for (k = 1; k <= n; ++k) {
+                    du[k][0] = -radius * sd[k][0] / sqrt(g2);
+                    du[k][2] = -radius * sd[k][1] / sqrt(g2);
+                }
+            } else {
+                /* |pc + tau (gn - pc)| = radius, tau in (0, 1) */
+                double a = 0, b = 0, c = -radius * radius, tau;
+                for (k = 1; k <= n; ++k) {
+                    double p0 = -alpha * sd[k][0], p1 = -alpha * sd[k][1], d0 = gn[k][0] - p0, d1 = gn[k][1] - p1;
+                    a += d0 * d0 + d1 * d1;
+                    b += 2.0 * (p0 * d0 + p1 * d1);
+                    c += p0 * p0 + p1 * p1;
+                }
+                tau = a > 0 ? (-b + sqrt(fmax(b * b - 4.0 * a * c, 0.0))) / (2.0 * a) : 0.0;
+                for (k = 1; k <= n; ++k) {
+                    du[k][0] = -alpha * sd[k][0] + tau * (gn[k][0] + alpha * sd[k][0]);
+                    du[k][2] = -alpha * sd[k][1] + tau * (gn[k][1] + alpha * sd[k][1]);
+                }
+            }
+            lp = radius;
+        }
+        /* the linear model's reduction of |r|^2: |r|^2 - |r + J p|^2 */
+        for (k = 1; k <= n; ++k) {
+            sd[k][0] = du[k][0];
+            sd[k][1] = du[k][2];
+        }
+        rrv__chain_apply(ch, sd, jv, 0);
+        for (k = 1; k <= n; ++k) {
+            double a0 = ch->r[k][0] + jv[k][0], a1 = ch->r[k][1] + jv[k][1];
+            pred += a0 * a0 + a1 * a1;
+        }
+        pred = f2 - pred;
         memcpy(xs, ch->x, sizeof(rrv_vec3) * (size_t)(n + 2));
         memcpy(sb1, ch->b1, sizeof(rrv_vec3) * (size_t)(n + 2));
         memcpy(sb2, ch->b2, sizeof(rrv_vec3) * (size_t)(n + 2));
-        rrv__chain_move(scene, ch, xs, sb1, sb2, du, step);
+        rrv__chain_move(scene, ch, xs, sb1, sb2, du, 1.0);
+        trial = rrv__chain_eval(scene, ch, 1, &largest);
+        ++it;
+        rho = trial < norm && pred > 0 ? (f2 - trial * trial) / pred : -1.0;
+        if (trial < norm && rho > 1e-4) {
+            norm = trial;
+            if (rho > 0.75 && lp > 0.99 * radius) radius = fmin(2.0 * radius, L * scale);
+            else if (rho < 0.25) radius *= 0.5;
+            continue;
+        }
+        /* undo the step */
+        radius = 0.5 * lp;
+        memcpy(ch->x, xs, sizeof(rrv_vec3) * (size_t)(n + 2));
+        ch->failed = 0;
+        if (!(radius > 1e-12 * L) || it >= RRV__MANIFOLD_ITERATIONS) break;
+        norm = rrv__chain_eval(scene, ch, 1, &largest);
+        ++it;
+        if (!(norm < DBL_MAX)) break;
     }
+    root->iterations = it;
     return 0;
 }
 
