@@ -699,7 +699,7 @@ static void chain_copy(rrv__chain *dst, const rrv__chain *src)
     *dst = *src;
     dst->cap = keep.cap;
 #define CHAIN_FIELD(f) dst->f = keep.f; memcpy(dst->f, src->f, slots * sizeof *src->f);
-    CHAIN_FIELD(t) CHAIN_FIELD(level) CHAIN_FIELD(x) CHAIN_FIELD(eta) CHAIN_FIELD(g)
+    CHAIN_FIELD(t) CHAIN_FIELD(level) CHAIN_FIELD(x) CHAIN_FIELD(g)
     CHAIN_FIELD(em) CHAIN_FIELD(gm) CHAIN_FIELD(wa) CHAIN_FIELD(wb) CHAIN_FIELD(b1)
     CHAIN_FIELD(b2) CHAIN_FIELD(r) CHAIN_FIELD(A) CHAIN_FIELD(B) CHAIN_FIELD(C)
     CHAIN_FIELD(snell) CHAIN_FIELD(nrm)
