@@ -136,26 +136,29 @@
                  path belongs to, 0 for the others; power heuristic only
                  between straight NEE and forward paths outside supports).
                  A point y uniform on a quad or triangle light; a chain of
-                 refraction vertices on comb planes along the chord x0 -> y
-                 (spacing `step`, random offset, at most 256, wider beyond),
-                 each refracting by Snell's law about its isosurface normal;
-                 Newton on two unknowns a vertex (gauge `manifoldgauge
-                 chord`, the default: in the comb plane; `iso`: in the
-                 isosurface's tangent plane, the paper's, undefined where
-                 grad eta ~ 0) until every vertex refracts within 1e-9 rad:
+                 vertices on comb planes along the chord x0 -> y (spacing
+                 `step`, random offset, at most 512, wider beyond), each
+                 kicking the ray as the comb does (eta d += grad eta h,
+                 h the path it stands for); Newton on two unknowns a vertex
+                 (gauge `manifoldgauge chord`, the default: in the comb
+                 plane; `iso`: in the isosurface's tangent plane, the
+                 paper's, undefined where grad eta ~ 0) until every segment
+                 follows its kicked direction within 1e-9 rad:
                  block-tridiagonal 2x2 Jacobian solved by block Thomas in
-                 O(n), step halved on a worse or unusable step and doubled
-                 up to 1, at most 40 evaluations, a singular pivot (a
-                 caustic) or a root that is not a physical path (a reflected
-                 vertex without total internal reflection, a sharp
+                 O(n) inside a trust region (dogleg; radius halved on a
+                 step that does not lower the residual, doubled on one the
+                 linear model predicted), at most 40 evaluations; a
+                 singular pivot (a caustic) or a root that is not a
+                 physical path (a segment against its kick, a sharp
                  interface crossed) fails. The density dw0/dA_y from the
                  same block elimination (the generalised geometry term of
                  Specular Manifold Sampling). Seeds: a direction from a
                  mixture of Gaussians around the chord (0.02 rad half the
-                 time, 0.2 rad 3 in 8) and uniform (1 in 8), made into a
-                 parabola or a ray traced through the planes by the chain's
-                 own rule; the first solve and every trial draw from that
-                 one distribution. `manifoldtrials 0` (default, unbiased
+                 time, 0.2 rad 3 in 8) and uniform (1 in 8), traced through
+                 the planes by the chain's own rule and aimed at y by
+                 shooting (at most 16 steps; a parabola where no trace
+                 reaches y's plane); the first solve and every trial draw
+                 from that one distribution. `manifoldtrials 0` (default, unbiased
                  for the chain model): 1/p by repeating solves until the
                  root recurs (initial directions within 1e-5), at most 64
                  trials. `manifoldtrials M`: M solves, each distinct root
@@ -943,7 +946,9 @@ typedef struct rrv_render_stats {
    splitting a pixel's samples between calls changes them only by float
    rounding of the additions. stats may be NULL; if not, it is added to.
    Thread-safe for distinct pixels: the scene is only read (give each
-   thread its own err, or NULL). */
+   thread its own err, or NULL). With nee manifold each call allocates
+   its solver's scratch (~250 KB, RRV_MALLOC) and frees it on return;
+   RRV_ERROR_MEMORY, with nothing added, when that fails. */
 RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
                                    int sample_begin, int sample_end,
                                    float *sum, int stride, rrv_render_stats *stats,
