@@ -6649,13 +6649,14 @@ static rrv_vec3 rrv__chain_seed_direction(const rrv__chain *ch, rrv__rng *rng)
     return rrv__sample_uniform_sphere(u1, u2);
 }
 
-/* One solve from a fresh seed (a parabola or, half the time, a traced
-   ray, from a direction of rrv__chain_seed_direction), counted in the stats. */
+/* One solve from a fresh seed (a chain traced from a direction of
+   rrv__chain_seed_direction and aimed at y, or the parabola from it where
+   no trace reaches y), counted in the stats; its iterations are the
+   aim's traces and the solve's evaluations. */
 static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, rrv__mroot *root)
 {
-    int found;
     rrv_vec3 w = rrv__chain_seed_direction(ch, rng);
-    int aimed;
+    int found, aimed;
     if (!rrv__chain_aim(ctx->scene, ch, w, &aimed)) rrv__chain_seed(ctx->scene, ch, w);
     found = rrv__manifold_solve(ctx->scene, ch, root);
     root->iterations += aimed;
