@@ -19,7 +19,8 @@
      standard errors (CHORD gauge; ISO misses it), and the chain is checked
      against the closed-form Luneburg root and its density, its Jacobian
      blocks and density against finite differences, reciprocity (to the
-     chain's O(h)), and the same partition of paths.
+     chain's O(h)), the same partition of paths, chains of 0, 1, 200 and
+     ~500 vertices, chains no solve can use, and a refused allocation.
    Fixed seeds; the renders compared are independent (distinct seeds).
    NEE_VERBOSE=1 prints the values. */
 #include <stdlib.h>
