@@ -3683,7 +3683,8 @@ static int rrv__sphere_interval(const rrv_field *f, rrv_vec3 o, rrv_vec3 d, doub
    gradient is taken inside the support; the rest is a straight segment. */
 #define RRV__EDGE_NUDGE 1e-9
 
-/* The longest comb chord, in majorant cells (rrv__rate_distance). */
+/* The longest comb chord, in majorant cells (rrv__rate_distance); a
+   measurement build may set another. */
 #ifndef RRV__COMB_MAX_CELLS
 #define RRV__COMB_MAX_CELLS 1
 #endif
@@ -3889,14 +3890,16 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
 
 /* The comb spacing from x (inside the grid's box) along d: the distance
    over which the kick rate, the cells' max |grad r| over the tolerance,
-   integrates to tau along the ray (each cell's bound is exact over the
-   whole cell, so a kick bends by about the tolerance at most wherever it
-   falls). Cells where the rate is low cost no kick: a chord runs across
-   them until the rate adds up, and cells without a gradient are crossed
-   straight (a ray through the empty part of a support runs to its face).
-   A chord spans at most RRV__COMB_MAX_CELLS cells' length, so that one
-   kick never stands for a stretch of the field longer than its cells
-   resolve. DBL_MAX if the ray leaves the box first. A DDA of its own,
+   integrates to tau along the ray (each cell's bound holds over the whole
+   cell, so the bending a kick stands for is at most about the tolerance).
+   Cells where the rate is low cost no kick: a chord runs across them until
+   the rate adds up, and cells without a gradient are crossed straight (a
+   ray through the empty part of a support runs to its face). A chord spans
+   at most RRV__COMB_MAX_CELLS cells' length, so that one kick never stands
+   for a stretch of the field longer than its cells resolve (measured in
+   README: longer chords save kicks but land much further off). Where a
+   kick falls hangs on the bounds, which a NanoVDB file and a gridvol of one
+   grid round differently (by ~1e-7): their kicks move by as much. DBL_MAX if the ray leaves the box first. A DDA of its own,
    with the steps of the majorant iterator's. */
 static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x, rrv_vec3 d, double tau,
                                  double inv_tolerance, int *entering)
