@@ -2380,17 +2380,20 @@ static double rrv__refraction_lookup(const struct rrv__majorant_grid *mg, rrv_ve
     d = g->data + 4 * (size_t)i[0] + sy * (size_t)i[1] + sz * (size_t)i[2];
     if (!grad) return rrv__blend8(d, 4, sy, sz, t);
     {
-        /* the four channels side by side, so the compiler can blend them as one vector */
-        double v[4];
+        /* the four channels side by side, blended in float as one vector:
+           the samples are floats, and the blend's float rounding (1e-7 of
+           r) is far below what the lattice resolves; in double the blend
+           was most of a kick's lookup */
+        float v[4], tx = (float)t[0], ty = (float)t[1], tz = (float)t[2];
         int c;
         for (c = 0; c < 4; ++c) {
-            double c00 = (double)d[c] + t[0] * ((double)d[4 + c] - d[c]);
-            double c10 = (double)d[sy + c] + t[0] * ((double)d[sy + 4 + c] - d[sy + c]);
-            double c01 = (double)d[sz + c] + t[0] * ((double)d[sz + 4 + c] - d[sz + c]);
-            double c11 = (double)d[sz + sy + c] + t[0] * ((double)d[sz + sy + 4 + c] - d[sz + sy + c]);
-            c00 += t[1] * (c10 - c00);
-            c01 += t[1] * (c11 - c01);
-            v[c] = c00 + t[2] * (c01 - c00);
+            float c00 = d[c] + tx * (d[4 + c] - d[c]);
+            float c10 = d[sy + c] + tx * (d[sy + 4 + c] - d[sy + c]);
+            float c01 = d[sz + c] + tx * (d[sz + 4 + c] - d[sz + c]);
+            float c11 = d[sz + sy + c] + tx * (d[sz + sy + 4 + c] - d[sz + sy + c]);
+            c00 += ty * (c10 - c00);
+            c01 += ty * (c11 - c01);
+            v[c] = c00 + tz * (c01 - c00);
         }
         *grad = rrv__v3(v[1], v[2], v[3]);
         return v[0];
@@ -3409,36 +3412,29 @@ typedef struct rrv__majorant_iterator {
     int done;
 } rrv__majorant_iterator;
 
-/* The majorant cell holding p (clamped into the grid), per axis and as an
-   index into the per-cell arrays. */
-static size_t rrv__majorant_cell(const struct rrv__majorant_grid *g, rrv_vec3 p, int cell[3])
-{
-    int a;
-    for (a = 0; a < 3; ++a) {
-        /* clamped before the cast: a far point must not overflow the int;
-           the cast of a non-negative value is its floor */
-        double c = (rrv__axis(p, a) - rrv__axis(g->lo, a)) * rrv__axis(g->inv_cell, a);
-        cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
-    }
-    return ((size_t)cell[2] * (size_t)g->n[1] + (size_t)cell[1]) * (size_t)g->n[0] + (size_t)cell[0];
-}
-
 /* Sets the iterator on the ray o + t d, t in [0, tmax). Returns 0 if the
    ray misses the box or the medium has nothing to collide with. */
 static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_medium *m, int with_refraction,
                                         const rrv_settings *s, rrv_vec3 o, rrv_vec3 d, double tmax)
 {
+    /* arrays, not rrv__axis: walkers restart at every comb point, where
+       this set-up was most of a restart's cost */
     const struct rrv__majorant_grid *g = m->majorant;
-    rrv_vec3 inv = rrv__v3(1.0 / d.x, 1.0 / d.y, 1.0 / d.z), p;
-    double t0 = 0, t1 = tmax;
+    const double os[3] = {o.x, o.y, o.z}, ds[3] = {d.x, d.y, d.z};
+    const double box_lo[3] = {m->lo.x, m->lo.y, m->lo.z}, box_hi[3] = {m->hi.x, m->hi.y, m->hi.z};
+    const double lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
+    const double inv_cell[3] = {g->inv_cell.x, g->inv_cell.y, g->inv_cell.z};
+    double inv[3], t0 = 0, t1 = tmax;
     int a;
     if (g->empty && !(with_refraction && g->grad_max)) return 0;
     for (a = 0; a < 3; ++a) {
-        double ia = rrv__axis(inv, a), oa = rrv__axis(o, a);
-        double ta = (rrv__axis(m->lo, a) - oa) * ia, tb = (rrv__axis(m->hi, a) - oa) * ia;
+        double ta, tb;
+        inv[a] = 1.0 / ds[a];
+        ta = (box_lo[a] - os[a]) * inv[a];
+        tb = (box_hi[a] - os[a]) * inv[a];
         if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
-        t0 = rrv__maxd(t0, ta);
-        t1 = rrv__mind(t1, tb);
+        if (ta > t0) t0 = ta;
+        if (tb < t1) t1 = tb;
     }
     if (!(t0 < t1)) return 0;
     it->grid = g;
@@ -3449,20 +3445,20 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
     it->t = t0;
     it->t_end = t1;
     it->done = 0;
-    p = rrv__madd(o, d, t0);
-    rrv__majorant_cell(g, p, it->cell);
     for (a = 0; a < 3; ++a) {
-        double lo = rrv__axis(g->lo, a), cs = rrv__axis(g->cell, a), da = rrv__axis(d, a);
-        int c = it->cell[a];
-        double ia = rrv__axis(inv, a);
-        if (da > 0) {
+        /* the cell of o + t0 d clamped into the grid (clamped before
+           the cast: a far point must not overflow the int) */
+        double c = (os[a] + t0 * ds[a] - lo[a]) * inv_cell[a];
+        int k = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+        it->cell[a] = k;
+        if (ds[a] > 0) {
             it->step[a] = 1;
-            it->t_next[a] = (lo + (c + 1) * cs - rrv__axis(o, a)) * ia;
-            it->t_delta[a] = cs * ia;
-        } else if (da < 0) {
+            it->t_next[a] = (lo[a] + (k + 1) * cs[a] - os[a]) * inv[a];
+            it->t_delta[a] = cs[a] * inv[a];
+        } else if (ds[a] < 0) {
             it->step[a] = -1;
-            it->t_next[a] = (lo + c * cs - rrv__axis(o, a)) * ia;
-            it->t_delta[a] = -cs * ia;
+            it->t_next[a] = (lo[a] + k * cs[a] - os[a]) * inv[a];
+            it->t_delta[a] = -cs[a] * inv[a];
         } else {
             it->step[a] = 0;
             it->t_next[a] = DBL_MAX;
@@ -3692,6 +3688,12 @@ static int rrv__sphere_interval(const rrv_field *f, rrv_vec3 o, rrv_vec3 d, doub
    gradient is taken inside the support; the rest is a straight segment. */
 #define RRV__EDGE_NUDGE 1e-9
 
+/* The longest comb chord, in majorant cells (rrv__rate_distance); a
+   measurement build may set another. */
+#ifndef RRV__COMB_MAX_CELLS
+#define RRV__COMB_MAX_CELLS 1
+#endif
+
 /* After crossing a face the ray is moved this far past it, so that which
    side it is on never rests on rounding (a ray left exactly on a face once
    found a 1e-16 remainder ahead, stepped by it and never moved again). */
@@ -3891,68 +3893,84 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     return nd;
 }
 
-/* The comb spacing from x (inside the grid's box) along d, tau spacings
-   of the first cell with a gradient: cells where max |grad r| is 0 are
-   crossed without a kick (a ray through the empty part of a support runs
-   straight to its face; it once paid a kick per cell), and in a cell with a
-   gradient the spacing is the inverse of its rate, at most a cell. The rate
-   alone, integrated along the ray, would place fewer kicks still, but then
-   where a kick falls hangs on the bounds, which two copies of one grid (a
-   NanoVDB file and a gridvol) round differently. DBL_MAX if the ray leaves
-   the box first. A DDA of its own: the comb calls it at every kick. */
+/* The comb spacing from x (inside the grid's box) along d: the distance
+   over which the kick rate, the cells' max |grad r| over the tolerance,
+   integrates to tau along the ray (each cell's bound holds over the whole
+   cell, so the bending a kick stands for is at most about the tolerance).
+   Cells where the rate is low cost no kick: a chord runs across them until
+   the rate adds up, and cells without a gradient are crossed straight (a
+   ray through the empty part of a support runs to its face). A chord spans
+   at most RRV__COMB_MAX_CELLS cells' length, so that one kick never stands
+   for a stretch of the field longer than its cells resolve (measured in
+   README: longer chords save kicks but land much further off). Where a
+   kick falls hangs on the bounds, which a NanoVDB file and a gridvol of one
+   grid round differently (by ~1e-7): their kicks move by as much. DBL_MAX if the ray leaves the box first. A DDA of its own,
+   with the steps of the majorant iterator's. */
 static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x, rrv_vec3 d, double tau,
                                  double inv_tolerance, int *entering)
 {
-    int cell[3], step[3], a;
-    double t_next[3], t_delta[3], t = 0, cell_min = fmin(g->cell.x, fmin(g->cell.y, g->cell.z));
-    size_t idx, stride[3];
+    /* arrays, not rrv__axis: the comb calls this at every kick, and the
+       per-axis selects and library fmin calls were half its cost */
+    const double xs[3] = {x.x, x.y, x.z}, ds[3] = {d.x, d.y, d.z};
+    const double lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
+    const double inv_cell[3] = {g->inv_cell.x, g->inv_cell.y, g->inv_cell.z};
+    const float *grad = g->grad_max;
+    double t_next[3], t_delta[3], t = 0, need = tau, cap, cell_min;
+    ptrdiff_t stride[3], idx = 0;
+    int cell[3], step[3], a, in_gradient;
     stride[0] = 1;
-    stride[1] = (size_t)g->n[0];
-    stride[2] = stride[1] * (size_t)g->n[1];
-    double h = 0;
-    int in_gradient;
-    idx = rrv__majorant_cell(g, x, cell);
-    in_gradient = g->grad_max[idx] > 0;
-    if (in_gradient) {
-        double rate = g->grad_max[idx] * inv_tolerance;
-        h = tau * (rate * cell_min > 1.0 ? 1.0 / rate : cell_min);
-    }
+    stride[1] = g->n[0];
+    stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
     for (a = 0; a < 3; ++a) {
-        double da = rrv__axis(d, a), cs = rrv__axis(g->cell, a), lo = rrv__axis(g->lo, a), xa = rrv__axis(x, a);
-        if (da > 0) {
-            step[a] = 1;
-            t_next[a] = (lo + (cell[a] + 1) * cs - xa) / da;
-            t_delta[a] = cs / da;
-        } else if (da < 0) {
-            step[a] = -1;
-            t_next[a] = (lo + cell[a] * cs - xa) / da;
-            t_delta[a] = -cs / da;
+        /* the cell clamped into the grid (clamped before
+           the cast: a far point must not overflow the int) */
+        double c = (xs[a] - lo[a]) * inv_cell[a];
+        cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+        idx += stride[a] * cell[a];
+        if (ds[a] != 0) {
+            double inv = 1.0 / ds[a];
+            step[a] = ds[a] > 0 ? 1 : -1;
+            t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) * inv;
+            t_delta[a] = cs[a] * (inv > 0 ? inv : -inv);
+            stride[a] *= step[a];
+            if (t_next[a] < 0) t_next[a] = 0;
         } else {
             step[a] = 0;
             t_next[a] = t_delta[a] = DBL_MAX;
         }
-        if (t_next[a] < 0) t_next[a] = 0;
     }
+    in_gradient = grad[idx] > 0;
+    cell_min = cs[0] < cs[1] ? cs[0] : cs[1];
+    if (cs[2] < cell_min) cell_min = cs[2];
+    cap = tau * RRV__COMB_MAX_CELLS * cell_min;
     /* A kick stands for the chords on both sides of it, so a chord must not
        carry a gradient into a stretch without one: where the ray passes
        from cells with a gradient to cells without, or back, a point falls
        on the face between them (where the gradient is 0). */
     for (;;) {
+        double t_face;
         a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
-        t = t_next[a];
-        if (in_gradient && h <= t) return h;
-        cell[a] += step[a];
-        if (cell[a] < 0 || cell[a] >= g->n[a]) return in_gradient ? h : DBL_MAX;
-        idx = step[a] > 0 ? idx + stride[a] : idx - stride[a];
-        if ((g->grad_max[idx] > 0) != in_gradient && t > RRV__EDGE_NUDGE * (1.0 + rrv__length(x))) {
-            *entering = !in_gradient;
-            return t;
+        t_face = t_next[a];
+        if (in_gradient) {
+            double rate = grad[idx] * inv_tolerance, span = t_face - t;
+            if (rate * span >= need) {
+                double h = t + need / rate;
+                return h < cap ? h : cap;
+            }
+            need -= rate * span;
+            if (t_face >= cap) return cap;
         }
-        if (!in_gradient && g->grad_max[idx] > 0) {
+        t = t_face;
+        cell[a] += step[a];
+        if (cell[a] < 0 || cell[a] >= g->n[a]) return DBL_MAX;
+        idx += stride[a];
+        if ((grad[idx] > 0) != in_gradient) {
+            if (t > RRV__EDGE_NUDGE * (1.0 + rrv__length(x))) {
+                *entering = !in_gradient;
+                return t;
+            }
             /* x lay on the face (within rounding): start the cell's spacing here */
-            double rate = g->grad_max[idx] * inv_tolerance;
-            in_gradient = 1;
-            h = t + tau * (rate * cell_min > 1.0 ? 1.0 / rate : cell_min);
+            in_gradient = !in_gradient;
         }
         t_next[a] += t_delta[a];
     }
@@ -4006,7 +4024,7 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
                            const rrv__support_view *view)
 {
     rrv__support_view after;
-    double ahead = fmin(h, view->t_face);
+    double ahead = rrv__mind(h, view->t_face);
     if (b->combing) {
         *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * (b->chord + ahead), x);
     } else {

@@ -1,8 +1,18 @@
-/* How far tracking is from the cost of its memory reads, on scenes/plume.rrv.
+/* How far tracking is from the cost of its memory reads, on scenes/plume.rrv,
+   and how far the comb's rays land from the eikonal reference's.
    Not a test: make test builds it so it cannot rot;
    `make bench` runs it from the repository root:
      build/measure_tracking [SPP]
-   It prints
+     build/measure_tracking --comb SCENE [BEND_TOLERANCE [PLANE]]
+   The second form traces camera rays (a 32 x 24 lattice of pixels, those
+   whose ray bends) through SCENE's refracting media with the comb
+   (rrv_trace_ray, REFRACTIVE, 16 walks a ray, the scene's bend tolerance
+   unless given) and with eikonal RK4 at h = 0.002 m, the reference, and
+   prints the RMS distance between where they cross the plane
+   forward . x = PLANE (default: the far corner of the refracting boxes
+   along the camera's forward axis), the RMS angle between their exit
+   directions, the mean comb points a ray and the CPU time a comb ray.
+   The first form prints
      1. tentative collisions (null and real, rrv_render_stats.events) per
         second of one thread rendering the plume, classic integrator;
      2. the same grid's lookup alone, as the tracker calls it
@@ -16,6 +26,7 @@
 #include "../rrv.h"
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 #include <time.h>
 
 #define LOOKUPS (1 << 22)
@@ -44,6 +55,93 @@ static double bare_trilinear(const float *d, int n, double sx, double sy, double
     return c00 + tz * (c01 - c00);
 }
 
+typedef struct landing {
+    rrv_vec3 forward;
+    double plane;
+} landing;
+
+static int land(const rrv_trace_result *r, const landing *l, rrv_vec3 *at)
+{
+    double along = rrv__dot(r->direction, l->forward);
+    if (!(along > 1e-6)) return 0;
+    *at = rrv__madd(r->position, r->direction, (l->plane - rrv__dot(r->position, l->forward)) / along);
+    return 1;
+}
+
+#define COMB_WALKS 16
+
+static int comb_error(const char *path, double tolerance, const char *plane)
+{
+    rrv_scene *scene = NULL;
+    rrv_error err;
+    rrv__camera_frame frame;
+    landing l;
+    double sq_pos = 0, sq_angle = 0, cpu = 0, kicks = 0;
+    long rays = 0, walks = 0;
+    int px, py, i;
+    if (rrv_scene_load(path, NULL, &scene, &err) != RRV_OK) {
+        fprintf(stderr, "%s:%d: %s\n", err.file, err.line, err.message);
+        return 2;
+    }
+    if (tolerance > 0) scene->settings.bend_tolerance = tolerance;
+    if (rrv_scene_prepare(scene, &err) != RRV_OK) {
+        fprintf(stderr, "%s: %s\n", path, err.message);
+        return 2;
+    }
+    rrv__camera_setup(&scene->camera, &frame);
+    l.forward = frame.forward;
+    l.plane = -DBL_MAX;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        if (!rrv__medium_refracts(m)) continue;
+        l.plane = fmax(l.plane, (l.forward.x > 0 ? m->hi.x : m->lo.x) * l.forward.x +
+                                    (l.forward.y > 0 ? m->hi.y : m->lo.y) * l.forward.y +
+                                    (l.forward.z > 0 ? m->hi.z : m->lo.z) * l.forward.z);
+    }
+    if (plane) l.plane = atof(plane);
+    for (py = 0; py < 24; ++py)
+        for (px = 0; px < 32; ++px) {
+            rrv_vec3 d = rrv__camera_ray(&frame, &scene->camera, (px + 0.5) * scene->camera.width / 32.0,
+                                         (py + 0.5) * scene->camera.height / 24.0);
+            rrv_trace_result ref, comb;
+            rrv_vec3 ref_at, comb_at;
+            double t;
+            int walk;
+            scene->settings.step = 0.002;
+            scene->settings.stepper = RRV_STEPPER_RK4;
+            if (rrv_trace_ray(scene, RRV_INTEGRATOR_EIKONAL, frame.eye, d, 1, 0, NULL, NULL, &ref, &err) != RRV_OK ||
+                ref.events == 0 || !land(&ref, &l, &ref_at))
+                continue;
+            ++rays;
+            t = seconds();
+            for (walk = 0; walk < COMB_WALKS; ++walk) {
+                if (rrv_trace_ray(scene, RRV_INTEGRATOR_REFRACTIVE, frame.eye, d, 1, (uint64_t)walk, NULL, NULL, &comb,
+                                  &err) != RRV_OK)
+                    continue;
+                kicks += (double)comb.events;
+                ++walks;
+                if (land(&comb, &l, &comb_at)) {
+                    rrv_vec3 e = rrv__sub(comb_at, ref_at);
+                    double c = rrv__dot(comb.direction, ref.direction);
+                    sq_pos += rrv__dot(e, e);
+                    c = c > 1 ? 1 : c;
+                    sq_angle += acos(c) * acos(c);
+                } else {
+                    sq_pos += 1.0; /* turned away from the plane: counts as a metre */
+                }
+            }
+            cpu += seconds() - t;
+        }
+    if (!walks) {
+        fprintf(stderr, "measure_tracking: no camera ray of %s bends\n", path);
+        return 2;
+    }
+    printf("| %s | %g | %ld | %.2f | %.3f mm | %.3g mrad | %.2f us |\n", path, scene->settings.bend_tolerance,
+           rays, kicks / walks, 1e3 * sqrt(sq_pos / walks), 1e3 * sqrt(sq_angle / walks), cpu / walks * 1e6);
+    rrv_scene_free(scene);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     rrv_scene *scene = NULL;
@@ -56,6 +154,8 @@ int main(int argc, char **argv)
     double best, t, acc = 0;
     int spp = argc > 1 ? atoi(argv[1]) : 4, w, h, run, order, i;
     uint64_t state = 0x853C49E6748FEA9Bull;
+    if (argc > 2 && strcmp(argv[1], "--comb") == 0)
+        return comb_error(argv[2], argc > 3 ? atof(argv[3]) : 0, argc > 4 ? argv[4] : NULL);
     if (rrv_scene_load("scenes/plume.rrv", NULL, &scene, &err) != RRV_OK) {
         fprintf(stderr, "%s:%d: %s\n", err.file, err.line, err.message);
         return 2;
