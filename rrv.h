@@ -121,11 +121,12 @@
                  probability p; 1/p is estimated by repeating independent
                  solves until the same root (within 1e-5) comes back, at
                  most 64 trials (Specular Manifold Sampling). A failed solve
-                 contributes zero. The Hessian of eta has closed forms for
-                 constant, slab, Luneburg, fish-eye and blob IORs; with any
-                 other IOR (grids, noise, shells, gas), or with the
-                 refractive integrator, curved connections are left to
-                 forward paths (still unbiased) and counted in
+                 contributes zero. The derivative of grad eta has closed
+                 forms for the profiles and blobs; for grids (gridvol,
+                 NanoVDB, baked noise, a gas through Hauf-Grigull) it is
+                 the exact derivative of the blended gradient the rays
+                 use. With the refractive integrator curved connections
+                 are left to forward paths (still unbiased) and counted in
                  rrv_render_stats.solves_unsupported. Near a fold caustic
                  1/|det J| is integrable but its square is not: shooting
                  from there is heavy-tailed (infinite variance in principle;
@@ -932,7 +933,7 @@ typedef struct rrv_render_stats {
     uint64_t solve_trials;      /* trials estimating 1/p, summed over those */
     uint64_t solves_unsupported;/* vertices whose curved connections were left to
                                    forward paths because shooting cannot run there:
-                                   not eikonal, or an IOR without a closed-form Hessian */
+                                   not eikonal, or an IOR with no derivative of its gradient */
 } rrv_render_stats;
 
 /* Renders pixels [x0,x1) x [y0,y1) of the image (row 0 at the top) for
@@ -1887,6 +1888,49 @@ static rrv_vec3 rrv__nv_gradient(const rrv_nanovdb *g, rrv_vec3 p)
                    g->inverse[2] * d[0] + g->inverse[5] * d[1] + g->inverse[8] * d[2]);
 }
 
+/* The Jacobian of rrv__nv_gradient (see the derivatives of the refractivity
+   gradient below for why it is not symmetrised). In index space the
+   gradient is d_a(u) = (T(u + e_a) - T(u - e_a)) / 2 of the trilinear T,
+   which is linear along each axis inside a cell, so its slope along b at q
+   is the difference of T at the two faces of q's cell along b. */
+static double rrv__nv_slope(const rrv_nanovdb *g, const double q[3], int axis)
+{
+    double e[3];
+    int a;
+    for (a = 0; a < 3; ++a) e[a] = q[a];
+    e[axis] = floor(q[axis]) + 1.0;
+    {
+        double up = rrv__nv_trilinear(g, e);
+        e[axis] -= 1.0;
+        return up - rrv__nv_trilinear(g, e);
+    }
+}
+
+static void rrv__nv_gradient_jacobian(const rrv_nanovdb *g, rrv_vec3 p, double J[9])
+{
+    double u[3], q[3], D[9];
+    int a, b, i, j;
+    rrv__nv_to_index(g, p, u);
+    for (a = 0; a < 3; ++a)
+        for (b = 0; b < 3; ++b) {
+            double up, down;
+            for (i = 0; i < 3; ++i) q[i] = u[i];
+            q[a] = u[a] + 1.0;
+            up = rrv__nv_slope(g, q, b);
+            q[a] = u[a] - 1.0;
+            down = rrv__nv_slope(g, q, b);
+            D[3 * a + b] = 0.5 * (up - down);
+        }
+    /* u_a = sum_j inverse[3 a + j] (p_j - translation_j) */
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j) {
+            double s = 0;
+            for (a = 0; a < 3; ++a)
+                for (b = 0; b < 3; ++b) s += g->inverse[3 * a + i] * D[3 * a + b] * g->inverse[3 * b + j];
+            J[3 * i + j] = s;
+        }
+}
+
 /* Tile extents by level: a root tile spans 4096 index points an axis, an
    upper node's entry 128, a lower node's entry 8 (one leaf). */
 static const int rrv__nv_extent_log2[3] = {12, 7, 3};
@@ -2400,6 +2444,117 @@ static double rrv__refraction_lookup(const struct rrv__majorant_grid *mg, rrv_ve
     }
 }
 
+/* ---- derivatives of the refractivity gradient (for nee shoot and manifold) ----
+   The solver's variational equations differentiate the very gradient the
+   ray steps use, so each function below is the exact derivative of one
+   gradient above, row-major J[3 i + j] = d grad_i / d x_j. Where that
+   gradient is a blend of differences rather than the derivative of a value
+   (the trilinear grids, the NanoVDB stencil) the matrix is not symmetric:
+   it is kept so, since the discrete ray map is what Newton's method and the
+   geometry term need the derivative of, and its symmetric part alone would
+   miss that derivative by the antisymmetric part (a discretisation error,
+   first order in the voxel: 9 % of the largest entry on a 17^3 grid of a
+   smooth field, 5 % at 33^3, test/test_hessian.c). The trilinear value's
+   own Hessian, zero inside every cell, would miss it entirely. */
+
+/* d/dt_axis of rrv__blend8: the same corners, the weight along the axis
+   replaced by its derivative (-1 at the lower corner, +1 at the upper). */
+static double rrv__blend8_slope(const float *d, size_t sx, size_t sy, size_t sz, const double t[3], int axis)
+{
+    size_t stride[3];
+    double sum = 0;
+    int corner, a;
+    stride[0] = sx; stride[1] = sy; stride[2] = sz;
+    for (corner = 0; corner < 8; ++corner) {
+        double w = 1;
+        size_t at = 0;
+        for (a = 0; a < 3; ++a) {
+            int bit = (corner >> a) & 1;
+            w *= a == axis ? (bit ? 1.0 : -1.0) : bit ? t[a] : 1.0 - t[a];
+            if (bit) at += stride[a];
+        }
+        sum += w * (double)d[at];
+    }
+    return sum;
+}
+
+/* The Jacobian of the gradient rrv__refraction_lookup returns: the
+   trilinear blend of the baked central differences, differentiated in the
+   cell that lookup picks (the one-sided slopes there; the derivative jumps
+   at cell faces, where the gradient itself is continuous). */
+static void rrv__refraction_lookup_jacobian(const struct rrv__majorant_grid *mg, rrv_vec3 p, double J[9])
+{
+    const rrv_grid *g = &mg->refraction;
+    const float *d;
+    double u[3], t[3], scale[3];
+    int n[3], i[3], a, b;
+    size_t sy = 4 * (size_t)g->nx, sz = sy * (size_t)g->ny;
+    scale[0] = mg->refraction_scale.x; scale[1] = mg->refraction_scale.y; scale[2] = mg->refraction_scale.z;
+    u[0] = (p.x - g->lo.x) * scale[0];
+    u[1] = (p.y - g->lo.y) * scale[1];
+    u[2] = (p.z - g->lo.z) * scale[2];
+    n[0] = g->nx; n[1] = g->ny; n[2] = g->nz;
+    for (a = 0; a < 3; ++a) {
+        i[a] = (int)u[a];
+        if (i[a] > n[a] - 2) i[a] = n[a] - 2;
+        if (i[a] < 0) i[a] = 0;
+        t[a] = u[a] - i[a];
+    }
+    d = g->data + 4 * (size_t)i[0] + sy * (size_t)i[1] + sz * (size_t)i[2];
+    for (a = 0; a < 3; ++a)
+        for (b = 0; b < 3; ++b) J[3 * a + b] = rrv__blend8_slope(d + 1 + a, 4, sy, sz, t, b) * scale[b];
+}
+
+/* Second derivatives in t of the cubic B-spline weights. */
+static void rrv__bspline_curvatures(double t, double ddw[4])
+{
+    ddw[0] = 1.0 - t;
+    ddw[1] = 3.0 * t - 2.0;
+    ddw[2] = 1.0 - 3.0 * t;
+    ddw[3] = t;
+}
+
+/* The Hessian of the tricubic B-spline rrv__cubic_eval evaluates (its
+   gradient is the value's derivative, so this one is symmetric): per pair
+   of axes the 64 coefficients weighted by the weights' derivatives of the
+   orders the pair asks for. */
+static void rrv__cubic_hessian(const rrv_grid *g, const double *c, rrv_vec3 p, double H[9])
+{
+    rrv__grid_cell cell;
+    double w[3][3][4]; /* axis, order of derivative, coefficient */
+    size_t sy = (size_t)g->nx + 2, sz = sy * ((size_t)g->ny + 2);
+    const double *base;
+    int a, b, i, j, k;
+    rrv__grid_locate(g, p, &cell);
+    for (a = 0; a < 3; ++a) {
+        rrv__bspline_weights(cell.t[a], w[a][0], w[a][1]);
+        rrv__bspline_curvatures(cell.t[a], w[a][2]);
+    }
+    base = c + (size_t)cell.i0[0] + (size_t)cell.i0[1] * sy + (size_t)cell.i0[2] * sz;
+    for (a = 0; a < 3; ++a)
+        for (b = a; b < 3; ++b) {
+            int order[3] = {0, 0, 0};
+            double sum = 0;
+            ++order[a];
+            ++order[b];
+            for (k = 0; k < 4; ++k)
+                for (j = 0; j < 4; ++j) {
+                    const double *row = base + (size_t)j * sy + (size_t)k * sz;
+                    double x = 0;
+                    for (i = 0; i < 4; ++i) x += w[0][order[0]][i] * row[i];
+                    sum += w[2][order[2]][k] * w[1][order[1]][j] * x;
+                }
+            H[3 * a + b] = H[3 * b + a] = sum / (cell.step[a] * cell.step[b]);
+        }
+}
+
+/* The Jacobian of rrv__baked_refractivity's gradient at p inside the bake. */
+static void rrv__baked_refractivity_jacobian(const rrv_medium *m, const rrv_grid *baked, rrv_vec3 p, double J[9])
+{
+    if (m->majorant->cubic) rrv__cubic_hessian(baked, m->majorant->cubic, p, J);
+    else rrv__refraction_lookup_jacobian(m->majorant, p, J);
+}
+
 /* The baked refractivity (and gradient if grad) at p inside the baked grid. */
 static double rrv__baked_refractivity(const rrv_medium *m, const rrv_grid *baked, rrv_vec3 p, rrv_vec3 *grad)
 {
@@ -2471,6 +2626,41 @@ static rrv_vec3 rrv__grid_gradient(const rrv_grid *g, rrv_vec3 p)
     return rrv__v3(grad[0], grad[1], grad[2]);
 }
 
+/* The Jacobian of rrv__grid_gradient: its eight corner differences (the
+   same, one-sided at the grid's faces) with the trilinear weights
+   differentiated. Not symmetric (see the derivatives of the refractivity
+   gradient below). Zero outside the grid, as the gradient is. */
+static void rrv__grid_gradient_jacobian(const rrv_grid *g, rrv_vec3 p, double J[9])
+{
+    rrv__grid_cell cell;
+    int a, b, corner;
+    for (a = 0; a < 9; ++a) J[a] = 0;
+    if (!rrv__inside_box(p, g->lo, g->hi)) return;
+    rrv__grid_locate(g, p, &cell);
+    for (corner = 0; corner < 8; ++corner) {
+        int c[3];
+        double w[3], dw[3], diff[3];
+        size_t base = 0;
+        for (a = 0; a < 3; ++a) {
+            int bit = (corner >> a) & 1;
+            c[a] = cell.i0[a] + bit;
+            w[a] = bit ? cell.t[a] : 1.0 - cell.t[a];
+            dw[a] = (bit ? 1.0 : -1.0) / cell.step[a];
+            base += (size_t)c[a] * cell.stride[a];
+        }
+        for (a = 0; a < 3; ++a) {
+            int m = c[a] > 0 ? c[a] - 1 : c[a], q = c[a] < cell.n[a] - 1 ? c[a] + 1 : c[a];
+            double up = (double)g->data[base + (size_t)(q - c[a]) * cell.stride[a]];
+            double down = (double)g->data[base - (size_t)(c[a] - m) * cell.stride[a]];
+            diff[a] = (up - down) / ((q - m) * cell.step[a]);
+        }
+        for (b = 0; b < 3; ++b) {
+            double wb = dw[b] * w[(b + 1) % 3] * w[(b + 2) % 3];
+            for (a = 0; a < 3; ++a) J[3 * a + b] += wb * diff[a];
+        }
+    }
+}
+
 /* Gradient of a scalar field: analytic where the field is, numeric else. */
 static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p)
 {
@@ -2494,6 +2684,41 @@ static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p)
         return rrv__inside_box(p, f->nanovdb.lo, f->nanovdb.hi) ? rrv__nv_gradient(&f->nanovdb, p) : rrv__v3(0, 0, 0);
     default:
         return rrv__v3(0, 0, 0);
+    }
+}
+
+/* The derivative of rrv__field_gradient (a scalar field's Hessian where the
+   gradient is the value's derivative); 0 for kinds it has none for here
+   (an unbaked noise field, which rrv__field_gradient does not handle
+   either). */
+static int rrv__field_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
+{
+    int i, k, l;
+    for (i = 0; i < 9; ++i) H[i] = 0;
+    switch (f->kind) {
+    case RRV_FIELD_NONE:
+    case RRV_FIELD_CONSTANT:
+        return 1;
+    case RRV_FIELD_BLOBS:
+        for (i = 0; i < f->blob_count; ++i) {
+            const rrv_blob *bl = &f->blobs[i];
+            rrv_vec3 e = rrv__sub(p, bl->center);
+            double s2 = bl->radius * bl->radius, q = rrv__dot(e, e) / s2, w, ee[3];
+            if (!(q < 72.0)) continue; /* the cut-off the value and gradient use */
+            w = bl->weight * exp(-0.5 * q) / s2;
+            ee[0] = e.x; ee[1] = e.y; ee[2] = e.z;
+            for (k = 0; k < 3; ++k)
+                for (l = 0; l < 3; ++l) H[3 * k + l] += w * (ee[k] * ee[l] / s2 - (k == l ? 1.0 : 0.0));
+        }
+        return 1;
+    case RRV_FIELD_GRID:
+        rrv__grid_gradient_jacobian(&f->grid, p, H);
+        return 1;
+    case RRV_FIELD_NANOVDB:
+        if (rrv__inside_box(p, f->nanovdb.lo, f->nanovdb.hi)) rrv__nv_gradient_jacobian(&f->nanovdb, p, H);
+        return 1;
+    default:
+        return 0;
     }
 }
 
@@ -2522,6 +2747,61 @@ static rrv_vec3 rrv__profile_gradient(const rrv_field *f, rrv_vec3 p)
     }
 }
 
+/* The derivative of rrv__profile_gradient (unscaled); 0 where there is
+   none here. The radial profiles have grad r = phi'(d) e (e = d / |d|), so
+   H = phi'' e e^T + (phi' / |d|) (I - e e^T), written as a I + b d d^T. */
+static int rrv__profile_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
+{
+    rrv_vec3 d = rrv__sub(p, f->center);
+    double R2 = f->radius * f->radius, q, a = 0, b = 0, dd[3];
+    int i, j;
+    for (i = 0; i < 9; ++i) H[i] = 0;
+    switch (f->kind) {
+    case RRV_FIELD_CONSTANT:
+    case RRV_FIELD_SLAB:
+        return 1;
+    case RRV_FIELD_LUNEBURG: {
+        double s;
+        q = rrv__dot(d, d) / R2;
+        if (q >= 1.0) return 1;
+        s = sqrt(2.0 - q);
+        a = -1.0 / (R2 * s);
+        b = -1.0 / (R2 * R2 * s * s * s);
+        break;
+    }
+    case RRV_FIELD_FISHEYE:
+        q = rrv__dot(d, d) / R2;
+        if (q >= 1.0) return 1;
+        a = -2.0 * f->n0 / (R2 * (1.0 + q) * (1.0 + q));
+        b = 8.0 * f->n0 / (R2 * R2 * (1.0 + q) * (1.0 + q) * (1.0 + q));
+        break;
+    case RRV_FIELD_SHELL: {
+        /* phi' = A / (2 e) (sech^2 u - sech^2 v), u = (r - inner) / e, v =
+           (r - R) / e; phi'' = A / e^2 (sech^2 v tanh v - sech^2 u tanh u).
+           At the centre the gradient (zero there) is not differentiable; it
+           is measure zero and gets the limit along a ray, phi'' I. */
+        double r = rrv__length(d), inner = f->radius - f->thickness, e = f->edge;
+        double cu = cosh((r - inner) / e), cv = cosh((r - f->radius) / e);
+        double su = 1.0 / (cu * cu), sv = 1.0 / (cv * cv);
+        double d1 = f->amplitude * 0.5 * (su - sv) / e;
+        double d2 = f->amplitude * (sv * tanh((r - f->radius) / e) - su * tanh((r - inner) / e)) / (e * e);
+        if (r == 0) {
+            a = d2;
+            break;
+        }
+        a = d1 / r;
+        b = (d2 - a) / (r * r);
+        break;
+    }
+    default:
+        return rrv__field_hessian(f, p, H);
+    }
+    dd[0] = d.x; dd[1] = d.y; dd[2] = d.z;
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j) H[3 * i + j] = (i == j ? a : 0.0) + b * dd[i] * dd[j];
+    return 1;
+}
+
 /* Refractivity and its gradient for one refractive medium at p. For a gas,
    grad r = r (grad P / P - grad T / T) (CONVENTIONS). */
 static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double ambient_r, rrv_vec3 *grad)
@@ -2539,6 +2819,46 @@ static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double
         *grad = rrv__scale(rrv__profile_gradient(rrv__field_of(m, RRV__IOR), p), m->ior_scale);
     }
     return r;
+}
+
+/* The derivative of rrv__refractivity_gradient, 0 where there is none. For
+   a gas, with u = grad P / P - grad T / T (so grad r = r u):
+   H = r (u u^T + H_P / P - grad P grad P^T / P^2 - H_T / T + grad T grad T^T / T^2),
+   symmetric where H_P and H_T are. T clamped at 1e-3 K (as the value does)
+   is not differentiated: no gas gets there. */
+static int rrv__refractivity_hessian(const rrv_medium *m, rrv_vec3 p, double ambient_r, double H[9])
+{
+    const rrv_grid *baked = rrv__refraction_grid_at(m, p);
+    int k, l;
+    if (baked) {
+        rrv__baked_refractivity_jacobian(m, baked, p, H);
+        return 1;
+    }
+    if (m->ior_from_gas) {
+        double r = rrv__refractivity(m, p, ambient_r), T = fmax(rrv__temperature(m, p), 1e-3), P = rrv__pressure(m, p);
+        double HT[9], HP[9], u[3], gt[3], gp[3];
+        rrv_vec3 gT = rrv__scale(rrv__field_gradient(rrv__field_of(m, RRV__TEMPERATURE), p), m->temperaturescale);
+        rrv_vec3 gP = rrv__field_gradient(rrv__field_of(m, RRV__PRESSURE), p);
+        if (!rrv__field_hessian(rrv__field_of(m, RRV__TEMPERATURE), p, HT) ||
+            !rrv__field_hessian(rrv__field_of(m, RRV__PRESSURE), p, HP)) {
+            for (k = 0; k < 9; ++k) H[k] = 0;
+            return 0;
+        }
+        gt[0] = gT.x / T; gt[1] = gT.y / T; gt[2] = gT.z / T;
+        gp[0] = gP.x / P; gp[1] = gP.y / P; gp[2] = gP.z / P;
+        for (k = 0; k < 3; ++k) u[k] = gp[k] - gt[k];
+        for (k = 0; k < 3; ++k)
+            for (l = 0; l < 3; ++l)
+                H[3 * k + l] = r * (u[k] * u[l] + HP[3 * k + l] / P - gp[k] * gp[l] -
+                                    HT[3 * k + l] * m->temperaturescale / T + gt[k] * gt[l]);
+        return 1;
+    }
+    {
+        const rrv_field *f = rrv__field_of(m, RRV__IOR);
+        int ok = rrv__profile_hessian(f, p, H);
+        for (k = 0; k < 9; ++k) H[k] *= m->ior_scale;
+        return ok;
+    }
 }
 
 /* The refractivity of the scene at p: that of the last listed refractive
@@ -5158,7 +5478,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
    its front (for two interior points, as in the tests: from the chord that
    passes y, in the plane through y perpendicular to it). Its Jacobian comes from
    the variational (Jacobi-field) equations of the very same discrete steps,
-   which need the Hessian of eta (closed form below). At the root
+   which need the Hessian of eta (rrv__scene_hessian). At the root
    dw0 = dA_y |cos theta_y| / |det J_perp|, J_perp the 2x2 derivative of the
    endpoint perpendicular to the arriving chord with respect to w0 per unit
    solid angle (r^2 I for straight rays: cos / r^2). */
@@ -5174,66 +5494,33 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
    meets the ambient one, differ by rounding only). */
 #define RRV__SOLVE_JUMP 1e-7
 
-/* The Hessian of the refractivity of one medium's profile at p, row-major
-   (scaled by ior_scale by the caller); 0 where there is no closed form here:
-   grids (their trilinear Hessian is zero almost everywhere and useless),
-   noise, shells and gas states. */
-static int rrv__profile_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
+/* Can shooting differentiate this medium's IOR? Every kind rrv__refractivity_
+   hessian has a derivative for: the closed-form profiles, blobs, and grids
+   (gridvol or NanoVDB, baked or not, trilinear or cubic: the derivative of
+   the gradient the rays use), for a gas through the chain rule. Noise is
+   always baked into a grid by prepare and differentiated as that grid (the
+   noise's own value is a sum of hashed lattice octaves whose gradient rrv
+   never evaluates). */
+static int rrv__solver_supports(const rrv_medium *m)
 {
-    rrv_vec3 d = rrv__sub(p, f->center);
-    double R2 = f->radius * f->radius, q, a = 0, b = 0, dd[3];
-    int i, j;
-    for (i = 0; i < 9; ++i) H[i] = 0;
-    switch (f->kind) {
+    if (!rrv__medium_refracts(m)) return 1;
+    if (m->ior_from_gas) {
+        rrv_field_kind t = rrv__field_of(m, RRV__TEMPERATURE)->kind, p = rrv__field_of(m, RRV__PRESSURE)->kind;
+        return t != RRV_FIELD_NOISE && p != RRV_FIELD_NOISE;
+    }
+    switch (rrv__field_of(m, RRV__IOR)->kind) {
     case RRV_FIELD_CONSTANT:
     case RRV_FIELD_SLAB:
-        return 1;
-    case RRV_FIELD_LUNEBURG: {
-        double s;
-        q = rrv__dot(d, d) / R2;
-        if (q >= 1.0) return 1;
-        s = sqrt(2.0 - q);
-        a = -1.0 / (R2 * s);
-        b = -1.0 / (R2 * R2 * s * s * s);
-        break;
-    }
+    case RRV_FIELD_LUNEBURG:
     case RRV_FIELD_FISHEYE:
-        q = rrv__dot(d, d) / R2;
-        if (q >= 1.0) return 1;
-        a = -2.0 * f->n0 / (R2 * (1.0 + q) * (1.0 + q));
-        b = 8.0 * f->n0 / (R2 * R2 * (1.0 + q) * (1.0 + q) * (1.0 + q));
-        break;
+    case RRV_FIELD_SHELL:
     case RRV_FIELD_BLOBS:
-        for (i = 0; i < f->blob_count; ++i) {
-            const rrv_blob *bl = &f->blobs[i];
-            rrv_vec3 e = rrv__sub(p, bl->center);
-            double s2 = bl->radius * bl->radius, qb = rrv__dot(e, e) / s2, w, ee[3];
-            int k, l;
-            if (!(qb < 72.0)) continue; /* the cut-off the value and gradient use */
-            w = bl->weight * exp(-0.5 * qb) / s2;
-            ee[0] = e.x; ee[1] = e.y; ee[2] = e.z;
-            for (k = 0; k < 3; ++k)
-                for (l = 0; l < 3; ++l) H[3 * k + l] += w * (ee[k] * ee[l] / s2 - (k == l ? 1.0 : 0.0));
-        }
+    case RRV_FIELD_GRID:
+    case RRV_FIELD_NANOVDB:
         return 1;
     default:
         return 0;
     }
-    dd[0] = d.x; dd[1] = d.y; dd[2] = d.z;
-    for (i = 0; i < 3; ++i)
-        for (j = 0; j < 3; ++j) H[3 * i + j] = (i == j ? a : 0.0) + b * dd[i] * dd[j];
-    return 1;
-}
-
-/* Can shooting differentiate this medium's IOR? */
-static int rrv__solver_supports(const rrv_medium *m)
-{
-    const struct rrv__majorant_grid *g = m->majorant;
-    rrv_field_kind k = m->ior.kind;
-    if (!rrv__medium_refracts(m)) return 1;
-    if (m->ior_from_gas || (g && (g->refraction.data || g->cubic))) return 0;
-    return k == RRV_FIELD_CONSTANT || k == RRV_FIELD_SLAB || k == RRV_FIELD_LUNEBURG || k == RRV_FIELD_FISHEYE ||
-           k == RRV_FIELD_BLOBS;
 }
 
 static int rrv__solver_supports_scene(const rrv_scene *scene)
@@ -5244,15 +5531,17 @@ static int rrv__solver_supports_scene(const rrv_scene *scene)
     return 1;
 }
 
-/* The Hessian of eta at p, where rrv__scene_refractivity takes eta from. */
+/* The derivative of the gradient of eta at p, taken where
+   rrv__scene_refractivity takes eta and its gradient from (row-major, d
+   grad_i / d x_j; not symmetric in grids, see the media section). */
 static void rrv__scene_hessian(const rrv_scene *scene, rrv_vec3 p, double H[9])
 {
+    double ambient_r = scene->settings.ambient_ior - 1.0;
     int i, k;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
         if (rrv__medium_refracts(m) && rrv__inside_box(p, m->lo, m->hi)) {
-            rrv__profile_hessian(&m->ior, p, H);
-            for (k = 0; k < 9; ++k) H[k] *= m->ior_scale;
+            rrv__refractivity_hessian(m, p, ambient_r, H);
             return;
         }
     }
