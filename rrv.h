@@ -2424,20 +2424,21 @@ static double rrv__refraction_lookup(const struct rrv__majorant_grid *mg, rrv_ve
     d = g->data + 4 * (size_t)i[0] + sy * (size_t)i[1] + sz * (size_t)i[2];
     if (!grad) return rrv__blend8(d, 4, sy, sz, t);
     {
-        /* the four channels side by side, blended in float as one vector:
-           the samples are floats, and the blend's float rounding (1e-7 of
-           r) is far below what the lattice resolves; in double the blend
-           was most of a kick's lookup */
-        float v[4], tx = (float)t[0], ty = (float)t[1], tz = (float)t[2];
+        /* the four channels side by side, so the compiler can blend them as
+           one vector; in double, not float: a float blend weight quantises
+           the position to 6e-8 of a cell, which makes the ray map a staircase
+           at that scale, and Newton's solves (to 1e-9) and their Jacobians
+           need it smooth */
+        double v[4];
         int c;
         for (c = 0; c < 4; ++c) {
-            float c00 = d[c] + tx * (d[4 + c] - d[c]);
-            float c10 = d[sy + c] + tx * (d[sy + 4 + c] - d[sy + c]);
-            float c01 = d[sz + c] + tx * (d[sz + 4 + c] - d[sz + c]);
-            float c11 = d[sz + sy + c] + tx * (d[sz + sy + 4 + c] - d[sz + sy + c]);
-            c00 += ty * (c10 - c00);
-            c01 += ty * (c11 - c01);
-            v[c] = c00 + tz * (c01 - c00);
+            double c00 = (double)d[c] + t[0] * ((double)d[4 + c] - d[c]);
+            double c10 = (double)d[sy + c] + t[0] * ((double)d[sy + 4 + c] - d[sy + c]);
+            double c01 = (double)d[sz + c] + t[0] * ((double)d[sz + 4 + c] - d[sz + c]);
+            double c11 = (double)d[sz + sy + c] + t[0] * ((double)d[sz + sy + 4 + c] - d[sz + sy + c]);
+            c00 += t[1] * (c10 - c00);
+            c01 += t[1] * (c11 - c01);
+            v[c] = c00 + t[2] * (c01 - c00);
         }
         *grad = rrv__v3(v[1], v[2], v[3]);
         return v[0];
