@@ -4539,6 +4539,8 @@ static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x);
 static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d);
 static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls);
 static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
+static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir, const rrv_shape *s,
+                                        rrv_vec3 x);
 static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                               rrv__rng *rng);
 static int rrv__solver_supports_scene(const rrv_scene *scene);
@@ -4565,11 +4567,13 @@ typedef struct rrv__camera_path {
     rrv__path path;      /* throughput, radiance, spectral MIS, refraction state */
     rrv_vec3 o, d;       /* the straight segment being walked */
     rrv_vec3 vertex;     /* the last real vertex: MIS pdfs are measured from it, not from bends */
+    rrv_vec3 w0;         /* the direction sampled there, before any bend (nee shoot retraces it) */
     double prev_pdf;     /* solid-angle pdf of the last sampled direction; 0: camera */
     int depth;           /* real vertices and interface reflections so far */
-    int touched, jumped; /* nee shoot partitions paths from the last vertex: touched,
-                            part of it lies in a refraction support; jumped, it crossed
-                            a sharp interface (shots never do) */
+    int touched, jumped; /* the path from the last vertex: touched, part of it lies in
+                            a refraction support; jumped, it crossed a sharp interface
+                            (shots never do). Decide which estimators could have made
+                            it (nee shoot and manifold) */
     long steps;          /* loop iterations since the last real vertex (work bound) */
 } rrv__camera_path;
 
@@ -4605,6 +4609,7 @@ static void rrv__sample_direct_light(rrv__context *ctx, rrv__path *path, rrv_vec
 static void rrv__restart_at_vertex(rrv__context *ctx, rrv__camera_path *cp, rrv_vec3 x)
 {
     cp->o = cp->vertex = x;
+    cp->w0 = cp->d;
     cp->steps = 0;
     if (ctx->bends) rrv__bender_restart(&cp->path.bender, ctx->scene, x);
     if (ctx->partition) {
@@ -4666,8 +4671,10 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
         if (cp->prev_pdf > 0 && ctx->sample_lights) {
             if (!(ctx->partition && cp->touched))
                 w = rrv__power_heuristic(cp->prev_pdf, rrv__emitter_pdf(s, cp->vertex, x, n) / rrv__light_choices(scene));
-            else if ((ctx->shoot || ctx->manifold) && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
-                w = 0.0; /* counted by the curved connection */
+            else if (ctx->shoot && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
+                w = rrv__shoot_forward_weight(ctx, cp->vertex, cp->w0, cp->prev_pdf, s, x); /* MIS with shooting */
+            else if (ctx->manifold && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
+                w = 0.0; /* counted by the curved connection alone */
         }
         w *= rrv__eta_scale(ctx, x) * rrv__path_mis(&cp->path);
         for (c = 0; c < 3; ++c) cp->path.L[c] += cp->path.beta[c] * s->L[c] * w;
@@ -4731,7 +4738,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
     rrv__camera_path cp;
     int c;
     cp.o = cp.vertex = o;
-    cp.d = d;
+    cp.d = cp.w0 = d;
     cp.prev_pdf = 0;
     cp.depth = 0;
     cp.touched = cp.jumped = 0;
@@ -5604,15 +5611,60 @@ static void rrv__vertex_eval(const rrv__vertex_bsdf *v, rrv_vec3 w, double f[3])
     }
 }
 
+/* The density of the vertex's own sampling of w (cosine lobe, phase function). */
+static double rrv__vertex_pdf(const rrv__vertex_bsdf *v, rrv_vec3 w)
+{
+    return v->surface ? fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI : rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
+}
+
+/* The MIS weight of curved NEE for a curved path x0 -> y on light s whose
+   initial direction w0 the vertex samples with density pdf_dir, the
+   endpoint moving on the light's plane as dA_y = |det| dw0: the power
+   heuristic between NEE's solid-angle density, had every solve found the
+   root (1/(area choices) |det|), and pdf_dir. The forward path's weight is
+   one minus it, computed from the same two numbers. */
+static double rrv__shoot_mis_weight(const rrv_scene *scene, const rrv_shape *s, double det, double pdf_dir)
+{
+    double pdf_nee = fabs(det) / (rrv__shape_area(s) * rrv__light_choices(scene));
+    return rrv__power_heuristic(pdf_nee, pdf_dir);
+}
+
+/* The MIS weight of a forward path that left the vertex x0 along w0
+   (density pdf_dir), touched a refraction support without crossing a sharp
+   interface and hit the quad or triangle light s at x: the one shot that
+   curved NEE would trace for it, from x0 along w0 with the same steps,
+   gives its |det J_plane|. Where that shot does not first cross the
+   light's plane from its front at x (it passed the plane beside the light
+   first, or a face grazed), no solve can return this path and the forward
+   path keeps it whole. */
+static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir, const rrv_shape *s,
+                                        rrv_vec3 x)
+{
+    rrv_vec3 ny = rrv__normalize(rrv__cross(s->e1, s->e2)), e1, e2;
+    rrv__shot shot;
+    double r[2], Jp[4], det;
+    rrv__frame(w0, &e1, &e2);
+    rrv__shoot(ctx, x0, w0, e1, e2, x, &ny, NULL, NULL, &shot);
+    if (shot.status != RRV__SHOT_REACHED || !shot.curved) return 1.0;
+    rrv__shot_residual(&shot, x, &ny, r, Jp);
+    if (!(sqrt(r[0] * r[0] + r[1] * r[1]) <= 1e-6 * (1.0 + rrv__length(rrv__sub(x, x0))))) return 1.0;
+    det = Jp[0] * Jp[3] - Jp[1] * Jp[2];
+    if (!(fabs(det) < DBL_MAX)) return 1.0;
+    return 1.0 - rrv__shoot_mis_weight(ctx->scene, s, det, pdf_dir);
+}
+
 /* Curved NEE from vertex x0: a point y sampled uniformly on one area light,
    one root w0 of the two-point problem from a random seed, and its inverse
    probability estimated by repeated trials until the same root comes back
    (Specular Manifold Sampling, Zeltner et al. 2020): E[trials] = 1/p, so
    summed over roots the estimate is unbiased up to the cap on trials.
    Only curved paths are counted here (part of them in a refraction support,
-   no sharp interface crossed): straight ones belong to straight NEE, and
-   forward paths of this class count zero. The sky and sphere lights (whose
-   samples cover only what is seen straight) are left to forward paths. */
+   no sharp interface crossed): straight ones belong to straight NEE. Curved
+   paths to quad and triangle lights are shared with the forward path by
+   the power heuristic (rrv__shoot_mis_weight): near a caustic |det| -> 0
+   and the forward path takes them, which keeps the estimate's 1/|det|
+   bounded. The sky and sphere lights (whose samples cover only what is
+   seen straight) are left to forward paths. */
 static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
 {
     const rrv_scene *scene = ctx->scene;
@@ -5663,7 +5715,8 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     ctx->stats.solve_trials += (uint64_t)count;
     ++ctx->stats.solve_connections;
     /* dw0 = dA_y / |det J_plane| (= dA_y |cos theta_y| / |det J_perp|) */
-    k = 1.0 / (fabs(root.det) * pdf_area) * count * rrv__eta_scale(ctx, y) * rrv__path_mis(path);
+    k = rrv__shoot_mis_weight(scene, s, root.det, rrv__vertex_pdf(v, root.w0)) / (fabs(root.det) * pdf_area) * count *
+        rrv__eta_scale(ctx, y) * rrv__path_mis(path);
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
 
