@@ -1041,6 +1041,62 @@ static void test_partition_is_exclusive(void)
     rrv_scene_free(s);
 }
 
+/* nee shoot shares curved paths to area lights between curved NEE and the
+   forward path by the power heuristic. For one path both must compute the
+   same weight: NEE from its root (w0, det J_plane from the solve), the
+   forward path from the one shot it traces along its own w0 to the light
+   point it hit. Here, for connections from the floor of the caustic scene
+   through the lens to the light: the two weights sum to one within 1e-6
+   (the root is converged to 1e-9, the weights are smooth in it), and the
+   connections include paths where neither weight is close to 0 or 1
+   (|det| / (area choices) near the vertex's pdf). */
+static void test_shoot_mis_weights_sum_to_one(void)
+{
+    rrv_scene *s = NULL;
+    rrv_error err;
+    rrv__context ctx;
+    rrv__rng rng;
+    const rrv_shape *light;
+    rrv__vertex_bsdf vb;
+    int k, roots = 0, shared = 0;
+    double worst = 0;
+    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
+        CHECKF(0, "parse: %s", err.message);
+        return;
+    }
+    solver_context(&ctx, s);
+    ctx.partition = ctx.shoot = ctx.sample_lights = 1;
+    light = &s->shapes[s->lights[0]];
+    memset(&vb, 0, sizeof vb);
+    vb.n = rrv__v3(0, 1, 0);
+    vb.g = 0.9;
+    rrv__rng_seed(&rng, 41, 0, 0);
+    for (k = 0; k < 600; ++k) {
+        rrv_vec3 x0 = rrv__v3(1.2 * rrv__uniform(&rng) - 0.6, 1e-5, 1.2 * rrv__uniform(&rng) - 0.6);
+        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5);
+        const rrv_vec3 down = rrv__v3(0, -1, 0);
+        rrv__root root;
+        double pdf, w_nee, w_fwd;
+        if (!rrv__solve_shot(&ctx, x0, y, &down, rrv__solver_seed(x0, y, &rng), &root) || !root.curved) continue;
+        ++roots;
+        /* every other vertex a medium with a forward phase function about
+           the chord (density up to 15 per sr), which shares many paths */
+        vb.surface = k & 1;
+        vb.d_in = rrv__normalize(rrv__sub(y, x0));
+        pdf = rrv__vertex_pdf(&vb, root.w0);
+        w_nee = rrv__shoot_mis_weight(s, light, root.det, pdf);
+        w_fwd = rrv__shoot_forward_weight(&ctx, x0, root.w0, pdf, light, y);
+        if (w_nee > 0.05 && w_nee < 0.95) ++shared;
+        worst = fmax(worst, fabs(w_nee + w_fwd - 1.0));
+        CHECKF(fabs(w_nee + w_fwd - 1.0) < 1e-6, "connection %d: NEE weight %.9f + forward weight %.9f, |det| %g", k,
+               w_nee, w_fwd, fabs(root.det));
+    }
+    SAY("  shoot MIS: %d curved roots, %d with both weights in (0.05, 0.95), worst |sum - 1| %.1e\n", roots, shared,
+        worst);
+    CHECK(roots > 200 && shared > 20);
+    rrv_scene_free(s);
+}
+
 /* NEE_ONLY=NAME runs only the tests whose name contains NAME (development). */
 static const char *only;
 #define NEE_RUN(fn)                                                                                                    \
@@ -1125,5 +1181,6 @@ int main(void)
     NEE_RUN(test_manifold_reciprocity);
     NEE_RUN(test_partition_is_exclusive);
     NEE_RUN(test_partition_manifold);
+    NEE_RUN(test_shoot_mis_weights_sum_to_one);
     return CHECK_EXIT_CODE();
 }
