@@ -5142,6 +5142,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
 
 #define RRV__SOLVE_ITERATIONS 20       /* shots a solve may take (converged ones: 4 to 12, a few to 25) */
 #define RRV__SOLVE_TRIALS 64          /* cap on the trials that estimate 1/p */
+#define RRV__SOLVE_RESTARTS 3         /* seeds a solve may try */
 #define RRV__SOLVE_SAME_ROOT 1e-5     /* roots whose directions differ less are one */
 #define RRV__SOLVE_SEGMENTS 200000L   /* a shot longer than this is a failed one */
 /* A face where the refractivity jumps by more than this is a sharp interface
@@ -5540,10 +5541,14 @@ static int rrv__solve_shot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv
             norm = sqrt(r[0] * r[0] + r[1] * r[1]);
         }
         if (!(norm < prev_norm)) {
-            /* worse, or lost: back to the last good direction, half the step */
+            /* worse, or lost: back to the last good direction, half the
+               step; worse after three halvings, the linear model is wrong
+               (on the lens caustic: a ray grazing a support's rim, whose
+               endpoint moves as the square root of its depth), and no
+               solve that converged there needed a step below 1/4 */
             if (!have_prev) return 0;
             step *= 0.5;
-            if (step < 1e-6) return 0;
+            if (step < 1.0 / 8) return 0;
             w = rrv__normalize(rrv__add(w_prev, rrv__add(rrv__scale(p1, step * delta[0]), rrv__scale(p2, step * delta[1]))));
             continue;
         }
@@ -5593,6 +5598,22 @@ static rrv_vec3 rrv__solver_seed(rrv_vec3 x0, rrv_vec3 y, rrv__rng *rng)
         return rrv__normalize(rrv__add(w, rrv__add(rrv__scale(t, rad * cos(phi)), rrv__scale(b, rad * sin(phi)))));
     }
     return rrv__sample_uniform_sphere(u1, u2);
+}
+
+/* A solve from seeds of rrv__solver_seed: up to RRV__SOLVE_RESTARTS of
+   them, the next drawn when the last failed, so that a solve fails only
+   when all did. Every call draws its own seeds, so trials stay independent
+   and identically distributed; root->iterations counts every shot. */
+static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv__rng *rng,
+                                  rrv__root *root)
+{
+    int k, shots = 0, found = 0;
+    for (k = 0; k < RRV__SOLVE_RESTARTS && !found; ++k) {
+        found = rrv__solve_shot(ctx, x0, y, plane, rrv__solver_seed(x0, y, rng), root);
+        shots += root->iterations;
+    }
+    root->iterations = shots;
+    return found;
 }
 
 /* Is a straight connection from x to a light sample one of the paths
@@ -5695,7 +5716,7 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     ny = rrv__normalize(rrv__cross(s->e1, s->e2));
     pdf_area = 1.0 / (rrv__shape_area(s) * choices);
     ++ctx->stats.solves;
-    if (!rrv__solve_shot(ctx, x0, y, &ny, rrv__solver_seed(x0, y, rng), &root)) {
+    if (!rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &root)) {
         ctx->stats.solve_iterations += (uint64_t)root.iterations;
         return;
     }
@@ -5711,7 +5732,7 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     for (count = 1; count < RRV__SOLVE_TRIALS; ++count) {
         int found;
         ++ctx->stats.solves;
-        found = rrv__solve_shot(ctx, x0, y, &ny, rrv__solver_seed(x0, y, rng), &again);
+        found = rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &again);
         ctx->stats.solve_iterations += (uint64_t)again.iterations;
         if (!found) continue;
         ++ctx->stats.solves_converged;
