@@ -97,42 +97,52 @@
                  where the bent path hits them, with MIS weight 1. Unbiased
                  (furnaces give exactly 1), but noisy for small lights.
      SHOOT       curved NEE by shooting (eikonal integrator), unbiased up
-                 to a cap on trials. Path space is partitioned by the path
-                 from the last vertex to the light: touching no refraction
-                 support (box or profile sphere), it is counted by straight
-                 NEE with MIS, as classic does; curved (part of it in a
-                 support, no sharp interface crossed) and ending on a quad
-                 or triangle light, only by the curved connection, forward
-                 paths of that kind count zero; everything else (across a
-                 sharp interface, to the sky, to sphere lights) only by
-                 forward paths. The connection: a point y uniform on a
-                 light, Newton/Levenberg-Marquardt on the two angles of the
-                 initial direction so that the ray, traced with the same
-                 steps camera rays take, first crosses the light's plane
-                 from its front at y (at most 40 iterations,
+                 to a cap on trials. The path from the last vertex to the
+                 light decides which estimators may make it: touching no
+                 refraction support (box or profile sphere), straight NEE
+                 and the forward path, by the power heuristic, as classic
+                 does; curved (part of it in a support, no sharp interface
+                 crossed) and ending on a quad or triangle light, the curved
+                 connection and the forward path, by the power heuristic on
+                 their solid-angle densities at the initial direction w0:
+                 p_nee = |det J_plane| / (area x light choices) (NEE's
+                 density had every solve found the root; the 1/p of the
+                 trials is an unbiased factor on top) and the vertex's own
+                 pdf of w0. The forward path computes det J_plane for itself
+                 from one shot along its own w0 with the same steps, so both
+                 sides evaluate the same function of the path, and the two
+                 weights sum to one (test/test_nee.c); any such weights keep
+                 the sum unbiased. Near a fold caustic det -> 0 and the
+                 forward path takes the path, which bounds NEE's 1/|det|
+                 (unweighted, its square is not integrable there).
+                 Everything else (across a sharp interface, to the sky, to
+                 sphere lights) only by forward paths, weight 1. The
+                 connection: a point y uniform on a light, Newton on the
+                 two angles of the initial direction so that the ray,
+                 traced with the same steps camera rays take, first crosses
+                 the light's plane from its front at y (at most 20 shots,
                  residual < 1e-9 (1 + |y - x0|), step halved on a worse or
-                 failed shot and doubled up to 1, at most 0.5 rad; det J = 0,
-                 a caustic, fails); the density from the Jacobi field of
-                 the same discrete steps, dw0 = dA_y / |det J_plane|
-                 (= |cos theta_y| / |det J_perp|);
-                 visibility and ratio-tracked transmittance along every
-                 chord. Seeds: a 0.3 rad Gaussian around the straight
-                 direction or (1 in 4) uniform, so every root has a nonzero
-                 probability p; 1/p is estimated by repeating independent
-                 solves until the same root (within 1e-5) comes back, at
-                 most 64 trials (Specular Manifold Sampling). A failed solve
+                 failed shot and doubled up to 1, at most 0.5 rad, given up
+                 when three halvings in a row fail; det J = 0, a caustic,
+                 fails); the density from the Jacobi field of the same
+                 discrete steps, dw0 = dA_y / |det J_plane|
+                 (= |cos theta_y| / |det J_perp|); visibility and
+                 ratio-tracked transmittance along every chord. Seeds:
+                 Gaussians of 0.05 rad (6 in 10) and 0.3 rad (3 in 10)
+                 around the straight direction or a uniform direction, so
+                 every root has a nonzero probability p; a solve tries up to
+                 3 seeds; 1/p is estimated by repeating independent solves
+                 until the same root (within 1e-5) comes back, at most 64
+                 trials (Specular Manifold Sampling). A failed solve
                  contributes zero. The Hessian of eta has closed forms for
                  constant, slab, Luneburg, fish-eye and blob IORs; with any
                  other IOR (grids, noise, shells, gas), or with the
                  refractive integrator, curved connections are left to
-                 forward paths (still unbiased) and counted in
-                 rrv_render_stats.solves_unsupported. Near a fold caustic
-                 1/|det J| is integrable but its square is not: shooting
-                 from there is heavy-tailed (infinite variance in principle;
-                 its images converge slowly and from below).
+                 forward paths (weight 1, still unbiased) and counted in
+                 rrv_render_stats.solves_unsupported.
      MANIFOLD    curved NEE by the paper's method (refractive and eikonal
-                 integrators, the same closed-form Hessians), with shoot's
-                 partition of path space (weights: 1 for the estimator a
+                 integrators, the same closed-form Hessians), partitioning
+                 path space by the same classes (weights: 1 for the estimator a
                  path belongs to, 0 for the others; power heuristic only
                  between straight NEE and forward paths outside supports).
                  A point y uniform on a quad or triangle light; a chain of
@@ -5143,6 +5153,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
 #define RRV__SOLVE_ITERATIONS 20       /* shots a solve may take (converged ones: 4 to 12, a few to 25) */
 #define RRV__SOLVE_TRIALS 64          /* cap on the trials that estimate 1/p */
 #define RRV__SOLVE_RESTARTS 3         /* seeds a solve may try */
+#define RRV__SOLVE_COARSE 8           /* eikonal: a solve first converges with steps this much longer */
 #define RRV__SOLVE_SAME_ROOT 1e-5     /* roots whose directions differ less are one */
 #define RRV__SOLVE_SEGMENTS 200000L   /* a shot longer than this is a failed one */
 /* A face where the refractivity jumps by more than this is a sharp interface
@@ -5520,12 +5531,12 @@ typedef struct rrv__root {
    halved on a failed or worsening shot and doubled (up to 1) on success,
    each step at most 0.5 rad. Returns 1 with the root, 0 if it did not
    converge, met a sharp interface, or stalled at a caustic (det J = 0). */
-static int rrv__solve_shot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv_vec3 seed,
-                           rrv__root *root)
+static int rrv__solve_shot_to(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv_vec3 seed,
+                              double tolerance, rrv__root *root)
 {
     rrv_vec3 w = seed, w_prev = seed, e1, e2, p1 = rrv__v3(0, 0, 0), p2 = p1;
     double prev_norm = DBL_MAX, step = 1.0, delta[2] = {0, 0};
-    double tol = 1e-9 * (1.0 + rrv__length(rrv__sub(y, x0)));
+    double tol = tolerance * (1.0 + rrv__length(rrv__sub(y, x0)));
     int it, have_prev = 0;
     root->iterations = 0;
     for (it = 0; it < RRV__SOLVE_ITERATIONS; ++it) {
@@ -5579,6 +5590,12 @@ static int rrv__solve_shot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv
     return 0;
 }
 
+static int rrv__solve_shot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv_vec3 seed,
+                           rrv__root *root)
+{
+    return rrv__solve_shot_to(ctx, x0, y, plane, seed, 1e-9, root);
+}
+
 /* Seeds for the solver: a Gaussian around the straight direction to y, of
    0.05 rad (six times in ten) or 0.3 rad (three in ten), or a uniform
    direction (one in ten), so that every root's basin has a nonzero
@@ -5607,9 +5624,21 @@ static rrv_vec3 rrv__solver_seed(rrv_vec3 x0, rrv_vec3 y, rrv__rng *rng)
 static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv__rng *rng,
                                   rrv__root *root)
 {
+    rrv_scene coarse_scene = *ctx->scene;
+    rrv__context coarse = *ctx;
+    rrv__root near;
     int k, shots = 0, found = 0;
+    coarse_scene.settings.step *= RRV__SOLVE_COARSE;
+    coarse.scene = &coarse_scene;
     for (k = 0; k < RRV__SOLVE_RESTARTS && !found; ++k) {
-        found = rrv__solve_shot(ctx, x0, y, plane, rrv__solver_seed(x0, y, rng), root);
+        rrv_vec3 seed = rrv__solver_seed(x0, y, rng);
+        if (ctx->eikonal && RRV__SOLVE_COARSE > 1) {
+            int near_found = rrv__solve_shot_to(&coarse, x0, y, plane, seed, 1e-6, &near);
+            shots += near.iterations;
+            if (!near_found) continue;
+            seed = near.w0;
+        }
+        found = rrv__solve_shot(ctx, x0, y, plane, seed, root);
         shots += root->iterations;
     }
     root->iterations = shots;
