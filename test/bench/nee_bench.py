@@ -9,13 +9,16 @@ sys CPU time of the render process (the machine may be shared, so wall
 time is printed beside it but not used).
 
     python3 test/bench/nee_bench.py [--seconds 20] [--ref-spp 4096] [--light 0.25]
-        [--modes none,straight,shoot] [--old PATH]
+        [--modes none,straight,shoot] [--old PATH] [--ref-nee shoot]
 
 --light S replaces the scene's 1 m square light by an S m square one with
 the same centre and power (radiance scaled by 1 / S^2): the smaller the
 light, the sharper the caustic. --modes runs only the named modes; --old
 also renders `shoot` with another build (row "shoot, old build"), to
-compare versions on one reference.
+compare versions on one reference. --ref-nee renders the reference with
+another unbiased mode: with a small light `none` converges too slowly to
+serve (its RMSE is printed), and `shoot` is checked against `none` by
+test/test_nee.c.
 
 Not a test: nothing here can fail on a number. The reference is the mean of
 two independent `none` renders; half their RMS difference is its own error,
@@ -100,6 +103,7 @@ def main():
     ap.add_argument("--ref-spp", type=int, default=4096, help="spp of each of the two reference renders")
     ap.add_argument("--light", type=float, default=1.0, help="side of the square light, m (power kept)")
     ap.add_argument("--modes", default="", help="comma-separated mode names to run (default: all)")
+    ap.add_argument("--ref-nee", default="none", help="the unbiased mode that renders the reference")
     ap.add_argument("--old", default="", help="another rrv binary whose shoot is measured too")
     args = ap.parse_args()
     wanted = [m for m in args.modes.split(",") if m]
@@ -111,9 +115,9 @@ def main():
     refs = []
     for seed in (1001, 1002):
         out = os.path.join(work, "ref%d.pfm" % seed)
-        cpu, wall, _ = render(plain, "none", args.ref_spp, seed, out)
+        cpu, wall, _ = render(plain, args.ref_nee, args.ref_spp, seed, out)
         refs.append(read_pfm(out))
-        print("reference none %d spp seed %d: %.1f s cpu" % (args.ref_spp, seed, cpu), flush=True)
+        print("reference %s %d spp seed %d: %.1f s cpu" % (args.ref_nee, args.ref_spp, seed, cpu), flush=True)
     ref = [(x + y) / 2 for x, y in zip(*refs)]
     ref_mse = (rmse(*refs) / 2) ** 2
     print("reference own RMSE ~ %.4f (half the RMS difference of its two halves)" % ref_mse ** 0.5)
