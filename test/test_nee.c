@@ -9,11 +9,12 @@
    - a lens caustic (square light over a Luneburg lens over a white floor):
      `none` with the comb and `none` with eikonal agree in every block of
      pixels within 4 standard errors, and `straight` misses the caustic;
-   - `shoot` (curved connections, eikonal): the furnaces give 1, the
-     caustic and fog inside the lens agree with `none` within 4 standard
-     errors, and the solver is checked against the closed-form two-point
-     problem of the Luneburg lens, finite differences of its Jacobian,
-     reciprocity, and the partition of paths between the estimators;
+   - `shoot` (curved connections, eikonal, MIS with the forward path): the
+     furnaces give 1, the caustic (under a 1 m and a 0.25 m light) and fog
+     inside the lens agree with `none` within 4 standard errors, and the
+     solver is checked against the closed-form two-point problem of the
+     Luneburg lens, finite differences of its Jacobian, reciprocity, the
+     classes of paths the estimators share, and MIS weights that sum to one;
    - `manifold` (a chain of refraction vertices, both integrators): the
      furnaces give 1, the caustic agrees with `none` in blocks within 4
      standard errors (CHORD gauge; ISO misses it), and the chain is checked
@@ -1059,14 +1060,16 @@ static void test_reciprocity(void)
     rrv_scene_free(b);
 }
 
-/* nee shoot splits the paths from a vertex to a light between three
-   estimators, and each path must belong to exactly one: straight NEE takes
-   the connections that touch no refraction support, shooting the others
-   (curved), and forward paths count only what neither can reach (sharp
-   interfaces, the sky, sphere lights). Here, for connections from the floor
-   to the light of the caustic scene: where straight NEE may connect, the
-   solver's root from the straight seed is that straight path and is not
-   counted as curved; where it may not, every root found is curved. */
+/* nee shoot sorts the paths from a vertex to a light into classes, and
+   every estimator must put a path in the same one: connections that touch
+   no refraction support are shared by straight NEE and the forward path,
+   curved ones by shooting and the forward path (MIS both, the weights of
+   the second pair checked below), and forward paths alone count what
+   neither can reach (sharp interfaces, the sky, sphere lights). Here, for
+   connections from the floor to the light of the caustic scene: where
+   straight NEE may connect, the solver's root from the straight seed is
+   that straight path and is not counted as curved; where it may not, every
+   root found is curved. */
 static void test_partition_is_exclusive(void)
 {
     rrv_scene *s = NULL;
