@@ -5402,7 +5402,9 @@ typedef struct rrv__shot {
    until it passes y: where it first crosses the plane through y with
    normal *plane from its front (a light's), or with plane NULL, where the
    chord through y's perpendicular plane is. With T, also tests every chord
-   for surfaces (BLOCKED) and ratio-tracks the transmittance along them. */
+   for surfaces (BLOCKED) and ratio-tracks the transmittance along them,
+   and skips the Jacobi field (out->de is then undefined): that shot
+   retraces a root whose solve already had it. */
 static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1, rrv_vec3 e2, rrv_vec3 y,
                        const rrv_vec3 *plane, rrv__rng *rng, double T[3], rrv__shot *out)
 {
@@ -5427,7 +5429,9 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
         int j;
         rrv__plan_segment(&b, scene, x, &d, &fixed);
         len = b.segment;
-        if (b.end == RRV__END_STEP) {
+        if (b.end == RRV__END_STEP && T) {
+            for (j = 0; j < 2; ++j) dc[j] = J.d[j];
+        } else if (b.end == RRV__END_STEP) {
             rrv__eikonal_step_jacobi(scene, scene->settings.stepper, b.h, x, d_start, &J1);
             if (b.h < scene->settings.step && !rrv__clipped_step_jacobi(scene, &b, x, d_start, d, len, &J, &J1))
                 break;
