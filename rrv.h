@@ -5150,7 +5150,8 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
    endpoint perpendicular to the arriving chord with respect to w0 per unit
    solid angle (r^2 I for straight rays: cos / r^2). */
 
-#define RRV__SOLVE_ITERATIONS 20      /* shots a solve may take (of those that converged within 40, 99 % took 15 or fewer) */
+/* Shots a solve may take: of the solves that converged within 40, 99 % took 15 or fewer. */
+#define RRV__SOLVE_ITERATIONS 20
 #define RRV__SOLVE_TRIALS 64          /* cap on the trials that estimate 1/p */
 #define RRV__SOLVE_RESTARTS 3         /* seeds a solve may try */
 #define RRV__SOLVE_COARSE 8           /* eikonal: a solve first converges with steps this much longer */
