@@ -8,7 +8,17 @@ MSE), and the solver's statistics from the render summary. Time is user +
 sys CPU time of the render process (the machine may be shared, so wall
 time is printed beside it but not used).
 
-    python3 test/bench/nee_bench.py [--seconds 20] [--ref-spp 4096]
+    python3 test/bench/nee_bench.py [--seconds 20] [--ref-spp 4096] [--light 0.25]
+        [--modes none,straight,shoot] [--old PATH] [--ref-nee shoot]
+
+--light S replaces the scene's 1 m square light by an S m square one with
+the same centre and power (radiance scaled by 1 / S^2): the smaller the
+light, the sharper the caustic. --modes runs only the named modes; --old
+also renders `shoot` with another build (row "shoot, old build"), to
+compare versions on one reference. --ref-nee renders the reference with
+another unbiased mode: with a small light `none` converges too slowly to
+serve (its RMSE is printed), and `shoot` is checked against `none` by
+test/test_nee.c.
 
 Not a test: nothing here can fail on a number. The reference is the mean of
 two independent `none` renders; half their RMS difference is its own error,
@@ -52,21 +62,28 @@ def read_pfm(path):
     return vals
 
 
-def scene_with(extra, workdir):
-    """The lens caustic with the render statement extended by `extra`."""
+def scene_with(extra, workdir, light=1.0):
+    """The lens caustic with the render statement extended by `extra`, its
+    1 m light replaced by a `light` m one of the same power."""
     with open(SCENE) as f:
         text = f.read()
     text = re.sub(r"^(render .*)$", lambda m: m.group(1) + " " + extra, text, count=1, flags=re.M)
-    path = os.path.join(workdir, "scene_%d.rrv" % abs(hash(extra)))
+    if light != 1.0:
+        quad = "quad origin -0.5 3 -0.5  u 1 0 0  v 0 0 1  L 10 10 10"
+        assert quad in text, "the light of scenes/lens_caustic.rrv changed"
+        h, L = 0.5 * light, 10.0 / (light * light)
+        text = text.replace(quad, "quad origin %.17g 3 %.17g  u %.17g 0 0  v 0 0 %.17g  L %.17g %.17g %.17g" %
+                            (-h, -h, light, light, L, L, L))
+    path = os.path.join(workdir, "scene_%d_%g.rrv" % (abs(hash(extra)), light))
     with open(path, "w") as f:
         f.write(text)
     return path
 
 
-def render(scene, nee, spp, seed, out):
+def render(scene, nee, spp, seed, out, rrv=RRV):
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    p = subprocess.run([RRV, "render", scene, "-o", out, "--spp", str(spp), "--seed", str(seed), "--nee", nee,
+    p = subprocess.run([rrv, "render", scene, "-o", out, "--spp", str(spp), "--seed", str(seed), "--nee", nee,
                         "--integrator", "eikonal", "--threads", "1", "--crop"] + CROP,
                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True, check=True)
     wall = time.perf_counter() - t0
@@ -84,15 +101,23 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--seconds", type=float, default=20.0, help="CPU seconds per mode")
     ap.add_argument("--ref-spp", type=int, default=4096, help="spp of each of the two reference renders")
+    ap.add_argument("--light", type=float, default=1.0, help="side of the square light, m (power kept)")
+    ap.add_argument("--modes", default="", help="comma-separated mode names to run (default: all)")
+    ap.add_argument("--ref-nee", default="none", help="the unbiased mode that renders the reference")
+    ap.add_argument("--old", default="", help="another rrv binary whose shoot is measured too")
     args = ap.parse_args()
+    wanted = [m for m in args.modes.split(",") if m]
+    for m in wanted:
+        if m not in [name for name, _, _ in MODES]:
+            sys.exit("nee_bench: unknown mode %r" % m)
     work = tempfile.mkdtemp(prefix="nee_bench_")
-    plain = scene_with("", work)
+    plain = scene_with("", work, args.light)
     refs = []
     for seed in (1001, 1002):
         out = os.path.join(work, "ref%d.pfm" % seed)
-        cpu, wall, _ = render(plain, "none", args.ref_spp, seed, out)
+        cpu, wall, _ = render(plain, args.ref_nee, args.ref_spp, seed, out)
         refs.append(read_pfm(out))
-        print("reference none %d spp seed %d: %.1f s cpu" % (args.ref_spp, seed, cpu), flush=True)
+        print("reference %s %d spp seed %d: %.1f s cpu" % (args.ref_nee, args.ref_spp, seed, cpu), flush=True)
     ref = [(x + y) / 2 for x, y in zip(*refs)]
     ref_mse = (rmse(*refs) / 2) ** 2
     print("reference own RMSE ~ %.4f (half the RMS difference of its two halves)" % ref_mse ** 0.5)
@@ -100,13 +125,16 @@ def main():
     print("RMSE against the reference; MSE* = MSE minus the reference's own, used for the efficiency")
     print("| mode | spp | cpu s | wall s | RMSE | efficiency 1/(s MSE*) | solver |")
     print("|---|---|---|---|---|---|---|")
-    for name, nee, extra in MODES:
-        scene = scene_with(extra, work)
+    runs = [(name, nee, extra, RRV) for name, nee, extra in MODES if not wanted or name in wanted]
+    if args.old:
+        runs.append(("shoot, old build", "shoot", "", args.old))
+    for name, nee, extra, rrv in runs:
+        scene = scene_with(extra, work, args.light)
         out = os.path.join(work, "probe.pfm")
-        cpu, _, _ = render(scene, nee, 1, 7, out)  # calibrate: CPU seconds per spp
+        cpu, _, _ = render(scene, nee, 1, 7, out, rrv)  # calibrate: CPU seconds per spp
         spp = max(1, int(args.seconds / max(cpu, 1e-3)))
         out = os.path.join(work, "mode.pfm")
-        cpu, wall, summary = render(scene, nee, spp, 11, out)
+        cpu, wall, summary = render(scene, nee, spp, 11, out, rrv)
         e = rmse(read_pfm(out), ref)
         solver = summary.split("; ", 1)[1] if "; " in summary else ""
         mse = max(e * e - ref_mse, 1e-30)
