@@ -2137,6 +2137,108 @@ static int rrv__grid_span(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, int a[3],
     return 1;
 }
 
+/* Whether the box reaches into the grid's box by more than 1e-9 of a voxel
+   on every axis (the sliver rule of rrv__grid_span, here for the grid's own
+   faces): a majorant cell just outside a grid whose faces it shares would
+   otherwise take the density on the face, and a ray through that cell,
+   where the density is 0, pays null collisions at that rate. */
+static int rrv__grid_reaches(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi)
+{
+    int a;
+    for (a = 0; a < 3; ++a) {
+        double glo = rrv__axis(g->lo, a), ghi = rrv__axis(g->hi, a);
+        int voxels = (a == 0 ? g->nx : a == 1 ? g->ny : g->nz) - 1;
+        double overlap = rrv__mind(rrv__axis(hi, a), ghi) - rrv__maxd(rrv__axis(lo, a), glo);
+        if (!(overlap > 1e-9 * (ghi - glo) / voxels)) return 0;
+    }
+    return 1;
+}
+
+/* Where a box's faces cut one axis of a grid, as points of the trilinear
+   lattice: sample index i0 and fraction t of the way to sample i0 + 1. */
+typedef struct rrv__grid_cut {
+    int i0[2];
+    double t[2];
+} rrv__grid_cut;
+
+/* The max of a grid's (non-negative) trilinear field over the box, exactly
+   (up to a margin for rounding), where the box's span of samples [a, b] is
+   known. The field is multilinear inside each voxel, so its max over the
+   part of a voxel inside the box sits at one of that part's corners; those
+   corners are the samples inside the box and the points where the box's
+   faces cut the lattice. The plain max of the span's samples bounds the
+   field too, but a coarse grid under finer majorant cells (a 2^3 grid of
+   1e10 in a corner) then gives every cell the corner's value, and walks
+   through the nearly empty rest take billions of null collisions. */
+static double rrv__grid_bound(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, const int a[3], const int b[3])
+{
+    int dim[3], ax, x, y, z, c, k[3], idx[3];
+    double glo[3], ghi[3], blo[3], bhi[3], w[3], samples = 0, corners = 0;
+    rrv__grid_cut cut[3];
+    size_t stride[3], n;
+    dim[0] = g->nx; dim[1] = g->ny; dim[2] = g->nz;
+    glo[0] = g->lo.x; glo[1] = g->lo.y; glo[2] = g->lo.z;
+    ghi[0] = g->hi.x; ghi[1] = g->hi.y; ghi[2] = g->hi.z;
+    blo[0] = lo.x; blo[1] = lo.y; blo[2] = lo.z;
+    bhi[0] = hi.x; bhi[1] = hi.y; bhi[2] = hi.z;
+    stride[0] = (size_t)g->channels;
+    stride[1] = stride[0] * (size_t)g->nx;
+    stride[2] = stride[1] * (size_t)g->ny;
+    for (ax = 0; ax < 3; ++ax) {
+        double s = (dim[ax] - 1) / (ghi[ax] - glo[ax]);
+        double u[2];
+        int e;
+        u[0] = rrv__clamp((blo[ax] - glo[ax]) * s, 0.0, dim[ax] - 1.0);
+        u[1] = rrv__clamp((bhi[ax] - glo[ax]) * s, 0.0, dim[ax] - 1.0);
+        for (e = 0; e < 2; ++e) {
+            int i = (int)floor(u[e]);
+            if (i > dim[ax] - 2) i = dim[ax] - 2;
+            cut[ax].i0[e] = i;
+            cut[ax].t[e] = u[e] - i;
+        }
+    }
+    /* The samples of the span (the old bound, kept as a cap) and, lattice
+       point by lattice point, the field where the point lies in the box:
+       index k runs over the span's samples, with the two faces' cuts in
+       place of the first and last. */
+    for (z = a[2]; z <= b[2]; ++z)
+        for (y = a[1]; y <= b[1]; ++y)
+            for (x = a[0]; x <= b[0]; ++x) {
+                double v = 0;
+                int corner;
+                k[0] = x; k[1] = y; k[2] = z;
+                n = (size_t)z * stride[2] + (size_t)y * stride[1] + (size_t)x * stride[0];
+                for (c = 0; c < g->channels; ++c) samples = fmax(samples, g->data[n + (size_t)c]);
+                for (ax = 0; ax < 3; ++ax) {
+                    const int lo_k = ax == 0 ? a[0] : ax == 1 ? a[1] : a[2];
+                    const int hi_k = ax == 0 ? b[0] : ax == 1 ? b[1] : b[2];
+                    if (k[ax] == lo_k) { idx[ax] = cut[ax].i0[0]; w[ax] = cut[ax].t[0]; }
+                    else if (k[ax] == hi_k) { idx[ax] = cut[ax].i0[1]; w[ax] = cut[ax].t[1]; }
+                    else { idx[ax] = k[ax] > dim[ax] - 2 ? dim[ax] - 2 : k[ax]; w[ax] = (double)(k[ax] - idx[ax]); }
+                }
+                n = (size_t)idx[2] * stride[2] + (size_t)idx[1] * stride[1] + (size_t)idx[0] * stride[0];
+                for (c = 0; c < g->channels; ++c) {
+                    double sum = 0;
+                    for (corner = 0; corner < 8; ++corner) {
+                        double weight = 1;
+                        size_t at = n + (size_t)c;
+                        for (ax = 0; ax < 3; ++ax) {
+                            int up = (corner >> ax) & 1;
+                            weight *= up ? w[ax] : 1.0 - w[ax];
+                            if (up) at += stride[ax];
+                        }
+                        if (weight > 0) sum += weight * g->data[at];
+                    }
+                    v = fmax(v, sum);
+                }
+                corners = fmax(corners, v);
+            }
+    /* The lookups round too (their fractions carry the error of a position
+       times the grid's resolution): a margin of 1e-9 of the samples covers
+       that, and the samples' max stays a bound in any case. */
+    return fmin(samples, corners + 1e-9 * samples);
+}
+
 /* An upper bound of a non-negative field over a box (the majorant grid's cell). */
 static double rrv__field_bound(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
 {
@@ -2156,17 +2258,9 @@ static double rrv__field_bound(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
         return f->base + fmax(0.0, f->amplitude) * rrv__falloff_bound(&f->noise, lo, hi);
     case RRV_FIELD_GRID: {
         const rrv_grid *g = &f->grid;
-        double best = 0;
-        int a[3], b[3], x, y, z, c;
-        size_t n;
-        if (!rrv__grid_span(g, lo, hi, a, b)) return 0;
-        for (z = a[2]; z <= b[2]; ++z)
-            for (y = a[1]; y <= b[1]; ++y)
-                for (x = a[0]; x <= b[0]; ++x) {
-                    n = (((size_t)z * (size_t)g->ny + (size_t)y) * (size_t)g->nx + (size_t)x) * (size_t)g->channels;
-                    for (c = 0; c < g->channels; ++c) best = fmax(best, g->data[n + (size_t)c]);
-                }
-        return best;
+        int a[3], b[3];
+        if (!rrv__grid_reaches(g, lo, hi) || !rrv__grid_span(g, lo, hi, a, b)) return 0;
+        return rrv__grid_bound(g, lo, hi, a, b);
     }
     case RRV_FIELD_NANOVDB: return fmax(0.0, rrv__nv_bound(&f->nanovdb, lo, hi));
     default: return 0;
@@ -3198,7 +3292,7 @@ static void rrv__majorant_slice(void *ctx, int z)
     int x, y;
     for (y = 0; y < g->n[1]; ++y)
         for (x = 0; x < g->n[0]; ++x, ++c) {
-            rrv_vec3 lo = rrv__v3(m->lo.x + x * g->cell.x, m->lo.y + y * g->cell.y, m->lo.z + z * g->cell.z);
+            rrv_vec3 lo = rrv__v3(g->lo.x + x * g->cell.x, g->lo.y + y * g->cell.y, g->lo.z + z * g->cell.z);
             rrv_vec3 hi = rrv__add(lo, g->cell);
             double d = rrv__mind(rrv__field_bound(rrv__field_of(m, RRV__DENSITY), lo, hi), FLT_MAX);
             /* Round the float bound up so it stays a bound (the loader
@@ -3211,12 +3305,86 @@ static void rrv__majorant_slice(void *ctx, int z)
         }
 }
 
+/* Where the majorant cells lie: their count per axis, g->lo (a corner of
+   the first cell) and the cell size; together they cover the medium's box.
+   Normally the box is cut into rrv__auto_cells cells an axis. Where one cell
+   could hold an optical depth above 64 (a voxel of 1e8 in an empty grid),
+   null collisions around the large values swamp the walks through it, so
+   the cells get finer: at least 4 times as many (fields without voxels),
+   and on a density grid whole parts of its voxels, 4 times the automatic
+   count or the voxels if finer, at most 256 (or max_bake_samples) an axis.
+   Cells on the voxels matter as much as their size: the bound over a part
+   of a voxel is exact (rrv__grid_bound), but a cell across a voxel's face
+   or the grid's own face, beyond which the density drops to 0, bounds the
+   empty side by the full side, and a ray along the face pays a null
+   collision per 1/majorant of its length. Those cells start from the
+   grid's faces, so the first and last may reach past the medium's box;
+   a refractive medium keeps its cells on its box, where the comb's spacing
+   (rrv__rate_distance) ends its walk. */
+static void rrv__majorant_lattice(const rrv_scene *scene, const rrv_medium *m, int refracts,
+                                  struct rrv__majorant_grid *g)
+{
+    const rrv_field *density = rrv__field_of(m, RRV__DENSITY);
+    int forced = scene->settings.majorant_cells, cap = 256, a;
+    double lo[3], hi[3], cell[3];
+    if (scene->settings.max_bake_samples > 0 && scene->settings.max_bake_samples < cap)
+        cap = scene->settings.max_bake_samples;
+    for (a = 0; a < 3; ++a) {
+        g->n[a] = forced > 0 ? (forced > cap ? cap : forced) : rrv__auto_cells(m, a);
+        if (g->n[a] > cap) g->n[a] = cap;
+        lo[a] = rrv__axis(m->lo, a);
+        hi[a] = rrv__axis(m->hi, a);
+        cell[a] = (hi[a] - lo[a]) / g->n[a];
+    }
+    if (forced <= 0 && rrv__field_bound(density, m->lo, m->hi) * g->sigma_t_max *
+                               rrv__length(rrv__v3(cell[0], cell[1], cell[2])) > 64.0) {
+        rrv_vec3 ext = rrv__sub(m->hi, m->lo);
+        for (a = 0; a < 3; ++a) {
+            double mlo = rrv__axis(m->lo, a), extent = rrv__axis(ext, a);
+            int target = 4 * g->n[a] > cap ? cap : 4 * g->n[a], n = target;
+            if (density->kind == RRV_FIELD_GRID) {
+                const rrv_grid *d = &density->grid;
+                int voxels = (a == 0 ? d->nx : a == 1 ? d->ny : d->nz) - 1;
+                double glo = rrv__axis(d->lo, a), voxel = (rrv__axis(d->hi, a) - glo) / voxels;
+                int parts = (int)rrv__clamp(ceil(voxel * target / extent - 1e-9), 1.0, (double)cap);
+                if (!refracts) {
+                    /* the fewest parts that still fit under the cap */
+                    for (; parts >= 1; --parts) {
+                        double c = voxel / parts, first = glo - ceil((glo - mlo) / c - 1e-9) * c;
+                        double count = ceil((mlo + extent - first) / c - 1e-9);
+                        if (count <= cap) {
+                            if (count > g->n[a]) {
+                                g->n[a] = (int)count;
+                                lo[a] = first;
+                                hi[a] = first + count * c;
+                                cell[a] = c;
+                            }
+                            break;
+                        }
+                    }
+                    if (parts >= 1) continue;
+                    parts = 1;
+                }
+                /* on the medium's box: as many cells as the parts make */
+                n = voxels > cap / parts ? cap : voxels * parts;
+            }
+            if (n > g->n[a]) {
+                g->n[a] = n;
+                cell[a] = extent / n;
+            }
+        }
+    }
+    g->lo = rrv__v3(lo[0], lo[1], lo[2]);
+    g->hi = rrv__v3(hi[0], hi[1], hi[2]);
+    g->cell = rrv__v3(cell[0], cell[1], cell[2]);
+    g->inv_cell = rrv__v3(1.0 / g->cell.x, 1.0 / g->cell.y, 1.0 / g->cell.z);
+}
+
 static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, size_t *baked_bytes, rrv_error *err)
 {
     struct rrv__majorant_grid *g;
     size_t cells, c;
     int x, refracts = rrv__medium_refracts(m);
-    int forced = scene->settings.majorant_cells;
     g = (struct rrv__majorant_grid *)RRV_MALLOC(sizeof *g);
     if (!g) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
     memset(g, 0, sizeof *g);
@@ -3236,35 +3404,9 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
         rrv_result res = rrv__bake_refraction(scene, m, baked_bytes, err);
         if (res != RRV_OK) return res;
     }
-    for (x = 0; x < 3; ++x) g->n[x] = forced > 0 ? (forced > 256 ? 256 : forced) : rrv__auto_cells(m, x);
     for (x = 0; x < 3; ++x) g->sigma_t_max = rrv__maxd(g->sigma_t_max, (m->sigma_a[x] + m->sigma_s[x]) * m->scale);
-    if (forced <= 0) {
-        /* Where one cell could hold an optical depth above 64 (a voxel of
-           1e8 in an empty grid), null collisions around the large values
-           swamp every walk through the cell: the cells then follow the
-           density grid's voxels, where the bound is exact (at most 256 an
-           axis; a field without voxels gets 4 times the cells). */
-        const rrv_field *density = rrv__field_of(m, RRV__DENSITY);
-        rrv_vec3 ext = rrv__sub(m->hi, m->lo);
-        double cell = rrv__length(rrv__v3(ext.x / g->n[0], ext.y / g->n[1], ext.z / g->n[2]));
-        double peak = rrv__field_bound(density, m->lo, m->hi) * g->sigma_t_max;
-        if (peak * cell > 64.0) {
-            for (x = 0; x < 3; ++x) {
-                int voxels = density->kind != RRV_FIELD_GRID ? 4 * g->n[x]
-                           : (x == 0 ? density->grid.nx : x == 1 ? density->grid.ny : density->grid.nz) - 1;
-                voxels = voxels > 256 ? 256 : voxels;
-                if (voxels > g->n[x]) g->n[x] = voxels;
-            }
-        }
-    }
-    for (x = 0; x < 3; ++x)
-        if (scene->settings.max_bake_samples > 0 && g->n[x] > scene->settings.max_bake_samples)
-            g->n[x] = scene->settings.max_bake_samples;
+    rrv__majorant_lattice(scene, m, refracts, g);
     cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
-    g->lo = m->lo;
-    g->hi = m->hi;
-    g->cell = rrv__v3((m->hi.x - m->lo.x) / g->n[0], (m->hi.y - m->lo.y) / g->n[1], (m->hi.z - m->lo.z) / g->n[2]);
-    g->inv_cell = rrv__v3(1.0 / g->cell.x, 1.0 / g->cell.y, 1.0 / g->cell.z);
     {
         rrv_result res = rrv__check_built_grid(scene, m, "majorant grid", cells, sizeof(float) * (refracts ? 2 : 1), err);
         if (res != RRV_OK) return res;
