@@ -1568,8 +1568,10 @@ static void rrv__bvh_split(rrv__bvh_build *b, int node_index, int first, int cou
         mid = first;
         for (i = first; i < first + count; ++i) {
             int p = b->prims[i];
-            int bin = (int)(RRV__BVH_BINS * (rrv__axis(b->centroids[p], best_axis) - cmin) / extent);
-            if (bin >= RRV__BVH_BINS) bin = RRV__BVH_BINS - 1;
+            /* the binning's own expression: times the bins after the
+               division, or a span near DBL_MAX overflows to inf */
+            double f = RRV__BVH_BINS * ((rrv__axis(b->centroids[p], best_axis) - cmin) / extent);
+            int bin = !(f > 0) ? 0 : f >= RRV__BVH_BINS ? RRV__BVH_BINS - 1 : (int)f;
             if (bin < best_bin) { b->prims[i] = b->prims[mid]; b->prims[mid] = p; mid++; }
         }
     }
