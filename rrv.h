@@ -2156,68 +2156,87 @@ static int rrv__grid_reaches(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi)
     return 1;
 }
 
-/* Where a box's faces cut one axis of a grid, as points of the trilinear
-   lattice: sample index i0 and fraction t of the way to sample i0 + 1. */
-typedef struct rrv__grid_cut {
-    int i0[2];
-    double t[2];
-} rrv__grid_cut;
+/* The points of one axis of a grid at which rrv__grid_bound evaluates the
+   field, as sample index i0 and fraction t of the way to sample i0 + 1:
+   where the box lies within one voxel along the axis, the two points where
+   its faces cut it; else every sample plane of its span. */
+typedef struct rrv__grid_axis_points {
+    int count, first, last_index;
+    int cut_i0[2];
+    double cut_t[2];
+} rrv__grid_axis_points;
 
-/* The max of a grid's (non-negative) trilinear field over the box, exactly
-   (up to a margin for rounding), where the box's span of samples [a, b] is
-   known. The field is multilinear inside each voxel, so its max over the
-   part of a voxel inside the box sits at one of that part's corners; those
-   corners are the samples inside the box and the points where the box's
-   faces cut the lattice. The plain max of the span's samples bounds the
-   field too, but a coarse grid under finer majorant cells (a 2^3 grid of
-   1e10 in a corner) then gives every cell the corner's value, and walks
-   through the nearly empty rest take billions of null collisions. */
+static void rrv__grid_axis_point(const rrv__grid_axis_points *pts, int j, int *i0, double *t)
+{
+    if (pts->count == 2 && pts->cut_i0[0] >= 0) {
+        *i0 = pts->cut_i0[j];
+        *t = pts->cut_t[j];
+    } else {
+        int k = pts->first + j;
+        *i0 = k > pts->last_index ? pts->last_index : k;
+        *t = (double)(k - *i0);
+    }
+}
+
+/* An upper bound of a grid's (non-negative) trilinear field over the box,
+   whose span of samples [a, b] is known. Along an axis where the box
+   spans more than one voxel, the field (piecewise linear along it, with
+   knots at the sample planes) is bounded by its values on the span's
+   sample planes; where the box lies within one voxel, its max sits where
+   the box's faces cut the axis, and taking those two points instead makes
+   the bound exact. A box of more than a voxel on every axis (majorant
+   cells over a fine grid) is thus bounded by the max of its samples, as
+   always; a coarse grid under finer cells (a 2^3 grid of 1e10 in a
+   corner) gets each cell's own max rather than the corner's value, which
+   sent walks through the nearly empty rest into billions of null
+   collisions. Exact because the field is multilinear in each voxel: with
+   the other coordinates fixed, its max along each axis is at one of the
+   axis's points. */
 static double rrv__grid_bound(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, const int a[3], const int b[3])
 {
-    int dim[3], ax, x, y, z, c, k[3], idx[3];
-    double glo[3], ghi[3], blo[3], bhi[3], w[3], samples = 0, corners = 0;
-    rrv__grid_cut cut[3];
-    size_t stride[3], n;
+    int dim[3], ax, i, j, k, c, corner, any_cut = 0;
+    size_t stride[3];
+    double samples = 0, best = 0;
+    rrv__grid_axis_points pts[3];
     dim[0] = g->nx; dim[1] = g->ny; dim[2] = g->nz;
-    glo[0] = g->lo.x; glo[1] = g->lo.y; glo[2] = g->lo.z;
-    ghi[0] = g->hi.x; ghi[1] = g->hi.y; ghi[2] = g->hi.z;
-    blo[0] = lo.x; blo[1] = lo.y; blo[2] = lo.z;
-    bhi[0] = hi.x; bhi[1] = hi.y; bhi[2] = hi.z;
     stride[0] = (size_t)g->channels;
     stride[1] = stride[0] * (size_t)g->nx;
     stride[2] = stride[1] * (size_t)g->ny;
     for (ax = 0; ax < 3; ++ax) {
-        double s = (dim[ax] - 1) / (ghi[ax] - glo[ax]);
-        double u[2];
-        int e;
-        u[0] = rrv__clamp((blo[ax] - glo[ax]) * s, 0.0, dim[ax] - 1.0);
-        u[1] = rrv__clamp((bhi[ax] - glo[ax]) * s, 0.0, dim[ax] - 1.0);
-        for (e = 0; e < 2; ++e) {
-            int i = (int)floor(u[e]);
-            if (i > dim[ax] - 2) i = dim[ax] - 2;
-            cut[ax].i0[e] = i;
-            cut[ax].t[e] = u[e] - i;
+        pts[ax].first = a[ax];
+        pts[ax].last_index = dim[ax] - 2;
+        pts[ax].count = b[ax] - a[ax] + 1;
+        pts[ax].cut_i0[0] = -1;
+        if (b[ax] - a[ax] == 1) {
+            double glo = rrv__axis(g->lo, ax), s = (dim[ax] - 1) / (rrv__axis(g->hi, ax) - glo);
+            double u[2];
+            int e;
+            u[0] = rrv__clamp((rrv__axis(lo, ax) - glo) * s, a[ax], b[ax]);
+            u[1] = rrv__clamp((rrv__axis(hi, ax) - glo) * s, a[ax], b[ax]);
+            for (e = 0; e < 2; ++e) {
+                pts[ax].cut_i0[e] = a[ax];
+                pts[ax].cut_t[e] = u[e] - a[ax];
+            }
+            any_cut = 1;
         }
     }
-    /* The samples of the span (the old bound, kept as a cap) and, lattice
-       point by lattice point, the field where the point lies in the box:
-       index k runs over the span's samples, with the two faces' cuts in
-       place of the first and last. */
-    for (z = a[2]; z <= b[2]; ++z)
-        for (y = a[1]; y <= b[1]; ++y)
-            for (x = a[0]; x <= b[0]; ++x) {
-                double v = 0;
-                int corner;
-                k[0] = x; k[1] = y; k[2] = z;
-                n = (size_t)z * stride[2] + (size_t)y * stride[1] + (size_t)x * stride[0];
+    /* the samples' max: the bound where no axis is cut, else a cap */
+    for (k = a[2]; k <= b[2]; ++k)
+        for (j = a[1]; j <= b[1]; ++j)
+            for (i = a[0]; i <= b[0]; ++i) {
+                size_t n = (size_t)k * stride[2] + (size_t)j * stride[1] + (size_t)i * stride[0];
                 for (c = 0; c < g->channels; ++c) samples = fmax(samples, g->data[n + (size_t)c]);
-                for (ax = 0; ax < 3; ++ax) {
-                    const int lo_k = ax == 0 ? a[0] : ax == 1 ? a[1] : a[2];
-                    const int hi_k = ax == 0 ? b[0] : ax == 1 ? b[1] : b[2];
-                    if (k[ax] == lo_k) { idx[ax] = cut[ax].i0[0]; w[ax] = cut[ax].t[0]; }
-                    else if (k[ax] == hi_k) { idx[ax] = cut[ax].i0[1]; w[ax] = cut[ax].t[1]; }
-                    else { idx[ax] = k[ax] > dim[ax] - 2 ? dim[ax] - 2 : k[ax]; w[ax] = (double)(k[ax] - idx[ax]); }
-                }
+            }
+    if (!any_cut) return samples;
+    for (k = 0; k < pts[2].count; ++k)
+        for (j = 0; j < pts[1].count; ++j)
+            for (i = 0; i < pts[0].count; ++i) {
+                int idx[3];
+                double w[3];
+                size_t n;
+                rrv__grid_axis_point(&pts[0], i, &idx[0], &w[0]);
+                rrv__grid_axis_point(&pts[1], j, &idx[1], &w[1]);
+                rrv__grid_axis_point(&pts[2], k, &idx[2], &w[2]);
                 n = (size_t)idx[2] * stride[2] + (size_t)idx[1] * stride[1] + (size_t)idx[0] * stride[0];
                 for (c = 0; c < g->channels; ++c) {
                     double sum = 0;
@@ -2231,14 +2250,13 @@ static double rrv__grid_bound(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, const
                         }
                         if (weight > 0) sum += weight * g->data[at];
                     }
-                    v = fmax(v, sum);
+                    best = fmax(best, sum);
                 }
-                corners = fmax(corners, v);
             }
     /* The lookups round too (their fractions carry the error of a position
        times the grid's resolution): a margin of 1e-9 of the samples covers
        that, and the samples' max stays a bound in any case. */
-    return fmin(samples, corners + 1e-9 * samples);
+    return fmin(samples, best + 1e-9 * samples);
 }
 
 /* An upper bound of a non-negative field over a box (the majorant grid's cell). */
