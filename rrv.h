@@ -3330,9 +3330,10 @@ static void rrv__majorant_slice(void *ctx, int z)
    Normally the box is cut into rrv__auto_cells cells an axis. Where one cell
    could hold an optical depth above 64 (a voxel of 1e8 in an empty grid),
    null collisions around the large values swamp the walks through it, so
-   the cells get finer: at least 4 times as many (fields without voxels),
-   and on a density grid whole parts of its voxels, 4 times the automatic
-   count or the voxels if finer, at most 256 (or max_bake_samples) an axis.
+   the cells get finer: 4 times as many for fields without voxels; on a
+   density grid, its voxels, each split into equal parts where that makes
+   fewer than 16 cells across the box; at most 256 (or max_bake_samples)
+   an axis.
    Cells on the voxels matter as much as their size: the bound over a part
    of a voxel is exact (rrv__grid_bound), but a cell across a voxel's face
    or the grid's own face, beyond which the density drops to 0, bounds the
@@ -3366,7 +3367,8 @@ static void rrv__majorant_lattice(const rrv_scene *scene, const rrv_medium *m, i
                 const rrv_grid *d = &density->grid;
                 int voxels = (a == 0 ? d->nx : a == 1 ? d->ny : d->nz) - 1;
                 double glo = rrv__axis(d->lo, a), voxel = (rrv__axis(d->hi, a) - glo) / voxels;
-                int parts = (int)rrv__clamp(ceil(voxel * target / extent - 1e-9), 1.0, (double)cap);
+                /* voxels wider than a 16th of the box are split */
+                int parts = (int)rrv__clamp(ceil(voxel * (cap < 16 ? cap : 16) / extent - 1e-9), 1.0, (double)cap);
                 if (!refracts) {
                     /* the fewest parts that still fit under the cap */
                     for (; parts >= 1; --parts) {

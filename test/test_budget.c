@@ -130,7 +130,7 @@ static void test_majorant_bounds_density_everywhere(void)
 static void test_majorant_of_a_coarse_grid_is_tight(void)
 {
     /* A 2^3 grid of 1e10 in one corner, 0 elsewhere, filling the medium:
-       16 cells an axis (4 times the automatic 4), each bounding the
+       its one voxel split into 16 cells an axis, each bounding the
        trilinear field by its value at the cell's corner nearest the hot
        one. The cell at the far corner gets 1e10 (1/16)^3; the max of the
        samples (the old bound) gave it 1e10. */

@@ -527,8 +527,8 @@ static void test_tracking_walks_are_bounded(void)
 static void test_majorant_follows_large_voxels(void)
 {
     /* One sample of 1e8 in an empty 8^3 grid: the majorant cells follow the
-       voxels, each split in 3 (21 an axis, at least 4 times the automatic
-       4), and only the 6^3 cells of the 2^3 voxels around the sample carry
+       voxels, each split in 3 (21 an axis: at least 16 across the box),
+       and only the 6^3 cells of the 2^3 voxels around the sample carry
        it. With the default 4^3 cells, each two voxels wide and widened by
        the rounding of their corners, rays through 64 voxels of nothing saw
        a majorant of 1e8: ~1e7 null collisions each, 1 s a sample. */
