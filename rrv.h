@@ -3342,7 +3342,7 @@ static void rrv__majorant_slice(void *ctx, int z)
    grid's faces, so the first and last may reach past the medium's box;
    a refractive medium keeps its cells on its box, where the comb's spacing
    (rrv__rate_distance) ends its walk. */
-static void rrv__majorant_lattice(const rrv_scene *scene, const rrv_medium *m, int refracts,
+static void rrv__majorant_lattice(const rrv_scene *scene, const rrv_medium *m, int refracts, int refine,
                                   struct rrv__majorant_grid *g)
 {
     const rrv_field *density = rrv__field_of(m, RRV__DENSITY);
@@ -3357,7 +3357,7 @@ static void rrv__majorant_lattice(const rrv_scene *scene, const rrv_medium *m, i
         hi[a] = rrv__axis(m->hi, a);
         cell[a] = (hi[a] - lo[a]) / g->n[a];
     }
-    if (forced <= 0 && rrv__field_bound(density, m->lo, m->hi) * g->sigma_t_max *
+    if (refine && forced <= 0 && rrv__field_bound(density, m->lo, m->hi) * g->sigma_t_max *
                                rrv__length(rrv__v3(cell[0], cell[1], cell[2])) > 64.0) {
         rrv_vec3 ext = rrv__sub(m->hi, m->lo);
         for (a = 0; a < 3; ++a) {
@@ -3427,8 +3427,17 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
         if (res != RRV_OK) return res;
     }
     for (x = 0; x < 3; ++x) g->sigma_t_max = rrv__maxd(g->sigma_t_max, (m->sigma_a[x] + m->sigma_s[x]) * m->scale);
-    rrv__majorant_lattice(scene, m, refracts, g);
+    rrv__majorant_lattice(scene, m, refracts, 1, g);
     cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
+    {
+        /* finer cells save work, so they must not cost a refusal: above
+           the grid limit the medium keeps the automatic ones */
+        size_t limit = scene->max_grid_bytes ? scene->max_grid_bytes : RRV_DEFAULT_MAX_GRID_BYTES;
+        if (cells > limit / (sizeof(float) * (refracts ? 2 : 1))) {
+            rrv__majorant_lattice(scene, m, refracts, 0, g);
+            cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
+        }
+    }
     {
         rrv_result res = rrv__check_built_grid(scene, m, "majorant grid", cells, sizeof(float) * (refracts ? 2 : 1), err);
         if (res != RRV_OK) return res;

@@ -153,6 +153,22 @@ static void test_majorant_of_a_coarse_grid_is_tight(void)
     rrv_scene_free(s);
 }
 
+static void test_finer_cells_never_cost_a_refusal(void)
+{
+    /* The same grid under a grid limit of 4 KiB: 16^3 cells (16 KiB) would
+       break it, so the medium keeps the automatic 4^3 and still loads. */
+    rrv_scene *s = tb_scene(4, 4);
+    rrv_error err;
+    rrv_medium *m = tb_medium(s, rrv__v3(0, 0, 0), rrv__v3(1, 1, 1), 0.5, 0.5);
+    float *v = set_grid(m, 2, 2, 2, m->lo, m->hi);
+    v[0] = 1e10f;
+    s->max_grid_bytes = 4096;
+    CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+    CHECKF(m->majorant->n[0] == 4 && m->majorant->n[1] == 4 && m->majorant->n[2] == 4, "%d x %d x %d cells",
+           m->majorant->n[0], m->majorant->n[1], m->majorant->n[2]);
+    rrv_scene_free(s);
+}
+
 /* Mean and standard error of a batch of estimates. */
 typedef struct tally { double sum, sum2; long n; } tally;
 static void tally_add(tally *t, double x) { t->sum += x; t->sum2 += x * x; t->n++; }
@@ -277,6 +293,7 @@ int main(void)
     (void)tb_blobs; /* scene_builder.h's, unused here */
     RUN(test_majorant_bounds_density_everywhere);
     RUN(test_majorant_of_a_coarse_grid_is_tight);
+    RUN(test_finer_cells_never_cost_a_refusal);
     RUN(test_tracking_through_a_coarse_grid_is_unbiased);
     RUN(test_hostile_coarse_grids_take_bounded_work);
     return CHECK_EXIT_CODE();
