@@ -59,8 +59,14 @@ static void test_majorant_bounds_density_everywhere(void)
        grid's box overlapping the medium's anyhow; a quarter refract (their
        cells stay on the medium's box), a quarter force the cell count, a
        quarter cap it as the fuzzers do. At 4000 points each, the density
-       must never exceed its cell's bound: no tolerance, the bound carries
-       its own margin for rounding. */
+       must never exceed its cell's bound by more than two known slivers:
+       the lookup's own rounding (trilinear weights in double put a value a
+       few ulps above the sample it equals, and where a cell spans several
+       voxels its bound is that sample, unpadded, as it always was: 1e-15
+       allows 4 ulps), and rrv__grid_span's rule that a cell reaching less
+       than 1e-9 of a voxel into a neighbour does not take its samples (a
+       point on a cell's face whose lookup rounds into the next voxel sees
+       a fraction ~1e-15 of a sample there: 1e-9 of the grid's peak). */
     rrv__rng rng;
     int trial, violations = 0, checked = 0, refused = 0, refined = 0;
     rrv__rng_seed(&rng, 11, 0, 0);
@@ -75,7 +81,7 @@ static void test_majorant_bounds_density_everywhere(void)
         int nx = 2 + (int)(rrv__uniform(&rng) * 4), ny = 2 + (int)(rrv__uniform(&rng) * 4);
         int nz = 2 + (int)(rrv__uniform(&rng) * 4), i, count = nx * ny * nz, kind = trial % 4;
         float *v;
-        double peak = 0, limit;
+        double peak = 0, limit, grid_peak;
         const struct rrv__majorant_grid *g;
         glo = rrv__v3(lo.x + ext.x * uniform_in(&rng, -0.5, 0.6), lo.y + ext.y * uniform_in(&rng, -0.5, 0.6),
                       lo.z + ext.z * uniform_in(&rng, -0.5, 0.6));
@@ -89,6 +95,7 @@ static void test_majorant_bounds_density_everywhere(void)
         limit = 1e11 / rrv__length(ext);
         if (peak > limit)
             for (i = 0; i < count; ++i) v[i] = (float)(v[i] * (limit / peak));
+        for (grid_peak = 0, i = 0; i < count; ++i) grid_peak = fmax(grid_peak, v[i]);
         if (kind == 1) {
             m->ior.kind = RRV_FIELD_SLAB;
             m->ior.base = 0.01;
@@ -111,9 +118,9 @@ static void test_majorant_bounds_density_everywhere(void)
             int cell[3];
             size_t c = rrv__majorant_cell(g, p, cell);
             double density = rrv__field_eval(&m->density, p, 0, 0.0);
-            if (!(density <= g->density_max[c])) {
+            if (!(density <= g->density_max[c] * (1 + 1e-15) + 1e-9 * grid_peak)) {
                 if (violations < 5)
-                    printf("  trial %d: density %.9g at (%.17g %.17g %.17g) above its cell's bound %.9g\n", trial,
+                    printf("  trial %d: density %.17g at (%.17g %.17g %.17g) above its cell's bound %.17g\n", trial,
                            density, p.x, p.y, p.z, (double)g->density_max[c]);
                 ++violations;
             }
