@@ -3376,7 +3376,7 @@ static void rrv__majorant_lattice(const rrv_scene *scene, const rrv_medium *m, i
                 /* voxels wider than a 16th of the box are split */
                 int parts = (int)rrv__clamp(ceil(voxel * (cap < 16 ? cap : 16) / extent - 1e-9), 1.0, (double)cap);
                 if (!refracts) {
-                    /* the fewest parts that still fit under the cap */
+                    /* as many of those parts as fit under the cap */
                     for (; parts >= 1; --parts) {
                         double c = voxel / parts, first = glo - ceil((glo - mlo) / c - 1e-9) * c;
                         double count = ceil((mlo + extent - first) / c - 1e-9);
