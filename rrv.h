@@ -247,8 +247,14 @@
      summary line prints the count. A sample above RRV_MAX_SAMPLE = 1e30 is
      discarded as non-finite; pixel sums saturate at FLT_MAX. To keep cuts
      rare, majorant cells follow the density voxels where a cell would hold
-     an optical depth above 64, and RK4 halves steps that span a feature of
-     the IOR.
+     an optical depth above 64 (split into equal parts where fewer than 16
+     would cross the box, each bounded exactly; beside a grid's faces the
+     cells bound 0), and RK4 halves steps that span a feature of the IOR.
+     What is left is heavy-tailed: a path that scatters in the thin layer
+     where a grid's density rises from 0 pays null collisions to leave it,
+     about (cell size) x sqrt(2 x slope of the extinction) of them, so a
+     2^3 grid of 7e10 on one face in a 2 m box takes ~3e5 events a sample
+     at 16 cells an axis (test/test_budget.c).
 
    USAGE
      In exactly one C file:
@@ -1584,8 +1590,10 @@ static void rrv__bvh_split(rrv__bvh_build *b, int node_index, int first, int cou
         mid = first;
         for (i = first; i < first + count; ++i) {
             int p = b->prims[i];
-            int bin = (int)(RRV__BVH_BINS * (rrv__axis(b->centroids[p], best_axis) - cmin) / extent);
-            if (bin >= RRV__BVH_BINS) bin = RRV__BVH_BINS - 1;
+            /* the binning's own expression: times the bins after the
+               division, or a span near DBL_MAX overflows to inf */
+            double f = RRV__BVH_BINS * ((rrv__axis(b->centroids[p], best_axis) - cmin) / extent);
+            int bin = !(f > 0) ? 0 : f >= RRV__BVH_BINS ? RRV__BVH_BINS - 1 : (int)f;
             if (bin < best_bin) { b->prims[i] = b->prims[mid]; b->prims[mid] = p; mid++; }
         }
     }
@@ -2196,6 +2204,126 @@ static int rrv__grid_span(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, int a[3],
     return 1;
 }
 
+/* Whether the box reaches into the grid's box by more than 1e-9 of a voxel
+   on every axis (the sliver rule of rrv__grid_span, here for the grid's own
+   faces): a majorant cell just outside a grid whose faces it shares would
+   otherwise take the density on the face, and a ray through that cell,
+   where the density is 0, pays null collisions at that rate. */
+static int rrv__grid_reaches(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi)
+{
+    int a;
+    for (a = 0; a < 3; ++a) {
+        double glo = rrv__axis(g->lo, a), ghi = rrv__axis(g->hi, a);
+        int voxels = (a == 0 ? g->nx : a == 1 ? g->ny : g->nz) - 1;
+        double overlap = rrv__mind(rrv__axis(hi, a), ghi) - rrv__maxd(rrv__axis(lo, a), glo);
+        if (!(overlap > 1e-9 * (ghi - glo) / voxels)) return 0;
+    }
+    return 1;
+}
+
+/* The points of one axis of a grid at which rrv__grid_bound evaluates the
+   field, as sample index i0 and fraction t of the way to sample i0 + 1:
+   where the box lies within one voxel along the axis, the two points where
+   its faces cut it; else every sample plane of its span. */
+typedef struct rrv__grid_axis_points {
+    int count, first, last_index;
+    int cut_i0[2];
+    double cut_t[2];
+} rrv__grid_axis_points;
+
+static void rrv__grid_axis_point(const rrv__grid_axis_points *pts, int j, int *i0, double *t)
+{
+    if (pts->count == 2 && pts->cut_i0[0] >= 0) {
+        *i0 = pts->cut_i0[j];
+        *t = pts->cut_t[j];
+    } else {
+        int k = pts->first + j;
+        *i0 = k > pts->last_index ? pts->last_index : k;
+        *t = (double)(k - *i0);
+    }
+}
+
+/* An upper bound of a grid's (non-negative) trilinear field over the box,
+   whose span of samples [a, b] is known. Along an axis where the box
+   spans more than one voxel, the field (piecewise linear along it, with
+   knots at the sample planes) is bounded by its values on the span's
+   sample planes; where the box lies within one voxel, its max sits where
+   the box's faces cut the axis, and taking those two points instead makes
+   the bound exact. A box of more than a voxel on every axis (majorant
+   cells over a fine grid) is thus bounded by the max of its samples, as
+   always; a coarse grid under finer cells (a 2^3 grid of 1e10 in a
+   corner) gets each cell's own max rather than the corner's value, which
+   sent walks through the nearly empty rest into billions of null
+   collisions. Exact because the field is multilinear in each voxel: with
+   the other coordinates fixed, its max along each axis is at one of the
+   axis's points. */
+static double rrv__grid_bound(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, const int a[3], const int b[3])
+{
+    int dim[3], ax, i, j, k, c, corner, any_cut = 0;
+    size_t stride[3];
+    double samples = 0, best = 0;
+    rrv__grid_axis_points pts[3];
+    dim[0] = g->nx; dim[1] = g->ny; dim[2] = g->nz;
+    stride[0] = (size_t)g->channels;
+    stride[1] = stride[0] * (size_t)g->nx;
+    stride[2] = stride[1] * (size_t)g->ny;
+    for (ax = 0; ax < 3; ++ax) {
+        pts[ax].first = a[ax];
+        pts[ax].last_index = dim[ax] - 2;
+        pts[ax].count = b[ax] - a[ax] + 1;
+        pts[ax].cut_i0[0] = -1;
+        if (b[ax] - a[ax] == 1) {
+            double glo = rrv__axis(g->lo, ax), s = (dim[ax] - 1) / (rrv__axis(g->hi, ax) - glo);
+            double u[2];
+            int e;
+            u[0] = rrv__clamp((rrv__axis(lo, ax) - glo) * s, a[ax], b[ax]);
+            u[1] = rrv__clamp((rrv__axis(hi, ax) - glo) * s, a[ax], b[ax]);
+            for (e = 0; e < 2; ++e) {
+                pts[ax].cut_i0[e] = a[ax];
+                pts[ax].cut_t[e] = u[e] - a[ax];
+            }
+            any_cut = 1;
+        }
+    }
+    /* the samples' max: the bound where no axis is cut, else a cap */
+    for (k = a[2]; k <= b[2]; ++k)
+        for (j = a[1]; j <= b[1]; ++j)
+            for (i = a[0]; i <= b[0]; ++i) {
+                size_t n = (size_t)k * stride[2] + (size_t)j * stride[1] + (size_t)i * stride[0];
+                for (c = 0; c < g->channels; ++c) samples = fmax(samples, g->data[n + (size_t)c]);
+            }
+    if (!any_cut) return samples;
+    for (k = 0; k < pts[2].count; ++k)
+        for (j = 0; j < pts[1].count; ++j)
+            for (i = 0; i < pts[0].count; ++i) {
+                int idx[3];
+                double w[3];
+                size_t n;
+                rrv__grid_axis_point(&pts[0], i, &idx[0], &w[0]);
+                rrv__grid_axis_point(&pts[1], j, &idx[1], &w[1]);
+                rrv__grid_axis_point(&pts[2], k, &idx[2], &w[2]);
+                n = (size_t)idx[2] * stride[2] + (size_t)idx[1] * stride[1] + (size_t)idx[0] * stride[0];
+                for (c = 0; c < g->channels; ++c) {
+                    double sum = 0;
+                    for (corner = 0; corner < 8; ++corner) {
+                        double weight = 1;
+                        size_t at = n + (size_t)c;
+                        for (ax = 0; ax < 3; ++ax) {
+                            int up = (corner >> ax) & 1;
+                            weight *= up ? w[ax] : 1.0 - w[ax];
+                            if (up) at += stride[ax];
+                        }
+                        if (weight > 0) sum += weight * g->data[at];
+                    }
+                    best = fmax(best, sum);
+                }
+            }
+    /* The lookups round too (their fractions carry the error of a position
+       times the grid's resolution): a margin of 1e-9 of the samples covers
+       that, and the samples' max stays a bound in any case. */
+    return fmin(samples, best + 1e-9 * samples);
+}
+
 /* An upper bound of a non-negative field over a box (the majorant grid's cell). */
 static double rrv__field_bound(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
 {
@@ -2215,17 +2343,9 @@ static double rrv__field_bound(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
         return f->base + fmax(0.0, f->amplitude) * rrv__falloff_bound(&f->noise, lo, hi);
     case RRV_FIELD_GRID: {
         const rrv_grid *g = &f->grid;
-        double best = 0;
-        int a[3], b[3], x, y, z, c;
-        size_t n;
-        if (!rrv__grid_span(g, lo, hi, a, b)) return 0;
-        for (z = a[2]; z <= b[2]; ++z)
-            for (y = a[1]; y <= b[1]; ++y)
-                for (x = a[0]; x <= b[0]; ++x) {
-                    n = (((size_t)z * (size_t)g->ny + (size_t)y) * (size_t)g->nx + (size_t)x) * (size_t)g->channels;
-                    for (c = 0; c < g->channels; ++c) best = fmax(best, g->data[n + (size_t)c]);
-                }
-        return best;
+        int a[3], b[3];
+        if (!rrv__grid_reaches(g, lo, hi) || !rrv__grid_span(g, lo, hi, a, b)) return 0;
+        return rrv__grid_bound(g, lo, hi, a, b);
     }
     case RRV_FIELD_NANOVDB: return fmax(0.0, rrv__nv_bound(&f->nanovdb, lo, hi));
     default: return 0;
@@ -3537,7 +3657,7 @@ static void rrv__majorant_slice(void *ctx, int z)
     int x, y;
     for (y = 0; y < g->n[1]; ++y)
         for (x = 0; x < g->n[0]; ++x, ++c) {
-            rrv_vec3 lo = rrv__v3(m->lo.x + x * g->cell.x, m->lo.y + y * g->cell.y, m->lo.z + z * g->cell.z);
+            rrv_vec3 lo = rrv__v3(g->lo.x + x * g->cell.x, g->lo.y + y * g->cell.y, g->lo.z + z * g->cell.z);
             rrv_vec3 hi = rrv__add(lo, g->cell);
             double d = rrv__mind(rrv__field_bound(rrv__field_of(m, RRV__DENSITY), lo, hi), FLT_MAX);
             /* Round the float bound up so it stays a bound (the loader
@@ -3550,12 +3670,88 @@ static void rrv__majorant_slice(void *ctx, int z)
         }
 }
 
+/* Where the majorant cells lie: their count per axis, g->lo (a corner of
+   the first cell) and the cell size; together they cover the medium's box.
+   Normally the box is cut into rrv__auto_cells cells an axis. Where one cell
+   could hold an optical depth above 64 (a voxel of 1e8 in an empty grid),
+   null collisions around the large values swamp the walks through it, so
+   the cells get finer: 4 times as many for fields without voxels; on a
+   density grid, its voxels, each split into equal parts where that makes
+   fewer than 16 cells across the box; at most 256 (or max_bake_samples)
+   an axis.
+   Cells on the voxels matter as much as their size: the bound over a part
+   of a voxel is exact (rrv__grid_bound), but a cell across a voxel's face
+   or the grid's own face, beyond which the density drops to 0, bounds the
+   empty side by the full side, and a ray along the face pays a null
+   collision per 1/majorant of its length. Those cells start from the
+   grid's faces, so the first and last may reach past the medium's box;
+   a refractive medium keeps its cells on its box, where the comb's spacing
+   (rrv__rate_distance) ends its walk. */
+static void rrv__majorant_lattice(const rrv_scene *scene, const rrv_medium *m, int refracts, int refine,
+                                  struct rrv__majorant_grid *g)
+{
+    const rrv_field *density = rrv__field_of(m, RRV__DENSITY);
+    int forced = scene->settings.majorant_cells, cap = 256, a;
+    double lo[3], hi[3], cell[3];
+    if (scene->settings.max_bake_samples > 0 && scene->settings.max_bake_samples < cap)
+        cap = scene->settings.max_bake_samples;
+    for (a = 0; a < 3; ++a) {
+        g->n[a] = forced > 0 ? (forced > cap ? cap : forced) : rrv__auto_cells(m, a);
+        if (g->n[a] > cap) g->n[a] = cap;
+        lo[a] = rrv__axis(m->lo, a);
+        hi[a] = rrv__axis(m->hi, a);
+        cell[a] = (hi[a] - lo[a]) / g->n[a];
+    }
+    if (refine && forced <= 0 && rrv__field_bound(density, m->lo, m->hi) * g->sigma_t_max *
+                               rrv__length(rrv__v3(cell[0], cell[1], cell[2])) > 64.0) {
+        rrv_vec3 ext = rrv__sub(m->hi, m->lo);
+        for (a = 0; a < 3; ++a) {
+            double mlo = rrv__axis(m->lo, a), extent = rrv__axis(ext, a);
+            int target = 4 * g->n[a] > cap ? cap : 4 * g->n[a], n = target;
+            if (density->kind == RRV_FIELD_GRID) {
+                const rrv_grid *d = &density->grid;
+                int voxels = (a == 0 ? d->nx : a == 1 ? d->ny : d->nz) - 1;
+                double glo = rrv__axis(d->lo, a), voxel = (rrv__axis(d->hi, a) - glo) / voxels;
+                /* voxels wider than a 16th of the box are split */
+                int parts = (int)rrv__clamp(ceil(voxel * (cap < 16 ? cap : 16) / extent - 1e-9), 1.0, (double)cap);
+                if (!refracts) {
+                    /* as many of those parts as fit under the cap */
+                    for (; parts >= 1; --parts) {
+                        double c = voxel / parts, first = glo - ceil((glo - mlo) / c - 1e-9) * c;
+                        double count = ceil((mlo + extent - first) / c - 1e-9);
+                        if (count <= cap) {
+                            if (count > g->n[a]) {
+                                g->n[a] = (int)count;
+                                lo[a] = first;
+                                hi[a] = first + count * c;
+                                cell[a] = c;
+                            }
+                            break;
+                        }
+                    }
+                    if (parts >= 1) continue;
+                    parts = 1;
+                }
+                /* on the medium's box: as many cells as the parts make */
+                n = voxels > cap / parts ? cap : voxels * parts;
+            }
+            if (n > g->n[a]) {
+                g->n[a] = n;
+                cell[a] = extent / n;
+            }
+        }
+    }
+    g->lo = rrv__v3(lo[0], lo[1], lo[2]);
+    g->hi = rrv__v3(hi[0], hi[1], hi[2]);
+    g->cell = rrv__v3(cell[0], cell[1], cell[2]);
+    g->inv_cell = rrv__v3(1.0 / g->cell.x, 1.0 / g->cell.y, 1.0 / g->cell.z);
+}
+
 static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, size_t *baked_bytes, rrv_error *err)
 {
     struct rrv__majorant_grid *g;
     size_t cells, c;
     int x, refracts = rrv__medium_refracts(m);
-    int forced = scene->settings.majorant_cells;
     g = (struct rrv__majorant_grid *)RRV_MALLOC(sizeof *g);
     if (!g) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
     memset(g, 0, sizeof *g);
@@ -3575,35 +3771,18 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
         rrv_result res = rrv__bake_refraction(scene, m, baked_bytes, err);
         if (res != RRV_OK) return res;
     }
-    for (x = 0; x < 3; ++x) g->n[x] = forced > 0 ? (forced > 256 ? 256 : forced) : rrv__auto_cells(m, x);
     for (x = 0; x < 3; ++x) g->sigma_t_max = rrv__maxd(g->sigma_t_max, (m->sigma_a[x] + m->sigma_s[x]) * m->scale);
-    if (forced <= 0) {
-        /* Where one cell could hold an optical depth above 64 (a voxel of
-           1e8 in an empty grid), null collisions around the large values
-           swamp every walk through the cell: the cells then follow the
-           density grid's voxels, where the bound is exact (at most 256 an
-           axis; a field without voxels gets 4 times the cells). */
-        const rrv_field *density = rrv__field_of(m, RRV__DENSITY);
-        rrv_vec3 ext = rrv__sub(m->hi, m->lo);
-        double cell = rrv__length(rrv__v3(ext.x / g->n[0], ext.y / g->n[1], ext.z / g->n[2]));
-        double peak = rrv__field_bound(density, m->lo, m->hi) * g->sigma_t_max;
-        if (peak * cell > 64.0) {
-            for (x = 0; x < 3; ++x) {
-                int voxels = density->kind != RRV_FIELD_GRID ? 4 * g->n[x]
-                           : (x == 0 ? density->grid.nx : x == 1 ? density->grid.ny : density->grid.nz) - 1;
-                voxels = voxels > 256 ? 256 : voxels;
-                if (voxels > g->n[x]) g->n[x] = voxels;
-            }
+    rrv__majorant_lattice(scene, m, refracts, 1, g);
+    cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
+    {
+        /* finer cells save work, so they must not cost a refusal: above
+           the grid limit the medium keeps the automatic ones */
+        size_t limit = scene->max_grid_bytes ? scene->max_grid_bytes : RRV_DEFAULT_MAX_GRID_BYTES;
+        if (cells > limit / (sizeof(float) * (refracts ? 2 : 1))) {
+            rrv__majorant_lattice(scene, m, refracts, 0, g);
+            cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
         }
     }
-    for (x = 0; x < 3; ++x)
-        if (scene->settings.max_bake_samples > 0 && g->n[x] > scene->settings.max_bake_samples)
-            g->n[x] = scene->settings.max_bake_samples;
-    cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
-    g->lo = m->lo;
-    g->hi = m->hi;
-    g->cell = rrv__v3((m->hi.x - m->lo.x) / g->n[0], (m->hi.y - m->lo.y) / g->n[1], (m->hi.z - m->lo.z) / g->n[2]);
-    g->inv_cell = rrv__v3(1.0 / g->cell.x, 1.0 / g->cell.y, 1.0 / g->cell.z);
     {
         rrv_result res = rrv__check_built_grid(scene, m, "majorant grid", cells, sizeof(float) * (refracts ? 2 : 1), err);
         if (res != RRV_OK) return res;

@@ -527,7 +527,8 @@ static void test_tracking_walks_are_bounded(void)
 static void test_majorant_follows_large_voxels(void)
 {
     /* One sample of 1e8 in an empty 8^3 grid: the majorant cells follow the
-       voxels (7 an axis), and only the 2^3 cells around the sample carry
+       voxels, each split in 3 (21 an axis: at least 16 across the box),
+       and only the 6^3 cells of the 2^3 voxels around the sample carry
        it. With the default 4^3 cells, each two voxels wide and widened by
        the rounding of their corners, rays through 64 voxels of nothing saw
        a majorant of 1e8: ~1e7 null collisions each, 1 s a sample. */
@@ -553,12 +554,12 @@ static void test_majorant_follows_large_voxels(void)
     s->settings.max_depth = 8;
     CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
     mg = m->majorant;
-    CHECKF(mg->n[0] == 7 && mg->n[1] == 7 && mg->n[2] == 7, "%d x %d x %d cells", mg->n[0], mg->n[1], mg->n[2]);
+    CHECKF(mg->n[0] == 21 && mg->n[1] == 21 && mg->n[2] == 21, "%d x %d x %d cells", mg->n[0], mg->n[1], mg->n[2]);
     for (z = 0; z < mg->n[2]; ++z)
         for (y = 0; y < mg->n[1]; ++y)
             for (x = 0; x < mg->n[0]; ++x)
                 loaded += mg->density_max[(z * mg->n[1] + y) * mg->n[0] + x] > 0;
-    CHECKF(loaded == 8, "%d cells carry the sample", loaded);
+    CHECKF(loaded == 216, "%d cells carry the sample", loaded);
     memset(&st, 0, sizeof st);
     rrv_render_rect(s, 0, 0, 8, 8, 0, 16, img, 8, &st, NULL);
     /* measured 4.3e3 events a sample here (with 4^3 cells: 3.3e5, and 80
