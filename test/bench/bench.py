@@ -320,7 +320,7 @@ def main():
     t0 = time.time()
     machine(b)
     refs = b.refs
-    for scene in ("plume", "luneburg", "fire", "fisheye"):
+    for scene in ("plume", "luneburg", "fire", "fisheye", "lens_caustic", "fire_caustic", "haze"):
         if scene not in refs or not os.path.exists(os.path.join(ROOT, "test", "ref", scene + ".exr")):
             sys.exit("bench: no reference for %s: run make refs" % scene)
 
@@ -339,6 +339,17 @@ def main():
             ("refractive tol 0.05, nee straight", ["--integrator", "refractive", "--bend-tolerance", "0.05",
                                                    "--nee", "straight"])]
     b.sweep("fire", fire, (2, 8, 32) if quick else (2, 8, 32, 128))
+    # curved next-event estimation against forward paths (none) and straight
+    # shadow rays on the two caustic scenes
+    lens = [("refractive comb, nee none", ["--integrator", "refractive", "--nee", "none"]),
+            ("refractive comb, nee straight", ["--integrator", "refractive", "--nee", "straight"]),
+            ("refractive comb, nee manifold", ["--integrator", "refractive", "--nee", "manifold"]),
+            ("eikonal RK4, nee shoot", ["--integrator", "eikonal", "--nee", "shoot"])]
+    b.sweep("lens_caustic", lens, (1, 4, 16) if quick else (1, 4, 16, 64))
+    fcaustic = [("eikonal RK4 h=0.05, nee none", ["--integrator", "eikonal", "--nee", "none"]),
+                ("eikonal RK4 h=0.05, nee straight", ["--integrator", "eikonal", "--nee", "straight"]),
+                ("eikonal RK4 h=0.05, nee shoot", ["--integrator", "eikonal", "--nee", "shoot"])]
+    b.sweep("fire_caustic", fcaustic, (1, 4) if quick else (1, 4, 16))
     if not quick:
         b.sweep("smoke", [("classic", ["--integrator", "classic"])], (1, 4, 16, 64))
         b.sweep("fisheye", [("refractive comb, nee none", ["--integrator", "refractive", "--nee", "none"]),
@@ -359,7 +370,7 @@ def main():
     b.setting_sweep("Next-event estimation (eikonal RK4, h = 0.05)", "luneburg", 4 if quick else 16,
                     [("nee %s" % n, ["--integrator", "eikonal", "--step", "0.05", "--nee", n])
                      for n in ("none", "straight", "shoot")])
-    b.overhead(("fire",) if quick else ("fire", "blast"), 16 if quick else 64)
+    b.overhead(("fire", "haze") if quick else ("fire", "haze", "blast"), 16 if quick else 64)
     if not quick:
         b.threads()
         b.majorant_and_memory()
