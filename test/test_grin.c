@@ -496,6 +496,114 @@ static void test_blob_born(void)
     blob_run(RRV_INTEGRATOR_REFRACTIVE, RRV_REFRACTION_POISSON, 1000, 0.01, 32, 0.03, "poisson(1000)");
 }
 
+/* ---- f. leapfrog's tangent map ------------------------------------------------------ */
+
+/* Determinant of a 6x6 matrix by Gaussian elimination with partial pivoting. */
+static double det6(double a[6][6])
+{
+    double det = 1;
+    int i, j, k;
+    for (i = 0; i < 6; ++i) {
+        int pivot = i;
+        for (j = i + 1; j < 6; ++j)
+            if (fabs(a[j][i]) > fabs(a[pivot][i])) pivot = j;
+        if (pivot != i) {
+            for (k = 0; k < 6; ++k) {
+                double t = a[i][k];
+                a[i][k] = a[pivot][k];
+                a[pivot][k] = t;
+            }
+            det = -det;
+        }
+        det *= a[i][i];
+        if (a[i][i] == 0) return 0;
+        for (j = i + 1; j < 6; ++j) {
+            double f = a[j][i] / a[i][i];
+            for (k = i; k < 6; ++k) a[j][k] -= f * a[i][k];
+        }
+    }
+    return det;
+}
+
+/* The leapfrog kernel the eikonal integrator steps with, as a map of
+   (x, v) with its step h and eta0 held fixed, preserves phase-space volume:
+   the determinant of its 6x6 tangent map (central differences, step 1e-6,
+   whose truncation error is ~1e-12 for these smooth fields) is 1 within
+   1e-7, at random points and directions inside the Luneburg lens and in a
+   Gaussian blob, steps 0.01 to 0.2. The same map with eta0 re-taken at the
+   perturbed start (the renderer's arc-length step) is not: its determinant
+   is 1 - h (grad eta . d) / eta to first order, which the test also checks
+   (to 10 % of the first-order term plus 1e-6, the O(h^2) rest), so the
+   first test would see a kernel that lost the fixed-sigma form. */
+static void test_leapfrog_tangent_map_volume(void)
+{
+    rrv_scene *scenes[2];
+    rrv__rng rng;
+    int si, k, worst_k = -1;
+    double worst = 0, worst_arc = 0;
+    scenes[0] = luneburg_scene();
+    scenes[1] = tb_scene(4, 4);
+    {
+        rrv_medium *m = refractive_medium(scenes[1], rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), RRV_FIELD_BLOBS);
+        m->ior.blob_count = 1;
+        m->ior.blobs = (rrv_blob *)RRV_MALLOC(sizeof(rrv_blob));
+        m->ior.blobs[0].center = rrv__v3(0.1, 0, 0);
+        m->ior.blobs[0].radius = 0.3;
+        m->ior.blobs[0].weight = 0.2;
+        prepare(scenes[1]);
+    }
+    rrv__rng_seed(&rng, 77, 0, 0);
+    for (si = 0; si < 2; ++si) {
+        const rrv_scene *s = scenes[si];
+        for (k = 0; k < 40; ++k) {
+            static const double steps[4] = {0.01, 0.05, 0.1, 0.2};
+            const double h = steps[k % 4], e = 1e-6;
+            rrv_vec3 x = rrv__v3(1.2 * rrv__uniform(&rng) - 0.6, 1.2 * rrv__uniform(&rng) - 0.6,
+                                 1.2 * rrv__uniform(&rng) - 0.6);
+            rrv_vec3 d = rrv__sample_uniform_sphere(rrv__uniform(&rng), rrv__uniform(&rng)), g;
+            double eta0 = rrv__eta_gradient(s, x, &g), z0[6], J[6][6], Ja[6][6], det, det_arc, first;
+            int a, b, arc;
+            z0[0] = x.x; z0[1] = x.y; z0[2] = x.z;
+            z0[3] = eta0 * d.x; z0[4] = eta0 * d.y; z0[5] = eta0 * d.z;
+            for (arc = 0; arc < 2; ++arc)
+                for (b = 0; b < 6; ++b) {
+                    double out[2][6];
+                    int side;
+                    for (side = 0; side < 2; ++side) {
+                        double z[6];
+                        rrv_vec3 xs, vs, x1, v1, gs;
+                        double es;
+                        memcpy(z, z0, sizeof z);
+                        z[b] += side ? e : -e;
+                        xs = rrv__v3(z[0], z[1], z[2]);
+                        vs = rrv__v3(z[3], z[4], z[5]);
+                        es = rrv__eta_gradient(s, xs, &gs);
+                        rrv__leapfrog_kdk(s, h, arc ? es : eta0, gs, xs, vs, &x1, &v1);
+                        out[side][0] = x1.x; out[side][1] = x1.y; out[side][2] = x1.z;
+                        out[side][3] = v1.x; out[side][4] = v1.y; out[side][5] = v1.z;
+                    }
+                    for (a = 0; a < 6; ++a) (arc ? Ja : J)[a][b] = (out[1][a] - out[0][a]) / (2 * e);
+                }
+            det = det6(J);
+            det_arc = det6(Ja);
+            first = h * rrv__dot(g, d) / eta0;
+            if (fabs(det - 1) > worst) {
+                worst = fabs(det - 1);
+                worst_k = k;
+            }
+            worst_arc = fmax(worst_arc, fabs(det_arc - (1 - first)) / (0.1 * fabs(first) + 1e-6));
+            CHECKF(fabs(det - 1) < 1e-7, "%s, point %d, h %g: det %.12f", si ? "blob" : "Luneburg", k, h, det);
+            CHECKF(fabs(det_arc - (1 - first)) < 0.1 * fabs(first) + 1e-6,
+                   "%s, point %d, h %g: arc-length step det %.9f, first order %.9f", si ? "blob" : "Luneburg", k, h,
+                   det_arc, 1 - first);
+        }
+    }
+    SAY("  leapfrog tangent map: worst |det - 1| %.1e (point %d); arc-length step within %.2f of its bound\n", worst,
+        worst_k, worst_arc);
+    rrv_scene_free(scenes[0]);
+    rrv_scene_free(scenes[1]);
+}
+
 /* ---- e. numerical stability of the Snell kick ---------------------------------------------- */
 
 static void test_refract_identity(void)
@@ -981,6 +1089,7 @@ int main(int argc, char **argv)
     RUN(test_luneburg_rk4);
     RUN(test_exits_never_stall);
     RUN(test_luneburg_leapfrog_order);
+    RUN(test_leapfrog_tangent_map_volume);
     RUN(test_luneburg_comb_default);
     RUN(test_luneburg_poisson);
     RUN(test_fisheye_rk4);
