@@ -110,8 +110,9 @@ class Bench:
         self.out("| method | spp | wall s | user+sys s | peak RSS MiB | MSE | rel. MSE | efficiency 1/(CPU s x MSE) |")
         self.out("|---|---|---|---|---|---|---|---|")
         cases = []
-        for label, args in methods:
-            for spp in spps:
+        for method in methods:
+            label, args = method[0], method[1]
+            for spp in (method[2] if len(method) > 2 else spps):
                 img, cmd = self.render_cmd(scene, spp, args)
                 cases.append((label, spp, img, cmd))
         res = timed([c[3] for c in cases], self.runs)
@@ -122,8 +123,8 @@ class Bench:
             self.out("| %s | %d | %.2f | %.2f | %.1f | %.3e | %.3e | %.3g |"
                      % (label, spp, wall, cpu, rss / 1024, mse, rel, 1 / (cpu * mse) if mse > 0 else float("inf")))
         self.out()
-        self.curves[scene] = [(label, curves[label]) for label, _ in methods]
-        for label, _ in methods:
+        self.curves[scene] = [(m[0], curves[m[0]]) for m in methods]
+        for label in [m[0] for m in methods]:
             pts = sorted(curves[label])
             self.summary_rows.append((scene, label, pts, floor))
 
@@ -341,15 +342,23 @@ def main():
     b.sweep("fire", fire, (2, 8, 32) if quick else (2, 8, 32, 128))
     # curved next-event estimation against forward paths (none) and straight
     # shadow rays on the two caustic scenes
-    lens = [("refractive comb, nee none", ["--integrator", "refractive", "--nee", "none"]),
-            ("refractive comb, nee straight", ["--integrator", "refractive", "--nee", "straight"]),
-            ("refractive comb, nee manifold", ["--integrator", "refractive", "--nee", "manifold"]),
-            ("eikonal RK4, nee shoot", ["--integrator", "eikonal", "--nee", "shoot"])]
-    b.sweep("lens_caustic", lens, (1, 4, 16) if quick else (1, 4, 16, 64))
-    fcaustic = [("eikonal RK4 h=0.05, nee none", ["--integrator", "eikonal", "--nee", "none"]),
-                ("eikonal RK4 h=0.05, nee straight", ["--integrator", "eikonal", "--nee", "straight"]),
-                ("eikonal RK4 h=0.05, nee shoot", ["--integrator", "eikonal", "--nee", "shoot"])]
-    b.sweep("fire_caustic", fcaustic, (1, 4) if quick else (1, 4, 16))
+    # (label, args, spps): each mode at the sample counts that give it about
+    # the same CPU times, so the curves overlap in time
+    lens = [("refractive comb, nee none", ["--integrator", "refractive", "--nee", "none"],
+             (16, 64, 256) if quick else (16, 64, 256, 1024)),
+            ("refractive comb, nee straight", ["--integrator", "refractive", "--nee", "straight"],
+             (4, 16) if quick else (4, 16, 64)),
+            ("refractive comb, nee manifold", ["--integrator", "refractive", "--nee", "manifold"],
+             (1, 2) if quick else (1, 4, 16)),
+            ("eikonal RK4, nee shoot", ["--integrator", "eikonal", "--nee", "shoot"],
+             (1, 4) if quick else (1, 4, 16))]
+    b.sweep("lens_caustic", lens, ())
+    fcaustic = [("eikonal RK4 h=0.05, nee none", ["--integrator", "eikonal", "--nee", "none"],
+                 (16, 64, 256) if quick else (64, 256, 1024)),
+                ("eikonal RK4 h=0.05, nee straight", ["--integrator", "eikonal", "--nee", "straight"], (4, 16)),
+                ("eikonal RK4 h=0.05, nee shoot", ["--integrator", "eikonal", "--nee", "shoot"],
+                 (1, 4) if quick else (1, 4, 16))]
+    b.sweep("fire_caustic", fcaustic, ())
     if not quick:
         b.sweep("smoke", [("classic", ["--integrator", "classic"])], (1, 4, 16, 64))
         b.sweep("fisheye", [("refractive comb, nee none", ["--integrator", "refractive", "--nee", "none"]),
