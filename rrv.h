@@ -3444,7 +3444,8 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
     it->with_refraction = with_refraction && g->grad_max != NULL;
     it->density_weight = 1.0;
     it->mu_eta_fixed = s->mu_eta;
-    it->inv_tolerance = 1.0 / s->bend_tolerance;
+    /* a division per walk, which delta tracking's walks (one a comb chord) need not pay */
+    it->inv_tolerance = it->with_refraction ? 1.0 / s->bend_tolerance : 0.0;
     it->t = t0;
     it->t_end = t1;
     it->done = 0;
@@ -4018,13 +4019,15 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
    1 / mu_eta when it is fixed, else from the majorant cells' gradient bounds
    (rrv__rate_distance). *medium is the refractive medium that holds x, the
    one whose field rrv__scene_refractivity would read there (NULL if none). */
-static double rrv__comb_spacing(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, const double inv_d[3], double tau,
-                                int *entering, const rrv_medium **medium)
+static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, rrv_vec3 x, rrv_vec3 d,
+                                const double inv_d[3], double tau, int *entering, const rrv_medium **medium)
 {
     int i;
     *entering = 0;
     for (i = scene->medium_count - 1; i >= 0; --i) {
-        const rrv_medium *m = &scene->media[i];
+        /* with a sole support, the search is its box alone */
+        const rrv_medium *m = b->sole_support ? b->sole_support : &scene->media[i];
+        if (b->sole_support) i = 0;
         if (!rrv__medium_refracts(m) || !rrv__inside_box(x, m->lo, m->hi)) continue;
         *medium = m;
         if (scene->settings.mu_eta > 0) return tau / scene->settings.mu_eta;
@@ -4054,8 +4057,12 @@ static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 
        order (measured), and it halves the field lookups per kick. medium,
        when given, is the one rrv__scene_refractivity would find at grad_at
        (the spacing's search found it), so the search is not repeated. */
-    double r_here = medium ? rrv__refractivity_gradient(medium, grad_at, scene->settings.ambient_ior - 1.0, &grad)
-                           : rrv__scene_refractivity(scene, grad_at, &grad);
+    const struct rrv__majorant_grid *mg = medium ? medium->majorant : NULL;
+    double r_here = mg && mg->refraction.data && !mg->cubic &&
+                            rrv__inside_box(grad_at, mg->refraction.lo, mg->refraction.hi)
+                        ? rrv__refraction_lookup(mg, grad_at, &grad)
+                    : medium ? rrv__refractivity_gradient(medium, grad_at, scene->settings.ambient_ior - 1.0, &grad)
+                             : rrv__scene_refractivity(scene, grad_at, &grad);
     double r_ahead = r_here + rrv__dot(grad, rrv__sub(rrv__madd(x, d, 0.5 * h), grad_at));
     d = rrv__normalize(rrv__madd(rrv__scale(d, 1.0 + b->r), grad, h_bar));
     b->r = r_ahead;
@@ -4189,7 +4196,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
         /* the first point a uniformly random fraction of a spacing ahead, so
            the comb does not alias with pixels */
         const rrv_medium *medium;
-        double h = rrv__comb_spacing(scene, o, *d, b->line_inv, 1.0 - rrv__uniform(rng), &b->entering, &medium);
+        double h = rrv__comb_spacing(scene, b, o, *d, b->line_inv, 1.0 - rrv__uniform(rng), &b->entering, &medium);
         rrv__comb_step(b, scene, o, d, h, &view, medium);
     }
 }
@@ -4212,7 +4219,7 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
                segment's start, so the comb does not alias with pixels */
             double tau = b->entering ? 1.0 - rrv__uniform(rng) : 1.0;
             const rrv_medium *medium;
-            double h = rrv__comb_spacing(scene, *o, *d, b->line_inv, tau, &b->entering, &medium);
+            double h = rrv__comb_spacing(scene, b, *o, *d, b->line_inv, tau, &b->entering, &medium);
             rrv__comb_step(b, scene, *o, d, h, &view, medium);
         } else {
             /* a kick that turned the chord out through a face it grazed:
