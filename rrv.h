@@ -3704,10 +3704,9 @@ static void rrv__view_face(rrv__support_view *v, double t, rrv_vec3 normal)
     if (t > 0 && t < v->t_face) { v->t_face = t; v->normal = normal; }
 }
 
-/* The reciprocals of a direction's components, which every cell walk and
-   box clip along a line needs: a comb chord computes them once and shares
-   them between its support test, its delta tracking and the next kick's
-   spacing (three sets a kick before). */
+/* The reciprocals of a direction's components, which every cell walk along
+   a line needs: a comb chord computes them once for its delta tracking's
+   walkers and the next kick's spacing walk (a set each before). */
 static void rrv__reciprocals(rrv_vec3 d, double inv[3])
 {
     inv[0] = 1.0 / d.x;
@@ -3715,11 +3714,12 @@ static void rrv__reciprocals(rrv_vec3 d, double inv[3])
     inv[2] = 1.0 / d.z;
 }
 
-/* rrv__look_along with the reciprocals of d given. The box clip is written
-   with arrays and products, not rrv__box_interval's per-axis selects and
-   divisions: it runs at every kick, where it was a sixth of the cost. */
-static void rrv__look_along_line(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, const double inv[3],
-                                 rrv__support_view *v)
+/* What a ray from o along d sees of the supports. The box clip is written
+   with arrays, not per-axis selects; it divides rather than multiplying by
+   the chord's reciprocals, which would move faces by an ulp and every
+   eikonal path with them (a statistical test of nee shoot that sits near
+   its bound then failed). */
+static void rrv__look_along(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, rrv__support_view *v)
 {
     const double os[3] = {o.x, o.y, o.z}, ds[3] = {d.x, d.y, d.z};
     int i;
@@ -3738,7 +3738,7 @@ static void rrv__look_along_line(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d,
             if (ds[a] == 0) {
                 missed |= os[a] < lo_box[a] || os[a] > hi_box[a];
             } else {
-                double ta = (lo_box[a] - os[a]) * inv[a], tb = (hi_box[a] - os[a]) * inv[a];
+                double ta = (lo_box[a] - os[a]) / ds[a], tb = (hi_box[a] - os[a]) / ds[a];
                 if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
                 if (ta > t0) { t0 = ta; axis0 = a; }
                 if (tb < t1) { t1 = tb; axis1 = a; }
@@ -3763,13 +3763,6 @@ static void rrv__look_along_line(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d,
             if (m->majorant->surface_free) v->surface_free = 1;
         }
     }
-}
-
-static void rrv__look_along(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, rrv__support_view *v)
-{
-    double inv[3];
-    rrv__reciprocals(d, inv);
-    rrv__look_along_line(scene, o, d, inv, v);
 }
 
 /* Fresnel reflectance of unpolarised light at a smooth dielectric interface,
@@ -4092,7 +4085,7 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
         if (h < DBL_MAX && rrv__deep_inside(b->sole_support, rrv__madd(x, *d, h), RRV__EDGE_NUDGE * (1.0 + h))) {
             ahead = h;
         } else {
-            rrv__look_along_line(scene, x, *d, b->line_inv, &looked);
+            rrv__look_along(scene, x, *d, &looked);
             view = &looked;
             ahead = rrv__mind(h, view->t_face);
         }
@@ -4106,8 +4099,8 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
         *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * ahead, rrv__madd(x, *d, 1e-3 * ahead), NULL);
         b->combing = 1;
     }
-    /* the chord's line: its reciprocals serve the support test here, the
-       chord's delta tracking and the next kick's spacing */
+    /* the chord's line: its reciprocals serve the chord's delta tracking
+       and the next kick's spacing */
     b->line_d = *d;
     rrv__reciprocals(*d, b->line_inv);
     if (b->sole_support && view->inside &&
@@ -4127,7 +4120,7 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
         b->ahead.normal = rrv__v3(0, 0, 1);
         return;
     }
-    rrv__look_along_line(scene, x, *d, b->line_inv, &after);
+    rrv__look_along(scene, x, *d, &after);
     /* a point within rounding of the face is the face (the view's distance
        to it may come from the previous chord's look, a few ulps off) */
     if (after.t_face <= ahead + RRV__EDGE_NUDGE * (1.0 + ahead)) {
@@ -4182,7 +4175,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     rrv__support_view view;
     b->line_d = *d;
     rrv__reciprocals(*d, b->line_inv);
-    rrv__look_along_line(scene, o, *d, b->line_inv, &view);
+    rrv__look_along(scene, o, *d, &view);
     b->pending = 1;
     b->segment = view.t_face;
     b->end = view.t_face < DBL_MAX ? RRV__END_FACE : RRV__END_NONE;
