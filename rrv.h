@@ -3923,9 +3923,12 @@ typedef struct rrv__majorant_iterator {
 } rrv__majorant_iterator;
 
 /* Sets the iterator on the ray o + t d, t in [0, tmax). Returns 0 if the
-   ray misses the box or the medium has nothing to collide with. */
+   ray misses the box or the medium has nothing to collide with. inv_d: the
+   reciprocals of d's components when the caller has them (a comb chord's
+   line), else NULL. */
 static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_medium *m, int with_refraction,
-                                        const rrv_settings *s, rrv_vec3 o, rrv_vec3 d, double tmax)
+                                        const rrv_settings *s, rrv_vec3 o, rrv_vec3 d, const double *inv_d,
+                                        double tmax)
 {
     /* arrays, not rrv__axis: walkers restart at every comb point, where
        this set-up was most of a restart's cost */
@@ -3939,7 +3942,7 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
     if (g->empty && !(with_refraction && g->grad_max)) return 0;
     for (a = 0; a < 3; ++a) {
         double ta, tb;
-        inv[a] = 1.0 / ds[a];
+        inv[a] = inv_d ? inv_d[a] : 1.0 / ds[a];
         ta = (box_lo[a] - os[a]) * inv[a];
         tb = (box_hi[a] - os[a]) * inv[a];
         if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
@@ -3951,7 +3954,8 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
     it->with_refraction = with_refraction && g->grad_max != NULL;
     it->density_weight = 1.0;
     it->mu_eta_fixed = s->mu_eta;
-    it->inv_tolerance = 1.0 / s->bend_tolerance;
+    /* a division per walk, which delta tracking's walks (one a comb chord) need not pay */
+    it->inv_tolerance = it->with_refraction ? 1.0 / s->bend_tolerance : 0.0;
     it->t = t0;
     it->t_end = t1;
     it->done = 0;
@@ -4016,12 +4020,13 @@ typedef struct rrv__walker {
                                     walk did not leave the box */
 } rrv__walker;
 
-static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
-                             rrv_vec3 o, rrv_vec3 d, double tmax)
+/* A walk along o + t d, t in [0, tmax); inv_d as for the iterator. */
+static int rrv__walker_start_line(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
+                                  rrv_vec3 o, rrv_vec3 d, const double *inv_d, double tmax)
 {
     const struct rrv__majorant_grid *g = m->majorant;
     double t0, t1;
-    if (!rrv__majorant_iterator_start(&w->cells, m, with_refraction, s, o, d, tmax)) return 0;
+    if (!rrv__majorant_iterator_start(&w->cells, m, with_refraction, s, o, d, inv_d, tmax)) return 0;
     t0 = w->cells.t;
     t1 = w->cells.t_end;
     w->medium = m;
@@ -4040,6 +4045,12 @@ static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refra
     }
     w->t_event = DBL_MAX;
     return 1;
+}
+
+static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
+                             rrv_vec3 o, rrv_vec3 d, double tmax)
+{
+    return rrv__walker_start_line(w, m, with_refraction, s, o, d, NULL, tmax);
 }
 
 static void rrv__walker_refraction_only(rrv__walker *w) { w->cells.density_weight = 0.0; }
@@ -4164,31 +4175,6 @@ static int rrv__eikonal_step(const rrv_scene *scene, rrv_stepper stepper, double
    straddling a jump of the gradient makes an error of the order of the step,
    and a jump of the IOR is a sharp interface (rrv__cross_face). */
 
-/* The interval [*t0, *t1] of the line o + t d inside the box lo..hi and the
-   normals of the faces at both ends. */
-static int rrv__box_interval(rrv_vec3 lo_box, rrv_vec3 hi_box, rrv_vec3 o, rrv_vec3 d, double *t0, double *t1,
-                             rrv_vec3 *n0, rrv_vec3 *n1)
-{
-    double lo = -DBL_MAX, hi = DBL_MAX;
-    int a, axis_lo = 0, axis_hi = 0;
-    for (a = 0; a < 3; ++a) {
-        double da = rrv__axis(d, a), oa = rrv__axis(o, a);
-        if (da == 0) {
-            if (oa < rrv__axis(lo_box, a) || oa > rrv__axis(hi_box, a)) return 0;
-        } else {
-            double ta = (rrv__axis(lo_box, a) - oa) / da, tb = (rrv__axis(hi_box, a) - oa) / da;
-            if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
-            if (ta > lo) { lo = ta; axis_lo = a; }
-            if (tb < hi) { hi = tb; axis_hi = a; }
-        }
-    }
-    *n0 = rrv__v3(axis_lo == 0, axis_lo == 1, axis_lo == 2);
-    *n1 = rrv__v3(axis_hi == 0, axis_hi == 1, axis_hi == 2);
-    *t0 = lo;
-    *t1 = hi;
-    return lo < hi;
-}
-
 static int rrv__has_sphere_support(const rrv_medium *m)
 {
     return !m->ior_from_gas && (m->ior.kind == RRV_FIELD_LUNEBURG || m->ior.kind == RRV_FIELD_FISHEYE);
@@ -4235,6 +4221,8 @@ typedef struct rrv__support_view {
     int surface_free; /* one support holding o has no surface reaching into it */
     double t_face;    /* distance to the next face crossed, entering or leaving; DBL_MAX: none */
     rrv_vec3 normal;  /* that face's normal (either orientation, not unit) */
+    int face_unknown; /* not looked up (rrv__comb_step): t_face and normal are unset,
+                         o lies inside the bender's sole support */
 } rrv__support_view;
 
 /* Offers the face crossed at parameter t to the view if it is the nearest ahead. */
@@ -4243,19 +4231,49 @@ static void rrv__view_face(rrv__support_view *v, double t, rrv_vec3 normal)
     if (t > 0 && t < v->t_face) { v->t_face = t; v->normal = normal; }
 }
 
+/* The reciprocals of a direction's components, which every cell walk along
+   a line needs: a comb chord computes them once for its delta tracking's
+   walkers and the next kick's spacing walk (a set each before). */
+static void rrv__reciprocals(rrv_vec3 d, double inv[3])
+{
+    inv[0] = 1.0 / d.x;
+    inv[1] = 1.0 / d.y;
+    inv[2] = 1.0 / d.z;
+}
+
+/* What a ray from o along d sees of the supports. The box clip is written
+   with arrays, not per-axis selects; it divides rather than multiplying by
+   the chord's reciprocals, which would move faces by an ulp and every
+   eikonal path with them (a statistical test of nee shoot that sits near
+   its bound then failed). */
 static void rrv__look_along(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, rrv__support_view *v)
 {
+    const double os[3] = {o.x, o.y, o.z}, ds[3] = {d.x, d.y, d.z};
     int i;
-    v->inside = v->surface_free = 0;
+    v->inside = v->surface_free = v->face_unknown = 0;
     v->t_face = DBL_MAX;
     v->normal = rrv__v3(0, 0, 1);
     for (i = 0; i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i];
-        double t0, t1, s0, s1;
+        double lo_box[3], hi_box[3], t0 = -DBL_MAX, t1 = DBL_MAX, s0, s1;
         rrv_vec3 n0, n1, sn0, sn1;
-        int inside;
-        if (!rrv__medium_refracts(m) || !rrv__box_interval(m->lo, m->hi, o, d, &t0, &t1, &n0, &n1) || !(t1 > 0))
-            continue;
+        int inside, a, axis0 = 0, axis1 = 0, missed = 0;
+        if (!rrv__medium_refracts(m)) continue;
+        lo_box[0] = m->lo.x; lo_box[1] = m->lo.y; lo_box[2] = m->lo.z;
+        hi_box[0] = m->hi.x; hi_box[1] = m->hi.y; hi_box[2] = m->hi.z;
+        for (a = 0; a < 3; ++a) {
+            if (ds[a] == 0) {
+                missed |= os[a] < lo_box[a] || os[a] > hi_box[a];
+            } else {
+                double ta = (lo_box[a] - os[a]) / ds[a], tb = (hi_box[a] - os[a]) / ds[a];
+                if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
+                if (ta > t0) { t0 = ta; axis0 = a; }
+                if (tb < t1) { t1 = tb; axis1 = a; }
+            }
+        }
+        if (missed || !(t0 < t1) || !(t1 > 0)) continue;
+        n0 = rrv__v3(axis0 == 0, axis0 == 1, axis0 == 2);
+        n1 = rrv__v3(axis1 == 0, axis1 == 1, axis1 == 2);
         rrv__view_face(v, t0, n0);
         rrv__view_face(v, t1, n1);
         inside = t0 <= 0;
@@ -4340,6 +4358,11 @@ typedef struct rrv__bender {
     int entering;      /* comb: the next point is where cells with a gradient begin */
     rrv__support_view ahead; /* END_KICK: the supports seen from the segment's end
                                 along its direction (the same line as the segment's) */
+    rrv_vec3 line_d;   /* the planned segment's direction (set with pending) */
+    double line_inv[3];/* the reciprocals of its components */
+    const rrv_medium *sole_support; /* the scene's one refraction support when it
+                                       is a box (no sphere, no second refractive
+                                       medium), else NULL: see rrv__comb_step */
 } rrv__bender;
 
 static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
@@ -4359,9 +4382,17 @@ static void rrv__bender_restart(rrv__bender *b, const rrv_scene *scene, rrv_vec3
 
 static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikonal, rrv_vec3 o)
 {
+    int i, supports = 0;
     b->scheme = rrv__resolve_scheme(scene->settings.refraction);
     b->eikonal = eikonal;
     b->chord = 0;
+    b->sole_support = NULL;
+    for (i = 0; i < scene->medium_count; ++i)
+        if (rrv__medium_refracts(&scene->media[i])) {
+            ++supports;
+            b->sole_support = &scene->media[i];
+        }
+    if (supports != 1 || rrv__has_sphere_support(b->sole_support)) b->sole_support = NULL;
     rrv__bender_restart(b, scene, o);
 }
 
@@ -4432,9 +4463,10 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
    README: longer chords save kicks but land much further off). Where a
    kick falls hangs on the bounds, which a NanoVDB file and a gridvol of one
    grid round differently (by ~1e-7): their kicks move by as much. DBL_MAX if the ray leaves the box first. A DDA of its own,
-   with the steps of the majorant iterator's. */
-static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x, rrv_vec3 d, double tau,
-                                 double inv_tolerance, int *entering)
+   with the steps of the majorant iterator's; inv_d holds the reciprocals of
+   d's components (the chord's, computed once for its whole line). */
+static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x, rrv_vec3 d, const double inv_d[3],
+                                 double tau, double inv_tolerance, int *entering)
 {
     /* arrays, not rrv__axis: the comb calls this at every kick, and the
        per-axis selects and library fmin calls were half its cost */
@@ -4455,7 +4487,7 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
         cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
         idx += stride[a] * cell[a];
         if (ds[a] != 0) {
-            double inv = 1.0 / ds[a];
+            double inv = inv_d[a];
             step[a] = ds[a] > 0 ? 1 : -1;
             t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) * inv;
             t_delta[a] = cs[a] * (inv > 0 ? inv : -inv);
@@ -4503,18 +4535,25 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
     }
 }
 
-/* Comb spacing from x along d, tau spacings: 1 / mu_eta when it is fixed,
-   else from the majorant cells' gradient bounds (rrv__rate_distance). */
-static double rrv__comb_spacing(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double tau, int *entering)
+/* Comb spacing from x along d (inv_d: its reciprocals), tau spacings:
+   1 / mu_eta when it is fixed, else from the majorant cells' gradient bounds
+   (rrv__rate_distance). *medium is the refractive medium that holds x, the
+   one whose field rrv__scene_refractivity would read there (NULL if none). */
+static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, rrv_vec3 x, rrv_vec3 d,
+                                const double inv_d[3], double tau, int *entering, const rrv_medium **medium)
 {
     int i;
     *entering = 0;
     for (i = scene->medium_count - 1; i >= 0; --i) {
-        const rrv_medium *m = &scene->media[i];
+        /* with a sole support, the search is its box alone */
+        const rrv_medium *m = b->sole_support ? b->sole_support : &scene->media[i];
+        if (b->sole_support) i = 0;
         if (!rrv__medium_refracts(m) || !rrv__inside_box(x, m->lo, m->hi)) continue;
+        *medium = m;
         if (scene->settings.mu_eta > 0) return tau / scene->settings.mu_eta;
-        return rrv__rate_distance(m->majorant, x, d, tau, 1.0 / scene->settings.bend_tolerance, entering);
+        return rrv__rate_distance(m->majorant, x, d, inv_d, tau, 1.0 / scene->settings.bend_tolerance, entering);
     }
+    *medium = NULL;
     return fmin(scene->settings.step, 1.0);
 }
 
@@ -4530,13 +4569,20 @@ static double rrv__comb_spacing(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, 
    that Snell amplifies to O(sqrt) kicks of either sign. The gradient is
    evaluated at grad_at (x, or a point just inside the support at its edge). */
 static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double h,
-                               double h_bar, rrv_vec3 grad_at)
+                               double h_bar, rrv_vec3 grad_at, const rrv_medium *medium)
 {
     rrv_vec3 grad;
     /* The refractivity at the midpoint of the chord ahead, from the value and
        gradient fetched here anyway: its O(h^2) error keeps the kick second
-       order (measured), and it halves the field lookups per kick. */
-    double r_here = rrv__scene_refractivity(scene, grad_at, &grad);
+       order (measured), and it halves the field lookups per kick. medium,
+       when given, is the one rrv__scene_refractivity would find at grad_at
+       (the spacing's search found it), so the search is not repeated. */
+    const struct rrv__majorant_grid *mg = medium ? medium->majorant : NULL;
+    double r_here = mg && mg->refraction.data && !mg->cubic &&
+                            rrv__inside_box(grad_at, mg->refraction.lo, mg->refraction.hi)
+                        ? rrv__refraction_lookup(mg, grad_at, &grad)
+                    : medium ? rrv__refractivity_gradient(medium, grad_at, scene->settings.ambient_ior - 1.0, &grad)
+                             : rrv__scene_refractivity(scene, grad_at, &grad);
     double r_ahead = r_here + rrv__dot(grad, rrv__sub(rrv__madd(x, d, 0.5 * h), grad_at));
     d = rrv__normalize(rrv__madd(rrv__scale(d, 1.0 + b->r), grad, h_bar));
     b->r = r_ahead;
@@ -4547,17 +4593,59 @@ static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 
    clipped to the next face, then the kick at x (a half kick when the comb
    starts), then the chord clipped again along the kicked direction, which
    may reach the face sooner. */
-static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 *d, double h,
-                           const rrv__support_view *view)
+/* Is p inside the box of m by more than margin on every side? */
+static int rrv__deep_inside(const rrv_medium *m, rrv_vec3 p, double margin)
 {
-    rrv__support_view after;
-    double ahead = rrv__mind(h, view->t_face);
+    return p.x > m->lo.x + margin && p.x < m->hi.x - margin && p.y > m->lo.y + margin && p.y < m->hi.y - margin &&
+           p.z > m->lo.z + margin && p.z < m->hi.z - margin;
+}
+
+static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 *d, double h,
+                           const rrv__support_view *view, const rrv_medium *medium)
+{
+    rrv__support_view after, looked;
+    double ahead;
+    if (view->face_unknown) {
+        /* The chord's far end deep inside the sole support means its face
+           lies beyond it (a box is convex); else the view is looked up now,
+           from x along the line it was not looked along. */
+        if (h < DBL_MAX && rrv__deep_inside(b->sole_support, rrv__madd(x, *d, h), RRV__EDGE_NUDGE * (1.0 + h))) {
+            ahead = h;
+        } else {
+            rrv__look_along(scene, x, *d, &looked);
+            view = &looked;
+            ahead = rrv__mind(h, view->t_face);
+        }
+    } else {
+        ahead = rrv__mind(h, view->t_face);
+    }
     if (b->combing) {
-        *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * (b->chord + ahead), x);
+        *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * (b->chord + ahead), x, medium);
     } else {
         /* the first half kick takes its gradient just ahead, inside */
-        *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * ahead, rrv__madd(x, *d, 1e-3 * ahead));
+        *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * ahead, rrv__madd(x, *d, 1e-3 * ahead), NULL);
         b->combing = 1;
+    }
+    /* the chord's line: its reciprocals serve the chord's delta tracking
+       and the next kick's spacing */
+    b->line_d = *d;
+    rrv__reciprocals(*d, b->line_inv);
+    if (b->sole_support && view->inside &&
+        rrv__deep_inside(b->sole_support, rrv__madd(x, *d, ahead), RRV__EDGE_NUDGE * (1.0 + ahead))) {
+        /* Both ends of the chord inside the one box support: the chord
+           crosses no face, and the look along it (a sixth of a kick's cost)
+           waits until a later chord needs its face (face_unknown). x is in
+           the box since the view from it is inside. */
+        b->segment = b->chord = ahead;
+        b->end = RRV__END_KICK;
+        b->surface_free = b->sole_support->majorant->surface_free;
+        b->pending = 1;
+        b->ahead.inside = 1;
+        b->ahead.surface_free = b->surface_free;
+        b->ahead.face_unknown = 1;
+        b->ahead.t_face = DBL_MAX;
+        b->ahead.normal = rrv__v3(0, 0, 1);
+        return;
     }
     rrv__look_along(scene, x, *d, &after);
     /* a point within rounding of the face is the face (the view's distance
@@ -4612,6 +4700,8 @@ static void rrv__eikonal_plan(rrv__bender *b, const rrv_scene *scene, rrv_steppe
 static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, rrv_vec3 *d, rrv__rng *rng)
 {
     rrv__support_view view;
+    b->line_d = *d;
+    rrv__reciprocals(*d, b->line_inv);
     rrv__look_along(scene, o, *d, &view);
     b->pending = 1;
     b->segment = view.t_face;
@@ -4625,8 +4715,9 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     } else if (b->scheme == RRV_REFRACTION_COMB) {
         /* the first point a uniformly random fraction of a spacing ahead, so
            the comb does not alias with pixels */
-        double h = rrv__comb_spacing(scene, o, *d, 1.0 - rrv__uniform(rng), &b->entering);
-        rrv__comb_step(b, scene, o, d, h, &view);
+        const rrv_medium *medium;
+        double h = rrv__comb_spacing(scene, b, o, *d, b->line_inv, 1.0 - rrv__uniform(rng), &b->entering, &medium);
+        rrv__comb_step(b, scene, o, d, h, &view, medium);
     }
 }
 
@@ -4647,8 +4738,9 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
                first point a random fraction of a spacing in, as at a
                segment's start, so the comb does not alias with pixels */
             double tau = b->entering ? 1.0 - rrv__uniform(rng) : 1.0;
-            double h = rrv__comb_spacing(scene, *o, *d, tau, &b->entering);
-            rrv__comb_step(b, scene, *o, d, h, &view);
+            const rrv_medium *medium;
+            double h = rrv__comb_spacing(scene, b, *o, *d, b->line_inv, tau, &b->entering, &medium);
+            rrv__comb_step(b, scene, *o, d, h, &view, medium);
         } else {
             /* a kick that turned the chord out through a face it grazed:
                the comb ends here, without an interface to refract */
@@ -4659,7 +4751,8 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     }
     case RRV__END_FACE:
         if (b->combing) /* the comb's last half kick, gradient just behind the face */
-            *d = rrv__comb_kick(b, scene, *o, *d, b->chord, 0.5 * b->chord, rrv__madd(*o, *d, -1e-3 * b->chord));
+            *d = rrv__comb_kick(b, scene, *o, *d, b->chord, 0.5 * b->chord, rrv__madd(*o, *d, -1e-3 * b->chord),
+                                NULL);
         *d = rrv__cross_face(b, scene, o, *d, b->normal, rng);
         break;
     default:
@@ -4733,13 +4826,14 @@ static void rrv__path_reweight(rrv__path *path, const double f[3])
 }
 
 static int rrv__start_walkers(const rrv__context *ctx, rrv__walker *walkers, int with_refraction,
-                              rrv_vec3 o, rrv_vec3 d, double tmax, rrv__rng *rng, uint64_t *events)
+                              rrv_vec3 o, rrv_vec3 d, const double *inv_d, double tmax, rrv__rng *rng,
+                              uint64_t *events)
 {
     const rrv_scene *scene = ctx->scene;
     int i, n = 0;
     for (i = 0; i < scene->medium_count; ++i) {
         rrv__walker *w = &walkers[n];
-        if (rrv__walker_start(w, &scene->media[i], with_refraction, &scene->settings, o, d, tmax)) {
+        if (rrv__walker_start_line(w, &scene->media[i], with_refraction, &scene->settings, o, d, inv_d, tmax)) {
             rrv__walker_advance(w, rng, events);
             if (w->t_event < DBL_MAX) ++n;
         }
@@ -4828,7 +4922,11 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
                                           rrv__rng *rng, rrv__flight *out)
 {
     rrv__walker walkers[RRV__MAX_MEDIA];
-    int n = rrv__start_walkers(ctx, walkers, ctx->refract_nulls, o, d, tmax, rng, &ctx->stats.events);
+    const rrv__bender *b = &path->bender;
+    /* a comb chord's line has its reciprocals already (rrv__comb_step) */
+    const double *inv_d = ctx->comb && b->pending && b->line_d.x == d.x && b->line_d.y == d.y && b->line_d.z == d.z
+                              ? b->line_inv : NULL;
+    int n = rrv__start_walkers(ctx, walkers, ctx->refract_nulls, o, d, inv_d, tmax, rng, &ctx->stats.events);
     while (n > 0) {
         int i, best = 0, ch;
         rrv__walker *w;
