@@ -641,7 +641,8 @@ typedef enum rrv_ior_interpolation {
    integrators; the classic integrator always uses straight NEE, which is
    exact there (its rays are straight). */
 typedef enum rrv_nee {
-    RRV_NEE_DEFAULT = 0, /* STRAIGHT for now */
+    RRV_NEE_DEFAULT = 0, /* SHOOT with the eikonal integrator, MANIFOLD with
+                            the refractive one */
     RRV_NEE_NONE,        /* no light sampling: lights, emitters and the sky
                             count only where a (bent) path hits them, MIS
                             weight 1. Unbiased; the reference. */
@@ -5519,6 +5520,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     rrv__camera_frame frame;
     double r_camera;
     int x, y, s, c, sobol, i;
+    rrv_nee nee;
     rrv__clear_error(err);
     if (!scene || !sum) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_render_rect: NULL scene or sum");
     if (x0 < 0 || y0 < 0 || x1 > scene->camera.width || y1 > scene->camera.height || x0 > x1 || y0 > y1)
@@ -5545,10 +5547,13 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.eikonal = scene->settings.integrator == RRV_INTEGRATOR_EIKONAL;
     ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
     ctx.step_bound = rrv__step_bound(scene, scene->settings.integrator);
-    ctx.sample_lights = !ctx.bends || scene->settings.nee != RRV_NEE_NONE;
-    ctx.partition = ctx.bends && (scene->settings.nee == RRV_NEE_SHOOT || scene->settings.nee == RRV_NEE_MANIFOLD);
-    ctx.shoot = ctx.partition && scene->settings.nee == RRV_NEE_SHOOT && ctx.eikonal && rrv__solver_supports_scene(scene);
-    ctx.manifold = ctx.partition && scene->settings.nee == RRV_NEE_MANIFOLD && rrv__solver_supports_scene(scene);
+    /* the default is the curved mode measured best for the integrator:
+       shooting for eikonal rays, the chain for the refractive ones */
+    nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : ctx.eikonal ? RRV_NEE_SHOOT : RRV_NEE_MANIFOLD;
+    ctx.sample_lights = !ctx.bends || nee != RRV_NEE_NONE;
+    ctx.partition = ctx.bends && (nee == RRV_NEE_SHOOT || nee == RRV_NEE_MANIFOLD);
+    ctx.shoot = ctx.partition && nee == RRV_NEE_SHOOT && ctx.eikonal && rrv__solver_supports_scene(scene);
+    ctx.manifold = ctx.partition && nee == RRV_NEE_MANIFOLD && rrv__solver_supports_scene(scene);
     ctx.eta_floor = scene->settings.ambient_ior;
     if (ctx.partition) {
         for (i = 0; i < scene->medium_count; ++i) {
@@ -5711,7 +5716,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
 /* The weak class's bound, in bend tolerances (rrv__weak_chord); a
    measurement build may set another. */
 #ifndef RRV__WEAK_BEND
-#define RRV__WEAK_BEND 1.0
+#define RRV__WEAK_BEND 7.0
 #endif
 
 /* Can shooting differentiate this medium's IOR? Every kind rrv__refractivity_
