@@ -182,7 +182,9 @@
      The weak class (shoot and manifold): a connection from x0 to y whose
      straight chord crosses no sharp interface and whose bound on bending,
      the integral along the chord of each majorant cell's max |grad eta|
-     over the lowest eta in the scene, is at most 7 bend tolerances
+     over the lowest eta in the scene (taken as at most 1 where an IOR or
+     gas state comes from a gridvol, whose range needs a scan of the grid),
+     is at most 7 bend tolerances
      (RRV__WEAK_BEND; 0.07 rad at the default 0.01), is straight NEE's,
      with the ordinary MIS weights; curved NEE skips it, and a forward path
      that did not cross a sharp interface and ends at y (or leaves for the
@@ -5577,9 +5579,18 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.eta_floor = scene->settings.ambient_ior;
     if (ctx.partition) {
         for (i = 0; i < scene->medium_count; ++i) {
+            const rrv_medium *m = &scene->media[i];
             double eta_lo = 1, eta_hi = 1;
-            rrv__medium_ior_ok(&scene->media[i], &eta_lo, &eta_hi);
-            if (rrv__medium_refracts(&scene->media[i])) ctx.eta_floor = rrv__mind(ctx.eta_floor, eta_lo);
+            if (!rrv__medium_refracts(m)) continue;
+            /* a gridvol's range is a scan of the grid, too slow for every
+               call (main.c makes one a sample and tile): there the floor is
+               1, the comb's own measure (its kick rate leaves eta out) */
+            if (m->ior.kind == RRV_FIELD_GRID ||
+                (m->ior_from_gas && (m->temperature.kind == RRV_FIELD_GRID || m->pressure.kind == RRV_FIELD_GRID)))
+                eta_lo = 1.0;
+            else
+                rrv__medium_ior_ok(m, &eta_lo, &eta_hi);
+            ctx.eta_floor = rrv__mind(ctx.eta_floor, eta_lo);
         }
         ctx.eta_floor = rrv__maxd(ctx.eta_floor, RRV_MIN_IOR);
     }
