@@ -5569,11 +5569,10 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
        shooting for eikonal rays, the chain for the refractive ones */
     nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : ctx.eikonal ? RRV_NEE_SHOOT : RRV_NEE_MANIFOLD;
     ctx.sample_lights = !ctx.bends || nee != RRV_NEE_NONE;
-    ctx.partition = 0;
     /* without a medium that refracts every connection is straight: no
        curved NEE, so such a scene renders as classic does, draw for draw */
-    for (i = 0; i < scene->medium_count; ++i)
-        if (rrv__medium_refracts(&scene->media[i])) ctx.partition = ctx.bends && (nee == RRV_NEE_SHOOT || nee == RRV_NEE_MANIFOLD);
+    for (i = 0; i < scene->medium_count && !rrv__medium_refracts(&scene->media[i]); ++i) {}
+    ctx.partition = ctx.bends && i < scene->medium_count && (nee == RRV_NEE_SHOOT || nee == RRV_NEE_MANIFOLD);
     ctx.shoot = ctx.partition && nee == RRV_NEE_SHOOT && ctx.eikonal && rrv__solver_supports_scene(scene);
     ctx.manifold = ctx.partition && nee == RRV_NEE_MANIFOLD && rrv__solver_supports_scene(scene);
     ctx.eta_floor = scene->settings.ambient_ior;
