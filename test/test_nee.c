@@ -1115,16 +1115,20 @@ static void test_reciprocity(void)
    the second pair checked below), and forward paths alone count what
    neither can reach (sharp interfaces, the sky, sphere lights). Here, for
    connections from the floor to the light of the caustic scene: where
-   straight NEE may connect, the solver's root from the straight seed is
-   that straight path and is not counted as curved; where it may not, every
-   root found is curved. */
+   straight NEE may connect along a chord that touches no support, the
+   solver's root from the straight seed is that straight path and is not
+   counted as curved; where it may connect along a weak chord through a
+   support (rrv__weak_chord; shooting skips those), the root turns from the
+   chord by at most the chord's bend bound (the initial direction of a path
+   differs from its mean direction, the chord's, by at most its total
+   turning); where it may not, every root found is curved. */
 static void test_partition_is_exclusive(void)
 {
     rrv_scene *s = NULL;
     rrv_error err;
     rrv__context ctx;
     rrv__rng rng;
-    int k, straight = 0, curved = 0;
+    int k, straight = 0, curved = 0, weak = 0;
     if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
         CHECKF(0, "parse: %s", err.message);
         return;
@@ -1138,12 +1142,20 @@ static void test_partition_is_exclusive(void)
         rrv__light_sample ls;
         rrv__root root;
         const rrv_vec3 down = rrv__v3(0, -1, 0); /* the light's normal */
+        rrv__support_view view;
         int allowed, found;
         ls.wi = rrv__normalize(rrv__sub(y, x0));
         ls.dist = rrv__length(rrv__sub(y, x0));
         allowed = rrv__straight_allowed(&ctx, x0, &ls);
         found = rrv__solve_shot(&ctx, x0, y, &down, ls.wi, &root);
-        if (allowed) {
+        rrv__look_along(s, x0, ls.wi, &view);
+        if (allowed && (view.inside || view.t_face < ls.dist)) {
+            double bound = rrv__chord_bend(&ctx, x0, ls.wi, ls.dist, 1e30);
+            ++weak;
+            CHECKF(!found || rrv__length(rrv__sub(root.w0, ls.wi)) <= bound + 1e-9, /* the root to 1e-9 */
+                   "weak connection %d: the root turns %g from the chord, bound %g", k,
+                   rrv__length(rrv__sub(root.w0, ls.wi)), bound);
+        } else if (allowed) {
             ++straight;
             CHECKF(found && !root.curved && rrv__length(rrv__sub(root.w0, ls.wi)) < 1e-9,
                    "straight connection %d: found %d curved %d", k, found, found ? root.curved : -1);
@@ -1152,7 +1164,7 @@ static void test_partition_is_exclusive(void)
             CHECKF(root.curved, "connection %d through a support found a root not counted as curved", k);
         }
     }
-    SAY("  partition: %d straight connections, %d curved roots of 400\n", straight, curved);
+    SAY("  partition: %d straight connections, %d weak, %d curved roots of 400\n", straight, weak, curved);
     CHECK(straight > 50 && curved > 50);
     rrv_scene_free(s);
 }
@@ -1335,9 +1347,11 @@ static const char *only;
     } while (0)
 
 /* The same partition for nee manifold, whose comb planes reach past the
-   supports: where straight NEE may connect, the chain's root from the
-   chord is the straight path and the manifold estimator gives it weight 0
-   (it carries nothing); where straight NEE may not, every root it carries
+   supports: where straight NEE may connect along a chord that touches no
+   support, the chain's root from the chord is the straight path and the
+   manifold estimator gives it weight 0 (it carries nothing); along a weak
+   chord through a support (which rrv__manifold_nee skips), the root turns
+   by at most the chord's bend bound; where straight NEE may not, every root it carries
    is one that forward paths give weight 0. So straight NEE, manifold and
    forward weights of each connection sum to one. */
 static void test_partition_manifold(void)
@@ -1348,7 +1362,7 @@ static void test_partition_manifold(void)
     rrv__rng rng;
     rrv__vertex_bsdf vb;
     rrv__chain *ch = rrv__chain_new(RRV__CHAIN_MAX);
-    int k, straight = 0, curved = 0;
+    int k, straight = 0, curved = 0, weak = 0;
     if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
         CHECKF(0, "parse: %s", err.message);
         rrv__chain_delete(ch);
@@ -1367,6 +1381,7 @@ static void test_partition_manifold(void)
         rrv__light_sample ls;
         rrv__mroot root;
         double carried[3];
+        rrv__support_view view;
         int allowed, found, carries;
         ls.wi = rrv__normalize(rrv__sub(y, x0));
         ls.dist = rrv__length(rrv__sub(y, x0));
@@ -1375,7 +1390,14 @@ static void test_partition_manifold(void)
         rrv__chain_seed(s, ch, ls.wi);
         found = rrv__manifold_solve(s, ch, &root);
         carries = found && rrv__chain_carry(&ctx, ch, &vb, &rng, carried);
-        if (allowed) {
+        rrv__look_along(s, x0, ls.wi, &view);
+        if (allowed && (view.inside || view.t_face < ls.dist)) {
+            double bound = rrv__chord_bend(&ctx, x0, ls.wi, ls.dist, 1e30);
+            ++weak;
+            CHECKF(!found || rrv__length(rrv__sub(root.w0, ls.wi)) <= bound + 1e-9, /* the root to 1e-9 */
+                   "weak connection %d: the root turns %g from the chord, bound %g", k,
+                   rrv__length(rrv__sub(root.w0, ls.wi)), bound);
+        } else if (allowed) {
             ++straight;
             CHECKF(found && !carries && rrv__length(rrv__sub(root.w0, ls.wi)) < 1e-9,
                    "straight connection %d (%d vertices): found %d, carried %d", k, ch->n, found, carries);
@@ -1383,9 +1405,95 @@ static void test_partition_manifold(void)
             ++curved;
         }
     }
-    SAY("  manifold partition: %d straight connections, %d curved roots carried of 300\n", straight, curved);
+    SAY("  manifold partition: %d straight connections, %d weak, %d curved roots carried of 300\n", straight, weak,
+        curved);
     CHECK(straight > 50 && curved > 30);
     rrv__chain_delete(ch);
+    rrv_scene_free(s);
+}
+
+/* ---- the weak class: connections straight NEE stands for under shoot and manifold ---- */
+
+/* The class of a connection x0 -> y as the NEE side asks it (a light
+   sample) and as a forward path ending at y asks it (its two ends): the
+   same function, so the estimators split paths without overlap. */
+static int nee_side_weak(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y)
+{
+    rrv__light_sample ls;
+    ls.dist = rrv__length(rrv__sub(y, x0));
+    ls.wi = rrv__scale(rrv__sub(y, x0), 1.0 / ls.dist);
+    return rrv__straight_allowed(ctx, x0, &ls);
+}
+
+static int forward_side_weak(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y)
+{
+    double len = rrv__length(rrv__sub(y, x0));
+    return rrv__weak_chord(ctx, x0, rrv__scale(rrv__sub(y, x0), 1.0 / len), len);
+}
+
+/* Random floor points to random points of the light over the Luneburg
+   lens: both sides agree on every pair, both classes occur, and a chord
+   through the lens's middle (bent by tens of degrees) is never weak. */
+static void test_weak_class_shared(void)
+{
+    rrv_scene *s = NULL;
+    rrv_error err;
+    rrv__context ctx;
+    rrv__rng rng;
+    int k, weak = 0, curved = 0;
+    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
+        CHECKF(0, "parse: %s", err.message);
+        return;
+    }
+    solver_context(&ctx, s);
+    ctx.partition = ctx.shoot = 1;
+    ctx.eta_floor = 1.0;
+    rrv__rng_seed(&rng, 41, 0, 0);
+    for (k = 0; k < 400; ++k) {
+        rrv_vec3 x0 = rrv__v3(4.0 * rrv__uniform(&rng) - 2.0, 1e-5, 4.0 * rrv__uniform(&rng) - 2.0);
+        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5);
+        int a = nee_side_weak(&ctx, x0, y), b = forward_side_weak(&ctx, x0, y);
+        CHECKF(a == b, "pair %d: NEE says %d, forward %d", k, a, b);
+        if (a) ++weak;
+        else ++curved;
+    }
+    SAY("  weak class: %d weak, %d curved of 400\n", weak, curved);
+    CHECK(weak > 50 && curved > 50);
+    /* through the centre (0, 1.2, 0), straight down and slanted */
+    CHECK(!forward_side_weak(&ctx, rrv__v3(0, 1e-5, 0), rrv__v3(0, 3, 0)));
+    CHECK(!forward_side_weak(&ctx, rrv__v3(-0.4, 1e-5, 0.1), rrv__v3(0.3, 3, -0.1)));
+    rrv_scene_free(s);
+}
+
+/* A support whose IOR has no gradient (a slab of gradient 0 at the
+   ambient IOR, so no jump at its faces either): a chord right across it
+   touches the support and is still weak, bend bound 0. */
+static void test_weak_class_flat_support(void)
+{
+    static const char text[] = "camera eye 0 0 -3  look 0 0 0  resolution 8 8\n"
+                               "quad origin -0.5 2 -0.5  u 1 0 0  v 0 0 1  L 1 1 1\n"
+                               "medium flat box -1 -1 -1 1 1 1  sigma_a 0 0 0  sigma_s 0 0 0\n"
+                               "ior flat slab normal 0 1 0 gradient 0 base 0\n";
+    rrv_scene *s = NULL;
+    rrv_error err;
+    rrv__context ctx;
+    rrv__support_view view;
+    rrv_vec3 x0 = rrv__v3(0.2, -1.5, 0.1), y = rrv__v3(0, 2, 0), d;
+    double len;
+    if (rrv_scene_parse(text, sizeof text - 1, "flat", NULL, NULL, &s, &err) != RRV_OK) {
+        CHECKF(0, "parse: %s", err.message);
+        return;
+    }
+    CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "prepare: %s", err.message);
+    solver_context(&ctx, s);
+    ctx.partition = ctx.shoot = 1;
+    ctx.eta_floor = 1.0;
+    len = rrv__length(rrv__sub(y, x0));
+    d = rrv__scale(rrv__sub(y, x0), 1.0 / len);
+    rrv__look_along(s, x0, d, &view);
+    CHECKF(view.t_face < len, "the chord does not cross the support (face at %g of %g)", view.t_face, len);
+    CHECKF(rrv__chord_bend(&ctx, x0, d, len, 1e30) == 0.0, "bend bound %g", rrv__chord_bend(&ctx, x0, d, len, 1e30));
+    CHECK(forward_side_weak(&ctx, x0, y) && nee_side_weak(&ctx, x0, y));
     rrv_scene_free(s);
 }
 
@@ -1418,5 +1526,7 @@ int main(void)
     NEE_RUN(test_manifold_bad_chains);
     NEE_RUN(test_manifold_out_of_memory);
     NEE_RUN(test_shoot_mis_weights_sum_to_one);
+    NEE_RUN(test_weak_class_shared);
+    NEE_RUN(test_weak_class_flat_support);
     return CHECK_EXIT_CODE();
 }
