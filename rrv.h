@@ -6350,12 +6350,23 @@ static double rrv__chord_bend(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, d
     for (i = 0; i < scene->medium_count && sum <= limit; ++i) {
         const rrv_medium *m = &scene->media[i];
         const struct rrv__majorant_grid *g = m->majorant;
-        double t0, t1, t, t_end, t_next[3], t_delta[3];
-        rrv_vec3 n0, n1;
+        double t0 = 0, t1 = DBL_MAX, t, t_end, t_next[3], t_delta[3];
         ptrdiff_t stride[3], idx = 0;
-        int cell[3], step[3], a;
+        int cell[3], step[3], a, misses = 0;
         if (!rrv__medium_refracts(m) || !g || !g->grad_max) continue;
-        if (!rrv__box_interval(g->lo, g->hi, x, d, &t0, &t1, &n0, &n1)) continue;
+        for (a = 0; a < 3; ++a) { /* the grid's box clips the chord */
+            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
+            const double hi = a == 0 ? g->hi.x : a == 1 ? g->hi.y : g->hi.z;
+            if (ds[a] == 0) {
+                misses |= xs[a] < lo || xs[a] > hi;
+            } else {
+                double ta = (lo - xs[a]) / ds[a], tb = (hi - xs[a]) / ds[a];
+                if (ta > tb) { double swap = ta; ta = tb; tb = swap; }
+                if (ta > t0) t0 = ta;
+                if (tb < t1) t1 = tb;
+            }
+        }
+        if (misses) continue;
         t = t0 > 0 ? t0 : 0;
         t_end = t1 < len ? t1 : len;
         if (!(t < t_end)) continue;
