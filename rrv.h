@@ -180,24 +180,20 @@
                  on the chord changes by less than D (faster, biased; 0, the
                  default, keeps all). Unsupported IORs as for shoot.
      The weak class (shoot and manifold): a connection from x0 to y whose
-     straight chord crosses no sharp interface and whose bound on bending,
-     the integral along the chord of each majorant cell's max |grad eta|
-     over the lowest eta in the scene (taken as at most 1 where an IOR or
-     gas state comes from a gridvol, whose range needs a scan of the grid),
-     is at most 7 bend tolerances
-     (RRV__WEAK_BEND; 0.07 rad at the default 0.01), is straight NEE's,
-     with the ordinary MIS weights; curved NEE skips it, and a forward path
-     that did not cross a sharp interface and ends at y (or leaves for the
-     sky along d) is sorted by the same function of its two ends. This is
-     an approximation of the same order as the comb's bend tolerance: the
-     path straight NEE stands for is the chord, the real one turns by less
-     than the bound. The bound sums magnitudes, so on noisy fields (heat
-     haze) it is several times the real bending; 7 is the largest of 1, 3,
-     5, 7, 10 under which the fire caustic still matches its reference as
-     with no weak class (README.md, "Next-event estimation"). On weak heat
-     haze curved NEE then costs 1.27x (manifold) and 1.07x (shoot) what
-     straight NEE does; on the lens caustic with a 1 m light `none` is
-     still more efficient than either (README.md).
+     straight chord touches no refraction support (or only supports with
+     zero gradient along it) is straight NEE's, with the ordinary MIS
+     weights; curved NEE skips it. A forward path that crossed no sharp
+     interface and ends at y (or leaves for the sky along d) is sorted by the
+     same function of its two ends, and, if its chord is weak but the path
+     itself turned (it left x0 at an angle to the chord larger than the
+     chord's bound on bending), it is another root of those two ends that no
+     light sample stands for, so it counts with weight 1. A build may set
+     RRV__WEAK_BEND to K > 0 to treat chords whose bound on bending (the
+     integral along the chord of each majorant cell's max |grad eta| over
+     the lowest eta) is at most K bend tolerances as straight too: on weak
+     heat haze that makes curved NEE cost ~1.3x straight NEE instead of
+     ~36x, but it is biased where a strong medium's gradient varies within
+     a cell (measured in README.md, "Weak connections"), so it is off.
    Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2;
    blackbody emission is n^2 B where the IOR is n (Kirchhoff), so a fire does
    not dim by 1/n^2 on leaving a dense medium.
@@ -5208,6 +5204,7 @@ static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x);
 static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d);
 static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls);
 static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len);
+static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len);
 static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
 static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir, const rrv_shape *s,
                                         rrv_vec3 x);
@@ -5324,7 +5321,8 @@ static void rrv__escape_to_sky(rrv__context *ctx, rrv__camera_path *cp)
     if (scene->environment.kind == RRV_ENV_NONE) return;
     rrv__environment_L(&scene->environment, cp->d, Le);
     if (cp->prev_pdf > 0 && ctx->sample_lights &&
-        (!(ctx->partition && cp->touched) || (!cp->jumped && rrv__weak_chord(ctx, cp->vertex, cp->d, DBL_MAX))))
+        (!(ctx->partition && cp->touched) ||
+         (!cp->jumped && rrv__forward_weak(ctx, cp->vertex, cp->w0, cp->d, DBL_MAX) == 1)))
         w = rrv__power_heuristic(cp->prev_pdf, RRV__INV_4PI / rrv__light_choices(scene));
     k = w * rrv__eta_scale(ctx, rrv__madd(cp->o, cp->d, 1e30)) * rrv__path_mis(&cp->path);
     for (c = 0; c < 3; ++c) cp->path.L[c] += cp->path.beta[c] * Le[c] * k;
@@ -5344,10 +5342,14 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
         double w = 1.0;
         if (cp->prev_pdf > 0 && ctx->sample_lights) {
             double to_x = rrv__length(rrv__sub(x, cp->vertex));
-            if (!(ctx->partition && cp->touched) ||
-                (!cp->jumped && to_x > 0 &&
-                 rrv__weak_chord(ctx, cp->vertex, rrv__scale(rrv__sub(x, cp->vertex), 1.0 / to_x), to_x)))
+            int weak = ctx->partition && cp->touched && !cp->jumped && to_x > 0
+                           ? rrv__forward_weak(ctx, cp->vertex, cp->w0, rrv__scale(rrv__sub(x, cp->vertex), 1.0 / to_x),
+                                               to_x)
+                           : 0;
+            if (!(ctx->partition && cp->touched) || weak == 1)
                 w = rrv__power_heuristic(cp->prev_pdf, rrv__emitter_pdf(s, cp->vertex, x, n) / rrv__light_choices(scene));
+            else if (weak == 2)
+                w = 1.0; /* a root no light sample stands for */
             else if (ctx->shoot && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
                 w = rrv__shoot_forward_weight(ctx, cp->vertex, cp->w0, cp->prev_pdf, s, x); /* MIS with shooting */
             else if (ctx->manifold && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
@@ -5858,10 +5860,10 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
    the ray passes straight through (the faces of a Luneburg lens, whose IOR
    meets the ambient one, differ by rounding only). */
 #define RRV__SOLVE_JUMP 1e-7
-/* The weak class's bound, in bend tolerances (rrv__weak_chord); a
-   measurement build may set another. */
+/* The weak class's bound, in bend tolerances (rrv__weak_chord): 0, exact,
+   unless a build sets it (see the manual's weak class). */
 #ifndef RRV__WEAK_BEND
-#define RRV__WEAK_BEND 7.0
+#define RRV__WEAK_BEND 0.0
 #endif
 
 /* Can shooting differentiate this medium's IOR? Every kind rrv__refractivity_
@@ -6417,15 +6419,15 @@ static double rrv__chord_bend(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, d
    an approximation: the path straight NEE stands for is the chord, the
    real one turns by less than the bound, the same order as the bending
    one comb kick leaves out. */
-static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len)
+static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double *bound)
 {
     const rrv_scene *scene = ctx->scene;
     double tolerance = RRV__WEAK_BEND * scene->settings.bend_tolerance, t = 0;
     int faces;
     rrv__support_view v;
+    *bound = 0;
     rrv__look_along(scene, x, d, &v);
     if (!v.inside && !(v.t_face < len)) return 1;
-    if (tolerance <= 0) return 0;
     /* each support box has at most two faces and a sphere two more along
        a line; more crossings than that are rounding: call it curved */
     for (faces = 0; v.t_face < len - t; ++faces) {
@@ -6434,7 +6436,31 @@ static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, doub
         t += v.t_face + rrv__face_gap(at);
         rrv__look_along(scene, rrv__madd(x, d, t), d, &v);
     }
-    return rrv__chord_bend(ctx, x, d, len, tolerance) <= tolerance;
+    *bound = rrv__chord_bend(ctx, x, d, len, tolerance);
+    return *bound <= tolerance;
+}
+
+static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len)
+{
+    double bound;
+    return rrv__weak_chord_bound(ctx, x, d, len, &bound);
+}
+
+/* The class of a forward path from its last vertex x along w0 that ends
+   along unit d at len (DBL_MAX: the sky): 0 if its chord is curved; 1 if
+   the chord is weak and the path is the chord's near-straight root, the
+   one straight NEE stands for (a ray that turns by at most the chord's
+   bound leaves within that angle of it); 2 if the chord is weak but the
+   path left at a wider angle: another root of the same two ends (a ray
+   bent by a lens into a point whose chord only grazes it), which straight
+   NEE never samples and curved NEE skips for weak chords, so the forward
+   path alone counts it, weight 1. */
+static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len)
+{
+    double bound, c;
+    if (!rrv__weak_chord_bound(ctx, x, d, len, &bound)) return 0;
+    c = rrv__dot(w0, d);
+    return acos(c > 1 ? 1 : c < -1 ? -1 : c) <= bound + 1e-9 ? 1 : 2;
 }
 
 static void rrv__vertex_eval(const rrv__vertex_bsdf *v, rrv_vec3 w, double f[3])

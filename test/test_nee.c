@@ -1462,6 +1462,19 @@ static void test_weak_class_shared(void)
     /* through the centre (0, 1.2, 0), straight down and slanted */
     CHECK(!forward_side_weak(&ctx, rrv__v3(0, 1e-5, 0), rrv__v3(0, 3, 0)));
     CHECK(!forward_side_weak(&ctx, rrv__v3(-0.4, 1e-5, 0.1), rrv__v3(0.3, 3, -0.1)));
+    /* a forward path whose chord misses the lens is the chord's own root
+       only if it left along the chord; one that left at an angle was bent
+       by the lens into that point: another root, which no light sample
+       stands for (class 2, counted in full) */
+    {
+        rrv_vec3 x0 = rrv__v3(1.8, 1e-5, 0), y = rrv__v3(0.45, 3.0, 0);
+        rrv_vec3 d = rrv__normalize(rrv__sub(y, x0)), w0 = rrv__normalize(rrv__v3(-0.55, 1.0, 0));
+        double len = rrv__length(rrv__sub(y, x0));
+        CHECK(forward_side_weak(&ctx, x0, y));
+        CHECK(rrv__forward_weak(&ctx, x0, d, d, len) == 1);
+        CHECK(rrv__forward_weak(&ctx, x0, w0, d, len) == 2);
+        CHECK(rrv__forward_weak(&ctx, rrv__v3(0, 1e-5, 0), d, rrv__v3(0, 1, 0), 3.0) == 0);
+    }
     rrv_scene_free(s);
 }
 
