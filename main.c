@@ -85,10 +85,11 @@ static const char render_help[] =
     "  --seed S               random seed, an integer >= 0 (default: the scene's)\n"
     "  --integrator NAME      classic, refractive or eikonal (default: the scene's)\n"
     "  --nee MODE             refractive, eikonal: light sampling, shoot\n"
-    "                         (eikonal: connections along bent rays; the\n"
-    "                         eikonal default), manifold (a chain of refraction\n"
-    "                         vertices solved by Newton; the refractive default;\n"
-    "                         scene keys manifoldgauge, manifoldtrials), none\n"
+    "                         (the default; eikonal: connections along bent\n"
+    "                         rays; refractive: bent connections left to the\n"
+    "                         paths), manifold (a chain of refraction vertices\n"
+    "                         solved by Newton; slow; scene keys manifoldgauge,\n"
+    "                         manifoldtrials), none\n"
     "                         (lights count only where the bent path hits them:\n"
     "                         unbiased, noisier) or straight (straight shadow\n"
     "                         rays: fast, biased near refracting media)\n"
@@ -1479,8 +1480,8 @@ static void print_render_summary(int width, int height, int spp, double seconds,
                 conv > 0 ? (double)stats->solve_segments / conv : 0.0);
     }
     if (stats->solves_unsupported > 0)
-        fprintf(stderr, "; %" PRIu64 " vertices could not shoot (not eikonal, or an IOR without a closed-form "
-                "Hessian): their curved connections were left to forward paths", stats->solves_unsupported);
+        fprintf(stderr, "; %" PRIu64 " vertices could not shoot (shooting needs the eikonal integrator): their "
+                "curved connections were left to forward paths", stats->solves_unsupported);
     fputc('\n', stderr);
 }
 

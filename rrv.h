@@ -86,8 +86,11 @@
    NEXT-EVENT ESTIMATION (rrv_settings.nee, scene `render nee`, CLI --nee)
      Refractive and eikonal integrators only; classic always samples lights
      with straight shadow rays, which is exact for straight rays.
-     DEFAULT     SHOOT with the eikonal integrator, MANIFOLD with the
-                 refractive one (each integrator's best curved mode).
+     DEFAULT     SHOOT, the most efficient curved mode measured (README.md).
+                 With the refractive integrator, which shooting cannot
+                 differentiate, its curved connections are left to forward
+                 paths: unbiased, as cheap as STRAIGHT, noisier for small
+                 lights (MANIFOLD solves them there, at a high cost).
      STRAIGHT    a straight shadow ray, ratio-tracked,
                  combined by the power heuristic with the phase/BSDF-sampled
                  continuation as though both sampled the same path. They do
@@ -393,8 +396,9 @@
        (eta_c / eta_e)^2; thermal emission follows Kirchhoff (above).
 
    HISTORY
-     0.5.0  curved NEE by default (shoot with the eikonal integrator,
-            manifold with the refractive one); shoot shares paths with the
+     0.5.0  unbiased NEE by default (shoot: curved connections solved with
+            the eikonal integrator, left to forward paths with the
+            refractive one); shoot shares paths with the
             forward path by MIS; manifold's kick model, trust region and heap
             scratch; exact derivatives of every IOR kind's gradient, so both
             run in grids and gas states; exact majorants of coarse grids;
@@ -662,8 +666,8 @@ typedef enum rrv_ior_interpolation {
    integrators; the classic integrator always uses straight NEE, which is
    exact there (its rays are straight). */
 typedef enum rrv_nee {
-    RRV_NEE_DEFAULT = 0, /* SHOOT with the eikonal integrator, MANIFOLD with
-                            the refractive one */
+    RRV_NEE_DEFAULT = 0, /* SHOOT (with the refractive integrator curved
+                            connections go to forward paths) */
     RRV_NEE_NONE,        /* no light sampling: lights, emitters and the sky
                             count only where a (bent) path hits them, MIS
                             weight 1. Unbiased; the reference. */
@@ -5691,7 +5695,11 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.step_bound = rrv__step_bound(scene, scene->settings.integrator);
     /* the default is the curved mode measured best for the integrator:
        shooting for eikonal rays, the chain for the refractive ones */
-    nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : ctx.eikonal ? RRV_NEE_SHOOT : RRV_NEE_MANIFOLD;
+    /* shoot by default, also where it cannot solve (the refractive
+       integrator): manifold solves there too, but at 100x-1000x straight
+       NEE's cost on a scene like scenes/fire.rrv (README.md), while leaving
+       those connections to forward paths stays unbiased at straight's cost */
+    nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : RRV_NEE_SHOOT;
     ctx.sample_lights = !ctx.bends || nee != RRV_NEE_NONE;
     /* without a medium that refracts every connection is straight: no
        curved NEE, so such a scene renders as classic does, draw for draw */
