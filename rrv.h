@@ -2560,24 +2560,32 @@ static double rrv__blend8(const float *d, size_t sx, size_t sy, size_t sz, const
    channels, found by multiplying with the precomputed sample density (the
    comb's kicks spent most of their lookup in rrv__grid_locate's divisions
    and per-channel set-up). */
-static double rrv__refraction_lookup(const struct rrv__majorant_grid *mg, rrv_vec3 p, rrv_vec3 *grad)
+/* The cell of the refraction grid holding p: its first sample (4 channels
+   a sample), the strides of a row and a slice, the offsets t in it. */
+static const float *rrv__refraction_cell(const struct rrv__majorant_grid *mg, rrv_vec3 p, size_t *sy, size_t *sz,
+                                         double t[3])
 {
     const rrv_grid *g = &mg->refraction;
-    const float *d;
-    double u[3], t[3];
-    int n[3], i[3], a;
-    size_t sy = 4 * (size_t)g->nx, sz = sy * (size_t)g->ny;
-    u[0] = (p.x - g->lo.x) * mg->refraction_scale.x;
-    u[1] = (p.y - g->lo.y) * mg->refraction_scale.y;
-    u[2] = (p.z - g->lo.z) * mg->refraction_scale.z;
-    n[0] = g->nx; n[1] = g->ny; n[2] = g->nz;
+    const double u[3] = {(p.x - g->lo.x) * mg->refraction_scale.x, (p.y - g->lo.y) * mg->refraction_scale.y,
+                         (p.z - g->lo.z) * mg->refraction_scale.z};
+    const int n[3] = {g->nx, g->ny, g->nz};
+    int i[3], a;
+    *sy = 4 * (size_t)g->nx;
+    *sz = *sy * (size_t)g->ny;
     for (a = 0; a < 3; ++a) {
         i[a] = (int)u[a];
         if (i[a] > n[a] - 2) i[a] = n[a] - 2;
         if (i[a] < 0) i[a] = 0;
         t[a] = u[a] - i[a];
     }
-    d = g->data + 4 * (size_t)i[0] + sy * (size_t)i[1] + sz * (size_t)i[2];
+    return g->data + 4 * (size_t)i[0] + *sy * (size_t)i[1] + *sz * (size_t)i[2];
+}
+
+static double rrv__refraction_lookup(const struct rrv__majorant_grid *mg, rrv_vec3 p, rrv_vec3 *grad)
+{
+    size_t sy, sz;
+    double t[3];
+    const float *d = rrv__refraction_cell(mg, p, &sy, &sz, t);
     if (!grad) return rrv__blend8(d, 4, sy, sz, t);
     {
         /* the four channels side by side, so the compiler can blend them as
@@ -2641,23 +2649,11 @@ static double rrv__blend8_slope(const float *d, size_t sx, size_t sy, size_t sz,
    at cell faces, where the gradient itself is continuous). */
 static void rrv__refraction_lookup_jacobian(const struct rrv__majorant_grid *mg, rrv_vec3 p, double J[9])
 {
-    const rrv_grid *g = &mg->refraction;
-    const float *d;
-    double u[3], t[3], scale[3];
-    int n[3], i[3], a, b;
-    size_t sy = 4 * (size_t)g->nx, sz = sy * (size_t)g->ny;
-    scale[0] = mg->refraction_scale.x; scale[1] = mg->refraction_scale.y; scale[2] = mg->refraction_scale.z;
-    u[0] = (p.x - g->lo.x) * scale[0];
-    u[1] = (p.y - g->lo.y) * scale[1];
-    u[2] = (p.z - g->lo.z) * scale[2];
-    n[0] = g->nx; n[1] = g->ny; n[2] = g->nz;
-    for (a = 0; a < 3; ++a) {
-        i[a] = (int)u[a];
-        if (i[a] > n[a] - 2) i[a] = n[a] - 2;
-        if (i[a] < 0) i[a] = 0;
-        t[a] = u[a] - i[a];
-    }
-    d = g->data + 4 * (size_t)i[0] + sy * (size_t)i[1] + sz * (size_t)i[2];
+    const double scale[3] = {mg->refraction_scale.x, mg->refraction_scale.y, mg->refraction_scale.z};
+    size_t sy, sz;
+    double t[3];
+    const float *d = rrv__refraction_cell(mg, p, &sy, &sz, t);
+    int a, b;
     for (a = 0; a < 3; ++a)
         for (b = 0; b < 3; ++b) J[3 * a + b] = rrv__blend8_slope(d + 1 + a, 4, sy, sz, t, b) * scale[b];
 }
