@@ -88,9 +88,10 @@
      with straight shadow rays, which is exact for straight rays.
      DEFAULT     SHOOT, the most efficient curved mode measured (README.md).
                  With the refractive integrator, which shooting cannot
-                 differentiate, its curved connections are left to forward
-                 paths: unbiased, as cheap as STRAIGHT, noisier for small
-                 lights (MANIFOLD solves them there, at a high cost).
+                 differentiate, it aims (AIM): unbiased, about as cheap as
+                 STRAIGHT, but without focusing, so caustics of small
+                 lights stay noisy (MANIFOLD solves them there, at a high
+                 cost).
      STRAIGHT    a straight shadow ray, ratio-tracked,
                  combined by the power heuristic with the phase/BSDF-sampled
                  continuation as though both sampled the same path. They do
@@ -143,9 +144,7 @@
                  forms for the profiles and blobs; for grids (gridvol,
                  NanoVDB, baked noise, a gas through Hauf-Grigull) it is
                  the exact derivative of the blended gradient the rays
-                 use. With the refractive integrator curved connections
-                 are left to forward paths (weight 1, still unbiased) and
-                 counted in rrv_render_stats.solves_unsupported.
+                 use. With the refractive integrator SHOOT aims (AIM).
      MANIFOLD    curved NEE by the paper's method (refractive and eikonal
                  integrators, the same closed-form Hessians), partitioning
                  path space by the same classes (weights: 1 for the estimator a
@@ -182,7 +181,28 @@
                  `manifolddrop D`: leave out comb planes across which eta
                  on the chord changes by less than D (faster, biased; 0, the
                  default, keeps all). Unsupported IORs as for shoot.
-     The weak class (shoot and manifold): a connection from x0 to y whose
+     AIM         bent shadow rays (refractive comb and eikonal integrators;
+                 the Poisson and midpoint schemes, whose rays bend at null
+                 events, leave curved connections to forward paths, counted
+                 in rrv_render_stats.solves_unsupported). The classes are
+                 SHOOT's; for a curved one, a point y uniform on a quad or
+                 triangle light gives w0 = (y - x0) / |y - x0|, and the
+                 shadow ray leaves x0 along w0 bent as camera rays are (the
+                 same comb kicks or eikonal steps), its transmittance
+                 ratio-tracked chord by chord; the light's radiance counts
+                 if the ray lands on that light's front, nothing if it meets
+                 anything else, leaves or crosses a sharp interface. w0 has
+                 the density of the straight line from x0 along w0 meeting
+                 the light, (|y - x0|^2 / |cos theta_y|) / (area x light
+                 choices), whichever face it meets: a function of w0 alone,
+                 so the power heuristic against the vertex's pdf of w0 is
+                 exact, and a forward path that reaches the light from x0
+                 along w0 takes the complementary weight wherever it lands
+                 on it. Unbiased for the integrator's own rays, no solve, no
+                 trials; as with NONE, focusing shows only as noise, so it
+                 suits weak heat haze (nearly every aimed ray lands) and not
+                 the caustics of small lights, which SHOOT solves.
+     The weak class (shoot, manifold and aim): a connection from x0 to y whose
      straight chord touches no refraction support (or only supports with
      zero gradient along it) is straight NEE's, with the ordinary MIS
      weights; curved NEE skips it. A forward path that crossed no sharp
@@ -666,8 +686,8 @@ typedef enum rrv_ior_interpolation {
    integrators; the classic integrator always uses straight NEE, which is
    exact there (its rays are straight). */
 typedef enum rrv_nee {
-    RRV_NEE_DEFAULT = 0, /* SHOOT (with the refractive integrator curved
-                            connections go to forward paths) */
+    RRV_NEE_DEFAULT = 0, /* SHOOT (with the refractive integrator, which
+                            cannot solve, it aims: AIM) */
     RRV_NEE_NONE,        /* no light sampling: lights, emitters and the sky
                             count only where a (bent) path hits them, MIS
                             weight 1. Unbiased; the reference. */
@@ -677,7 +697,8 @@ typedef enum rrv_nee {
                             crosses a refracting medium */
     RRV_NEE_SHOOT,       /* eikonal: connections to area lights along bent
                             rays, found by Newton on the initial direction;
-                            straight NEE only where it is exact (see manual) */
+                            straight NEE only where it is exact (see manual);
+                            refractive: AIM */
     RRV_NEE_MANIFOLD,    /* refractive and eikonal: a chain of refraction
                             vertices moved by Newton until each obeys Snell's
                             law (the paper's refractive ratio tracking) */
@@ -5230,7 +5251,7 @@ static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3
 static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                               rrv__rng *rng);
 static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
-static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w);
+static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w);
 static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, rrv__rng *rng, rrv_vec3 *y, rrv_vec3 *ny,
                                              double *pdf_area);
 #define RRV__CHAIN_MAX 512 /* comb planes a manifold chain may have (more: wider spacing) */
@@ -5370,7 +5391,7 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
                end does not change: the light's straight crossing along w0
                (rrv__aim_nee). A weak chord's path is that straight line, so
                this is the straight NEE's weight there too. */
-            w = rrv__power_heuristic(cp->prev_pdf, rrv__aim_pdf(scene, s, cp->vertex, cp->w0));
+            w = rrv__power_heuristic(cp->prev_pdf, rrv__aim_forward_pdf(ctx, s, cp->vertex, cp->w0));
         } else if (cp->prev_pdf > 0 && ctx->sample_lights) {
             double to_x = rrv__length(rrv__sub(x, cp->vertex));
             int weak = ctx->partition && cp->touched && !cp->jumped && to_x > 0
@@ -5713,12 +5734,10 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.eikonal = scene->settings.integrator == RRV_INTEGRATOR_EIKONAL;
     ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
     ctx.step_bound = rrv__step_bound(scene, scene->settings.integrator);
-    /* the default is the curved mode measured best for the integrator:
-       shooting for eikonal rays, the chain for the refractive ones */
     /* shoot by default, also where it cannot solve (the refractive
-       integrator): manifold solves there too, but at 100x-1000x straight
-       NEE's cost on a scene like scenes/fire.rrv (README.md), while leaving
-       those connections to forward paths stays unbiased at straight's cost */
+       integrator), where it aims: manifold solves there, but at 100x-1000x
+       straight NEE's cost on a scene like scenes/fire.rrv (README.md), while
+       aiming stays unbiased at about straight's cost */
     nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : RRV_NEE_SHOOT;
     ctx.sample_lights = !ctx.bends || nee != RRV_NEE_NONE;
     /* without a medium that refracts every connection is straight: no
@@ -6463,10 +6482,12 @@ static double rrv__chord_bend(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, d
    an approximation: the path straight NEE stands for is the chord, the
    real one turns by less than the bound, the same order as the bending
    one comb kick leaves out. */
-static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double *bound)
+/* The chord's bound on bending (rrv__chord_bend, counted until it passes
+   stop) into *bound; 0 if the chord crosses a sharp interface. */
+static int rrv__chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop, double *bound)
 {
     const rrv_scene *scene = ctx->scene;
-    double tolerance = RRV__WEAK_BEND * scene->settings.bend_tolerance, t = 0;
+    double t = 0;
     int faces;
     rrv__support_view v;
     *bound = 0;
@@ -6480,8 +6501,14 @@ static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d
         t += v.t_face + rrv__face_gap(at);
         rrv__look_along(scene, rrv__madd(x, d, t), d, &v);
     }
-    *bound = rrv__chord_bend(ctx, x, d, len, tolerance);
-    return *bound <= tolerance;
+    *bound = rrv__chord_bend(ctx, x, d, len, stop);
+    return 1;
+}
+
+static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double *bound)
+{
+    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
+    return rrv__chord_bound(ctx, x, d, len, tolerance, bound) && *bound <= tolerance;
 }
 
 static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len)
@@ -6657,11 +6684,37 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
    NEE's, a path crossing a sharp interface (Fresnel) is the forward path's
    alone, and the sky and sphere lights are not aimed at. */
 
+/* How far, in the light's size (the square root of its area), the bound
+   on an aimed ray's turning (the chord's, rrv__chord_bend, times its
+   length) may move its landing point before aiming is not worth a ray:
+   beyond it the ray would mostly miss (a lens, a fire's strong haze) and
+   the kicks through the strong field are the dearest part of a shadow
+   ray. Efficiency only: either class is unbiased. */
+#ifndef RRV__AIM_REACH
+#define RRV__AIM_REACH 1.0
+#endif
+
+/* Who carries a connection from x0 along unit w over len to a point of
+   the quad or triangle light s: 0, straight NEE (a weak chord,
+   rrv__weak_chord); 1, nee aim; 2, the forward path alone (the chord
+   crosses a sharp interface, or bends too much to be worth aiming:
+   RRV__AIM_REACH). A function of x0 and w alone (len and s are where w's
+   line meets the light), so a forward path computes it for itself. */
+static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double len)
+{
+    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
+    double reach = RRV__AIM_REACH * sqrt(rrv__shape_area(s)) / len, bound;
+    if (!rrv__chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound)) return 2;
+    if (bound <= tolerance) return 0;
+    return bound <= reach ? 1 : 2;
+}
+
 /* The solid-angle density of nee aim's w toward the quad or triangle light
    s from x0, light choice included: 0 where the line from x0 along unit w
    misses s. Both faces count: the point is drawn whatever side of s faces
-   x0, and a bent ray aimed at the back may land on the front. */
-static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w)
+   x0, and a bent ray aimed at the back may land on the front. *len: how
+   far along w the line meets s. */
+static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double *len)
 {
     rrv_vec3 n = rrv__cross(s->e1, s->e2), rel;
     double n2 = rrv__dot(n, n), facing = rrv__dot(n, w), t, a, b, cos_y;
@@ -6673,7 +6726,17 @@ static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 
     b = rrv__dot(rrv__cross(s->e1, rel), n) / n2;
     if (a < 0 || b < 0 || (s->kind == RRV_SHAPE_TRIANGLE ? a + b > 1 : a > 1 || b > 1)) return 0.0;
     cos_y = fabs(facing) / sqrt(n2);
+    *len = t;
     return t * t / (rrv__shape_area(s) * cos_y * rrv__light_choices(scene));
+}
+
+/* The density nee (straight or aimed) draws w with from x0 toward the
+   quad or triangle light s, 0 where it leaves w to forward paths: what a
+   forward path that reached s from x0 along w weighs itself against. */
+static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w)
+{
+    double len, pdf = rrv__aim_pdf(ctx->scene, s, x0, w, &len);
+    return pdf > 0 && rrv__aim_class(ctx, s, x0, w, len) < 2 ? pdf : 0.0;
 }
 
 /* nee aim's shadow ray from o along *d, bent as camera rays are: the shape
@@ -6734,10 +6797,10 @@ static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const 
     to_y = rrv__length(rrv__sub(y, x0));
     if (!(to_y > 0)) return;
     w0 = rrv__scale(rrv__sub(y, x0), 1.0 / to_y);
-    if (rrv__weak_chord(ctx, x0, w0, to_y)) return; /* straight NEE's */
     rrv__vertex_eval(v, w0, f);
     if (!(f[0] > 0 || f[1] > 0 || f[2] > 0)) return;
-    pdf_aim = rrv__aim_pdf(scene, s, x0, w0);
+    if (rrv__aim_class(ctx, s, x0, w0, to_y) != 1) return; /* straight NEE's or the forward path's */
+    pdf_aim = rrv__aim_pdf(scene, s, x0, w0, &to_y);
     if (!(pdf_aim > 0) || !(pdf_aim < DBL_MAX)) return; /* y on the light's rim, seen edge-on */
     ++ctx->stats.aim_shots;
     d = w0;

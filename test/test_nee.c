@@ -37,6 +37,11 @@ static void *t_malloc(size_t n)
     if (allocations_to_pass > 0) --allocations_to_pass;
     return malloc(n);
 }
+/* nee aim aims only where a ray will likely land (RRV__AIM_REACH, 1 in the
+   header); the tests of strong media aim everywhere, so that the aimed
+   estimator itself is checked where refraction turns most rays off. */
+static double aim_reach = 1.0;
+#define RRV__AIM_REACH aim_reach
 #define RRV_MALLOC(sz) t_malloc(sz)
 #define RRV_REALLOC(p, sz) realloc(p, sz)
 #define RRV_FREE(p) free(p)
@@ -359,22 +364,30 @@ static void test_lens_caustic_shoot(void)
         CHECKF(vs * 5 < vn, "caustic: variance per sample %.3f with shoot, %.3f with none", vs, vn);
     }
     /* The comb cannot shoot: shoot aims there (nee aim), with the same
-       classes, and the image stays unbiased; so does aim with eikonal. */
+       classes, and the image stays unbiased; so does aim with eikonal.
+       Aimed everywhere (most rays through the lens are turned off the
+       light), and with the default reach (few are aimed). */
     {
         static const method *const aimers[] = {&comb, &eikonal};
         static const rrv_nee modes[] = {RRV_NEE_SHOOT, RRV_NEE_AIM};
         static const char *const names[] = {"comb, nee shoot (aims)", "eikonal, nee aim"};
-        for (i = 0; i < 2; ++i) {
-            memset(b, 0, sizeof b);
-            memset(&rs, 0, sizeof rs);
-            use(s, aimers[i], modes[i]);
-            s->settings.seed = 6 + (uint64_t)i;
-            block_samples_rect(s, 640, x0, y0, x1, y1, BLOCK, BLOCK, b, &rs);
-            SAY("  %s: %llu aimed shadow rays, %.1f%% turned off their light\n", names[i],
-                (unsigned long long)rs.aim_shots, 100.0 * (double)rs.aim_missed / (double)rs.aim_shots);
-            CHECK(rs.solves == 0 && rs.aim_shots > rs.aim_missed && rs.solves_unsupported == 0);
-            blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, names[i]);
-        }
+        int reach;
+        for (reach = 0; reach < 2; ++reach)
+            for (i = 0; i < 2; ++i) {
+                aim_reach = reach ? 1e30 : 1.0;
+                memset(b, 0, sizeof b);
+                memset(&rs, 0, sizeof rs);
+                use(s, aimers[i], modes[i]);
+                s->settings.seed = 6 + (uint64_t)i + 2 * (uint64_t)reach;
+                block_samples_rect(s, 640, x0, y0, x1, y1, BLOCK, BLOCK, b, &rs);
+                SAY("  %s, reach %g: %llu aimed shadow rays, %.1f%% turned off their light\n", names[i], aim_reach,
+                    (unsigned long long)rs.aim_shots, 100.0 * (double)rs.aim_missed / (double)rs.aim_shots);
+                CHECK(rs.solves == 0 && rs.aim_shots > rs.aim_missed && rs.solves_unsupported == 0);
+                /* aimed everywhere, most rays through the lens miss */
+                if (reach) CHECK(rs.aim_missed * 2 > rs.aim_shots);
+                blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, names[i]);
+            }
+        aim_reach = 1.0;
     }
     rrv_scene_free(s);
 }
@@ -1456,11 +1469,68 @@ static void test_two_lights_aim(void)
     block_samples_rect(s, 640, x0, y0, x1, y1, BLOCK, BLOCK, a, NULL);
     use(s, &comb, RRV_NEE_AIM);
     s->settings.seed = 62;
+    aim_reach = 1e30; /* aim through the lens too */
     block_samples_rect(s, 320, x0, y0, x1, y1, BLOCK, BLOCK, b, &rs);
+    aim_reach = 1.0;
     SAY("  two lights: %llu aimed rays, %.1f%% turned off their own light\n", (unsigned long long)rs.aim_shots,
         100.0 * (double)rs.aim_missed / (double)rs.aim_shots);
     CHECK(rs.aim_shots > rs.aim_missed && rs.aim_missed > 0);
     blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, "two lights, green, nee aim");
+    rrv_scene_free(s);
+}
+
+/* nee aim's MIS: for light points y seen from floor points x0 under the
+   lens, the weight nee gives the path along w0 = (y - x0) / |y - x0|
+   (straight NEE's for a weak chord, aim's for an aimed one, none where the
+   forward path alone carries it) and the weight of a forward path leaving
+   x0 along w0 and reaching the light sum to one; every class occurs. */
+static void test_aim_weights_sum_to_one(void)
+{
+    rrv_scene *s = NULL;
+    rrv_error err;
+    rrv__context ctx;
+    rrv__rng rng;
+    rrv__vertex_bsdf vb;
+    const rrv_shape *light;
+    rrv_vec3 ny;
+    int k, classes[3] = {0, 0, 0};
+    double worst = 0;
+    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
+        CHECKF(0, "parse: %s", err.message);
+        return;
+    }
+    memset(&ctx, 0, sizeof ctx);
+    ctx.scene = s;
+    ctx.comb = ctx.bends = ctx.partition = ctx.aim = ctx.sample_lights = 1;
+    ctx.eta_floor = 1;
+    ctx.eta_camera2 = 1;
+    light = &s->shapes[s->lights[0]];
+    ny = rrv__normalize(rrv__cross(light->e1, light->e2));
+    memset(&vb, 0, sizeof vb);
+    vb.surface = 1;
+    vb.n = rrv__v3(0, 1, 0);
+    rrv__rng_seed(&rng, 43, 0, 0);
+    for (k = 0; k < 2000; ++k) {
+        double ux = rrv__uniform(&rng), uz = rrv__uniform(&rng), u1 = rrv__uniform(&rng), u2 = rrv__uniform(&rng);
+        rrv_vec3 x0 = rrv__v3(3.0 * ux - 1.5, 1e-5, 3.0 * uz - 1.5);
+        rrv_vec3 y = rrv__madd(rrv__madd(light->p0, light->e1, u1), light->e2, u2), w0;
+        double len = rrv__length(rrv__sub(y, x0)), pdf_dir, w_nee, w_fwd, len_line;
+        int cls;
+        w0 = rrv__scale(rrv__sub(y, x0), 1.0 / len);
+        pdf_dir = rrv__vertex_pdf(&vb, w0);
+        cls = rrv__aim_class(&ctx, light, x0, w0, len);
+        ++classes[cls];
+        w_nee = cls == 0   ? rrv__power_heuristic(rrv__emitter_pdf(light, x0, y, ny) / rrv__light_choices(s), pdf_dir)
+                : cls == 1 ? rrv__power_heuristic(rrv__aim_pdf(s, light, x0, w0, &len_line), pdf_dir)
+                           : 0.0;
+        w_fwd = rrv__power_heuristic(pdf_dir, rrv__aim_forward_pdf(&ctx, light, x0, w0));
+        worst = fmax(worst, fabs(w_nee + w_fwd - 1.0));
+        CHECKF(fabs(w_nee + w_fwd - 1.0) < 1e-9, "connection %d (class %d): nee %.12f + forward %.12f", k, cls, w_nee,
+               w_fwd);
+    }
+    SAY("  aim MIS: %d weak, %d aimed, %d left to forward paths; worst |sum - 1| %.1e\n", classes[0], classes[1],
+        classes[2], worst);
+    CHECK(classes[0] > 20 && classes[1] > 20 && classes[2] > 20);
     rrv_scene_free(s);
 }
 
@@ -1652,6 +1722,7 @@ int main(void)
     NEE_RUN(test_fog_in_lens_shoot);
     NEE_RUN(test_weak_haze_aim);
     NEE_RUN(test_two_lights_aim);
+    NEE_RUN(test_aim_weights_sum_to_one);
     NEE_RUN(test_lens_caustic_manifold);
     NEE_RUN(test_luneburg_two_point);
     NEE_RUN(test_jacobian_against_differences);
