@@ -1401,7 +1401,16 @@ static const char weak_haze_text[] =
     "density haze constant 1\n"
     "ior haze noise octaves 2 frequency 2 seed 3 falloff sphere center 0 0.5 0 radius 0.5 amplitude 0.02 base 0\n";
 
-static void test_weak_haze_aim(void)
+/* The same haze under a triangle light of about the same size and power. */
+static const char weak_haze_triangle_text[] =
+    "camera eye 0 0.5 -2.4  look 0 0.5 0  up 0 1 0  fov 30  resolution 24 24\n"
+    "render maxdepth 4 bendtolerance 0.01 step 0.01\n"
+    "triangle p0 -0.35 2 -0.3  p1 0.35 2 -0.3  p2 0 2 0.4  L 20 20 20\n"
+    "medium haze box -0.5 0 -0.5 0.5 1 0.5  sigma_a 0.2 0.2 0.2  sigma_s 1.5 1.5 1.5\n"
+    "density haze constant 1\n"
+    "ior haze noise octaves 2 frequency 2 seed 3 falloff sphere center 0 0.5 0 radius 0.5 amplitude 0.02 base 0\n";
+
+static void weak_haze_case(const char *text, size_t size, const char *what)
 {
     rrv_scene *s = NULL;
     rrv_error err;
@@ -1409,7 +1418,7 @@ static void test_weak_haze_aim(void)
     stats a[16], b[16];
     int i;
     double va = 0, vb = 0;
-    if (rrv_scene_parse(weak_haze_text, sizeof weak_haze_text - 1, "haze", NULL, NULL, &s, &err) != RRV_OK) {
+    if (rrv_scene_parse(text, size, what, NULL, NULL, &s, &err) != RRV_OK) {
         CHECKF(0, "parse: %s", err.message);
         return;
     }
@@ -1422,17 +1431,23 @@ static void test_weak_haze_aim(void)
     use(s, &comb, RRV_NEE_AIM);
     s->settings.seed = 52;
     block_samples_rect(s, 64, 0, 0, 24, 24, 6, 6, b, &rs);
-    blocks_agree(a, b, 4, 0, 0, 4, 4, "weak haze, nee aim");
+    blocks_agree(a, b, 4, 0, 0, 4, 4, what);
     for (i = 0; i < 16; ++i) {
         va += sample_variance(&a[i]);
         vb += sample_variance(&b[i]);
     }
-    SAY("  weak haze: %llu aimed rays, %.1f%% turned off their light; variance per sample: aim %.4f, none %.4f\n",
+    SAY("  %s: %llu aimed rays, %.1f%% turned off their light; variance per sample: aim %.4f, none %.4f\n", what,
         (unsigned long long)rs.aim_shots, 100.0 * (double)rs.aim_missed / (double)rs.aim_shots, vb / 16, va / 16);
     /* weak haze turns few rays off the light */
     CHECK(rs.aim_shots > 0 && rs.solves == 0 && rs.aim_missed * 20 < rs.aim_shots);
-    CHECKF(vb * 10 < va, "weak haze: variance per sample %.4f with aim, %.4f with none", vb / 16, va / 16);
+    CHECKF(vb * 10 < va, "%s: variance per sample %.4f with aim, %.4f with none", what, vb / 16, va / 16);
     rrv_scene_free(s);
+}
+
+static void test_weak_haze_aim(void)
+{
+    weak_haze_case(weak_haze_text, sizeof weak_haze_text - 1, "weak haze, quad light, nee aim");
+    weak_haze_case(weak_haze_triangle_text, sizeof weak_haze_triangle_text - 1, "weak haze, triangle light, nee aim");
 }
 
 /* Two lights side by side over the lens, green and red: a ray aimed at
