@@ -85,11 +85,12 @@ static const char render_help[] =
     "  --seed S               random seed, an integer >= 0 (default: the scene's)\n"
     "  --integrator NAME      classic, refractive or eikonal (default: the scene's)\n"
     "  --nee MODE             refractive, eikonal: light sampling, shoot\n"
-    "                         (the default; eikonal: connections along bent\n"
-    "                         rays; refractive: bent connections left to the\n"
-    "                         paths), manifold (a chain of refraction vertices\n"
-    "                         solved by Newton; slow; scene keys manifoldgauge,\n"
-    "                         manifoldtrials), none\n"
+    "                         (the default; eikonal: connections solved along\n"
+    "                         bent rays; refractive: as aim), aim (shadow rays\n"
+    "                         aimed at the light and bent as camera rays are:\n"
+    "                         unbiased, cheap, no focusing), manifold (a chain\n"
+    "                         of refraction vertices solved by Newton; slow;\n"
+    "                         scene keys manifoldgauge, manifoldtrials), none\n"
     "                         (lights count only where the bent path hits them:\n"
     "                         unbiased, noisier) or straight (straight shadow\n"
     "                         rays: fast, biased near refracting media)\n"
@@ -829,6 +830,8 @@ static void add_stats(rrv_render_stats *into, const rrv_render_stats *from)
     into->solve_connections += from->solve_connections;
     into->solve_trials += from->solve_trials;
     into->solves_unsupported += from->solves_unsupported;
+    into->aim_shots += from->aim_shots;
+    into->aim_missed += from->aim_missed;
 }
 
 /* ---- the sample tree ------------------------------------------------------------
@@ -1374,12 +1377,13 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
             opt->has_integrator = 1;
         } else if (strcmp(arg, "--nee") == 0) {
             const char *mode;
-            if (!take_value(&args, arg, "none, straight or shoot", &mode)) return EXIT_USAGE;
+            if (!take_value(&args, arg, "none, straight, shoot, manifold or aim", &mode)) return EXIT_USAGE;
             if (strcmp(mode, "none") == 0) opt->nee = RRV_NEE_NONE;
             else if (strcmp(mode, "straight") == 0) opt->nee = RRV_NEE_STRAIGHT;
             else if (strcmp(mode, "shoot") == 0) opt->nee = RRV_NEE_SHOOT;
             else if (strcmp(mode, "manifold") == 0) opt->nee = RRV_NEE_MANIFOLD;
-            else return usage_error(&args, "--nee needs none, straight, shoot or manifold, got \"%s\"", mode);
+            else if (strcmp(mode, "aim") == 0) opt->nee = RRV_NEE_AIM;
+            else return usage_error(&args, "--nee needs none, straight, shoot, manifold or aim, got \"%s\"", mode);
             opt->has_nee = 1;
         } else if (strcmp(arg, "--sampler") == 0) {
             const char *name;
@@ -1479,9 +1483,13 @@ static void print_render_summary(int width, int height, int spp, double seconds,
                 stats->solve_connections ? (double)stats->solve_trials / (double)stats->solve_connections : 0.0,
                 conv > 0 ? (double)stats->solve_segments / conv : 0.0);
     }
+    if (stats->aim_shots > 0)
+        fprintf(stderr, "; aimed nee: %" PRIu64 " bent shadow rays, %.1f%% turned off their light", stats->aim_shots,
+                100.0 * (double)stats->aim_missed / (double)stats->aim_shots);
     if (stats->solves_unsupported > 0)
-        fprintf(stderr, "; %" PRIu64 " vertices could not shoot (shooting needs the eikonal integrator): their "
-                "curved connections were left to forward paths", stats->solves_unsupported);
+        fprintf(stderr, "; %" PRIu64 " vertices had no curved nee (the poisson and midpoint schemes cannot aim, "
+                "manifold needs an IOR with a known Hessian): their curved connections were left to forward paths",
+                stats->solves_unsupported);
     fputc('\n', stderr);
 }
 

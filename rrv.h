@@ -88,9 +88,10 @@
      with straight shadow rays, which is exact for straight rays.
      DEFAULT     SHOOT, the most efficient curved mode measured (README.md).
                  With the refractive integrator, which shooting cannot
-                 differentiate, its curved connections are left to forward
-                 paths: unbiased, as cheap as STRAIGHT, noisier for small
-                 lights (MANIFOLD solves them there, at a high cost).
+                 differentiate, it aims (AIM): unbiased, about as cheap as
+                 STRAIGHT, but without focusing, so caustics of small
+                 lights stay noisy (MANIFOLD solves them there, at a high
+                 cost).
      STRAIGHT    a straight shadow ray, ratio-tracked,
                  combined by the power heuristic with the phase/BSDF-sampled
                  continuation as though both sampled the same path. They do
@@ -143,9 +144,7 @@
                  forms for the profiles and blobs; for grids (gridvol,
                  NanoVDB, baked noise, a gas through Hauf-Grigull) it is
                  the exact derivative of the blended gradient the rays
-                 use. With the refractive integrator curved connections
-                 are left to forward paths (weight 1, still unbiased) and
-                 counted in rrv_render_stats.solves_unsupported.
+                 use. With the refractive integrator SHOOT aims (AIM).
      MANIFOLD    curved NEE by the paper's method (refractive and eikonal
                  integrators, the same closed-form Hessians), partitioning
                  path space by the same classes (weights: 1 for the estimator a
@@ -182,7 +181,28 @@
                  `manifolddrop D`: leave out comb planes across which eta
                  on the chord changes by less than D (faster, biased; 0, the
                  default, keeps all). Unsupported IORs as for shoot.
-     The weak class (shoot and manifold): a connection from x0 to y whose
+     AIM         bent shadow rays (refractive comb and eikonal integrators;
+                 the Poisson and midpoint schemes, whose rays bend at null
+                 events, leave curved connections to forward paths, counted
+                 in rrv_render_stats.solves_unsupported). The classes are
+                 SHOOT's; for a curved one, a point y uniform on a quad or
+                 triangle light gives w0 = (y - x0) / |y - x0|, and the
+                 shadow ray leaves x0 along w0 bent as camera rays are (the
+                 same comb kicks or eikonal steps), its transmittance
+                 ratio-tracked chord by chord; the light's radiance counts
+                 if the ray lands on that light's front, nothing if it meets
+                 anything else, leaves or crosses a sharp interface. w0 has
+                 the density of the straight line from x0 along w0 meeting
+                 the light, (|y - x0|^2 / |cos theta_y|) / (area x light
+                 choices), whichever face it meets: a function of w0 alone,
+                 so the power heuristic against the vertex's pdf of w0 is
+                 exact, and a forward path that reaches the light from x0
+                 along w0 takes the complementary weight wherever it lands
+                 on it. Unbiased for the integrator's own rays, no solve, no
+                 trials; as with NONE, focusing shows only as noise, so it
+                 suits weak heat haze (nearly every aimed ray lands) and not
+                 the caustics of small lights, which SHOOT solves.
+     The weak class (shoot, manifold and aim): a connection from x0 to y whose
      straight chord touches no refraction support (or only supports with
      zero gradient along it) is straight NEE's, with the ordinary MIS
      weights; curved NEE skips it. A forward path that crossed no sharp
@@ -666,8 +686,8 @@ typedef enum rrv_ior_interpolation {
    integrators; the classic integrator always uses straight NEE, which is
    exact there (its rays are straight). */
 typedef enum rrv_nee {
-    RRV_NEE_DEFAULT = 0, /* SHOOT (with the refractive integrator curved
-                            connections go to forward paths) */
+    RRV_NEE_DEFAULT = 0, /* SHOOT (with the refractive integrator, which
+                            cannot solve, it aims: AIM) */
     RRV_NEE_NONE,        /* no light sampling: lights, emitters and the sky
                             count only where a (bent) path hits them, MIS
                             weight 1. Unbiased; the reference. */
@@ -677,10 +697,15 @@ typedef enum rrv_nee {
                             crosses a refracting medium */
     RRV_NEE_SHOOT,       /* eikonal: connections to area lights along bent
                             rays, found by Newton on the initial direction;
-                            straight NEE only where it is exact (see manual) */
-    RRV_NEE_MANIFOLD     /* refractive and eikonal: a chain of refraction
+                            straight NEE only where it is exact (see manual);
+                            refractive: AIM */
+    RRV_NEE_MANIFOLD,    /* refractive and eikonal: a chain of refraction
                             vertices moved by Newton until each obeys Snell's
                             law (the paper's refractive ratio tracking) */
+    RRV_NEE_AIM          /* refractive and eikonal: the shadow ray aimed at a
+                            light sample and bent as camera rays are; what it
+                            lands on counts (no solve: straight NEE's cost,
+                            unbiased, no focusing; see manual) */
 } rrv_nee;
 
 /* nee MANIFOLD: the two unknowns of a chain vertex. */
@@ -974,8 +999,14 @@ typedef struct rrv_render_stats {
     uint64_t solve_connections; /* curved connections made (a root found, counted) */
     uint64_t solve_trials;      /* trials estimating 1/p, summed over those */
     uint64_t solves_unsupported;/* vertices whose curved connections were left to
-                                   forward paths because shooting cannot run there:
-                                   not eikonal, or an IOR with no derivative of its gradient */
+                                   forward paths because no curved NEE runs there:
+                                   the Poisson and midpoint schemes, or (manifold) an
+                                   IOR with no derivative of its gradient */
+    /* nee aim (and shoot where it cannot solve): */
+    uint64_t aim_shots;         /* bent shadow rays aimed at a light sample */
+    uint64_t aim_missed;        /* of which refraction turned off their light (they
+                                   met another surface, left the scene or met a
+                                   sharp interface); the rest landed or were absorbed */
 } rrv_render_stats;
 
 /* Renders pixels [x0,x1) x [y0,y1) of the image (row 0 at the top) for
@@ -4798,6 +4829,8 @@ typedef struct rrv__context {
                                 shooting or (forward) by the path alone */
     int shoot;               /* nee shoot can run (eikonal, Hessians known) */
     int manifold;            /* nee manifold can run (Hessians known) */
+    int aim;                 /* nee aim: bent shadow rays aimed at light
+                                samples (also shoot where it cannot solve) */
     double eta_floor;        /* the lowest eta anywhere (nee shoot and manifold's class) */
     double eta_camera2;      /* (1 + r at the camera)^2: radiance scales as eta^2 */
     double thermal_scale;    /* blackbody radiance at the camera over that in
@@ -5217,6 +5250,10 @@ static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3
                                         rrv_vec3 x);
 static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                               rrv__rng *rng);
+static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
+static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w);
+static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, rrv__rng *rng, rrv_vec3 *y, rrv_vec3 *ny,
+                                             double *pdf_area);
 #define RRV__CHAIN_MAX 512 /* comb planes a manifold chain may have (more: wider spacing) */
 static struct rrv__chain *rrv__chain_new(int cap);
 static void rrv__chain_delete(struct rrv__chain *ch);
@@ -5227,6 +5264,7 @@ static void rrv__curved_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, con
 {
     if (ctx->shoot) rrv__shoot_nee(ctx, path, x0, v, rng);
     else if (ctx->manifold) rrv__manifold_nee(ctx, path, x0, v, rng);
+    else if (ctx->aim) rrv__aim_nee(ctx, path, x0, v, rng);
     else if (ctx->partition) ++ctx->stats.solves_unsupported;
 }
 
@@ -5347,7 +5385,14 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
     int front = rrv__dot(n, cp->d) < 0, c;
     if ((s->L[0] > 0 || s->L[1] > 0 || s->L[2] > 0) && front) {
         double w = 1.0;
-        if (cp->prev_pdf > 0 && ctx->sample_lights) {
+        if (cp->prev_pdf > 0 && ctx->sample_lights && ctx->aim && cp->touched && !cp->jumped &&
+            s->kind != RRV_SHAPE_SPHERE) {
+            /* nee aim draws w0 toward this light with a density the path's
+               end does not change: the light's straight crossing along w0
+               (rrv__aim_nee). A weak chord's path is that straight line, so
+               this is the straight NEE's weight there too. */
+            w = rrv__power_heuristic(cp->prev_pdf, rrv__aim_forward_pdf(ctx, s, cp->vertex, cp->w0));
+        } else if (cp->prev_pdf > 0 && ctx->sample_lights) {
             double to_x = rrv__length(rrv__sub(x, cp->vertex));
             int weak = ctx->partition && cp->touched && !cp->jumped && to_x > 0
                            ? rrv__forward_weak(ctx, cp->vertex, cp->w0, rrv__scale(rrv__sub(x, cp->vertex), 1.0 / to_x),
@@ -5689,20 +5734,25 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.eikonal = scene->settings.integrator == RRV_INTEGRATOR_EIKONAL;
     ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
     ctx.step_bound = rrv__step_bound(scene, scene->settings.integrator);
-    /* the default is the curved mode measured best for the integrator:
-       shooting for eikonal rays, the chain for the refractive ones */
     /* shoot by default, also where it cannot solve (the refractive
-       integrator): manifold solves there too, but at 100x-1000x straight
-       NEE's cost on a scene like scenes/fire.rrv (README.md), while leaving
-       those connections to forward paths stays unbiased at straight's cost */
+       integrator), where it aims: manifold solves there, but at 100x-1000x
+       straight NEE's cost on a scene like scenes/fire.rrv (README.md), while
+       aiming stays unbiased at about straight's cost */
     nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : RRV_NEE_SHOOT;
     ctx.sample_lights = !ctx.bends || nee != RRV_NEE_NONE;
     /* without a medium that refracts every connection is straight: no
        curved NEE, so such a scene renders as classic does, draw for draw */
     for (i = 0; i < scene->medium_count && !rrv__medium_refracts(&scene->media[i]); ++i) {}
-    ctx.partition = ctx.bends && i < scene->medium_count && (nee == RRV_NEE_SHOOT || nee == RRV_NEE_MANIFOLD);
+    ctx.partition = ctx.bends && i < scene->medium_count &&
+                    (nee == RRV_NEE_SHOOT || nee == RRV_NEE_MANIFOLD || nee == RRV_NEE_AIM);
     ctx.shoot = ctx.partition && nee == RRV_NEE_SHOOT && ctx.eikonal && rrv__solver_supports_scene(scene);
     ctx.manifold = ctx.partition && nee == RRV_NEE_MANIFOLD && rrv__solver_supports_scene(scene);
+    /* Where shoot cannot solve (the comb's kicks have no Jacobi field) it
+       aims instead: the same classes, unbiased, at straight NEE's cost.
+       Aiming needs ray geometry that does not hang on the density (the
+       Poisson and midpoint schemes refract at null events): there the
+       connections stay with forward paths. */
+    ctx.aim = ctx.partition && !ctx.refract_nulls && (nee == RRV_NEE_AIM || (nee == RRV_NEE_SHOOT && !ctx.shoot));
     ctx.eta_floor = scene->settings.ambient_ior;
     if (ctx.partition) {
         for (i = 0; i < scene->medium_count; ++i) {
@@ -5777,6 +5827,8 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
         stats->solve_connections += ctx.stats.solve_connections;
         stats->solve_trials += ctx.stats.solve_trials;
         stats->solves_unsupported += ctx.stats.solves_unsupported;
+        stats->aim_shots += ctx.stats.aim_shots;
+        stats->aim_missed += ctx.stats.aim_missed;
     }
     rrv__chain_delete(ctx.chain);
     return RRV_OK;
@@ -6430,10 +6482,12 @@ static double rrv__chord_bend(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, d
    an approximation: the path straight NEE stands for is the chord, the
    real one turns by less than the bound, the same order as the bending
    one comb kick leaves out. */
-static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double *bound)
+/* The chord's bound on bending (rrv__chord_bend, counted until it passes
+   stop) into *bound; 0 if the chord crosses a sharp interface. */
+static int rrv__chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop, double *bound)
 {
     const rrv_scene *scene = ctx->scene;
-    double tolerance = RRV__WEAK_BEND * scene->settings.bend_tolerance, t = 0;
+    double t = 0;
     int faces;
     rrv__support_view v;
     *bound = 0;
@@ -6447,8 +6501,14 @@ static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d
         t += v.t_face + rrv__face_gap(at);
         rrv__look_along(scene, rrv__madd(x, d, t), d, &v);
     }
-    *bound = rrv__chord_bend(ctx, x, d, len, tolerance);
-    return *bound <= tolerance;
+    *bound = rrv__chord_bend(ctx, x, d, len, stop);
+    return 1;
+}
+
+static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double *bound)
+{
+    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
+    return rrv__chord_bound(ctx, x, d, len, tolerance, bound) && *bound <= tolerance;
 }
 
 static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len)
@@ -6597,6 +6657,161 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     /* dw0 = dA_y / |det J_plane| (= dA_y |cos theta_y| / |det J_perp|) */
     k = rrv__shoot_mis_weight(scene, s, root.det, rrv__vertex_pdf(v, root.w0)) / (fabs(root.det) * pdf_area) * count *
         rrv__eta_scale(ctx, y) * rrv__path_mis(path);
+    for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
+}
+
+/* ---- nee AIM: bent shadow rays aimed at light samples -----------------------------
+   Where the two-point problem is not solved (the comb, whose kick points
+   move with the ray and have no Jacobi field; or by choice), light is still
+   sampled: a point y uniform on a quad or triangle light gives the
+   direction w0 from x0 to it, and the shadow ray leaves along w0 bent
+   exactly as a camera ray would be (the same comb kicks or eikonal steps,
+   its transmittance ratio-tracked chord by chord). If it lands on the front
+   of that light, the light's radiance counts. As an estimator this is
+   sampling w0 with the solid-angle density pdf(w0) of the straight line
+   from x0 along w0 meeting the light (rrv__aim_pdf), a function of w0 alone,
+   whatever the bent ray then does; so the power heuristic against the
+   vertex's own sampling of w0 is exact, and a forward path that reaches
+   the light from x0 along w0 takes the complementary weight (in
+   rrv__hit_surface), whether or not its end is where w0's line meets it.
+   Unbiased for the discretisation camera rays use, at about the cost of a
+   straight shadow ray plus the kicks along it. It does not focus: a ray
+   that refraction turns off the light contributes nothing, so caustics of
+   small lights come from forward paths, as with nee none; on weak heat
+   haze nearly every aimed ray lands, and the estimate is as good as
+   straight NEE's without its bias.
+   The classes are shoot's: a weak chord (rrv__weak_chord) is straight
+   NEE's, a path crossing a sharp interface (Fresnel) is the forward path's
+   alone, and the sky and sphere lights are not aimed at. */
+
+/* How far, in the light's size (the square root of its area), the bound
+   on an aimed ray's turning (the chord's, rrv__chord_bend, times its
+   length) may move its landing point before aiming is not worth a ray:
+   beyond it the ray would mostly miss (a lens, a fire's strong haze) and
+   the kicks through the strong field are the dearest part of a shadow
+   ray. Efficiency only: either class is unbiased. */
+#ifndef RRV__AIM_REACH
+#define RRV__AIM_REACH 1.0
+#endif
+
+/* Who carries a connection from x0 along unit w over len to a point of
+   the quad or triangle light s: 0, straight NEE (a weak chord,
+   rrv__weak_chord); 1, nee aim; 2, the forward path alone (the chord
+   crosses a sharp interface, or bends too much to be worth aiming:
+   RRV__AIM_REACH). A function of x0 and w alone (len and s are where w's
+   line meets the light), so a forward path computes it for itself. */
+static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double len)
+{
+    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
+    double reach = RRV__AIM_REACH * sqrt(rrv__shape_area(s)) / len, bound;
+    if (!rrv__chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound)) return 2;
+    if (bound <= tolerance) return 0;
+    return bound <= reach ? 1 : 2;
+}
+
+/* The solid-angle density of nee aim's w toward the quad or triangle light
+   s from x0, light choice included: 0 where the line from x0 along unit w
+   misses s. Both faces count: the point is drawn whatever side of s faces
+   x0, and a bent ray aimed at the back may land on the front. *len: how
+   far along w the line meets s. */
+static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double *len)
+{
+    rrv_vec3 n = rrv__cross(s->e1, s->e2), rel;
+    double n2 = rrv__dot(n, n), facing = rrv__dot(n, w), t, a, b, cos_y;
+    if (!(facing != 0) || !(n2 > 0)) return 0.0;
+    t = rrv__dot(n, rrv__sub(s->p0, x0)) / facing;
+    if (!(t > 0) || !(t < DBL_MAX)) return 0.0;
+    rel = rrv__sub(rrv__madd(x0, w, t), s->p0);
+    a = rrv__dot(rrv__cross(rel, s->e2), n) / n2;
+    b = rrv__dot(rrv__cross(s->e1, rel), n) / n2;
+    if (a < 0 || b < 0 || (s->kind == RRV_SHAPE_TRIANGLE ? a + b > 1 : a > 1 || b > 1)) return 0.0;
+    cos_y = fabs(facing) / sqrt(n2);
+    *len = t;
+    return t * t / (rrv__shape_area(s) * cos_y * rrv__light_choices(scene));
+}
+
+/* The density nee (straight or aimed) draws w with from x0 toward the
+   quad or triangle light s, 0 where it leaves w to forward paths: what a
+   forward path that reached s from x0 along w weighs itself against. */
+static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w)
+{
+    double len, pdf = rrv__aim_pdf(ctx->scene, s, x0, w, &len);
+    return pdf > 0 && rrv__aim_class(ctx, s, x0, w, len) < 2 ? pdf : 0.0;
+}
+
+/* nee aim's shadow ray from o along *d, bent as camera rays are: the shape
+   index of the first surface it meets (*hit, *d its direction there) and
+   the transmittance up to it; -1 where T reaches 0 or the step bound
+   (counted as cut), -2 where it leaves the scene or meets a sharp
+   interface. */
+static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *rng, rrv__hit *hit, double T[3])
+{
+    const rrv_scene *scene = ctx->scene;
+    rrv__bender b;
+    long steps = 0;
+    ++ctx->stats.paths;
+    T[0] = T[1] = T[2] = 1.0;
+    rrv__bender_start(&b, scene, ctx->eikonal, o);
+    for (;;) {
+        double segment, reach, Ts[3];
+        int has_hit, c;
+        if (++steps > ctx->step_bound) {
+            ++ctx->stats.paths_cut;
+            return -1;
+        }
+        if (!b.pending) rrv__plan_segment(&b, scene, o, d, rng);
+        segment = b.segment;
+        /* a surface on the face that ends the segment belongs to it, as in
+           rrv__trace_path */
+        has_hit = b.surface_free ? 0
+                                 : rrv__intersect_scene(scene, o, *d,
+                                                        segment < DBL_MAX
+                                                            ? segment + rrv__face_gap(rrv__madd(o, *d, segment))
+                                                            : DBL_MAX,
+                                                        hit);
+        if (!has_hit && !(segment < DBL_MAX)) return -2;
+        reach = has_hit ? hit->t : segment;
+        if (rrv__chord_meets_extinction(scene, o, *d, reach)) {
+            rrv__ratio_tracking_transmittance(ctx, o, *d, reach, rng, Ts);
+            for (c = 0; c < 3; ++c) T[c] *= Ts[c];
+            if (!(T[0] > 0 || T[1] > 0 || T[2] > 0)) return -1;
+        }
+        if (has_hit) return hit->shape;
+        if (b.end == RRV__END_FACE && rrv__face_jumps(scene, rrv__madd(o, *d, segment), *d)) return -2;
+        if (b.end == RRV__END_KICK || b.end == RRV__END_STEP) ++ctx->stats.events;
+        rrv__finish_segment(&b, scene, &o, d, rng);
+    }
+}
+
+/* nee aim from vertex x0 (the section's comment says why it is unbiased). */
+static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
+{
+    const rrv_scene *scene = ctx->scene;
+    rrv_vec3 y, ny, w0, d;
+    rrv__hit hit;
+    double pdf_area, to_y, pdf_aim, pdf_dir, f[3], T[3], k;
+    int c, met;
+    const rrv_shape *s = rrv__pick_area_light(scene, rng, &y, &ny, &pdf_area);
+    (void)pdf_area;
+    if (!s) return;
+    to_y = rrv__length(rrv__sub(y, x0));
+    if (!(to_y > 0)) return;
+    w0 = rrv__scale(rrv__sub(y, x0), 1.0 / to_y);
+    rrv__vertex_eval(v, w0, f);
+    if (!(f[0] > 0 || f[1] > 0 || f[2] > 0)) return;
+    if (rrv__aim_class(ctx, s, x0, w0, to_y) != 1) return; /* straight NEE's or the forward path's */
+    pdf_aim = rrv__aim_pdf(scene, s, x0, w0, &to_y);
+    if (!(pdf_aim > 0) || !(pdf_aim < DBL_MAX)) return; /* y on the light's rim, seen edge-on */
+    ++ctx->stats.aim_shots;
+    d = w0;
+    met = rrv__aim_trace(ctx, x0, &d, rng, &hit, T);
+    if (met == -1) return;
+    if (met == -2 || &scene->shapes[met] != s || !(rrv__dot(hit.n, d) < 0)) {
+        ++ctx->stats.aim_missed;
+        return;
+    }
+    pdf_dir = rrv__vertex_pdf(v, w0);
+    k = rrv__power_heuristic(pdf_aim, pdf_dir) / pdf_aim * rrv__eta_scale(ctx, hit.p) * rrv__path_mis(path);
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
 
@@ -11100,7 +11315,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"refraction", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|poisson|midpoint|comb"},
     {"majorantcells", RRV__SF_INT, 1, 0, 0.0, 256.0, NULL},
     {"iorinterp", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "trilinear|cubic"},
-    {"nee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "none|straight|shoot|manifold"},
+    {"nee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "none|straight|shoot|manifold|aim"},
     {"manifoldgauge", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "chord|iso"},
     {"manifoldtrials", RRV__SF_INT, 1, 0, 0.0, 1024.0, NULL},
     {"manifolddrop", RRV__SF_NUM, 1, 0, 0.0, 1.0, NULL},
@@ -11625,7 +11840,7 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
     if ((unsigned)s->ior_interpolation > (unsigned)RRV_IOR_INTERP_CUBIC)
         return rrv__ck_fail(ck, RRV_OK, "ior_interpolation %d is not one of rrv_ior_interpolation",
                             (int)s->ior_interpolation);
-    if ((unsigned)s->nee > (unsigned)RRV_NEE_MANIFOLD)
+    if ((unsigned)s->nee > (unsigned)RRV_NEE_AIM)
         return rrv__ck_fail(ck, RRV_OK, "nee %d is not one of rrv_nee", (int)s->nee);
     if ((unsigned)s->sampler > (unsigned)RRV_SAMPLER_SOBOL)
         return rrv__ck_fail(ck, RRV_OK, "sampler %d is not one of rrv_sampler", (int)s->sampler);
@@ -12576,7 +12791,7 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[9].given) s->majorant_cells = (int)sl[9].v[0];
     if (sl[10].given) s->ior_interpolation = sl[10].choice ? RRV_IOR_INTERP_CUBIC : RRV_IOR_INTERP_TRILINEAR;
     if (sl[11].given) {
-        static const rrv_nee modes[] = {RRV_NEE_NONE, RRV_NEE_STRAIGHT, RRV_NEE_SHOOT, RRV_NEE_MANIFOLD};
+        static const rrv_nee modes[] = {RRV_NEE_NONE, RRV_NEE_STRAIGHT, RRV_NEE_SHOOT, RRV_NEE_MANIFOLD, RRV_NEE_AIM};
         s->nee = modes[sl[11].choice];
     }
     if (sl[12].given) s->manifold_gauge = sl[12].choice ? RRV_GAUGE_ISO : RRV_GAUGE_CHORD;

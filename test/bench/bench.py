@@ -353,6 +353,8 @@ def main():
              (4, 16) if quick else (4, 16, 64)),
             ("refractive comb, nee manifold", ["--integrator", "refractive", "--nee", "manifold"],
              (1, 2) if quick else (1, 4, 16)),
+            ("refractive comb, nee aim", ["--integrator", "refractive", "--nee", "aim"],
+             (16, 64) if quick else (16, 64, 256)),
             ("eikonal RK4, nee shoot", ["--integrator", "eikonal", "--nee", "shoot"],
              (1, 4) if quick else (1, 4, 16))]
     b.sweep("lens_caustic", lens, ())
@@ -360,8 +362,18 @@ def main():
                  (16, 64, 256) if quick else (64, 256, 1024)),
                 ("eikonal RK4 h=0.05, nee straight", ["--integrator", "eikonal", "--nee", "straight"], (4, 16)),
                 ("eikonal RK4 h=0.05, nee shoot", ["--integrator", "eikonal", "--nee", "shoot"],
-                 (1, 4) if quick else (1, 4, 16))]
+                 (1, 4) if quick else (1, 4, 16)),
+                ("refractive comb, nee aim", ["--integrator", "refractive", "--nee", "aim"],
+                 (16, 64) if quick else (16, 64, 256))]
     b.sweep("fire_caustic", fcaustic, ())
+    # weak heat haze: aimed shadow rays against forward paths and straight ones
+    haze = [("refractive comb, nee none", ["--integrator", "refractive", "--nee", "none"],
+             (16, 64) if quick else (16, 64, 256)),
+            ("refractive comb, nee straight", ["--integrator", "refractive", "--nee", "straight"],
+             (16, 64) if quick else (16, 64, 256)),
+            ("refractive comb, nee aim (default)", ["--integrator", "refractive", "--nee", "aim"],
+             (16, 64) if quick else (16, 64, 256))]
+    b.sweep("haze", haze, ())
     if not quick:
         b.sweep("smoke", [("classic", ["--integrator", "classic"])], (1, 4, 16, 64))
         b.sweep("fisheye", [("refractive comb, nee none", ["--integrator", "refractive", "--nee", "none"]),
