@@ -2417,6 +2417,11 @@ enum { RRV__DENSITY, RRV__TEMPERATURE, RRV__PRESSURE, RRV__IOR, RRV__FIELD_KINDS
 #ifndef RRV__COMB_WANDER
 #define RRV__COMB_WANDER 0
 #endif
+/* Its h^2 W <= BUDGET tau tolerance (rrv__rate_distance); 4 bounds a
+   kick's error by the tolerance, a measurement build may set another. */
+#ifndef RRV__COMB_WANDER_BUDGET
+#define RRV__COMB_WANDER_BUDGET 4.0
+#endif
 
 struct rrv__majorant_grid {
     int n[3];
@@ -4576,8 +4581,8 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
     const double inv_cell[3] = {g->inv_cell.x, g->inv_cell.y, g->inv_cell.z};
     const float *grad = g->grad_max, *wanders = g->jacobian_wander;
     double t_next[3], t_delta[3], t = 0, need = tau, cap, cell_min, wander = 0;
-    /* h^2 wander <= 4 tau tolerance: the chord's share of a kick's error (below) */
-    const double budget = 4.0 * tau / inv_tolerance;
+    /* h^2 wander <= 4 tau tolerance: the chord's share of a kick's error (above) */
+    const double budget = wanders ? RRV__COMB_WANDER_BUDGET * tau / inv_tolerance : 0;
     ptrdiff_t stride[3], idx = 0;
     int cell[3], step[3], a, in_gradient;
     stride[0] = 1;
