@@ -2440,6 +2440,20 @@ static double rrv__profile_refractivity(const rrv_field *f, rrv_vec3 p, double a
    and the majorant bound over it is exact. The user's fields stay as given. */
 enum { RRV__DENSITY, RRV__TEMPERATURE, RRV__PRESSURE, RRV__IOR, RRV__FIELD_KINDS };
 
+/* 1: the comb's chords are limited by a per-cell bound on how much the
+   gradient's Jacobian varies (rrv__cell_jacobian_wander) instead of
+   RRV__COMB_MAX_CELLS cells, where the gradient is a baked trilinear grid.
+   Off by default: at equal landing error it measured no fewer kicks (README,
+   "Refraction overhead"); a measurement build may set it. */
+#ifndef RRV__COMB_WANDER
+#define RRV__COMB_WANDER 0
+#endif
+/* Its h^2 W <= BUDGET tau tolerance (rrv__rate_distance); 4 bounds a
+   kick's error by the tolerance, a measurement build may set another. */
+#ifndef RRV__COMB_WANDER_BUDGET
+#define RRV__COMB_WANDER_BUDGET 4.0
+#endif
+
 struct rrv__majorant_grid {
     int n[3];
     rrv_vec3 lo, hi, cell;
@@ -2448,6 +2462,10 @@ struct rrv__majorant_grid {
     double sigma_t_max;    /* max over channels of (sigma_a + sigma_s) * scale */
     float *density_max;    /* per cell */
     float *grad_max;       /* per cell max |grad r|, NULL if the medium does not refract */
+    float *jacobian_wander; /* with RRV__COMB_WANDER, per cell bound on |J(p) - J(q)|, J the
+                              Jacobian of grad r, p, q in the cell, where grad r is a baked
+                              trilinear grid's; -1 in a cell, or NULL for the medium, where none
+                              is known (the comb's chords there keep RRV__COMB_MAX_CELLS) */
     float density_peak;    /* max of density_max: sizes the work bounds */
     float grad_peak;       /* max of grad_max, 0 if the medium does not refract */
     size_t bytes;          /* heap bytes built for this medium (grids, bakes) */
@@ -3393,6 +3411,52 @@ static double rrv__cell_gradient_bound(const rrv_medium *m, rrv_vec3 lo, rrv_vec
     return 1.5 * best;
 }
 
+/* A bound on how far the Jacobian of the blended gradient of the baked
+   refraction grid moves within a cell, |J(p) - J(q)| (Frobenius) for p, q
+   in [lo, hi]. Inside a lattice cell, column a of J is a bilinear blend of
+   the cell's four gradient differences along axis a over the sample
+   spacing; so J(p) - J(q) lies in the box of those differences' ranges over
+   the lattice cells [lo, hi] spans (across a lattice face J jumps, and both
+   sides are in the ranges), and the box's diagonal bounds it. -1 where J is
+   not that blend: closed forms, sampled gases, cubic interpolation, and a
+   cell reaching past the bake (where the gradient drops to 0, a jump that
+   no bound on J covers). */
+static double rrv__cell_jacobian_wander(const rrv_medium *m, rrv_vec3 lo, rrv_vec3 hi)
+{
+    const struct rrv__majorant_grid *mg = m->majorant;
+    const rrv_grid *baked = &mg->refraction;
+    const size_t stride[3] = {4, 4 * (size_t)baked->nx, 4 * (size_t)baked->nx * (size_t)baked->ny};
+    const double scale[3] = {mg->refraction_scale.x, mg->refraction_scale.y, mg->refraction_scale.z};
+    double low[9], high[9], sum = 0;
+    int a[3], b[3], x, y, z, axis, c, first[3] = {1, 1, 1};
+    if (!baked->data || !rrv__flat_beyond_bake(m)) return -1;
+    if (lo.x < baked->lo.x || lo.y < baked->lo.y || lo.z < baked->lo.z || hi.x > baked->hi.x ||
+        hi.y > baked->hi.y || hi.z > baked->hi.z)
+        return -1;
+    if (!rrv__grid_span(baked, lo, hi, a, b)) return -1;
+    for (z = a[2]; z <= b[2]; ++z)
+        for (y = a[1]; y <= b[1]; ++y)
+            for (x = a[0]; x <= b[0]; ++x) {
+                const int at[3] = {x, y, z};
+                const float *v = baked->data + (size_t)x * stride[0] + (size_t)y * stride[1] + (size_t)z * stride[2];
+                for (axis = 0; axis < 3; ++axis) {
+                    const float *w = v + stride[axis];
+                    if (at[axis] >= b[axis]) continue; /* the edge along axis leaves the span */
+                    for (c = 0; c < 3; ++c) {
+                        double dj = ((double)w[1 + c] - v[1 + c]) * scale[axis];
+                        int k = 3 * axis + c;
+                        if (first[axis] || dj < low[k]) low[k] = dj;
+                        if (first[axis] || dj > high[k]) high[k] = dj;
+                    }
+                    first[axis] = 0;
+                }
+            }
+    for (axis = 0; axis < 3; ++axis)
+        if (first[axis]) return -1; /* a lattice of one sample along an axis */
+    for (c = 0; c < 9; ++c) sum += (high[c] - low[c]) * (high[c] - low[c]);
+    return sqrt(sum);
+}
+
 /* Refuses a grid rrv_scene_prepare would build (majorant, bake) of `count`
    entries of `size` bytes above the scene's grid limit: the limit that keeps
    a hostile file from exhausting memory holds for what it makes us build. */
@@ -3720,6 +3784,13 @@ static void rrv__majorant_slice(void *ctx, int z)
             g->density_max[c] = df > 0 ? df : 0.0f;
             if (g->grad_max)
                 g->grad_max[c] = (float)rrv__mind(rrv__cell_gradient_bound(m, lo, hi, job->ambient_r), FLT_MAX);
+            if (g->jacobian_wander) {
+                /* rounded up, as the density bound; -1 stays -1 */
+                double v = rrv__mind(rrv__cell_jacobian_wander(m, lo, hi), FLT_MAX);
+                float vf = (float)v;
+                if ((double)vf < v) vf = nextafterf(vf, FLT_MAX);
+                g->jacobian_wander[c] = vf;
+            }
         }
 }
 
@@ -3804,7 +3875,7 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
 {
     struct rrv__majorant_grid *g;
     size_t cells, c;
-    int x, refracts = rrv__medium_refracts(m);
+    int x, refracts = rrv__medium_refracts(m), arrays;
     g = (struct rrv__majorant_grid *)RRV_MALLOC(sizeof *g);
     if (!g) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
     memset(g, 0, sizeof *g);
@@ -3825,24 +3896,28 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
         if (res != RRV_OK) return res;
     }
     for (x = 0; x < 3; ++x) g->sigma_t_max = rrv__maxd(g->sigma_t_max, (m->sigma_a[x] + m->sigma_s[x]) * m->scale);
+    /* density bounds; gradient bounds where it refracts; Jacobian wander
+       bounds where that gradient is a baked trilinear blend */
+    arrays = !refracts ? 1 : RRV__COMB_WANDER && g->refraction.data && rrv__flat_beyond_bake(m) ? 3 : 2;
     rrv__majorant_lattice(scene, m, refracts, 1, g);
     cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
     {
         /* finer cells save work, so they must not cost a refusal: above
            the grid limit the medium keeps the automatic ones */
         size_t limit = scene->max_grid_bytes ? scene->max_grid_bytes : RRV_DEFAULT_MAX_GRID_BYTES;
-        if (cells > limit / (sizeof(float) * (refracts ? 2 : 1))) {
+        if (cells > limit / (sizeof(float) * arrays)) {
             rrv__majorant_lattice(scene, m, refracts, 0, g);
             cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
         }
     }
     {
-        rrv_result res = rrv__check_built_grid(scene, m, "majorant grid", cells, sizeof(float) * (refracts ? 2 : 1), err);
+        rrv_result res = rrv__check_built_grid(scene, m, "majorant grid", cells, sizeof(float) * arrays, err);
         if (res != RRV_OK) return res;
     }
-    g->density_max = (float *)RRV_MALLOC(cells * sizeof(float) * (refracts ? 2 : 1));
+    g->density_max = (float *)RRV_MALLOC(cells * sizeof(float) * arrays);
     if (!g->density_max) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
     g->grad_max = refracts ? g->density_max + cells : NULL;
+    g->jacobian_wander = arrays > 2 ? g->density_max + 2 * cells : NULL;
     {
         rrv__majorant_bake job;
         job.m = m;
@@ -4513,8 +4588,17 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
    ray through the empty part of a support runs to its face). A chord spans
    at most RRV__COMB_MAX_CELLS cells' length, so that one kick never stands
    for a stretch of the field longer than its cells resolve (measured in
-   README: longer chords save kicks but land much further off). Where a
-   kick falls hangs on the bounds, which a NanoVDB file and a gridvol of one
+   README: longer chords save kicks but land much further off).
+   With RRV__COMB_WANDER, where the cells bound how much the Jacobian J of
+   the gradient wanders (g->jacobian_wander), the cap gives way to
+   h^2 W <= 4 tau tolerance, W the sum of the wander bounds of the cells the
+   chord reaches: a kick stands for the half chords on both sides, and over
+   one of length h/2 it misses the integral of grad r by J d h^2 / 8 (J at
+   the kick; the two sides' terms cancel at equal chords) plus at most
+   W h^2 / 8, so with every chord held to the rule a kick's bending error
+   beyond that first-order term is at most the tolerance (over eta ~ 1, as
+   the rate). It measured no fewer kicks at equal landing error (README).
+   Where a kick falls hangs on the bounds, which a NanoVDB file and a gridvol of one
    grid round differently (by ~1e-7): their kicks move by as much. DBL_MAX if the ray leaves the box first. A DDA of its own,
    with the steps of the majorant iterator's; inv_d holds the reciprocals of
    d's components (the chord's, computed once for its whole line). */
@@ -4526,8 +4610,10 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
     const double xs[3] = {x.x, x.y, x.z}, ds[3] = {d.x, d.y, d.z};
     const double lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
     const double inv_cell[3] = {g->inv_cell.x, g->inv_cell.y, g->inv_cell.z};
-    const float *grad = g->grad_max;
-    double t_next[3], t_delta[3], t = 0, need = tau, cap, cell_min;
+    const float *grad = g->grad_max, *wanders = g->jacobian_wander;
+    double t_next[3], t_delta[3], t = 0, need = tau, cap, cell_min, wander = 0;
+    /* h^2 wander <= 4 tau tolerance: the chord's share of a kick's error (above) */
+    const double budget = wanders ? RRV__COMB_WANDER_BUDGET * tau / inv_tolerance : 0;
     ptrdiff_t stride[3], idx = 0;
     int cell[3], step[3], a, in_gradient;
     stride[0] = 1;
@@ -4555,6 +4641,10 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
     cell_min = cs[0] < cs[1] ? cs[0] : cs[1];
     if (cs[2] < cell_min) cell_min = cs[2];
     cap = tau * RRV__COMB_MAX_CELLS * cell_min;
+    if (wanders && wanders[idx] >= 0) {
+        cap = DBL_MAX;
+        wander = wanders[idx];
+    }
     /* A kick stands for the chords on both sides of it, so a chord must not
        carry a gradient into a stretch without one: where the ray passes
        from cells with a gradient to cells without, or back, a point falls
@@ -4565,12 +4655,14 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
         t_face = t_next[a];
         if (in_gradient) {
             double rate = grad[idx] * inv_tolerance, span = t_face - t;
+            /* the longest chord the Jacobian's wander allows, within cap */
+            double limit = wander > 0 && budget < cap * cap * wander ? sqrt(budget / wander) : cap;
             if (rate * span >= need) {
                 double h = t + need / rate;
-                return h < cap ? h : cap;
+                return h < limit ? h : limit;
             }
+            if (t_face >= limit) return limit;
             need -= rate * span;
-            if (t_face >= cap) return cap;
         }
         t = t_face;
         cell[a] += step[a];
@@ -4583,6 +4675,19 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
             }
             /* x lay on the face (within rounding): start the cell's spacing here */
             in_gradient = !in_gradient;
+            wander = 0;
+        }
+        if (wanders && in_gradient) {
+            /* the chord reaching into this cell takes on its wander; if
+               even its start is too long for that, it ends on the face
+               (t > 0: the chord so far kept t^2 wander <= budget). Into a
+               cell without a bound, it reaches at most the cap. */
+            if (wanders[idx] < 0) {
+                cap = fmin(cap, t + tau * RRV__COMB_MAX_CELLS * cell_min);
+            } else {
+                wander += wanders[idx];
+                if (t * t * wander > budget) return t;
+            }
         }
         t_next[a] += t_delta[a];
     }
@@ -5668,7 +5773,8 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
         if (g) {
             g->bytes = baked + sizeof *g;
             if (g->density_max)
-                g->bytes += (size_t)g->n[0] * g->n[1] * g->n[2] * sizeof(float) * (g->grad_max ? 2 : 1);
+                g->bytes += (size_t)g->n[0] * g->n[1] * g->n[2] * sizeof(float) *
+                            (size_t)(1 + (g->grad_max != NULL) + (g->jacobian_wander != NULL));
             scene->bytes += g->bytes;
         }
         if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }

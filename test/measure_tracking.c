@@ -3,15 +3,17 @@
    Not a test: make test builds it so it cannot rot;
    `make bench` runs it from the repository root:
      build/measure_tracking [SPP]
-     build/measure_tracking --comb SCENE [BEND_TOLERANCE [PLANE]]
+     build/measure_tracking --comb SCENE [BEND_TOLERANCE [PLANE [MU_ETA]]]
    The second form traces camera rays (a 32 x 24 lattice of pixels, those
    whose ray bends) through SCENE's refracting media with the comb
    (rrv_trace_ray, REFRACTIVE, 16 walks a ray, the scene's bend tolerance
    unless given) and with eikonal RK4 at h = 0.002 m, the reference, and
    prints the RMS distance between where they cross the plane
-   forward . x = PLANE (default: the far corner of the refracting boxes
-   along the camera's forward axis), the RMS angle between their exit
+   forward . x = PLANE (default, or "-": the far corner of the refracting
+   boxes along the camera's forward axis), the RMS angle between their exit
    directions, the mean comb points a ray and the CPU time a comb ray.
+   MU_ETA > 0 sets the comb's fixed rate (points a metre, evenly spaced):
+   the uniform leapfrog to set a spacing rule against.
    The first form prints
      1. tentative collisions (null and real, rrv_render_stats.events) per
         second of one thread rendering the plume, classic integrator;
@@ -70,7 +72,7 @@ static int land(const rrv_trace_result *r, const landing *l, rrv_vec3 *at)
 
 #define COMB_WALKS 16
 
-static int comb_error(const char *path, double tolerance, const char *plane)
+static int comb_error(const char *path, double tolerance, const char *plane, double mu_eta)
 {
     rrv_scene *scene = NULL;
     rrv_error err;
@@ -84,6 +86,7 @@ static int comb_error(const char *path, double tolerance, const char *plane)
         return 2;
     }
     if (tolerance > 0) scene->settings.bend_tolerance = tolerance;
+    if (mu_eta > 0) scene->settings.mu_eta = mu_eta;
     if (rrv_scene_prepare(scene, &err) != RRV_OK) {
         fprintf(stderr, "%s: %s\n", path, err.message);
         return 2;
@@ -98,7 +101,7 @@ static int comb_error(const char *path, double tolerance, const char *plane)
                                     (l.forward.y > 0 ? m->hi.y : m->lo.y) * l.forward.y +
                                     (l.forward.z > 0 ? m->hi.z : m->lo.z) * l.forward.z);
     }
-    if (plane) l.plane = atof(plane);
+    if (plane && strcmp(plane, "-") != 0) l.plane = atof(plane);
     for (py = 0; py < 24; ++py)
         for (px = 0; px < 32; ++px) {
             rrv_vec3 d = rrv__camera_ray(&frame, &scene->camera, (px + 0.5) * scene->camera.width / 32.0,
@@ -155,7 +158,8 @@ int main(int argc, char **argv)
     int spp = argc > 1 ? atoi(argv[1]) : 4, w, h, run, order, i;
     uint64_t state = 0x853C49E6748FEA9Bull;
     if (argc > 2 && strcmp(argv[1], "--comb") == 0)
-        return comb_error(argv[2], argc > 3 ? atof(argv[3]) : 0, argc > 4 ? argv[4] : NULL);
+        return comb_error(argv[2], argc > 3 ? atof(argv[3]) : 0, argc > 4 ? argv[4] : NULL,
+                          argc > 5 ? atof(argv[5]) : 0);
     if (rrv_scene_load("scenes/plume.rrv", NULL, &scene, &err) != RRV_OK) {
         fprintf(stderr, "%s:%d: %s\n", err.file, err.line, err.message);
         return 2;
