@@ -4921,6 +4921,25 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
 
 /* ---- integrators: classic and refractive null-scattering path tracing ---------- */
 
+/* How far, in the light's size (the square root of its area), the bound
+   on an aimed ray's turning (the chord's, rrv__chord_bend, times its
+   length) may move its landing point before aiming is not worth a ray:
+   beyond it the ray would mostly miss (a lens, a fire's strong haze) and
+   the kicks through the strong field are the dearest part of a shadow
+   ray. Efficiency only: either class is unbiased. */
+#ifndef RRV__AIM_REACH
+#define RRV__AIM_REACH 1.0
+#endif
+/* The same where shoot could solve the connection instead: aiming gives
+   up its focusing (a lensed light's image is sampled only where it
+   overlaps the straight one), so it takes only the connections that bend
+   least. 0.3: eikonal shoot on scenes/haze.rrv aims nearly all and costs
+   1.4x straight NEE instead of 11x, while on fire_caustic its efficiency
+   falls by a fifth (README.md). */
+#ifndef RRV__SHOOT_AIM_REACH
+#define RRV__SHOOT_AIM_REACH 0.3
+#endif
+
 typedef struct rrv__context {
     const rrv_scene *scene;
     int refract_nulls;       /* refract at null events (Poisson, midpoint schemes) */
@@ -4940,6 +4959,7 @@ typedef struct rrv__context {
     int aim_by_landing;      /* shoot and aim share the curved paths: a
                                 path is aim's if its chord to where it lands
                                 is aim's class, shoot's otherwise */
+    double aim_reach;        /* RRV__AIM_REACH, or RRV__SHOOT_AIM_REACH with shoot */
     double eta_floor;        /* the lowest eta anywhere (nee shoot and manifold's class) */
     double eta_camera2;      /* (1 + r at the camera)^2: radiance scales as eta^2 */
     double thermal_scale;    /* blackbody radiance at the camera over that in
@@ -5873,6 +5893,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
        connections stay with forward paths. */
     ctx.aim = ctx.partition && !ctx.refract_nulls && (nee == RRV_NEE_AIM || nee == RRV_NEE_SHOOT);
     ctx.aim_by_landing = ctx.shoot;
+    ctx.aim_reach = ctx.shoot ? RRV__SHOOT_AIM_REACH : RRV__AIM_REACH;
     ctx.eta_floor = scene->settings.ambient_ior;
     if (ctx.partition) {
         for (i = 0; i < scene->medium_count; ++i) {
@@ -6806,15 +6827,6 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
    NEE's, a path crossing a sharp interface (Fresnel) is the forward path's
    alone, and the sky and sphere lights are not aimed at. */
 
-/* How far, in the light's size (the square root of its area), the bound
-   on an aimed ray's turning (the chord's, rrv__chord_bend, times its
-   length) may move its landing point before aiming is not worth a ray:
-   beyond it the ray would mostly miss (a lens, a fire's strong haze) and
-   the kicks through the strong field are the dearest part of a shadow
-   ray. Efficiency only: either class is unbiased. */
-#ifndef RRV__AIM_REACH
-#define RRV__AIM_REACH 1.0
-#endif
 
 /* Who carries a connection from x0 along unit w over len to a point of
    the quad or triangle light s: 0, straight NEE (a weak chord,
@@ -6825,7 +6837,7 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
 static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double len)
 {
     double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
-    double reach = RRV__AIM_REACH * sqrt(rrv__shape_area(s)) / len, bound;
+    double reach = ctx->aim_reach * sqrt(rrv__shape_area(s)) / len, bound;
     if (!rrv__chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound)) return 2;
     if (bound <= tolerance) return 0;
     return bound <= reach ? 1 : 2;
