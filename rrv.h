@@ -2622,40 +2622,52 @@ static double rrv__refraction_lookup(const struct rrv__majorant_grid *mg, rrv_ve
    smooth field, 5 % at 33^3, test/test_hessian.c). The trilinear value's
    own Hessian, zero inside every cell, would miss it entirely. */
 
-/* d/dt_axis of rrv__blend8: the same corners, the weight along the axis
-   replaced by its derivative (-1 at the lower corner, +1 at the upper). */
-static double rrv__blend8_slope(const float *d, size_t sx, size_t sy, size_t sz, const double t[3], int axis)
+/* The refraction grid's value, gradient and the gradient's Jacobian at p,
+   from one location of its cell: the value and gradient are
+   rrv__refraction_lookup's bit for bit (the same blends in the same
+   order), J is the trilinear blend of the baked central differences
+   differentiated in that cell (the one-sided slopes there; the derivative
+   jumps at cell faces, where the gradient itself is continuous). Per
+   channel, the slope along x is the (y, z) blend of the corners' x
+   differences, and those along y and z are differences of the partial
+   blends the value is built from, so they cost a few operations more
+   than the value rather than a sum over the eight corners each. */
+static double rrv__refraction_lookup_jacobian_fused(const struct rrv__majorant_grid *mg, rrv_vec3 p, rrv_vec3 *grad,
+                                                    double J[9])
 {
-    size_t stride[3];
-    double sum = 0;
-    int corner, a;
-    stride[0] = sx; stride[1] = sy; stride[2] = sz;
-    for (corner = 0; corner < 8; ++corner) {
-        double w = 1;
-        size_t at = 0;
-        for (a = 0; a < 3; ++a) {
-            int bit = (corner >> a) & 1;
-            w *= a == axis ? (bit ? 1.0 : -1.0) : bit ? t[a] : 1.0 - t[a];
-            if (bit) at += stride[a];
-        }
-        sum += w * (double)d[at];
+    size_t sy, sz;
+    double t[3], v[4], slope[3][4];
+    const float *d = rrv__refraction_cell(mg, p, &sy, &sz, t);
+    int c;
+    for (c = 0; c < 4; ++c) {
+        /* x differences of the four x edges (rows y, z = 00, 10, 01, 11) */
+        double dx00 = (double)d[4 + c] - d[c], dx10 = (double)d[sy + 4 + c] - d[sy + c];
+        double dx01 = (double)d[sz + 4 + c] - d[sz + c], dx11 = (double)d[sz + sy + 4 + c] - d[sz + sy + c];
+        double c00 = (double)d[c] + t[0] * dx00, c10 = (double)d[sy + c] + t[0] * dx10;
+        double c01 = (double)d[sz + c] + t[0] * dx01, c11 = (double)d[sz + sy + c] + t[0] * dx11;
+        double ey0 = c10 - c00, ey1 = c11 - c01, sx0 = dx00 + t[1] * (dx10 - dx00), sx1 = dx01 + t[1] * (dx11 - dx01);
+        c00 += t[1] * ey0;
+        c01 += t[1] * ey1;
+        v[c] = c00 + t[2] * (c01 - c00);
+        slope[0][c] = sx0 + t[2] * (sx1 - sx0);
+        slope[1][c] = ey0 + t[2] * (ey1 - ey0);
+        slope[2][c] = c01 - c00;
     }
-    return sum;
+    for (c = 0; c < 3; ++c) {
+        J[3 * c] = slope[0][1 + c] * mg->refraction_scale.x;
+        J[3 * c + 1] = slope[1][1 + c] * mg->refraction_scale.y;
+        J[3 * c + 2] = slope[2][1 + c] * mg->refraction_scale.z;
+    }
+    *grad = rrv__v3(v[1], v[2], v[3]);
+    return v[0];
 }
 
-/* The Jacobian of the gradient rrv__refraction_lookup returns: the
-   trilinear blend of the baked central differences, differentiated in the
-   cell that lookup picks (the one-sided slopes there; the derivative jumps
-   at cell faces, where the gradient itself is continuous). */
+/* The Jacobian of the gradient rrv__refraction_lookup returns (see
+   rrv__refraction_lookup_jacobian_fused). */
 static void rrv__refraction_lookup_jacobian(const struct rrv__majorant_grid *mg, rrv_vec3 p, double J[9])
 {
-    const double scale[3] = {mg->refraction_scale.x, mg->refraction_scale.y, mg->refraction_scale.z};
-    size_t sy, sz;
-    double t[3];
-    const float *d = rrv__refraction_cell(mg, p, &sy, &sz, t);
-    int a, b;
-    for (a = 0; a < 3; ++a)
-        for (b = 0; b < 3; ++b) J[3 * a + b] = rrv__blend8_slope(d + 1 + a, 4, sy, sz, t, b) * scale[b];
+    rrv_vec3 grad;
+    rrv__refraction_lookup_jacobian_fused(mg, p, &grad, J);
 }
 
 /* Second derivatives in t of the cubic B-spline weights. */
@@ -3012,6 +3024,19 @@ static int rrv__refractivity_hessian(const rrv_medium *m, rrv_vec3 p, double amb
         for (k = 0; k < 9; ++k) H[k] *= m->ior_scale;
         return ok;
     }
+}
+
+/* rrv__refractivity_gradient and rrv__refractivity_hessian at one point:
+   the same numbers, and for a baked trilinear grid one cell lookup for all
+   three (the Jacobi fields of nee shoot take both at every stage of every
+   step). */
+static double rrv__refractivity_gradient_hessian(const rrv_medium *m, rrv_vec3 p, double ambient_r, rrv_vec3 *grad,
+                                                 double H[9])
+{
+    const rrv_grid *baked = rrv__refraction_grid_at(m, p);
+    if (baked && !m->majorant->cubic) return rrv__refraction_lookup_jacobian_fused(m->majorant, p, grad, H);
+    rrv__refractivity_hessian(m, p, ambient_r, H);
+    return rrv__refractivity_gradient(m, p, ambient_r, grad);
 }
 
 /* The refractivity of the scene at p: that of the last listed refractive
@@ -5931,6 +5956,22 @@ static void rrv__scene_hessian(const rrv_scene *scene, rrv_vec3 p, double H[9])
     for (k = 0; k < 9; ++k) H[k] = 0;
 }
 
+/* Eta, its gradient (rrv__eta_gradient's) and the gradient's derivative
+   (rrv__scene_hessian's) at p, the medium found once. */
+static double rrv__eta_gradient_hessian(const rrv_scene *scene, rrv_vec3 p, rrv_vec3 *grad, double H[9])
+{
+    double ambient_r = scene->settings.ambient_ior - 1.0;
+    int i, k;
+    for (i = scene->medium_count - 1; i >= 0; --i) {
+        const rrv_medium *m = &scene->media[i];
+        if (rrv__medium_refracts(m) && rrv__inside_box(p, m->lo, m->hi))
+            return 1.0 + rrv__refractivity_gradient_hessian(m, p, ambient_r, grad, H);
+    }
+    for (k = 0; k < 9; ++k) H[k] = 0;
+    *grad = rrv__v3(0, 0, 0);
+    return 1.0 + ambient_r;
+}
+
 static rrv_vec3 rrv__mat_apply(const double H[9], rrv_vec3 v)
 {
     return rrv__v3(H[0] * v.x + H[1] * v.y + H[2] * v.z, H[3] * v.x + H[4] * v.y + H[5] * v.z,
@@ -5948,7 +5989,7 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
                                      rrv__jacobi *J)
 {
     rrv_vec3 g, v, v1, dx[2], dv[2];
-    double eta = rrv__eta_gradient(scene, x, &g), n1;
+    double H[9], eta = rrv__eta_gradient_hessian(scene, x, &g, H), n1;
     int j;
     v = rrv__scale(d, eta);
     for (j = 0; j < 2; ++j) {
@@ -5960,10 +6001,11 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
         rrv_vec3 xs[4], vs[4], gs[4], kx[4], kv[4], sx, sv;
         double es[4], Hs[4][9];
         int s;
-        xs[0] = x; vs[0] = v;
+        /* the first stage is at x, already looked up */
+        xs[0] = x; vs[0] = v; es[0] = eta; gs[0] = g;
+        memcpy(Hs[0], H, sizeof H);
         for (s = 0; s < 4; ++s) {
-            es[s] = rrv__eta_gradient(scene, xs[s], &gs[s]);
-            rrv__scene_hessian(scene, xs[s], Hs[s]);
+            if (s) es[s] = rrv__eta_gradient_hessian(scene, xs[s], &gs[s], Hs[s]);
             kx[s] = rrv__scale(vs[s], 1.0 / es[s]);
             kv[s] = gs[s];
             if (s < 3) {
@@ -5994,11 +6036,9 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
     } else {
         /* kick (h/2) grad eta, drift (h / eta) v, kick (h/2) (eta1/eta) grad eta1 */
         rrv_vec3 vh = rrv__madd(v, g, 0.5 * h), x1, g1;
-        double H[9], H1[9], eta1;
-        rrv__scene_hessian(scene, x, H);
+        double H1[9], eta1;
         x1 = rrv__madd(x, vh, h / eta);
-        eta1 = rrv__eta_gradient(scene, x1, &g1);
-        rrv__scene_hessian(scene, x1, H1);
+        eta1 = rrv__eta_gradient_hessian(scene, x1, &g1, H1);
         v1 = rrv__madd(vh, g1, 0.5 * h * eta1 / eta);
         for (j = 0; j < 2; ++j) {
             rrv_vec3 dvh = rrv__madd(dv[j], rrv__mat_apply(H, dx[j]), 0.5 * h);
