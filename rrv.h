@@ -6121,15 +6121,37 @@ typedef struct rrv__shot {
     long segments;
 } rrv__shot;
 
+/* The straight chords of one shot that reached y, kept so that the
+   transmittance along the root a solve found can be tracked without
+   tracing the root again (rrv__kept_transmittance): from x[i] along d[i]
+   for len[i], the last one ending where the shot passes y. A shot of more
+   chords than fit is not kept (n = -1). */
+#define RRV__CHORDS_KEPT 256
+typedef struct rrv__chords {
+    int n;
+    rrv_vec3 x[RRV__CHORDS_KEPT], d[RRV__CHORDS_KEPT];
+    double len[RRV__CHORDS_KEPT];
+} rrv__chords;
+
+static void rrv__keep_chord(rrv__chords *kept, rrv_vec3 x, rrv_vec3 d, double len)
+{
+    if (kept->n < 0) return;
+    if (kept->n == RRV__CHORDS_KEPT) { kept->n = -1; return; }
+    kept->x[kept->n] = x;
+    kept->d[kept->n] = d;
+    kept->len[kept->n++] = len;
+}
+
 /* Traces the ray from x0 along w0 (tangent basis e1, e2 of the two angles)
    until it passes y: where it first crosses the plane through y with
    normal *plane from its front (a light's), or with plane NULL, where the
    chord through y's perpendicular plane is. With T, also tests every chord
    for surfaces (BLOCKED) and ratio-tracks the transmittance along them,
    and skips the Jacobi field (out->de is then undefined): that shot
-   retraces a root whose solve already had it. */
-static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1, rrv_vec3 e2, rrv_vec3 y,
-                       const rrv_vec3 *plane, rrv__rng *rng, double T[3], rrv__shot *out)
+   retraces a root whose solve already had it. With kept, records the
+   chords of the shot (valid where it reached y). */
+static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1, rrv_vec3 e2, rrv_vec3 y,
+                            const rrv_vec3 *plane, rrv__rng *rng, double T[3], rrv__chords *kept, rrv__shot *out)
 {
     const rrv_scene *scene = ctx->scene;
     rrv__bender b;
@@ -6145,6 +6167,7 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
     J.d[1] = e2;
     out->curved = rrv__in_support(scene, x0);
     if (T) T[0] = T[1] = T[2] = 1.0;
+    if (kept) kept->n = 0;
     for (n = 0; n < RRV__SOLVE_SEGMENTS; ++n) {
         rrv_vec3 d_start = d, dc[2];
         rrv__jacobi J1 = J;
@@ -6177,6 +6200,7 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
             if (s < 0) s = DBL_MAX;
         }
         if (s < DBL_MAX && s <= len) {
+            if (kept) rrv__keep_chord(kept, x, d, s);
             out->end = rrv__madd(x, d, s);
             out->dir = d;
             for (j = 0; j < 2; ++j) {
@@ -6199,6 +6223,7 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
             return;
         }
         if (b.end == RRV__END_NONE) break; /* straight on forever, never passing y */
+        if (kept) rrv__keep_chord(kept, x, d, len);
         if (T) {
             rrv__hit hit;
             double Ts[3];
@@ -6230,6 +6255,33 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
     out->status = RRV__SHOT_MISSED;
 }
 
+static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1, rrv_vec3 e2, rrv_vec3 y,
+                       const rrv_vec3 *plane, rrv__rng *rng, double T[3], rrv__shot *out)
+{
+    rrv__shoot_kept(ctx, x0, w0, e1, e2, y, plane, rng, T, NULL, out);
+}
+
+/* The transmittance along the chords a shot kept, tracked as rrv__shoot
+   with T tracks it along the same chords (the same tests and random
+   numbers in the same order): 0 if a surface blocks them. */
+static int rrv__kept_transmittance(rrv__context *ctx, const rrv__chords *kept, rrv__rng *rng, double T[3])
+{
+    int i, c;
+    T[0] = T[1] = T[2] = 1.0;
+    for (i = 0; i < kept->n; ++i) {
+        rrv__hit hit;
+        double Ts[3], len = kept->len[i];
+        if (i == kept->n - 1) {
+            ++ctx->stats.paths;
+            len *= 1.0 - 1e-6;
+        }
+        if (rrv__intersect_scene(ctx->scene, kept->x[i], kept->d[i], len, &hit)) return 0;
+        rrv__ratio_tracking_transmittance(ctx, kept->x[i], kept->d[i], len, rng, Ts);
+        for (c = 0; c < 3; ++c) T[c] *= Ts[c];
+    }
+    return 1;
+}
+
 /* The residual (offset of y from the path in the light's plane, or in the
    plane through y perpendicular to the arriving chord) and its 2x2
    Jacobian: J_plane, or J_perp = J_plane |cos theta_y|. */
@@ -6252,6 +6304,7 @@ typedef struct rrv__root {
     int curved;
     long segments;
     int iterations;
+    rrv_vec3 ahead;   /* w0 moved by one more Newton step (the linear model's root): where a polish starts */
 } rrv__root;
 
 /* Newton's method on the two angles of w0 from a seed direction, the step
@@ -6260,7 +6313,7 @@ typedef struct rrv__root {
    |y - x0|). Returns 1 with the root, 0 if it did not converge, met a
    sharp interface, or stalled at a caustic (det J = 0). */
 static int rrv__solve_shot_to(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv_vec3 seed,
-                              double tolerance, rrv__root *root)
+                              double tolerance, rrv__chords *kept, rrv__root *root)
 {
     rrv_vec3 w = seed, w_prev = seed, e1, e2, p1 = rrv__v3(0, 0, 0), p2 = p1;
     double prev_norm = DBL_MAX, step = 1.0, delta[2] = {0, 0};
@@ -6271,7 +6324,7 @@ static int rrv__solve_shot_to(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const 
         rrv__shot shot;
         double r[2] = {0, 0}, Jp[4] = {0, 0, 0, 0}, norm, det, len;
         rrv__frame(w, &e1, &e2);
-        rrv__shoot(ctx, x0, w, e1, e2, y, plane, NULL, NULL, &shot);
+        rrv__shoot_kept(ctx, x0, w, e1, e2, y, plane, NULL, NULL, kept, &shot);
         root->iterations = it + 1;
         if (shot.status == RRV__SHOT_INTERFACE) return 0;
         norm = DBL_MAX;
@@ -6299,6 +6352,8 @@ static int rrv__solve_shot_to(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const 
             root->det = det;
             root->curved = shot.curved;
             root->segments = shot.segments;
+            root->ahead = rrv__normalize(rrv__add(w, rrv__add(rrv__scale(e1, (Jp[3] * r[0] - Jp[1] * r[1]) / det),
+                                                              rrv__scale(e2, (Jp[0] * r[1] - Jp[2] * r[0]) / det))));
             return 1;
         }
         /* a singular Jacobian is a caustic: no finite density */
@@ -6318,10 +6373,12 @@ static int rrv__solve_shot_to(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const 
     return 0;
 }
 
+/* A solve to the polish's tolerance, the chords of its last shot in kept
+   (may be NULL). */
 static int rrv__solve_shot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv_vec3 seed,
-                           rrv__root *root)
+                           rrv__chords *kept, rrv__root *root)
 {
-    return rrv__solve_shot_to(ctx, x0, y, plane, seed, 1e-9, root);
+    return rrv__solve_shot_to(ctx, x0, y, plane, seed, 1e-9, kept, root);
 }
 
 /* Seeds for the solver: a Gaussian around the straight direction to y, of
@@ -6345,16 +6402,47 @@ static rrv_vec3 rrv__solver_seed(rrv_vec3 x0, rrv_vec3 y, rrv__rng *rng)
     return rrv__sample_uniform_sphere(u1, u2);
 }
 
+/* The last polish of one connection's solves (rrv__solve_shot_seeded):
+   its seed and what it returned. */
+typedef struct rrv__polish_memo {
+    int valid;
+    rrv_vec3 seed;
+    int found;
+    rrv__root root;
+} rrv__polish_memo;
+
+/* A direction on the lattice of spacing 2^-26 (1.5e-8) in each component,
+   renormalised. The coarse roots that two solves of one connection reach
+   from different seeds differ by 1e-15 to 1e-10 after the step to the
+   linear model's root (measured on scenes/haze.rrv), and the polish's
+   first shot misses y by ~1e-5 (the coarse steps' error), so the
+   lattice's offsets are lost in the polish while the two seeds nearly
+   always land on the same point. */
+static rrv_vec3 rrv__snap_direction(rrv_vec3 w)
+{
+    const double per = 67108864.0; /* 2^26: the products and quotients are exact */
+    return rrv__normalize(
+        rrv__v3(floor(w.x * per + 0.5) / per, floor(w.y * per + 0.5) / per, floor(w.z * per + 0.5) / per));
+}
+
 /* A solve from seeds of rrv__solver_seed: up to RRV__SOLVE_RESTARTS of
    them, the next drawn when the last failed, so that a solve fails only
    when all did. Each seed is first converged (to 1e-6) with eikonal steps
    RRV__SOLVE_COARSE times longer, an eighth of the work a shot, and the
-   camera rays' steps then polish that root (two or three shots): only the
-   polished root counts, so this is one more deterministic map from seeds
-   to roots. Every call draws its own seeds, so trials stay independent and
-   identically distributed; root->iterations counts every shot. */
+   camera rays' steps then polish that root (two or three shots), from
+   the linear model's root at the coarse one snapped to a lattice
+   (rrv__snap_direction): only the polished root counts, so this is one
+   more deterministic map from seeds to roots. Every call draws its own
+   seeds, so trials stay independent and identically distributed. The
+   polish is a function of its seed alone (x0, y and the plane fixed), so
+   with memo (one per connection, valid 0 at first) a polish whose seed
+   is the last one's returns the last one's result without shooting:
+   the repeated trials of a connection, which find the same root, cost a
+   coarse solve each. With kept, the chords of the last shot taken are
+   kept there (those of the root where one was found by shooting).
+   root->iterations counts the shots taken. */
 static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv__rng *rng,
-                                  rrv__root *root)
+                                  rrv__polish_memo *memo, rrv__chords *kept, rrv__root *root)
 {
     rrv_scene coarse_scene = *ctx->scene;
     rrv__context coarse = *ctx;
@@ -6365,13 +6453,25 @@ static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, co
     for (k = 0; k < RRV__SOLVE_RESTARTS && !found; ++k) {
         rrv_vec3 seed = rrv__solver_seed(x0, y, rng);
         if (ctx->eikonal) {
-            int near_found = rrv__solve_shot_to(&coarse, x0, y, plane, seed, 1e-6, &near);
+            int near_found = rrv__solve_shot_to(&coarse, x0, y, plane, seed, 1e-6, NULL, &near);
             shots += near.iterations;
             if (!near_found) continue;
-            seed = near.w0;
+            seed = rrv__snap_direction(near.ahead);
+            if (memo && memo->valid && seed.x == memo->seed.x && seed.y == memo->seed.y && seed.z == memo->seed.z) {
+                found = memo->found;
+                *root = memo->root;
+                if (kept) kept->n = -1; /* not shot here */
+                continue;
+            }
         }
-        found = rrv__solve_shot(ctx, x0, y, plane, seed, root);
+        found = rrv__solve_shot(ctx, x0, y, plane, seed, kept, root);
         shots += root->iterations;
+        if (memo && ctx->eikonal) {
+            memo->valid = 1;
+            memo->seed = seed;
+            memo->found = found;
+            memo->root = *root;
+        }
     }
     root->iterations = shots;
     return found;
@@ -6588,7 +6688,8 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     const rrv_shape *s;
     rrv_vec3 y, ny, e1, e2;
     rrv__root root, again;
-    rrv__shot shot;
+    rrv__polish_memo memo;
+    rrv__chords kept;
     double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng), pdf_area, T[3], f[3], k;
     if (!choices) return;
     pick = (int)(u * choices);
@@ -6609,7 +6710,8 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     ny = rrv__normalize(rrv__cross(s->e1, s->e2));
     pdf_area = 1.0 / (rrv__shape_area(s) * choices);
     ++ctx->stats.solves;
-    if (!rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &root)) {
+    memo.valid = 0;
+    if (!rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &memo, &kept, &root)) {
         ctx->stats.solve_iterations += (uint64_t)root.iterations;
         return;
     }
@@ -6619,13 +6721,19 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     if (!root.curved) return;
     rrv__vertex_eval(v, root.w0, f);
     if (!(rrv__max3(f) > 0)) return;
-    rrv__frame(root.w0, &e1, &e2);
-    rrv__shoot(ctx, x0, root.w0, e1, e2, y, &ny, rng, T, &shot);
-    if (shot.status != RRV__SHOT_REACHED || !(rrv__max3(T) > 0)) return;
+    if (kept.n > 0) {
+        /* the root's own chords: its last shot in the solve */
+        if (!rrv__kept_transmittance(ctx, &kept, rng, T) || !(rrv__max3(T) > 0)) return;
+    } else {
+        rrv__shot shot;
+        rrv__frame(root.w0, &e1, &e2);
+        rrv__shoot(ctx, x0, root.w0, e1, e2, y, &ny, rng, T, &shot);
+        if (shot.status != RRV__SHOT_REACHED || !(rrv__max3(T) > 0)) return;
+    }
     for (count = 1; count < RRV__SOLVE_TRIALS; ++count) {
         int found;
         ++ctx->stats.solves;
-        found = rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &again);
+        found = rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &memo, NULL, &again);
         ctx->stats.solve_iterations += (uint64_t)again.iterations;
         if (!found) continue;
         ++ctx->stats.solves_converged;

@@ -662,7 +662,7 @@ static void test_solve_through_grid(void)
         rrv__root root;
         rrv__shot shot;
         rrv_vec3 e1, e2;
-        if (!rrv__solve_shot(&ctx, x0, y, NULL, rrv__solver_seed(x0, y, &rng), &root)) continue;
+        if (!rrv__solve_shot(&ctx, x0, y, NULL, rrv__solver_seed(x0, y, &rng), NULL, &root)) continue;
         ++found;
         rrv__frame(root.w0, &e1, &e2);
         rrv__shoot(&ctx, x0, root.w0, e1, e2, y, NULL, NULL, NULL, &shot);
