@@ -5999,14 +5999,16 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
     if (stepper != RRV_STEPPER_LEAPFROG) {
         static const double reach[3] = {0.5, 0.5, 1.0}, weight[4] = {1, 2, 2, 1};
         rrv_vec3 xs[4], vs[4], gs[4], kx[4], kv[4], sx, sv;
-        double es[4], Hs[4][9];
+        double es[4], inv_e[4], e2[4], Hs[4][9];
         int s;
         /* the first stage is at x, already looked up */
         xs[0] = x; vs[0] = v; es[0] = eta; gs[0] = g;
         memcpy(Hs[0], H, sizeof H);
         for (s = 0; s < 4; ++s) {
             if (s) es[s] = rrv__eta_gradient_hessian(scene, xs[s], &gs[s], Hs[s]);
-            kx[s] = rrv__scale(vs[s], 1.0 / es[s]);
+            inv_e[s] = 1.0 / es[s];
+            e2[s] = es[s] * es[s];
+            kx[s] = rrv__scale(vs[s], inv_e[s]);
             kv[s] = gs[s];
             if (s < 3) {
                 xs[s + 1] = rrv__madd(x, kx[s], reach[s] * h);
@@ -6020,8 +6022,7 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
             sx = dx[j]; sv = dv[j];
             for (s = 0; s < 4; ++s) {
                 /* d(v / eta) = dv / eta - v (grad eta . dx) / eta^2; d(grad eta) = H dx */
-                rrv_vec3 kxs = rrv__sub(rrv__scale(sv, 1.0 / es[s]),
-                                        rrv__scale(vs[s], rrv__dot(gs[s], sx) / (es[s] * es[s])));
+                rrv_vec3 kxs = rrv__sub(rrv__scale(sv, inv_e[s]), rrv__scale(vs[s], rrv__dot(gs[s], sx) / e2[s]));
                 rrv_vec3 kvs = rrv__mat_apply(Hs[s], sx);
                 ax = rrv__madd(ax, kxs, weight[s] * h / 6.0);
                 av = rrv__madd(av, kvs, weight[s] * h / 6.0);
