@@ -678,6 +678,86 @@ static void test_solve_through_grid(void)
     rrv_scene_free(s);
 }
 
+/* A gas grid as gas_grid_scene's with an absorbing density grid in it,
+   so that ratio tracking along a connection draws random numbers. */
+static rrv_scene *gas_grid_dense_scene(void)
+{
+    rrv_scene *s = empty_scene();
+    int m = add_medium(s, 1, 40.0);
+    rrv_field t, d;
+    fill_grid(&t, 17, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 300.0, 500.0);
+    fill_grid(&d, 9, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 1.0, 1.0);
+    set_field(s, m, RRV_MEDIUM_TEMPERATURE, &t);
+    set_field(s, m, RRV_MEDIUM_DENSITY, &d);
+    s->media[m].sigma_a[0] = s->media[m].sigma_a[1] = s->media[m].sigma_a[2] = 0.7;
+    s->settings.ambient_ior = 1.0 + 40.0 * 2.92e-4;
+    prepare(s);
+    return s;
+}
+
+/* What curved NEE saves on a connection changes no number: a solve whose
+   polish is the memo's (a repeated trial) returns exactly what the same
+   solve computes without the memo, and the transmittance tracked along
+   the chords the root's last shot kept is exactly that of tracing the
+   root again with the same random numbers. Connections from x0 to points
+   y on a plane facing it, through a gas grid with density. */
+static void test_memo_and_kept_chords_change_nothing(void)
+{
+    rrv_scene *s = gas_grid_dense_scene();
+    rrv__context ctx;
+    rrv__rng rng;
+    rrv_vec3 x0 = rrv__v3(-0.1, 0.2, -0.95), down = rrv__v3(0, 0, -1);
+    static rrv__chords kept;
+    int k, hits = 0, connections = 0, tracked = 0;
+    solver_context(&ctx, s);
+    rrv__rng_seed(&rng, 51, 0, 0);
+    for (k = 0; k < 20; ++k) {
+        rrv_vec3 y = rrv__v3(0.6 * rrv__uniform(&rng) - 0.3, 0.6 * rrv__uniform(&rng) - 0.3, 0.95), e1, e2;
+        rrv__polish_memo memo;
+        rrv__root root, with_memo, without;
+        rrv__rng at_trial, copy;
+        rrv__shot shot;
+        double T[3], T_again[3];
+        int found, found_memo, found_plain;
+        memo.valid = 0;
+        found = rrv__solve_shot_seeded(&ctx, x0, y, &down, &rng, &memo, &kept, &root);
+        if (!found) continue;
+        ++connections;
+        /* the root's transmittance, kept chords against a retrace */
+        copy = rng;
+        if (kept.n > 0) {
+            int open = rrv__kept_transmittance(&ctx, &kept, &rng, T);
+            rrv__frame(root.w0, &e1, &e2);
+            rrv__shoot(&ctx, x0, root.w0, e1, e2, y, &down, &copy, T_again, &shot);
+            CHECKF(open == (shot.status == RRV__SHOT_REACHED), "connection %d: kept chords open %d, retrace status %d",
+                   k, open, shot.status);
+            CHECKF(T[0] == T_again[0] && T[1] == T_again[1] && T[2] == T_again[2],
+                   "connection %d: T %.17g along the kept chords, %.17g retraced", k, T[0], T_again[0]);
+            CHECKF(rrv__uniform(&rng) == rrv__uniform(&copy), "connection %d: different random numbers used", k);
+            tracked += T[0] < 1; /* some null collision happened */
+        }
+        /* a repeated trial, with and without the memo, from the same state */
+        at_trial = rng;
+        found_memo = rrv__solve_shot_seeded(&ctx, x0, y, &down, &rng, &memo, NULL, &with_memo);
+        found_plain = rrv__solve_shot_seeded(&ctx, x0, y, &down, &at_trial, NULL, NULL, &without);
+        CHECKF(found_memo == found_plain, "connection %d: found %d with the memo, %d without", k, found_memo,
+               found_plain);
+        if (found_memo && found_plain) {
+            CHECKF(with_memo.w0.x == without.w0.x && with_memo.w0.y == without.w0.y && with_memo.w0.z == without.w0.z &&
+                       with_memo.det == without.det,
+                   "connection %d: the memo's root differs from the one computed", k);
+            hits += with_memo.iterations < without.iterations;
+        }
+    }
+    SAY("  memo: %d of %d repeated trials reused the polish; %d transmittances below 1\n", hits,
+        connections, tracked);
+    CHECKF(connections >= 15, "only %d of 20 connections solved", connections);
+    CHECKF(hits >= connections - 2, "only %d of %d repeated trials reused the polish", hits, connections);
+    CHECKF(tracked >= connections / 2, "only %d of %d transmittances below 1: the density is not tested", tracked,
+           connections);
+    rrv_scene_free(s);
+}
+
 int main(void)
 {
     verbose = getenv("HESSIAN_VERBOSE") != NULL;
@@ -696,5 +776,6 @@ int main(void)
     RUN(test_eta_gradient_hessian_is_both);
     RUN(test_shoot_jacobian_in_grids);
     RUN(test_solve_through_grid);
+    RUN(test_memo_and_kept_chords_change_nothing);
     return CHECK_EXIT_CODE();
 }
