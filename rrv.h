@@ -5998,7 +5998,7 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
     }
     if (stepper != RRV_STEPPER_LEAPFROG) {
         static const double reach[3] = {0.5, 0.5, 1.0}, weight[4] = {1, 2, 2, 1};
-        rrv_vec3 xs[4], vs[4], gs[4], kx[4], kv[4], sx, sv;
+        rrv_vec3 xs[4], vs[4], gs[4], kx[4], kv[4], sx[2], sv[2], ax[2], av[2];
         double es[4], inv_e[4], e2[4], Hs[4][9];
         int s;
         /* the first stage is at x, already looked up */
@@ -6017,22 +6017,29 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
         }
         v1 = v;
         for (s = 0; s < 4; ++s) v1 = rrv__madd(v1, kv[s], weight[s] * h / 6.0);
+        /* both columns stage by stage (each column's operations as they
+           were, so the same numbers) */
         for (j = 0; j < 2; ++j) {
-            rrv_vec3 ax = dx[j], av = dv[j];
-            sx = dx[j]; sv = dv[j];
-            for (s = 0; s < 4; ++s) {
+            ax[j] = sx[j] = dx[j];
+            av[j] = sv[j] = dv[j];
+        }
+        for (s = 0; s < 4; ++s) {
+            const double wh = weight[s] * h / 6.0;
+            for (j = 0; j < 2; ++j) {
                 /* d(v / eta) = dv / eta - v (grad eta . dx) / eta^2; d(grad eta) = H dx */
-                rrv_vec3 kxs = rrv__sub(rrv__scale(sv, inv_e[s]), rrv__scale(vs[s], rrv__dot(gs[s], sx) / e2[s]));
-                rrv_vec3 kvs = rrv__mat_apply(Hs[s], sx);
-                ax = rrv__madd(ax, kxs, weight[s] * h / 6.0);
-                av = rrv__madd(av, kvs, weight[s] * h / 6.0);
+                rrv_vec3 kxs = rrv__sub(rrv__scale(sv[j], inv_e[s]), rrv__scale(vs[s], rrv__dot(gs[s], sx[j]) / e2[s]));
+                rrv_vec3 kvs = rrv__mat_apply(Hs[s], sx[j]);
+                ax[j] = rrv__madd(ax[j], kxs, wh);
+                av[j] = rrv__madd(av[j], kvs, wh);
                 if (s < 3) {
-                    sx = rrv__madd(dx[j], kxs, reach[s] * h);
-                    sv = rrv__madd(dv[j], kvs, reach[s] * h);
+                    sx[j] = rrv__madd(dx[j], kxs, reach[s] * h);
+                    sv[j] = rrv__madd(dv[j], kvs, reach[s] * h);
                 }
             }
-            J->x[j] = ax;
-            dv[j] = av;
+        }
+        for (j = 0; j < 2; ++j) {
+            J->x[j] = ax[j];
+            dv[j] = av[j];
         }
     } else {
         /* kick (h/2) grad eta, drift (h / eta) v, kick (h/2) (eta1/eta) grad eta1 */
@@ -6054,9 +6061,10 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
         }
     }
     n1 = rrv__length(v1);
-    for (j = 0; j < 2; ++j) {
-        rrv_vec3 d1 = rrv__scale(v1, 1.0 / n1);
-        J->d[j] = rrv__scale(rrv__madd(dv[j], d1, -rrv__dot(d1, dv[j])), 1.0 / n1);
+    {
+        double inv_n1 = 1.0 / n1;
+        rrv_vec3 d1 = rrv__scale(v1, inv_n1);
+        for (j = 0; j < 2; ++j) J->d[j] = rrv__scale(rrv__madd(dv[j], d1, -rrv__dot(d1, dv[j])), inv_n1);
     }
 }
 
