@@ -6313,7 +6313,8 @@ typedef struct rrv__root {
     int curved;
     long segments;
     int iterations;
-    rrv_vec3 ahead;   /* w0 moved by one more Newton step (the linear model's root): where a polish starts */
+    rrv_vec3 ahead;   /* w0 moved by one more Newton step (the linear model's root) if under 1e-4 rad, else w0:
+                         where a polish starts */
 } rrv__root;
 
 /* Newton's method on the two angles of w0 from a seed direction, the step
@@ -6361,8 +6362,14 @@ static int rrv__solve_shot_to(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const 
             root->det = det;
             root->curved = shot.curved;
             root->segments = shot.segments;
-            root->ahead = rrv__normalize(rrv__add(w, rrv__add(rrv__scale(e1, (Jp[3] * r[0] - Jp[1] * r[1]) / det),
-                                                              rrv__scale(e2, (Jp[0] * r[1] - Jp[2] * r[0]) / det))));
+            {
+                /* the linear model's root, unless its step is large (a
+                   nearly singular J, by a caustic): then the root itself */
+                double a1 = (Jp[3] * r[0] - Jp[1] * r[1]) / det, a2 = (Jp[0] * r[1] - Jp[2] * r[0]) / det;
+                root->ahead = a1 * a1 + a2 * a2 < 1e-8
+                                  ? rrv__normalize(rrv__add(w, rrv__add(rrv__scale(e1, a1), rrv__scale(e2, a2))))
+                                  : w;
+            }
             return 1;
         }
         /* a singular Jacobian is a caustic: no finite density */
