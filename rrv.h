@@ -2671,40 +2671,52 @@ static double rrv__refraction_lookup(const struct rrv__majorant_grid *mg, rrv_ve
    smooth field, 5 % at 33^3, test/test_hessian.c). The trilinear value's
    own Hessian, zero inside every cell, would miss it entirely. */
 
-/* d/dt_axis of rrv__blend8: the same corners, the weight along the axis
-   replaced by its derivative (-1 at the lower corner, +1 at the upper). */
-static double rrv__blend8_slope(const float *d, size_t sx, size_t sy, size_t sz, const double t[3], int axis)
+/* The refraction grid's value, gradient and the gradient's Jacobian at p,
+   from one location of its cell: the value and gradient are
+   rrv__refraction_lookup's bit for bit (the same blends in the same
+   order), J is the trilinear blend of the baked central differences
+   differentiated in that cell (the one-sided slopes there; the derivative
+   jumps at cell faces, where the gradient itself is continuous). Per
+   channel, the slope along x is the (y, z) blend of the corners' x
+   differences, and those along y and z are differences of the partial
+   blends the value is built from, so they cost a few operations more
+   than the value rather than a sum over the eight corners each. */
+static double rrv__refraction_lookup_jacobian_fused(const struct rrv__majorant_grid *mg, rrv_vec3 p, rrv_vec3 *grad,
+                                                    double J[9])
 {
-    size_t stride[3];
-    double sum = 0;
-    int corner, a;
-    stride[0] = sx; stride[1] = sy; stride[2] = sz;
-    for (corner = 0; corner < 8; ++corner) {
-        double w = 1;
-        size_t at = 0;
-        for (a = 0; a < 3; ++a) {
-            int bit = (corner >> a) & 1;
-            w *= a == axis ? (bit ? 1.0 : -1.0) : bit ? t[a] : 1.0 - t[a];
-            if (bit) at += stride[a];
-        }
-        sum += w * (double)d[at];
+    size_t sy, sz;
+    double t[3], v[4], slope[3][4];
+    const float *d = rrv__refraction_cell(mg, p, &sy, &sz, t);
+    int c;
+    for (c = 0; c < 4; ++c) {
+        /* x differences of the four x edges (rows y, z = 00, 10, 01, 11) */
+        double dx00 = (double)d[4 + c] - d[c], dx10 = (double)d[sy + 4 + c] - d[sy + c];
+        double dx01 = (double)d[sz + 4 + c] - d[sz + c], dx11 = (double)d[sz + sy + 4 + c] - d[sz + sy + c];
+        double c00 = (double)d[c] + t[0] * dx00, c10 = (double)d[sy + c] + t[0] * dx10;
+        double c01 = (double)d[sz + c] + t[0] * dx01, c11 = (double)d[sz + sy + c] + t[0] * dx11;
+        double ey0 = c10 - c00, ey1 = c11 - c01, sx0 = dx00 + t[1] * (dx10 - dx00), sx1 = dx01 + t[1] * (dx11 - dx01);
+        c00 += t[1] * ey0;
+        c01 += t[1] * ey1;
+        v[c] = c00 + t[2] * (c01 - c00);
+        slope[0][c] = sx0 + t[2] * (sx1 - sx0);
+        slope[1][c] = ey0 + t[2] * (ey1 - ey0);
+        slope[2][c] = c01 - c00;
     }
-    return sum;
+    for (c = 0; c < 3; ++c) {
+        J[3 * c] = slope[0][1 + c] * mg->refraction_scale.x;
+        J[3 * c + 1] = slope[1][1 + c] * mg->refraction_scale.y;
+        J[3 * c + 2] = slope[2][1 + c] * mg->refraction_scale.z;
+    }
+    *grad = rrv__v3(v[1], v[2], v[3]);
+    return v[0];
 }
 
-/* The Jacobian of the gradient rrv__refraction_lookup returns: the
-   trilinear blend of the baked central differences, differentiated in the
-   cell that lookup picks (the one-sided slopes there; the derivative jumps
-   at cell faces, where the gradient itself is continuous). */
+/* The Jacobian of the gradient rrv__refraction_lookup returns (see
+   rrv__refraction_lookup_jacobian_fused). */
 static void rrv__refraction_lookup_jacobian(const struct rrv__majorant_grid *mg, rrv_vec3 p, double J[9])
 {
-    const double scale[3] = {mg->refraction_scale.x, mg->refraction_scale.y, mg->refraction_scale.z};
-    size_t sy, sz;
-    double t[3];
-    const float *d = rrv__refraction_cell(mg, p, &sy, &sz, t);
-    int a, b;
-    for (a = 0; a < 3; ++a)
-        for (b = 0; b < 3; ++b) J[3 * a + b] = rrv__blend8_slope(d + 1 + a, 4, sy, sz, t, b) * scale[b];
+    rrv_vec3 grad;
+    rrv__refraction_lookup_jacobian_fused(mg, p, &grad, J);
 }
 
 /* Second derivatives in t of the cubic B-spline weights. */
@@ -3061,6 +3073,19 @@ static int rrv__refractivity_hessian(const rrv_medium *m, rrv_vec3 p, double amb
         for (k = 0; k < 9; ++k) H[k] *= m->ior_scale;
         return ok;
     }
+}
+
+/* rrv__refractivity_gradient and rrv__refractivity_hessian at one point:
+   the same numbers, and for a baked trilinear grid one cell lookup for all
+   three (the Jacobi fields of nee shoot take both at every stage of every
+   step). */
+static double rrv__refractivity_gradient_hessian(const rrv_medium *m, rrv_vec3 p, double ambient_r, rrv_vec3 *grad,
+                                                 double H[9])
+{
+    const rrv_grid *baked = rrv__refraction_grid_at(m, p);
+    if (baked && !m->majorant->cubic) return rrv__refraction_lookup_jacobian_fused(m->majorant, p, grad, H);
+    rrv__refractivity_hessian(m, p, ambient_r, H);
+    return rrv__refractivity_gradient(m, p, ambient_r, grad);
 }
 
 /* The refractivity of the scene at p: that of the last listed refractive
@@ -6124,6 +6149,22 @@ static void rrv__scene_hessian(const rrv_scene *scene, rrv_vec3 p, double H[9])
     for (k = 0; k < 9; ++k) H[k] = 0;
 }
 
+/* Eta, its gradient (rrv__eta_gradient's) and the gradient's derivative
+   (rrv__scene_hessian's) at p, the medium found once. */
+static double rrv__eta_gradient_hessian(const rrv_scene *scene, rrv_vec3 p, rrv_vec3 *grad, double H[9])
+{
+    double ambient_r = scene->settings.ambient_ior - 1.0;
+    int i, k;
+    for (i = scene->medium_count - 1; i >= 0; --i) {
+        const rrv_medium *m = &scene->media[i];
+        if (rrv__medium_refracts(m) && rrv__inside_box(p, m->lo, m->hi))
+            return 1.0 + rrv__refractivity_gradient_hessian(m, p, ambient_r, grad, H);
+    }
+    for (k = 0; k < 9; ++k) H[k] = 0;
+    *grad = rrv__v3(0, 0, 0);
+    return 1.0 + ambient_r;
+}
+
 static rrv_vec3 rrv__mat_apply(const double H[9], rrv_vec3 v)
 {
     return rrv__v3(H[0] * v.x + H[1] * v.y + H[2] * v.z, H[3] * v.x + H[4] * v.y + H[5] * v.z,
@@ -6141,7 +6182,7 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
                                      rrv__jacobi *J)
 {
     rrv_vec3 g, v, v1, dx[2], dv[2];
-    double eta = rrv__eta_gradient(scene, x, &g), n1;
+    double H[9], eta = rrv__eta_gradient_hessian(scene, x, &g, H), n1;
     int j;
     v = rrv__scale(d, eta);
     for (j = 0; j < 2; ++j) {
@@ -6150,14 +6191,17 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
     }
     if (stepper != RRV_STEPPER_LEAPFROG) {
         static const double reach[3] = {0.5, 0.5, 1.0}, weight[4] = {1, 2, 2, 1};
-        rrv_vec3 xs[4], vs[4], gs[4], kx[4], kv[4], sx, sv;
-        double es[4], Hs[4][9];
+        rrv_vec3 xs[4], vs[4], gs[4], kx[4], kv[4], sx[2], sv[2], ax[2], av[2];
+        double es[4], inv_e[4], e2[4], Hs[4][9];
         int s;
-        xs[0] = x; vs[0] = v;
+        /* the first stage is at x, already looked up */
+        xs[0] = x; vs[0] = v; es[0] = eta; gs[0] = g;
+        memcpy(Hs[0], H, sizeof H);
         for (s = 0; s < 4; ++s) {
-            es[s] = rrv__eta_gradient(scene, xs[s], &gs[s]);
-            rrv__scene_hessian(scene, xs[s], Hs[s]);
-            kx[s] = rrv__scale(vs[s], 1.0 / es[s]);
+            if (s) es[s] = rrv__eta_gradient_hessian(scene, xs[s], &gs[s], Hs[s]);
+            inv_e[s] = 1.0 / es[s];
+            e2[s] = es[s] * es[s];
+            kx[s] = rrv__scale(vs[s], inv_e[s]);
             kv[s] = gs[s];
             if (s < 3) {
                 xs[s + 1] = rrv__madd(x, kx[s], reach[s] * h);
@@ -6166,32 +6210,36 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
         }
         v1 = v;
         for (s = 0; s < 4; ++s) v1 = rrv__madd(v1, kv[s], weight[s] * h / 6.0);
+        /* both columns stage by stage (each column's operations as they
+           were, so the same numbers) */
         for (j = 0; j < 2; ++j) {
-            rrv_vec3 ax = dx[j], av = dv[j];
-            sx = dx[j]; sv = dv[j];
-            for (s = 0; s < 4; ++s) {
+            ax[j] = sx[j] = dx[j];
+            av[j] = sv[j] = dv[j];
+        }
+        for (s = 0; s < 4; ++s) {
+            const double wh = weight[s] * h / 6.0;
+            for (j = 0; j < 2; ++j) {
                 /* d(v / eta) = dv / eta - v (grad eta . dx) / eta^2; d(grad eta) = H dx */
-                rrv_vec3 kxs = rrv__sub(rrv__scale(sv, 1.0 / es[s]),
-                                        rrv__scale(vs[s], rrv__dot(gs[s], sx) / (es[s] * es[s])));
-                rrv_vec3 kvs = rrv__mat_apply(Hs[s], sx);
-                ax = rrv__madd(ax, kxs, weight[s] * h / 6.0);
-                av = rrv__madd(av, kvs, weight[s] * h / 6.0);
+                rrv_vec3 kxs = rrv__sub(rrv__scale(sv[j], inv_e[s]), rrv__scale(vs[s], rrv__dot(gs[s], sx[j]) / e2[s]));
+                rrv_vec3 kvs = rrv__mat_apply(Hs[s], sx[j]);
+                ax[j] = rrv__madd(ax[j], kxs, wh);
+                av[j] = rrv__madd(av[j], kvs, wh);
                 if (s < 3) {
-                    sx = rrv__madd(dx[j], kxs, reach[s] * h);
-                    sv = rrv__madd(dv[j], kvs, reach[s] * h);
+                    sx[j] = rrv__madd(dx[j], kxs, reach[s] * h);
+                    sv[j] = rrv__madd(dv[j], kvs, reach[s] * h);
                 }
             }
-            J->x[j] = ax;
-            dv[j] = av;
+        }
+        for (j = 0; j < 2; ++j) {
+            J->x[j] = ax[j];
+            dv[j] = av[j];
         }
     } else {
         /* kick (h/2) grad eta, drift (h / eta) v, kick (h/2) (eta1/eta) grad eta1 */
         rrv_vec3 vh = rrv__madd(v, g, 0.5 * h), x1, g1;
-        double H[9], H1[9], eta1;
-        rrv__scene_hessian(scene, x, H);
+        double H1[9], eta1;
         x1 = rrv__madd(x, vh, h / eta);
-        eta1 = rrv__eta_gradient(scene, x1, &g1);
-        rrv__scene_hessian(scene, x1, H1);
+        eta1 = rrv__eta_gradient_hessian(scene, x1, &g1, H1);
         v1 = rrv__madd(vh, g1, 0.5 * h * eta1 / eta);
         for (j = 0; j < 2; ++j) {
             rrv_vec3 dvh = rrv__madd(dv[j], rrv__mat_apply(H, dx[j]), 0.5 * h);
@@ -6206,9 +6254,10 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
         }
     }
     n1 = rrv__length(v1);
-    for (j = 0; j < 2; ++j) {
-        rrv_vec3 d1 = rrv__scale(v1, 1.0 / n1);
-        J->d[j] = rrv__scale(rrv__madd(dv[j], d1, -rrv__dot(d1, dv[j])), 1.0 / n1);
+    {
+        double inv_n1 = 1.0 / n1;
+        rrv_vec3 d1 = rrv__scale(v1, inv_n1);
+        for (j = 0; j < 2; ++j) J->d[j] = rrv__scale(rrv__madd(dv[j], d1, -rrv__dot(d1, dv[j])), inv_n1);
     }
 }
 
@@ -6274,15 +6323,37 @@ typedef struct rrv__shot {
     long segments;
 } rrv__shot;
 
+/* The straight chords of one shot that reached y, kept so that the
+   transmittance along the root a solve found can be tracked without
+   tracing the root again (rrv__kept_transmittance): from x[i] along d[i]
+   for len[i], the last one ending where the shot passes y. A shot of more
+   chords than fit is not kept (n = -1). */
+#define RRV__CHORDS_KEPT 256
+typedef struct rrv__chords {
+    int n;
+    rrv_vec3 x[RRV__CHORDS_KEPT], d[RRV__CHORDS_KEPT];
+    double len[RRV__CHORDS_KEPT];
+} rrv__chords;
+
+static void rrv__keep_chord(rrv__chords *kept, rrv_vec3 x, rrv_vec3 d, double len)
+{
+    if (kept->n < 0) return;
+    if (kept->n == RRV__CHORDS_KEPT) { kept->n = -1; return; }
+    kept->x[kept->n] = x;
+    kept->d[kept->n] = d;
+    kept->len[kept->n++] = len;
+}
+
 /* Traces the ray from x0 along w0 (tangent basis e1, e2 of the two angles)
    until it passes y: where it first crosses the plane through y with
    normal *plane from its front (a light's), or with plane NULL, where the
    chord through y's perpendicular plane is. With T, also tests every chord
    for surfaces (BLOCKED) and ratio-tracks the transmittance along them,
    and skips the Jacobi field (out->de is then undefined): that shot
-   retraces a root whose solve already had it. */
-static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1, rrv_vec3 e2, rrv_vec3 y,
-                       const rrv_vec3 *plane, rrv__rng *rng, double T[3], rrv__shot *out)
+   retraces a root whose solve already had it. With kept, records the
+   chords of the shot (valid where it reached y). */
+static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1, rrv_vec3 e2, rrv_vec3 y,
+                            const rrv_vec3 *plane, rrv__rng *rng, double T[3], rrv__chords *kept, rrv__shot *out)
 {
     const rrv_scene *scene = ctx->scene;
     rrv__bender b;
@@ -6298,6 +6369,7 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
     J.d[1] = e2;
     out->curved = rrv__in_support(scene, x0);
     if (T) T[0] = T[1] = T[2] = 1.0;
+    if (kept) kept->n = 0;
     for (n = 0; n < RRV__SOLVE_SEGMENTS; ++n) {
         rrv_vec3 d_start = d, dc[2];
         rrv__jacobi J1 = J;
@@ -6330,6 +6402,7 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
             if (s < 0) s = DBL_MAX;
         }
         if (s < DBL_MAX && s <= len) {
+            if (kept) rrv__keep_chord(kept, x, d, s);
             out->end = rrv__madd(x, d, s);
             out->dir = d;
             for (j = 0; j < 2; ++j) {
@@ -6352,6 +6425,7 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
             return;
         }
         if (b.end == RRV__END_NONE) break; /* straight on forever, never passing y */
+        if (kept) rrv__keep_chord(kept, x, d, len);
         if (T) {
             rrv__hit hit;
             double Ts[3];
@@ -6383,6 +6457,33 @@ static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1,
     out->status = RRV__SHOT_MISSED;
 }
 
+static void rrv__shoot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec3 e1, rrv_vec3 e2, rrv_vec3 y,
+                       const rrv_vec3 *plane, rrv__rng *rng, double T[3], rrv__shot *out)
+{
+    rrv__shoot_kept(ctx, x0, w0, e1, e2, y, plane, rng, T, NULL, out);
+}
+
+/* The transmittance along the chords a shot kept, tracked as rrv__shoot
+   with T tracks it along the same chords (the same tests and random
+   numbers in the same order): 0 if a surface blocks them. */
+static int rrv__kept_transmittance(rrv__context *ctx, const rrv__chords *kept, rrv__rng *rng, double T[3])
+{
+    int i, c;
+    T[0] = T[1] = T[2] = 1.0;
+    for (i = 0; i < kept->n; ++i) {
+        rrv__hit hit;
+        double Ts[3], len = kept->len[i];
+        if (i == kept->n - 1) {
+            ++ctx->stats.paths;
+            len *= 1.0 - 1e-6;
+        }
+        if (rrv__intersect_scene(ctx->scene, kept->x[i], kept->d[i], len, &hit)) return 0;
+        rrv__ratio_tracking_transmittance(ctx, kept->x[i], kept->d[i], len, rng, Ts);
+        for (c = 0; c < 3; ++c) T[c] *= Ts[c];
+    }
+    return 1;
+}
+
 /* The residual (offset of y from the path in the light's plane, or in the
    plane through y perpendicular to the arriving chord) and its 2x2
    Jacobian: J_plane, or J_perp = J_plane |cos theta_y|. */
@@ -6405,6 +6506,8 @@ typedef struct rrv__root {
     int curved;
     long segments;
     int iterations;
+    rrv_vec3 ahead;   /* w0 moved by one more Newton step (the linear model's root) if under 1e-4 rad, else w0:
+                         where a polish starts */
 } rrv__root;
 
 /* Newton's method on the two angles of w0 from a seed direction, the step
@@ -6413,7 +6516,7 @@ typedef struct rrv__root {
    |y - x0|). Returns 1 with the root, 0 if it did not converge, met a
    sharp interface, or stalled at a caustic (det J = 0). */
 static int rrv__solve_shot_to(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv_vec3 seed,
-                              double tolerance, rrv__root *root)
+                              double tolerance, rrv__chords *kept, rrv__root *root)
 {
     rrv_vec3 w = seed, w_prev = seed, e1, e2, p1 = rrv__v3(0, 0, 0), p2 = p1;
     double prev_norm = DBL_MAX, step = 1.0, delta[2] = {0, 0};
@@ -6424,7 +6527,7 @@ static int rrv__solve_shot_to(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const 
         rrv__shot shot;
         double r[2] = {0, 0}, Jp[4] = {0, 0, 0, 0}, norm, det, len;
         rrv__frame(w, &e1, &e2);
-        rrv__shoot(ctx, x0, w, e1, e2, y, plane, NULL, NULL, &shot);
+        rrv__shoot_kept(ctx, x0, w, e1, e2, y, plane, NULL, NULL, kept, &shot);
         root->iterations = it + 1;
         if (shot.status == RRV__SHOT_INTERFACE) return 0;
         norm = DBL_MAX;
@@ -6452,6 +6555,14 @@ static int rrv__solve_shot_to(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const 
             root->det = det;
             root->curved = shot.curved;
             root->segments = shot.segments;
+            {
+                /* the linear model's root, unless its step is large (a
+                   nearly singular J, by a caustic): then the root itself */
+                double a1 = (Jp[3] * r[0] - Jp[1] * r[1]) / det, a2 = (Jp[0] * r[1] - Jp[2] * r[0]) / det;
+                root->ahead = a1 * a1 + a2 * a2 < 1e-8
+                                  ? rrv__normalize(rrv__add(w, rrv__add(rrv__scale(e1, a1), rrv__scale(e2, a2))))
+                                  : w;
+            }
             return 1;
         }
         /* a singular Jacobian is a caustic: no finite density */
@@ -6471,10 +6582,12 @@ static int rrv__solve_shot_to(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const 
     return 0;
 }
 
+/* A solve to the polish's tolerance, the chords of its last shot in kept
+   (may be NULL). */
 static int rrv__solve_shot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv_vec3 seed,
-                           rrv__root *root)
+                           rrv__chords *kept, rrv__root *root)
 {
-    return rrv__solve_shot_to(ctx, x0, y, plane, seed, 1e-9, root);
+    return rrv__solve_shot_to(ctx, x0, y, plane, seed, 1e-9, kept, root);
 }
 
 /* Seeds for the solver: a Gaussian around the straight direction to y, of
@@ -6498,16 +6611,47 @@ static rrv_vec3 rrv__solver_seed(rrv_vec3 x0, rrv_vec3 y, rrv__rng *rng)
     return rrv__sample_uniform_sphere(u1, u2);
 }
 
+/* The last polish of one connection's solves (rrv__solve_shot_seeded):
+   its seed and what it returned. */
+typedef struct rrv__polish_memo {
+    int valid;
+    rrv_vec3 seed;
+    int found;
+    rrv__root root;
+} rrv__polish_memo;
+
+/* A direction on the lattice of spacing 2^-26 (1.5e-8) in each component,
+   renormalised. The coarse roots that two solves of one connection reach
+   from different seeds differ by 1e-15 to 1e-10 after the step to the
+   linear model's root (measured on scenes/haze.rrv), and the polish's
+   first shot misses y by ~1e-5 (the coarse steps' error), so the
+   lattice's offsets are lost in the polish while the two seeds nearly
+   always land on the same point. */
+static rrv_vec3 rrv__snap_direction(rrv_vec3 w)
+{
+    const double per = 67108864.0; /* 2^26: the products and quotients are exact */
+    return rrv__normalize(
+        rrv__v3(floor(w.x * per + 0.5) / per, floor(w.y * per + 0.5) / per, floor(w.z * per + 0.5) / per));
+}
+
 /* A solve from seeds of rrv__solver_seed: up to RRV__SOLVE_RESTARTS of
    them, the next drawn when the last failed, so that a solve fails only
    when all did. Each seed is first converged (to 1e-6) with eikonal steps
    RRV__SOLVE_COARSE times longer, an eighth of the work a shot, and the
-   camera rays' steps then polish that root (two or three shots): only the
-   polished root counts, so this is one more deterministic map from seeds
-   to roots. Every call draws its own seeds, so trials stay independent and
-   identically distributed; root->iterations counts every shot. */
+   camera rays' steps then polish that root (two or three shots), from
+   the linear model's root at the coarse one snapped to a lattice
+   (rrv__snap_direction): only the polished root counts, so this is one
+   more deterministic map from seeds to roots. Every call draws its own
+   seeds, so trials stay independent and identically distributed. The
+   polish is a function of its seed alone (x0, y and the plane fixed), so
+   with memo (one per connection, valid 0 at first) a polish whose seed
+   is the last one's returns the last one's result without shooting:
+   the repeated trials of a connection, which find the same root, cost a
+   coarse solve each. With kept, the chords of the last shot taken are
+   kept there (those of the root where one was found by shooting).
+   root->iterations counts the shots taken. */
 static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv__rng *rng,
-                                  rrv__root *root)
+                                  rrv__polish_memo *memo, rrv__chords *kept, rrv__root *root)
 {
     rrv_scene coarse_scene = *ctx->scene;
     rrv__context coarse = *ctx;
@@ -6518,13 +6662,25 @@ static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, co
     for (k = 0; k < RRV__SOLVE_RESTARTS && !found; ++k) {
         rrv_vec3 seed = rrv__solver_seed(x0, y, rng);
         if (ctx->eikonal) {
-            int near_found = rrv__solve_shot_to(&coarse, x0, y, plane, seed, 1e-6, &near);
+            int near_found = rrv__solve_shot_to(&coarse, x0, y, plane, seed, 1e-6, NULL, &near);
             shots += near.iterations;
             if (!near_found) continue;
-            seed = near.w0;
+            seed = rrv__snap_direction(near.ahead);
+            if (memo && memo->valid && seed.x == memo->seed.x && seed.y == memo->seed.y && seed.z == memo->seed.z) {
+                found = memo->found;
+                *root = memo->root;
+                if (kept) kept->n = -1; /* not shot here */
+                continue;
+            }
         }
-        found = rrv__solve_shot(ctx, x0, y, plane, seed, root);
+        found = rrv__solve_shot(ctx, x0, y, plane, seed, kept, root);
         shots += root->iterations;
+        if (memo && ctx->eikonal) {
+            memo->valid = 1;
+            memo->seed = seed;
+            memo->found = found;
+            memo->root = *root;
+        }
     }
     root->iterations = shots;
     return found;
@@ -6749,7 +6905,8 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     const rrv_shape *s;
     rrv_vec3 y, ny, e1, e2;
     rrv__root root, again;
-    rrv__shot shot;
+    rrv__polish_memo memo;
+    rrv__chords kept;
     double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng), pdf_area, T[3], f[3], k;
     if (!choices) return;
     pick = (int)(u * choices);
@@ -6772,7 +6929,8 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     ny = rrv__normalize(rrv__cross(s->e1, s->e2));
     pdf_area = 1.0 / (rrv__shape_area(s) * choices);
     ++ctx->stats.solves;
-    if (!rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &root)) {
+    memo.valid = 0;
+    if (!rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &memo, &kept, &root)) {
         ctx->stats.solve_iterations += (uint64_t)root.iterations;
         return;
     }
@@ -6782,13 +6940,19 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     if (!root.curved) return;
     rrv__vertex_eval(v, root.w0, f);
     if (!(rrv__max3(f) > 0)) return;
-    rrv__frame(root.w0, &e1, &e2);
-    rrv__shoot(ctx, x0, root.w0, e1, e2, y, &ny, rng, T, &shot);
-    if (shot.status != RRV__SHOT_REACHED || !(rrv__max3(T) > 0)) return;
+    if (kept.n > 0) {
+        /* the root's own chords: its last shot in the solve */
+        if (!rrv__kept_transmittance(ctx, &kept, rng, T) || !(rrv__max3(T) > 0)) return;
+    } else {
+        rrv__shot shot;
+        rrv__frame(root.w0, &e1, &e2);
+        rrv__shoot(ctx, x0, root.w0, e1, e2, y, &ny, rng, T, &shot);
+        if (shot.status != RRV__SHOT_REACHED || !(rrv__max3(T) > 0)) return;
+    }
     for (count = 1; count < RRV__SOLVE_TRIALS; ++count) {
         int found;
         ++ctx->stats.solves;
-        found = rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &again);
+        found = rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &memo, NULL, &again);
         ctx->stats.solve_iterations += (uint64_t)again.iterations;
         if (!found) continue;
         ++ctx->stats.solves_converged;

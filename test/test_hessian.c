@@ -449,6 +449,119 @@ static void test_nanovdb_stencil(void)
     rrv_nanovdb_free(&g);
 }
 
+/* ---- the fused lookup against the formulas it replaces ---------------------------- */
+
+/* d/dt_axis of the trilinear blend of one channel of the refraction grid
+   at its cell's lower corner d: the sum over the eight corners, each
+   weighted by the product of its per-axis weights, the one along the axis
+   replaced by its derivative (-1 at the lower corner, +1 at the upper).
+   The library computed its Jacobian this way before it shared the blends
+   with the value. */
+static double corner_sum_slope(const float *d, size_t sy, size_t sz, const double t[3], int axis)
+{
+    const size_t stride[3] = {4, sy, sz};
+    double sum = 0;
+    int corner, a;
+    for (corner = 0; corner < 8; ++corner) {
+        double w = 1;
+        size_t at = 0;
+        for (a = 0; a < 3; ++a) {
+            int upper = (corner >> a) & 1;
+            if (a == axis) w *= upper ? 1.0 : -1.0;
+            else w *= upper ? t[a] : 1.0 - t[a];
+            if (upper) at += stride[a];
+        }
+        sum += w * (double)d[at];
+    }
+    return sum;
+}
+
+/* Points uniform in the grid's box (its last cells included, where the
+   cell index is clamped): the fused lookup's value and gradient equal
+   rrv__refraction_lookup's exactly, its Jacobian the corner sums within
+   1e-12 of the largest entry at the point (the two orders of the same
+   sums differ by a few ulp of the samples, and the samples of these
+   smooth grids are within ~10 cells' slope of each other). */
+static void check_fused_lookup(const rrv_scene *s, const char *name, uint64_t seed)
+{
+    const struct rrv__majorant_grid *mg = s->media[0].majorant;
+    const rrv_grid *g = &mg->refraction;
+    const double scale[3] = {mg->refraction_scale.x, mg->refraction_scale.y, mg->refraction_scale.z};
+    double worst = 0;
+    int k, a, b, same = 1;
+    rrv__rng rng;
+    rrv__rng_seed(&rng, seed, 0, 0);
+    for (k = 0; k < 2000; ++k) {
+        double u0 = rrv__uniform(&rng), u1 = rrv__uniform(&rng), u2 = rrv__uniform(&rng);
+        rrv_vec3 p = rrv__v3(g->lo.x + u0 * (g->hi.x - g->lo.x), g->lo.y + u1 * (g->hi.y - g->lo.y),
+                             g->lo.z + u2 * (g->hi.z - g->lo.z));
+        rrv_vec3 grad, grad_ref;
+        double J[9], J2[9], t[3], biggest = 0;
+        size_t sy, sz;
+        const float *d = rrv__refraction_cell(mg, p, &sy, &sz, t);
+        double v = rrv__refraction_lookup_jacobian_fused(mg, p, &grad, J);
+        double v_ref = rrv__refraction_lookup(mg, p, &grad_ref);
+        rrv__refraction_lookup_jacobian(mg, p, J2);
+        same &= v == v_ref && grad.x == grad_ref.x && grad.y == grad_ref.y && grad.z == grad_ref.z;
+        for (a = 0; a < 9; ++a) same &= J[a] == J2[a];
+        for (a = 0; a < 9; ++a) biggest = fmax(biggest, fabs(J[a]));
+        for (a = 0; a < 3; ++a)
+            for (b = 0; b < 3; ++b) {
+                double ref = corner_sum_slope(d + 1 + a, sy, sz, t, b) * scale[b];
+                worst = fmax(worst, fabs(J[3 * a + b] - ref) / biggest);
+            }
+    }
+    SAY("  %-32s fused Jacobian against the corner sums: %.2e of max |J|\n", name, worst);
+    CHECKF(same, "%s: the fused lookup's value, gradient or Jacobian differs from the separate lookups", name);
+    CHECKF(worst <= 1e-12, "%s: fused Jacobian off the corner sums by %g of max |J|", name, worst);
+}
+
+static void test_fused_lookup_matches_corner_sums(void)
+{
+    rrv_scene *ior = ior_grid_scene(17, RRV_IOR_INTERP_TRILINEAR), *noise = gas_noise_scene();
+    check_fused_lookup(ior, "IOR grid, trilinear", 31);
+    check_fused_lookup(noise, "gas, noise temperature", 32);
+    rrv_scene_free(ior);
+    rrv_scene_free(noise);
+}
+
+/* rrv__eta_gradient_hessian, which the Jacobi steps call, gives exactly
+   what rrv__eta_gradient and rrv__scene_hessian give, for every kind it
+   dispatches on (the fused grid lookup, the cubic spline, an unbaked
+   grid, a closed-form profile) and outside the media. */
+static void test_eta_gradient_hessian_is_both(void)
+{
+    rrv_scene *scenes[5];
+    static const char *names[5] = {"IOR grid, trilinear", "IOR grid, cubic", "gas, pressure grid (unbaked)",
+                                   "gas, noise temperature", "Luneburg"};
+    int k, i, a;
+    scenes[0] = ior_grid_scene(17, RRV_IOR_INTERP_TRILINEAR);
+    scenes[1] = ior_grid_scene(17, RRV_IOR_INTERP_CUBIC);
+    scenes[2] = gas_two_grids_scene();
+    scenes[3] = gas_noise_scene();
+    scenes[4] = profile_scene(RRV_FIELD_LUNEBURG);
+    for (k = 0; k < 5; ++k) {
+        rrv__rng rng;
+        int same = 1, outside = 0;
+        rrv__rng_seed(&rng, 40 + (uint64_t)k, 0, 0);
+        for (i = 0; i < 500; ++i) {
+            /* [-1.2, 1.2]^3: the medium's box [-1, 1]^3 and a margin */
+            double u0 = rrv__uniform(&rng), u1 = rrv__uniform(&rng), u2 = rrv__uniform(&rng);
+            rrv_vec3 p = rrv__v3(2.4 * u0 - 1.2, 2.4 * u1 - 1.2, 2.4 * u2 - 1.2), g, g_ref;
+            double H[9], H_ref[9];
+            double eta = rrv__eta_gradient_hessian(scenes[k], p, &g, H);
+            double eta_ref = rrv__eta_gradient(scenes[k], p, &g_ref);
+            rrv__scene_hessian(scenes[k], p, H_ref);
+            outside += !rrv__inside_box(p, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1));
+            same &= eta == eta_ref && g.x == g_ref.x && g.y == g_ref.y && g.z == g_ref.z;
+            for (a = 0; a < 9; ++a) same &= H[a] == H_ref[a];
+        }
+        CHECKF(same, "%s: rrv__eta_gradient_hessian differs from rrv__eta_gradient and rrv__scene_hessian", names[k]);
+        CHECKF(outside > 0, "%s: no point outside the medium", names[k]);
+        rrv_scene_free(scenes[k]);
+    }
+}
+
 /* ---- the solver in grid media --------------------------------------------------- */
 
 static void solver_context(rrv__context *ctx, const rrv_scene *s)
@@ -549,7 +662,7 @@ static void test_solve_through_grid(void)
         rrv__root root;
         rrv__shot shot;
         rrv_vec3 e1, e2;
-        if (!rrv__solve_shot(&ctx, x0, y, NULL, rrv__solver_seed(x0, y, &rng), &root)) continue;
+        if (!rrv__solve_shot(&ctx, x0, y, NULL, rrv__solver_seed(x0, y, &rng), NULL, &root)) continue;
         ++found;
         rrv__frame(root.w0, &e1, &e2);
         rrv__shoot(&ctx, x0, root.w0, e1, e2, y, NULL, NULL, NULL, &shot);
@@ -562,6 +675,86 @@ static void test_solve_through_grid(void)
         CHECK(root.curved && root.det > 0 && root.det == root.det);
     }
     CHECKF(found >= 8, "only %d of 10 seeds converged", found);
+    rrv_scene_free(s);
+}
+
+/* A gas grid as gas_grid_scene's with an absorbing density grid in it,
+   so that ratio tracking along a connection draws random numbers. */
+static rrv_scene *gas_grid_dense_scene(void)
+{
+    rrv_scene *s = empty_scene();
+    int m = add_medium(s, 1, 40.0);
+    rrv_field t, d;
+    fill_grid(&t, 17, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 300.0, 500.0);
+    fill_grid(&d, 9, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 1.0, 1.0);
+    set_field(s, m, RRV_MEDIUM_TEMPERATURE, &t);
+    set_field(s, m, RRV_MEDIUM_DENSITY, &d);
+    s->media[m].sigma_a[0] = s->media[m].sigma_a[1] = s->media[m].sigma_a[2] = 0.7;
+    s->settings.ambient_ior = 1.0 + 40.0 * 2.92e-4;
+    prepare(s);
+    return s;
+}
+
+/* What curved NEE saves on a connection changes no number: a solve whose
+   polish is the memo's (a repeated trial) returns exactly what the same
+   solve computes without the memo, and the transmittance tracked along
+   the chords the root's last shot kept is exactly that of tracing the
+   root again with the same random numbers. Connections from x0 to points
+   y on a plane facing it, through a gas grid with density. */
+static void test_memo_and_kept_chords_change_nothing(void)
+{
+    rrv_scene *s = gas_grid_dense_scene();
+    rrv__context ctx;
+    rrv__rng rng;
+    rrv_vec3 x0 = rrv__v3(-0.1, 0.2, -0.95), down = rrv__v3(0, 0, -1);
+    static rrv__chords kept;
+    int k, hits = 0, connections = 0, tracked = 0;
+    solver_context(&ctx, s);
+    rrv__rng_seed(&rng, 51, 0, 0);
+    for (k = 0; k < 20; ++k) {
+        rrv_vec3 y = rrv__v3(0.6 * rrv__uniform(&rng) - 0.3, 0.6 * rrv__uniform(&rng) - 0.3, 0.95), e1, e2;
+        rrv__polish_memo memo;
+        rrv__root root, with_memo, without;
+        rrv__rng at_trial, copy;
+        rrv__shot shot;
+        double T[3], T_again[3];
+        int found, found_memo, found_plain;
+        memo.valid = 0;
+        found = rrv__solve_shot_seeded(&ctx, x0, y, &down, &rng, &memo, &kept, &root);
+        if (!found) continue;
+        ++connections;
+        /* the root's transmittance, kept chords against a retrace */
+        copy = rng;
+        if (kept.n > 0) {
+            int open = rrv__kept_transmittance(&ctx, &kept, &rng, T);
+            rrv__frame(root.w0, &e1, &e2);
+            rrv__shoot(&ctx, x0, root.w0, e1, e2, y, &down, &copy, T_again, &shot);
+            CHECKF(open == (shot.status == RRV__SHOT_REACHED), "connection %d: kept chords open %d, retrace status %d",
+                   k, open, shot.status);
+            CHECKF(T[0] == T_again[0] && T[1] == T_again[1] && T[2] == T_again[2],
+                   "connection %d: T %.17g along the kept chords, %.17g retraced", k, T[0], T_again[0]);
+            CHECKF(rrv__uniform(&rng) == rrv__uniform(&copy), "connection %d: different random numbers used", k);
+            tracked += T[0] < 1; /* some null collision happened */
+        }
+        /* a repeated trial, with and without the memo, from the same state */
+        at_trial = rng;
+        found_memo = rrv__solve_shot_seeded(&ctx, x0, y, &down, &rng, &memo, NULL, &with_memo);
+        found_plain = rrv__solve_shot_seeded(&ctx, x0, y, &down, &at_trial, NULL, NULL, &without);
+        CHECKF(found_memo == found_plain, "connection %d: found %d with the memo, %d without", k, found_memo,
+               found_plain);
+        if (found_memo && found_plain) {
+            CHECKF(with_memo.w0.x == without.w0.x && with_memo.w0.y == without.w0.y && with_memo.w0.z == without.w0.z &&
+                       with_memo.det == without.det,
+                   "connection %d: the memo's root differs from the one computed", k);
+            hits += with_memo.iterations < without.iterations;
+        }
+    }
+    SAY("  memo: %d of %d repeated trials reused the polish; %d transmittances below 1\n", hits,
+        connections, tracked);
+    CHECKF(connections >= 15, "only %d of 20 connections solved", connections);
+    CHECKF(hits >= connections - 2, "only %d of %d repeated trials reused the polish", hits, connections);
+    CHECKF(tracked >= connections / 2, "only %d of %d transmittances below 1: the density is not tested", tracked,
+           connections);
     rrv_scene_free(s);
 }
 
@@ -579,7 +772,10 @@ int main(void)
     RUN(test_gas_blobs);
     RUN(test_profiles);
     RUN(test_nanovdb_stencil);
+    RUN(test_fused_lookup_matches_corner_sums);
+    RUN(test_eta_gradient_hessian_is_both);
     RUN(test_shoot_jacobian_in_grids);
     RUN(test_solve_through_grid);
+    RUN(test_memo_and_kept_chords_change_nothing);
     return CHECK_EXIT_CODE();
 }

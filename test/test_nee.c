@@ -737,7 +737,7 @@ static void test_luneburg_two_point(void)
         CHECK(want.inside && !other.inside);
         for (k = 0; k < 40; ++k) {
             rrv__root got;
-            if (!rrv__solve_shot(&ctx, x0, x1, NULL, rrv__solver_seed(x0, x1, &rng), &got)) continue;
+            if (!rrv__solve_shot(&ctx, x0, x1, NULL, rrv__solver_seed(x0, x1, &rng), NULL, &got)) continue;
             ++converged;
             if (rrv__length(rrv__sub(got.w0, want.w0)) < 1e-4) {
                 double err_w0 = rrv__length(rrv__sub(got.w0, want.w0));
@@ -1130,11 +1130,11 @@ static void reciprocity(rrv_scene *s, rrv_vec3 x0, rrv_vec3 y, const char *name)
     double eta0 = 1.0 + rrv__scene_refractivity(s, x0, NULL), eta1 = 1.0 + rrv__scene_refractivity(s, y, NULL);
     double lhs, rhs;
     solver_context(&ctx, s);
-    if (!rrv__solve_shot(&ctx, x0, y, NULL, rrv__normalize(rrv__sub(y, x0)), &there)) {
+    if (!rrv__solve_shot(&ctx, x0, y, NULL, rrv__normalize(rrv__sub(y, x0)), NULL, &there)) {
         CHECKF(0, "%s: no root from x0 to y", name);
         return;
     }
-    if (!rrv__solve_shot(&ctx, y, x0, NULL, rrv__scale(there.dir, -1.0), &back)) {
+    if (!rrv__solve_shot(&ctx, y, x0, NULL, rrv__scale(there.dir, -1.0), NULL, &back)) {
         CHECKF(0, "%s: no root back from y to x0", name);
         return;
     }
@@ -1195,7 +1195,7 @@ static void test_partition_is_exclusive(void)
         ls.wi = rrv__normalize(rrv__sub(y, x0));
         ls.dist = rrv__length(rrv__sub(y, x0));
         allowed = rrv__straight_allowed(&ctx, x0, &ls);
-        found = rrv__solve_shot(&ctx, x0, y, &down, ls.wi, &root);
+        found = rrv__solve_shot(&ctx, x0, y, &down, ls.wi, NULL, &root);
         rrv__look_along(s, x0, ls.wi, &view);
         if (allowed && (view.inside || view.t_face < ls.dist)) {
             double bound = rrv__chord_bend(&ctx, x0, ls.wi, ls.dist, 1e30);
@@ -1367,7 +1367,7 @@ static void test_shoot_mis_weights_sum_to_one(void)
         const rrv_vec3 down = rrv__v3(0, -1, 0);
         rrv__root root;
         double pdf, w_nee, w_fwd;
-        if (!rrv__solve_shot(&ctx, x0, y, &down, rrv__solver_seed(x0, y, &rng), &root) || !root.curved) continue;
+        if (!rrv__solve_shot(&ctx, x0, y, &down, rrv__solver_seed(x0, y, &rng), NULL, &root) || !root.curved) continue;
         ++roots;
         /* every other vertex a medium with a forward phase function about
            the chord (density up to 15 per sr), which shares many paths */
