@@ -122,7 +122,14 @@
                  forward path takes the path, which bounds NEE's 1/|det|
                  (unweighted, its square is not integrable there).
                  Everything else (across a sharp interface, to the sky, to
-                 sphere lights) only by forward paths, weight 1. The
+                 sphere lights) only by forward paths, weight 1. A curved
+                 path whose chord from x0 to where it lands bends little
+                 (an aimed ray would move by at most RRV__SHOOT_AIM_REACH =
+                 0.3 of the light's size: AIM's class) is AIM's instead: y
+                 in that class is not solved for but aimed at, a solved
+                 root never lands there, and the forward path weighs
+                 itself against AIM (weak heat haze costs 1.3x straight
+                 NEE instead of 2.8x solving it all). The
                  connection: a point y uniform on a light, Newton on the
                  two angles of the initial direction so that the ray,
                  traced with the same steps camera rays take, first crosses
@@ -416,6 +423,12 @@
        (eta_c / eta_e)^2; thermal emission follows Kirchhoff (above).
 
    HISTORY
+     0.6.0  nee aim: bent shadow rays aimed at light samples, unbiased at
+            about straight NEE's cost, the refractive default (as shoot)
+            and, with eikonal, shoot's way for connections that bend
+            little; shoot's solve 3.4x cheaper on haze (fused Jacobian
+            lookup, polish memo, the root's own chords); a comb spacing
+            bounded by the gradient's variation, measured and left off
      0.5.0  unbiased NEE by default (shoot: curved connections solved with
             the eikonal integrator, left to forward paths with the
             refractive one); shoot shares paths with the
@@ -445,7 +458,7 @@
 #include <stdint.h>
 
 #define RRV_VERSION_MAJOR 0
-#define RRV_VERSION_MINOR 5
+#define RRV_VERSION_MINOR 6
 #define RRV_VERSION_PATCH 0
 
 #ifndef RRV_DEF
