@@ -322,7 +322,7 @@ static void test_lens_caustic_shoot(void)
     rrv_error err;
     rrv_render_stats rs;
     stats a[NBLOCKS], b[NBLOCKS];
-    int i, bx, by, peak = -1;
+    int i, peak;
     const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
     if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
         CHECKF(0, "parse: %s", err.message);
@@ -337,19 +337,7 @@ static void test_lens_caustic_shoot(void)
     use(s, &eikonal, RRV_NEE_SHOOT);
     s->settings.seed = 5;
     block_samples_rect(s, 24, x0, y0, x1, y1, BLOCK, BLOCK, b, &rs);
-    for (by = y0 / BLOCK; by < y1 / BLOCK; ++by) {
-        for (bx = x0 / BLOCK; bx < x1 / BLOCK; ++bx) {
-            double d, se;
-            i = by * BLOCKS_X + bx;
-            d = stats_mean(&b[i]) - stats_mean(&a[i]);
-            se = sqrt(stats_se(&a[i]) * stats_se(&a[i]) + stats_se(&b[i]) * stats_se(&b[i]));
-            if (peak < 0 || stats_mean(&a[i]) > stats_mean(&a[peak])) peak = i;
-            SAY("  lens caustic block %d,%d: none %.4f +- %.4f (%ld samples), shoot %.4f +- %.4f (%ld samples)\n", bx, by,
-                stats_mean(&a[i]), stats_se(&a[i]), a[i].n, stats_mean(&b[i]), stats_se(&b[i]), b[i].n);
-            CHECKF(fabs(d) <= 4 * se, "block %d,%d: none %.4f, shoot %.4f, difference %.4f over 4 se %.4f", bx, by,
-                   stats_mean(&a[i]), stats_mean(&b[i]), d, 4 * se);
-        }
-    }
+    peak = blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, "lens caustic, eikonal shoot");
     SAY("  shoot: %llu solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, %.0f segments a chain\n",
         (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)rs.solves,
         rs.solve_iterations / (double)rs.solves, rs.solve_trials / (double)rs.solve_connections,
@@ -413,7 +401,7 @@ static void test_small_light_caustic_shoot(void)
     rrv_error err;
     rrv_render_stats rs;
     stats a[NBLOCKS], b[NBLOCKS];
-    int i, bx, by, peak = -1;
+    int peak;
     const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
     if (rrv_scene_parse(small_caustic_text, sizeof small_caustic_text - 1, "small caustic", NULL, NULL, &s, &err) !=
         RRV_OK) {
@@ -429,19 +417,7 @@ static void test_small_light_caustic_shoot(void)
     use(s, &eikonal, RRV_NEE_SHOOT);
     s->settings.seed = 52;
     block_samples_rect(s, 16, x0, y0, x1, y1, BLOCK, BLOCK, b, &rs);
-    for (by = y0 / BLOCK; by < y1 / BLOCK; ++by) {
-        for (bx = x0 / BLOCK; bx < x1 / BLOCK; ++bx) {
-            double d, se;
-            i = by * BLOCKS_X + bx;
-            d = stats_mean(&b[i]) - stats_mean(&a[i]);
-            se = sqrt(stats_se(&a[i]) * stats_se(&a[i]) + stats_se(&b[i]) * stats_se(&b[i]));
-            if (peak < 0 || stats_mean(&b[i]) > stats_mean(&b[peak])) peak = i;
-            SAY("  small light block %d,%d: none %.4f +- %.4f, shoot %.4f +- %.4f\n", bx, by, stats_mean(&a[i]),
-                stats_se(&a[i]), stats_mean(&b[i]), stats_se(&b[i]));
-            CHECKF(fabs(d) <= 4 * se, "small light, block %d,%d: none %.4f, shoot %.4f, difference %.4f over 4 se %.4f",
-                   bx, by, stats_mean(&a[i]), stats_mean(&b[i]), d, 4 * se);
-        }
-    }
+    peak = blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, "small light, eikonal shoot");
     SAY("  small light shoot: %llu solves, %.1f%% converged, %.1f iterations, %.2f trials a connection\n",
         (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)rs.solves,
         rs.solve_iterations / (double)rs.solves, rs.solve_trials / (double)rs.solve_connections);
@@ -557,7 +533,6 @@ static void test_fog_in_lens_shoot(void)
     rrv_error err;
     rrv_render_stats rs;
     stats a[NBLOCKS], b[NBLOCKS];
-    int i, bx, by;
     const int x0 = 8, y0 = 4, x1 = 24, y1 = 16;
     if (rrv_scene_parse(fog_text, sizeof fog_text - 1, "fog", NULL, NULL, &s, &err) != RRV_OK) {
         CHECKF(0, "parse: %s", err.message);
@@ -572,18 +547,7 @@ static void test_fog_in_lens_shoot(void)
     use(s, &eikonal, RRV_NEE_SHOOT);
     s->settings.seed = 8;
     block_samples_rect(s, 16, x0, y0, x1, y1, BLOCK, BLOCK, b, &rs);
-    for (by = y0 / BLOCK; by < y1 / BLOCK; ++by) {
-        for (bx = x0 / BLOCK; bx < x1 / BLOCK; ++bx) {
-            double d, se;
-            i = by * BLOCKS_X + bx;
-            d = stats_mean(&b[i]) - stats_mean(&a[i]);
-            se = sqrt(stats_se(&a[i]) * stats_se(&a[i]) + stats_se(&b[i]) * stats_se(&b[i]));
-            SAY("  fog block %d,%d: none %.4f +- %.4f, shoot %.4f +- %.4f\n", bx, by, stats_mean(&a[i]), stats_se(&a[i]),
-                stats_mean(&b[i]), stats_se(&b[i]));
-            CHECKF(fabs(d) <= 4 * se, "fog block %d,%d: none %.4f, shoot %.4f, difference %.4f over 4 se %.4f", bx, by,
-                   stats_mean(&a[i]), stats_mean(&b[i]), d, 4 * se);
-        }
-    }
+    blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, "fog in the lens, eikonal shoot");
     SAY("  fog shoot: %llu solves, %.1f%% converged, %llu connections\n", (unsigned long long)rs.solves,
         100.0 * rs.solves_converged / (double)rs.solves, (unsigned long long)rs.solve_connections);
     CHECK(rs.solve_connections > 100);
