@@ -85,6 +85,18 @@ static double stats_se(const stats *s)
     return s->n > 1 ? sqrt(fmax(0.0, s->sum2 / s->n - m * m) / (s->n - 1)) : 0.0;
 }
 
+/* The scene of a test's text, or NULL with the failure checked. */
+static rrv_scene *parse_text(const char *text, size_t size, const char *name)
+{
+    rrv_scene *s = NULL;
+    rrv_error err;
+    if (rrv_scene_parse(text, size, name, NULL, NULL, &s, &err) != RRV_OK) {
+        CHECKF(0, "%s: parse: %s", name, err.message);
+        return NULL;
+    }
+    return s;
+}
+
 /* Renders pixels [x0,x1) x [y0,y1) one sample index at a time and files
    each pixel sample of the green channel into the stats of its block (bw x
    bh pixels, numbered over the whole image). */
@@ -260,10 +272,7 @@ static void test_lens_caustic(void)
     stats a[NBLOCKS], b[NBLOCKS], c[NBLOCKS];
     int i, peak = 0, compared = 0;
     const int spp = 320;
-    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
     memset(a, 0, sizeof a);
     memset(b, 0, sizeof b);
     memset(c, 0, sizeof c);
@@ -324,10 +333,7 @@ static void test_lens_caustic_shoot(void)
     stats a[NBLOCKS], b[NBLOCKS];
     int i, peak;
     const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
-    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
     memset(a, 0, sizeof a);
     memset(b, 0, sizeof b);
     memset(&rs, 0, sizeof rs);
@@ -403,11 +409,7 @@ static void test_small_light_caustic_shoot(void)
     stats a[NBLOCKS], b[NBLOCKS];
     int peak;
     const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
-    if (rrv_scene_parse(small_caustic_text, sizeof small_caustic_text - 1, "small caustic", NULL, NULL, &s, &err) !=
-        RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(small_caustic_text, sizeof small_caustic_text - 1, "small caustic"))) return;
     memset(a, 0, sizeof a);
     memset(b, 0, sizeof b);
     memset(&rs, 0, sizeof rs);
@@ -491,10 +493,7 @@ static void test_lens_caustic_manifold(void)
     rrv_error err;
     stats a[NBLOCKS];
     const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
-    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
     memset(a, 0, sizeof a);
     use(s, &comb, RRV_NEE_NONE);
     s->settings.seed = 40;
@@ -534,10 +533,7 @@ static void test_fog_in_lens_shoot(void)
     rrv_render_stats rs;
     stats a[NBLOCKS], b[NBLOCKS];
     const int x0 = 8, y0 = 4, x1 = 24, y1 = 16;
-    if (rrv_scene_parse(fog_text, sizeof fog_text - 1, "fog", NULL, NULL, &s, &err) != RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(fog_text, sizeof fog_text - 1, "fog"))) return;
     memset(a, 0, sizeof a);
     memset(b, 0, sizeof b);
     memset(&rs, 0, sizeof rs);
@@ -599,10 +595,7 @@ static void test_classic_ignores_nee(void)
     int w, h;
     size_t n, i;
     float *x, *y;
-    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
     w = s->camera.width;
     h = s->camera.height;
     n = (size_t)w * h * 3;
@@ -1141,10 +1134,7 @@ static void test_partition_is_exclusive(void)
     rrv__context ctx;
     rrv__rng rng;
     int k, straight = 0, curved = 0, weak = 0;
-    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
     solver_context(&ctx, s);
     ctx.partition = ctx.shoot = 1;
     rrv__rng_seed(&rng, 3, 0, 0);
@@ -1279,10 +1269,7 @@ static void test_manifold_out_of_memory(void)
     rrv_error err;
     float sum[4 * 4 * 3];
     int i, untouched = 1;
-    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
     use(s, &eikonal, RRV_NEE_MANIFOLD);
     memset(sum, 0, sizeof sum);
     allocations_to_pass = 0;
@@ -1314,10 +1301,7 @@ static void test_shoot_mis_weights_sum_to_one(void)
     rrv__vertex_bsdf vb;
     int k, roots = 0, shared = 0;
     double worst = 0;
-    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
     solver_context(&ctx, s);
     ctx.partition = ctx.shoot = ctx.sample_lights = 1;
     light = &s->shapes[s->lights[0]];
@@ -1447,10 +1431,7 @@ static void test_two_lights_aim(void)
     rrv_render_stats rs;
     stats a[NBLOCKS], b[NBLOCKS];
     const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
-    if (rrv_scene_parse(two_lights_text, sizeof two_lights_text - 1, "two lights", NULL, NULL, &s, &err) != RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(two_lights_text, sizeof two_lights_text - 1, "two lights"))) return;
     memset(a, 0, sizeof a);
     memset(b, 0, sizeof b);
     memset(&rs, 0, sizeof rs);
@@ -1485,10 +1466,7 @@ static void test_aim_weights_sum_to_one(void)
     rrv_vec3 ny;
     int k, classes[3] = {0, 0, 0};
     double worst = 0;
-    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
     memset(&ctx, 0, sizeof ctx);
     ctx.scene = s;
     ctx.comb = ctx.bends = ctx.partition = ctx.aim = ctx.sample_lights = 1;
@@ -1627,10 +1605,7 @@ static void test_weak_class_shared(void)
     rrv__context ctx;
     rrv__rng rng;
     int k, weak = 0, curved = 0;
-    if (rrv_scene_parse(caustic_text, sizeof caustic_text - 1, "caustic", NULL, NULL, &s, &err) != RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
     solver_context(&ctx, s);
     ctx.partition = ctx.shoot = 1;
     ctx.eta_floor = 1.0;
@@ -1679,10 +1654,7 @@ static void test_weak_class_flat_support(void)
     rrv__support_view view;
     rrv_vec3 x0 = rrv__v3(0.2, -1.5, 0.1), y = rrv__v3(0, 2, 0), d;
     double len;
-    if (rrv_scene_parse(text, sizeof text - 1, "flat", NULL, NULL, &s, &err) != RRV_OK) {
-        CHECKF(0, "parse: %s", err.message);
-        return;
-    }
+    if (!(s = parse_text(text, sizeof text - 1, "flat"))) return;
     CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "prepare: %s", err.message);
     solver_context(&ctx, s);
     ctx.partition = ctx.shoot = 1;
