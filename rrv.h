@@ -3172,20 +3172,35 @@ static int rrv__medium_emission_ok(const rrv_medium *m)
     return m->Lescale <= RRV_MAX_RADIANCE && rrv__max3(m->Le) * m->Lescale <= RRV_MAX_RADIANCE;
 }
 
+/* The unit vector along v, whose components but one are zero (the zeros
+   keep their signs, as dividing them by |v| would). */
+static rrv_vec3 rrv__axis_unit(rrv_vec3 v)
+{
+    return rrv__v3(v.x == 0 ? v.x : v.x > 0 ? 1.0 : -1.0, v.y == 0 ? v.y : v.y > 0 ? 1.0 : -1.0,
+                   v.z == 0 ? v.z : v.z > 0 ? 1.0 : -1.0);
+}
+
 /* Snell's law at a null event (seed Algorithm 1, CONVENTIONS). r_in is the
    refractivity the ray carries, r_out the one at the event, grad its
    gradient. The change of direction is formed directly, because m = eta_in /
    eta_out differs from 1 by ~1e-4 in air and m d - sqrt(k) n would cancel. */
 static rrv_vec3 rrv__refract_at_null_event(rrv_vec3 d, double r_in, double r_out, rrv_vec3 grad, int *reflected)
 {
-    double big = fmax(fabs(grad.x), fmax(fabs(grad.y), fabs(grad.z)));
     double delta, c, s2, e, k;
     rrv_vec3 n, out;
     *reflected = 0;
-    if (!(big > 0) || big > DBL_MAX) return d;
-    /* Dividing by the largest component first keeps a denormal gradient
-       from overflowing 1/|grad| (its reciprocal is not representable). */
-    n = rrv__normalize(rrv__v3(grad.x / big, grad.y / big, grad.z / big));
+    if ((grad.x == 0) + (grad.y == 0) + (grad.z == 0) == 2) {
+        /* along an axis (a box face's normal): the unit vector the general
+           case below would compute exactly, without its divisions */
+        if (!(fabs(grad.x + grad.y + grad.z) <= DBL_MAX)) return d;
+        n = rrv__axis_unit(grad);
+    } else {
+        double big = fmax(fabs(grad.x), fmax(fabs(grad.y), fabs(grad.z)));
+        if (!(big > 0) || big > DBL_MAX) return d;
+        /* Dividing by the largest component first keeps a denormal gradient
+           from overflowing 1/|grad| (its reciprocal is not representable). */
+        n = rrv__normalize(rrv__v3(grad.x / big, grad.y / big, grad.z / big));
+    }
     delta = (r_in - r_out) / (1.0 + r_out);
     if (delta == 0) return d;
     c = -rrv__dot(n, d);
@@ -3194,7 +3209,8 @@ static rrv_vec3 rrv__refract_at_null_event(rrv_vec3 d, double r_in, double r_out
        entering higher IOR (delta < 0) comes from the side grad points away
        from, and must bend toward grad. */
     if (c < 0 || (c == 0 && delta < 0)) { n = rrv__scale(n, -1.0); c = -c; }
-    s2 = fmax(0.0, 1.0 - c * c);
+    s2 = 1.0 - c * c;
+    if (!(s2 > 0)) s2 = 0; /* fmax(0, s2) without the library call */
     e = delta * (2.0 + delta) * s2;
     k = c * c - e;
     if (k < 0) {
@@ -4234,7 +4250,10 @@ static int rrv__sphere_interval(const rrv_field *f, rrv_vec3 o, rrv_vec3 d, doub
    found a 1e-16 remainder ahead, stepped by it and never moved again). */
 static double rrv__face_gap(rrv_vec3 x)
 {
-    return RRV__EDGE_NUDGE * (1.0 + fmax(fabs(x.x), fmax(fabs(x.y), fabs(x.z))));
+    /* the largest |component| by comparisons: fmax is a library call */
+    double big = fabs(x.x) > fabs(x.y) ? fabs(x.x) : fabs(x.y);
+    if (fabs(x.z) > big) big = fabs(x.z);
+    return RRV__EDGE_NUDGE * (1.0 + big);
 }
 
 /* What a ray from o along d sees of the refraction supports. */
@@ -4283,6 +4302,12 @@ static void rrv__look_along(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, rrv_
         if (!rrv__medium_refracts(m)) continue;
         lo_box[0] = m->lo.x; lo_box[1] = m->lo.y; lo_box[2] = m->lo.z;
         hi_box[0] = m->hi.x; hi_box[1] = m->hi.y; hi_box[2] = m->hi.z;
+        /* A box behind the ray on one axis (o past a side, d not turning
+           back to it) is missed, as the clip below would find, without its
+           divisions: every ray that has just left a box looks from there. */
+        for (a = 0; a < 3; ++a)
+            missed |= (os[a] > hi_box[a] && ds[a] >= 0) || (os[a] < lo_box[a] && ds[a] <= 0);
+        if (missed) continue;
         for (a = 0; a < 3; ++a) {
             if (ds[a] == 0) {
                 missed |= os[a] < lo_box[a] || os[a] > hi_box[a];
@@ -4454,7 +4479,8 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     b->reflected = 0;
     if (r_before != r_after) {
         int reflected;
-        rrv_vec3 n = rrv__normalize(normal);
+        rrv_vec3 n = (normal.x == 0) + (normal.y == 0) + (normal.z == 0) == 2 ? rrv__axis_unit(normal)
+                                                                               : rrv__normalize(normal);
         nd = rrv__refract_at_null_event(d, r_before, r_after, n, &reflected);
         if (!reflected) {
             double cos_i = fabs(rrv__dot(n, d)), cos_t = fabs(rrv__dot(n, nd));
@@ -5449,14 +5475,24 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
         /* A surface lying on the face that ends the segment belongs to it:
            looked for a gap past the end, it cannot slip between this
            segment's end and the next one's start. */
-        has_hit = ctx->bends && cp.path.bender.surface_free
-                      ? 0
-                      : rrv__intersect_scene(scene, cp.o, cp.d,
-                                             segment < DBL_MAX ? segment + rrv__face_gap(rrv__madd(cp.o, cp.d, segment))
-                                                               : DBL_MAX,
-                                             &hit);
-        /* delta tracking along it, up to the surface if one is hit */
-        outcome = rrv__refractive_delta_tracking(ctx, &cp.path, cp.o, cp.d, has_hit ? hit.t : segment, rng, &flight);
+        if (ctx->comb && cp.path.bender.surface_free && segment < DBL_MAX &&
+            !rrv__chord_meets_extinction(scene, cp.o, cp.d, segment)) {
+            /* a chord with nothing to meet (as in the loop below), here also
+               one that ends at a face: no ray cast, no tracking */
+            has_hit = 0;
+            outcome = RRV__FLIGHT_PASSED;
+        } else {
+            has_hit = ctx->bends && cp.path.bender.surface_free
+                          ? 0
+                          : rrv__intersect_scene(scene, cp.o, cp.d,
+                                                 segment < DBL_MAX
+                                                     ? segment + rrv__face_gap(rrv__madd(cp.o, cp.d, segment))
+                                                     : DBL_MAX,
+                                                 &hit);
+            /* delta tracking along it, up to the surface if one is hit */
+            outcome =
+                rrv__refractive_delta_tracking(ctx, &cp.path, cp.o, cp.d, has_hit ? hit.t : segment, rng, &flight);
+        }
         if (outcome == RRV__FLIGHT_ABSORBED) break;
         if (outcome == RRV__FLIGHT_CUT) {
             ++ctx->stats.paths_cut;
