@@ -4410,6 +4410,10 @@ typedef struct rrv__bender {
     const rrv_medium *sole_support; /* the scene's one refraction support when it
                                        is a box (no sphere, no second refractive
                                        medium), else NULL: see rrv__comb_step */
+    int face_known;    /* the last face crossed into a support looked up the
+                          refractivity r and its gradient face_grad just past
+                          it, at face_at: the comb's first half kick there */
+    rrv_vec3 face_at, face_grad;
 } rrv__bender;
 
 static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
@@ -4425,6 +4429,7 @@ static void rrv__bender_restart(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     b->pending = 0;
     b->combing = 0;
     b->reflected = 0;
+    b->face_known = 0;
 }
 
 static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikonal, rrv_vec3 o)
@@ -4467,16 +4472,24 @@ static rrv_vec3 rrv__bend_at_null_event(rrv__bender *b, const rrv_scene *scene, 
    angle) and refracts otherwise, so the estimate stays unbiased with weight
    1. Refracting the jump with the interior gradient as the normal, as
    Poisson events once did, never converged (0.27 m off on a slab grid at
-   any event rate). Moves x just past the face on the side the ray leaves to. */
+   any event rate). Moves x just past the face on the side the ray leaves to;
+   known_before is the refractivity just behind the face (the comb's last
+   half kick looked it up), or NULL to look it up here. */
 static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3 *x, rrv_vec3 d, rrv_vec3 normal,
-                                rrv__rng *rng)
+                                const double *known_before, rrv__rng *rng)
 {
     double gap = rrv__face_gap(*x);
-    double r_before = rrv__scene_refractivity(scene, rrv__madd(*x, d, -gap), NULL);
-    double r_after = rrv__scene_refractivity(scene, rrv__madd(*x, d, gap), NULL);
+    rrv_vec3 after_at = rrv__madd(*x, d, gap), grad_after;
+    double r_after = rrv__scene_refractivity(scene, after_at, &grad_after);
     rrv_vec3 nd = d;
+    double r_before = known_before ? *known_before : rrv__scene_refractivity(scene, rrv__madd(*x, d, -gap), NULL);
     b->r = r_after;
     b->reflected = 0;
+    /* the gradient came with the value: a comb starting past the face
+       takes its first half kick from it (rrv__comb_step) */
+    b->face_known = 1;
+    b->face_at = after_at;
+    b->face_grad = grad_after;
     if (r_before != r_after) {
         int reflected;
         rrv_vec3 n = (normal.x == 0) + (normal.y == 0) + (normal.z == 0) == 2 ? rrv__axis_unit(normal)
@@ -4490,6 +4503,7 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
             nd = rrv__normalize(rrv__madd(d, n, -2.0 * rrv__dot(n, d)));
             b->r = r_before;
             b->reflected = 1;
+            b->face_known = 0;
         }
     }
     *x = rrv__madd(*x, nd, gap);
@@ -4616,25 +4630,37 @@ static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, rr
    (2 eta c) per point, and near turning points (c ~ 0) the ratio is noise
    that Snell amplifies to O(sqrt) kicks of either sign. The gradient is
    evaluated at grad_at (x, or a point just inside the support at its edge). */
-static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double h,
-                               double h_bar, rrv_vec3 grad_at, const rrv_medium *medium)
+/* The kick with the refractivity r_here and its gradient grad at grad_at. */
+static rrv_vec3 rrv__comb_kick_by(rrv__bender *b, rrv_vec3 x, rrv_vec3 d, double h, double h_bar, rrv_vec3 grad_at,
+                                  double r_here, rrv_vec3 grad)
 {
-    rrv_vec3 grad;
     /* The refractivity at the midpoint of the chord ahead, from the value and
-       gradient fetched here anyway: its O(h^2) error keeps the kick second
-       order (measured), and it halves the field lookups per kick. medium,
-       when given, is the one rrv__scene_refractivity would find at grad_at
-       (the spacing's search found it), so the search is not repeated. */
-    const struct rrv__majorant_grid *mg = medium ? medium->majorant : NULL;
-    double r_here = mg && mg->refraction.data && !mg->cubic &&
-                            rrv__inside_box(grad_at, mg->refraction.lo, mg->refraction.hi)
-                        ? rrv__refraction_lookup(mg, grad_at, &grad)
-                    : medium ? rrv__refractivity_gradient(medium, grad_at, scene->settings.ambient_ior - 1.0, &grad)
-                             : rrv__scene_refractivity(scene, grad_at, &grad);
+       gradient fetched anyway: its O(h^2) error keeps the kick second order
+       (measured), and it halves the field lookups per kick. */
     double r_ahead = r_here + rrv__dot(grad, rrv__sub(rrv__madd(x, d, 0.5 * h), grad_at));
     d = rrv__normalize(rrv__madd(rrv__scale(d, 1.0 + b->r), grad, h_bar));
     b->r = r_ahead;
     return d;
+}
+
+/* The refractivity and its gradient at p for a kick. medium, when given, is
+   the one rrv__scene_refractivity would find at p (the spacing's search
+   found it), so the search is not repeated. */
+static double rrv__kick_lookup(const rrv_scene *scene, rrv_vec3 p, const rrv_medium *medium, rrv_vec3 *grad)
+{
+    const struct rrv__majorant_grid *mg = medium ? medium->majorant : NULL;
+    return mg && mg->refraction.data && !mg->cubic && rrv__inside_box(p, mg->refraction.lo, mg->refraction.hi)
+               ? rrv__refraction_lookup(mg, p, grad)
+           : medium ? rrv__refractivity_gradient(medium, p, scene->settings.ambient_ior - 1.0, grad)
+                    : rrv__scene_refractivity(scene, p, grad);
+}
+
+static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double h,
+                               double h_bar, rrv_vec3 grad_at, const rrv_medium *medium)
+{
+    rrv_vec3 grad;
+    double r_here = rrv__kick_lookup(scene, grad_at, medium, &grad);
+    return rrv__comb_kick_by(b, x, d, h, h_bar, grad_at, r_here, grad);
 }
 
 /* The comb from x along *d: the chord to the next point at spacing h,
@@ -4669,6 +4695,11 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
     }
     if (b->combing) {
         *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * (b->chord + ahead), x, medium);
+    } else if (b->face_known) {
+        /* the first half kick past a face: the gradient just inside it,
+           which crossing the face looked up with the refractivity */
+        *d = rrv__comb_kick_by(b, x, *d, ahead, 0.5 * ahead, b->face_at, b->r, b->face_grad);
+        b->combing = 1;
     } else {
         /* the first half kick takes its gradient just ahead, inside */
         *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * ahead, rrv__madd(x, *d, 1e-3 * ahead), NULL);
@@ -4756,7 +4787,10 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     b->end = view.t_face < DBL_MAX ? RRV__END_FACE : RRV__END_NONE;
     b->normal = view.normal;
     b->surface_free = 0;
-    if (!view.inside) return;
+    if (!view.inside) {
+        b->face_known = 0;
+        return;
+    }
     if (b->eikonal) {
         if (view.t_face > 2 * RRV__EDGE_NUDGE)
             rrv__eikonal_plan(b, scene, scene->settings.stepper, scene->settings.step, o, d, &view);
@@ -4767,6 +4801,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
         double h = rrv__comb_spacing(scene, b, o, *d, b->line_inv, 1.0 - rrv__uniform(rng), &b->entering, &medium);
         rrv__comb_step(b, scene, o, d, h, &view, medium);
     }
+    b->face_known = 0;
 }
 
 /* The ray has run the whole planned segment from *o: moves *o to its end
@@ -4798,10 +4833,16 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
         break;
     }
     case RRV__END_FACE:
-        if (b->combing) /* the comb's last half kick, gradient just behind the face */
-            *d = rrv__comb_kick(b, scene, *o, *d, b->chord, 0.5 * b->chord, rrv__madd(*o, *d, -1e-3 * b->chord),
-                                NULL);
-        *d = rrv__cross_face(b, scene, o, *d, b->normal, rng);
+        if (b->combing) {
+            /* the comb's last half kick, gradient just behind the face, where
+               the refractivity looked up with it is the face's r_before */
+            rrv_vec3 at = rrv__madd(*o, *d, -rrv__face_gap(*o)), grad;
+            double r_behind = rrv__scene_refractivity(scene, at, &grad);
+            *d = rrv__comb_kick_by(b, *o, *d, b->chord, 0.5 * b->chord, at, r_behind, grad);
+            *d = rrv__cross_face(b, scene, o, *d, b->normal, &r_behind, rng);
+        } else {
+            *d = rrv__cross_face(b, scene, o, *d, b->normal, NULL, rng);
+        }
         break;
     default:
         b->pending = 0;
