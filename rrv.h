@@ -4414,6 +4414,7 @@ typedef struct rrv__bender {
                           refractivity r and its gradient face_grad just past
                           it, at face_at: the comb's first half kick there */
     rrv_vec3 face_at, face_grad;
+    double face_jump;  /* the last face crossed: |r past - r behind| */
 } rrv__bender;
 
 static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
@@ -4430,6 +4431,7 @@ static void rrv__bender_restart(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     b->combing = 0;
     b->reflected = 0;
     b->face_known = 0;
+    b->face_jump = 0;
 }
 
 static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikonal, rrv_vec3 o)
@@ -4463,6 +4465,20 @@ static rrv_vec3 rrv__bend_at_null_event(rrv__bender *b, const rrv_scene *scene, 
     return nd;
 }
 
+/* Do refractivities just behind and past a face differ by more than the
+   rounding of a float grid of them? A baked refraction grid holds floats,
+   so a field that ends exactly at the ambient value reads up to half a
+   float's ulp (2^-24 of |r|) off it past the face: fire's haze box reads
+   2.15e-9 off the ambient 0.146, a "jump" that refracted by ~1e-9 rad and
+   drew a Fresnel number at every crossing (a tenth of the refraction
+   overhead). A jump the data holds (a grid that ends off the ambient) is
+   many ulps. */
+static int rrv__is_jump(double r_before, double r_after)
+{
+    double big = fabs(r_before) > fabs(r_after) ? fabs(r_before) : fabs(r_after);
+    return !(fabs(r_after - r_before) <= FLT_EPSILON * big);
+}
+
 /* A sharp interface at a support face x: the IOR just behind and just past
    the face differ (a medium box whose field does not end at the ambient
    IOR, a fish-eye's rim). Real temperature grids rarely end exactly at the
@@ -4490,7 +4506,8 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     b->face_known = 1;
     b->face_at = after_at;
     b->face_grad = grad_after;
-    if (r_before != r_after) {
+    b->face_jump = fabs(r_after - r_before);
+    if (rrv__is_jump(r_before, r_after)) {
         int reflected;
         rrv_vec3 n = (normal.x == 0) + (normal.y == 0) + (normal.z == 0) == 2 ? rrv__axis_unit(normal)
                                                                                : rrv__normalize(normal);
@@ -5276,6 +5293,7 @@ typedef struct rrv__vertex_bsdf {
 /* In the solver section, below. */
 static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x);
 static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d);
+static int rrv__jump_counts(double jump);
 static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls);
 static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len);
 static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len);
@@ -5544,11 +5562,13 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             /* the segment's end: a comb kick, an eikonal step, a face */
             int end = cp.path.bender.end;
             if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
+            rrv__finish_segment(&cp.path.bender, scene, &cp.o, &cp.d, rng);
             if (ctx->partition) {
-                if (end == RRV__END_FACE && rrv__face_jumps(scene, rrv__madd(cp.o, cp.d, segment), cp.d)) cp.jumped = 1;
+                /* the jump crossing the face looked up (rrv__face_jumps
+                   would look up the same two refractivities again) */
+                if (end == RRV__END_FACE && rrv__jump_counts(cp.path.bender.face_jump)) cp.jumped = 1;
                 cp.touched = 1;
             }
-            rrv__finish_segment(&cp.path.bender, scene, &cp.o, &cp.d, rng);
             /* Chords with nothing to meet (no surface reaches the support,
                no medium with extinction near them) go from kick to kick
                here: delta tracking and the ray cast would find nothing. */
@@ -6129,6 +6149,10 @@ static int rrv__clipped_step_jacobi(const rrv_scene *scene, const rrv__bender *b
     }
     return 1;
 }
+
+/* Is a jump of the refractivity across a face (rrv__cross_face's
+   face_jump) one that curved connections cannot solve across? */
+static int rrv__jump_counts(double jump) { return jump > RRV__SOLVE_JUMP; }
 
 /* Does the refractivity jump across the face the ray along d meets at x? */
 static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
