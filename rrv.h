@@ -4415,6 +4415,9 @@ typedef struct rrv__bender {
                           it, at face_at: the comb's first half kick there */
     rrv_vec3 face_at, face_grad;
     double face_jump;  /* the last face crossed: |r past - r behind| */
+    int support_in_extinction; /* the sole support's box lies in the box of a
+                                  medium with extinction: every chord in it
+                                  meets extinction (rrv__chord_meets_extinction) */
 } rrv__bender;
 
 static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
@@ -4447,6 +4450,13 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikona
             b->sole_support = &scene->media[i];
         }
     if (supports != 1 || rrv__has_sphere_support(b->sole_support)) b->sole_support = NULL;
+    b->support_in_extinction = 0;
+    for (i = 0; b->sole_support && i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i], *s = b->sole_support;
+        if (!m->majorant->empty && m->lo.x <= s->lo.x && m->lo.y <= s->lo.y && m->lo.z <= s->lo.z &&
+            s->hi.x <= m->hi.x && s->hi.y <= m->hi.y && s->hi.z <= m->hi.z)
+            b->support_in_extinction = 1;
+    }
     rrv__bender_restart(b, scene, o);
 }
 
@@ -5535,7 +5545,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
            looked for a gap past the end, it cannot slip between this
            segment's end and the next one's start. */
         if (ctx->comb && cp.path.bender.surface_free && segment < DBL_MAX &&
-            !rrv__chord_meets_extinction(scene, cp.o, cp.d, segment)) {
+            !cp.path.bender.support_in_extinction && !rrv__chord_meets_extinction(scene, cp.o, cp.d, segment)) {
             /* a chord with nothing to meet (as in the loop below), here also
                one that ends at a face: no ray cast, no tracking */
             has_hit = 0;
@@ -5574,6 +5584,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                here: delta tracking and the ray cast would find nothing. */
             while (ctx->comb && cp.path.bender.pending && cp.path.bender.end == RRV__END_KICK &&
                    cp.path.bender.surface_free && cp.steps < ctx->step_bound &&
+                   !cp.path.bender.support_in_extinction &&
                    !rrv__chord_meets_extinction(scene, cp.o, cp.d, cp.path.bender.segment)) {
                 ++cp.steps;
                 ++ctx->stats.events;
