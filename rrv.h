@@ -3259,20 +3259,35 @@ static int rrv__medium_emission_ok(const rrv_medium *m)
     return m->Lescale <= RRV_MAX_RADIANCE && rrv__max3(m->Le) * m->Lescale <= RRV_MAX_RADIANCE;
 }
 
+/* The unit vector along v, whose components but one are zero (the zeros
+   keep their signs, as dividing them by |v| would). */
+static rrv_vec3 rrv__axis_unit(rrv_vec3 v)
+{
+    return rrv__v3(v.x == 0 ? v.x : v.x > 0 ? 1.0 : -1.0, v.y == 0 ? v.y : v.y > 0 ? 1.0 : -1.0,
+                   v.z == 0 ? v.z : v.z > 0 ? 1.0 : -1.0);
+}
+
 /* Snell's law at a null event (seed Algorithm 1, CONVENTIONS). r_in is the
    refractivity the ray carries, r_out the one at the event, grad its
    gradient. The change of direction is formed directly, because m = eta_in /
    eta_out differs from 1 by ~1e-4 in air and m d - sqrt(k) n would cancel. */
 static rrv_vec3 rrv__refract_at_null_event(rrv_vec3 d, double r_in, double r_out, rrv_vec3 grad, int *reflected)
 {
-    double big = fmax(fabs(grad.x), fmax(fabs(grad.y), fabs(grad.z)));
     double delta, c, s2, e, k;
     rrv_vec3 n, out;
     *reflected = 0;
-    if (!(big > 0) || big > DBL_MAX) return d;
-    /* Dividing by the largest component first keeps a denormal gradient
-       from overflowing 1/|grad| (its reciprocal is not representable). */
-    n = rrv__normalize(rrv__v3(grad.x / big, grad.y / big, grad.z / big));
+    if ((grad.x == 0) + (grad.y == 0) + (grad.z == 0) == 2) {
+        /* along an axis (a box face's normal): the unit vector the general
+           case below would compute exactly, without its divisions */
+        if (!(fabs(grad.x + grad.y + grad.z) <= DBL_MAX)) return d;
+        n = rrv__axis_unit(grad);
+    } else {
+        double big = fmax(fabs(grad.x), fmax(fabs(grad.y), fabs(grad.z)));
+        if (!(big > 0) || big > DBL_MAX) return d;
+        /* Dividing by the largest component first keeps a denormal gradient
+           from overflowing 1/|grad| (its reciprocal is not representable). */
+        n = rrv__normalize(rrv__v3(grad.x / big, grad.y / big, grad.z / big));
+    }
     delta = (r_in - r_out) / (1.0 + r_out);
     if (delta == 0) return d;
     c = -rrv__dot(n, d);
@@ -3281,7 +3296,8 @@ static rrv_vec3 rrv__refract_at_null_event(rrv_vec3 d, double r_in, double r_out
        entering higher IOR (delta < 0) comes from the side grad points away
        from, and must bend toward grad. */
     if (c < 0 || (c == 0 && delta < 0)) { n = rrv__scale(n, -1.0); c = -c; }
-    s2 = fmax(0.0, 1.0 - c * c);
+    s2 = 1.0 - c * c;
+    if (!(s2 > 0)) s2 = 0; /* fmax(0, s2) without the library call */
     e = delta * (2.0 + delta) * s2;
     k = c * c - e;
     if (k < 0) {
@@ -4378,7 +4394,10 @@ static int rrv__sphere_interval(const rrv_field *f, rrv_vec3 o, rrv_vec3 d, doub
    found a 1e-16 remainder ahead, stepped by it and never moved again). */
 static double rrv__face_gap(rrv_vec3 x)
 {
-    return RRV__EDGE_NUDGE * (1.0 + fmax(fabs(x.x), fmax(fabs(x.y), fabs(x.z))));
+    /* the largest |component| by comparisons: fmax is a library call */
+    double big = fabs(x.x) > fabs(x.y) ? fabs(x.x) : fabs(x.y);
+    if (fabs(x.z) > big) big = fabs(x.z);
+    return RRV__EDGE_NUDGE * (1.0 + big);
 }
 
 /* What a ray from o along d sees of the refraction supports. */
@@ -4427,6 +4446,12 @@ static void rrv__look_along(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, rrv_
         if (!rrv__medium_refracts(m)) continue;
         lo_box[0] = m->lo.x; lo_box[1] = m->lo.y; lo_box[2] = m->lo.z;
         hi_box[0] = m->hi.x; hi_box[1] = m->hi.y; hi_box[2] = m->hi.z;
+        /* A box behind the ray on one axis (o past a side, d not turning
+           back to it) is missed, as the clip below would find, without its
+           divisions: every ray that has just left a box looks from there. */
+        for (a = 0; a < 3; ++a)
+            missed |= (os[a] > hi_box[a] && ds[a] >= 0) || (os[a] < lo_box[a] && ds[a] <= 0);
+        if (missed) continue;
         for (a = 0; a < 3; ++a) {
             if (ds[a] == 0) {
                 missed |= os[a] < lo_box[a] || os[a] > hi_box[a];
@@ -4529,6 +4554,14 @@ typedef struct rrv__bender {
     const rrv_medium *sole_support; /* the scene's one refraction support when it
                                        is a box (no sphere, no second refractive
                                        medium), else NULL: see rrv__comb_step */
+    int face_known;    /* the last face crossed into a support looked up the
+                          refractivity r and its gradient face_grad just past
+                          it, at face_at: the comb's first half kick there */
+    rrv_vec3 face_at, face_grad;
+    double face_jump;  /* the last face crossed: |r past - r behind| */
+    int support_in_extinction; /* the sole support's box lies in the box of a
+                                  medium with extinction: every chord in it
+                                  meets extinction (rrv__chord_meets_extinction) */
 } rrv__bender;
 
 static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
@@ -4544,6 +4577,8 @@ static void rrv__bender_restart(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     b->pending = 0;
     b->combing = 0;
     b->reflected = 0;
+    b->face_known = 0;
+    b->face_jump = 0;
 }
 
 static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikonal, rrv_vec3 o)
@@ -4559,6 +4594,13 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikona
             b->sole_support = &scene->media[i];
         }
     if (supports != 1 || rrv__has_sphere_support(b->sole_support)) b->sole_support = NULL;
+    b->support_in_extinction = 0;
+    for (i = 0; b->sole_support && i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i], *s = b->sole_support;
+        if (!m->majorant->empty && m->lo.x <= s->lo.x && m->lo.y <= s->lo.y && m->lo.z <= s->lo.z &&
+            s->hi.x <= m->hi.x && s->hi.y <= m->hi.y && s->hi.z <= m->hi.z)
+            b->support_in_extinction = 1;
+    }
     rrv__bender_restart(b, scene, o);
 }
 
@@ -4577,6 +4619,20 @@ static rrv_vec3 rrv__bend_at_null_event(rrv__bender *b, const rrv_scene *scene, 
     return nd;
 }
 
+/* Do refractivities just behind and past a face differ by more than the
+   rounding of a float grid of them? A baked refraction grid holds floats,
+   so a field that ends exactly at the ambient value reads up to half a
+   float's ulp (2^-24 of |r|) off it past the face: fire's haze box reads
+   2.15e-9 off the ambient 0.146, a "jump" that refracted by ~1e-9 rad,
+   drew a Fresnel number at every crossing (3.6 % of that render's CPU
+   time) and reflected rays entering within 6e-5 of grazing. A jump the
+   data holds (a grid that ends off the ambient) is many ulps. */
+static int rrv__is_jump(double r_before, double r_after)
+{
+    double big = fabs(r_before) > fabs(r_after) ? fabs(r_before) : fabs(r_after);
+    return !(fabs(r_after - r_before) <= FLT_EPSILON * big);
+}
+
 /* A sharp interface at a support face x: the IOR just behind and just past
    the face differ (a medium box whose field does not end at the ambient
    IOR, a fish-eye's rim). Real temperature grids rarely end exactly at the
@@ -4586,19 +4642,29 @@ static rrv_vec3 rrv__bend_at_null_event(rrv__bender *b, const rrv_scene *scene, 
    angle) and refracts otherwise, so the estimate stays unbiased with weight
    1. Refracting the jump with the interior gradient as the normal, as
    Poisson events once did, never converged (0.27 m off on a slab grid at
-   any event rate). Moves x just past the face on the side the ray leaves to. */
+   any event rate). Moves x just past the face on the side the ray leaves to;
+   known_before is the refractivity just behind the face (the comb's last
+   half kick looked it up), or NULL to look it up here. */
 static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3 *x, rrv_vec3 d, rrv_vec3 normal,
-                                rrv__rng *rng)
+                                const double *known_before, rrv__rng *rng)
 {
     double gap = rrv__face_gap(*x);
-    double r_before = rrv__scene_refractivity(scene, rrv__madd(*x, d, -gap), NULL);
-    double r_after = rrv__scene_refractivity(scene, rrv__madd(*x, d, gap), NULL);
+    rrv_vec3 after_at = rrv__madd(*x, d, gap), grad_after;
+    double r_after = rrv__scene_refractivity(scene, after_at, &grad_after);
     rrv_vec3 nd = d;
+    double r_before = known_before ? *known_before : rrv__scene_refractivity(scene, rrv__madd(*x, d, -gap), NULL);
     b->r = r_after;
     b->reflected = 0;
-    if (r_before != r_after) {
+    /* the gradient came with the value: a comb starting past the face
+       takes its first half kick from it (rrv__comb_step) */
+    b->face_known = 1;
+    b->face_at = after_at;
+    b->face_grad = grad_after;
+    b->face_jump = fabs(r_after - r_before);
+    if (rrv__is_jump(r_before, r_after)) {
         int reflected;
-        rrv_vec3 n = rrv__normalize(normal);
+        rrv_vec3 n = (normal.x == 0) + (normal.y == 0) + (normal.z == 0) == 2 ? rrv__axis_unit(normal)
+                                                                               : rrv__normalize(normal);
         nd = rrv__refract_at_null_event(d, r_before, r_after, n, &reflected);
         if (!reflected) {
             double cos_i = fabs(rrv__dot(n, d)), cos_t = fabs(rrv__dot(n, nd));
@@ -4608,6 +4674,7 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
             nd = rrv__normalize(rrv__madd(d, n, -2.0 * rrv__dot(n, d)));
             b->r = r_before;
             b->reflected = 1;
+            b->face_known = 0;
         }
     }
     *x = rrv__madd(*x, nd, gap);
@@ -4764,25 +4831,37 @@ static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, rr
    (2 eta c) per point, and near turning points (c ~ 0) the ratio is noise
    that Snell amplifies to O(sqrt) kicks of either sign. The gradient is
    evaluated at grad_at (x, or a point just inside the support at its edge). */
-static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double h,
-                               double h_bar, rrv_vec3 grad_at, const rrv_medium *medium)
+/* The kick with the refractivity r_here and its gradient grad at grad_at. */
+static rrv_vec3 rrv__comb_kick_by(rrv__bender *b, rrv_vec3 x, rrv_vec3 d, double h, double h_bar, rrv_vec3 grad_at,
+                                  double r_here, rrv_vec3 grad)
 {
-    rrv_vec3 grad;
     /* The refractivity at the midpoint of the chord ahead, from the value and
-       gradient fetched here anyway: its O(h^2) error keeps the kick second
-       order (measured), and it halves the field lookups per kick. medium,
-       when given, is the one rrv__scene_refractivity would find at grad_at
-       (the spacing's search found it), so the search is not repeated. */
-    const struct rrv__majorant_grid *mg = medium ? medium->majorant : NULL;
-    double r_here = mg && mg->refraction.data && !mg->cubic &&
-                            rrv__inside_box(grad_at, mg->refraction.lo, mg->refraction.hi)
-                        ? rrv__refraction_lookup(mg, grad_at, &grad)
-                    : medium ? rrv__refractivity_gradient(medium, grad_at, scene->settings.ambient_ior - 1.0, &grad)
-                             : rrv__scene_refractivity(scene, grad_at, &grad);
+       gradient fetched anyway: its O(h^2) error keeps the kick second order
+       (measured), and it halves the field lookups per kick. */
     double r_ahead = r_here + rrv__dot(grad, rrv__sub(rrv__madd(x, d, 0.5 * h), grad_at));
     d = rrv__normalize(rrv__madd(rrv__scale(d, 1.0 + b->r), grad, h_bar));
     b->r = r_ahead;
     return d;
+}
+
+/* The refractivity and its gradient at p for a kick. medium, when given, is
+   the one rrv__scene_refractivity would find at p (the spacing's search
+   found it), so the search is not repeated. */
+static double rrv__kick_lookup(const rrv_scene *scene, rrv_vec3 p, const rrv_medium *medium, rrv_vec3 *grad)
+{
+    const struct rrv__majorant_grid *mg = medium ? medium->majorant : NULL;
+    return mg && mg->refraction.data && !mg->cubic && rrv__inside_box(p, mg->refraction.lo, mg->refraction.hi)
+               ? rrv__refraction_lookup(mg, p, grad)
+           : medium ? rrv__refractivity_gradient(medium, p, scene->settings.ambient_ior - 1.0, grad)
+                    : rrv__scene_refractivity(scene, p, grad);
+}
+
+static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double h,
+                               double h_bar, rrv_vec3 grad_at, const rrv_medium *medium)
+{
+    rrv_vec3 grad;
+    double r_here = rrv__kick_lookup(scene, grad_at, medium, &grad);
+    return rrv__comb_kick_by(b, x, d, h, h_bar, grad_at, r_here, grad);
 }
 
 /* The comb from x along *d: the chord to the next point at spacing h,
@@ -4817,6 +4896,11 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
     }
     if (b->combing) {
         *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * (b->chord + ahead), x, medium);
+    } else if (b->face_known) {
+        /* the first half kick past a face: the gradient just inside it,
+           which crossing the face looked up with the refractivity */
+        *d = rrv__comb_kick_by(b, x, *d, ahead, 0.5 * ahead, b->face_at, b->r, b->face_grad);
+        b->combing = 1;
     } else {
         /* the first half kick takes its gradient just ahead, inside */
         *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * ahead, rrv__madd(x, *d, 1e-3 * ahead), NULL);
@@ -4904,7 +4988,10 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     b->end = view.t_face < DBL_MAX ? RRV__END_FACE : RRV__END_NONE;
     b->normal = view.normal;
     b->surface_free = 0;
-    if (!view.inside) return;
+    if (!view.inside) {
+        b->face_known = 0;
+        return;
+    }
     if (b->eikonal) {
         if (view.t_face > 2 * RRV__EDGE_NUDGE)
             rrv__eikonal_plan(b, scene, scene->settings.stepper, scene->settings.step, o, d, &view);
@@ -4915,6 +5002,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
         double h = rrv__comb_spacing(scene, b, o, *d, b->line_inv, 1.0 - rrv__uniform(rng), &b->entering, &medium);
         rrv__comb_step(b, scene, o, d, h, &view, medium);
     }
+    b->face_known = 0;
 }
 
 /* The ray has run the whole planned segment from *o: moves *o to its end
@@ -4946,10 +5034,16 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
         break;
     }
     case RRV__END_FACE:
-        if (b->combing) /* the comb's last half kick, gradient just behind the face */
-            *d = rrv__comb_kick(b, scene, *o, *d, b->chord, 0.5 * b->chord, rrv__madd(*o, *d, -1e-3 * b->chord),
-                                NULL);
-        *d = rrv__cross_face(b, scene, o, *d, b->normal, rng);
+        if (b->combing) {
+            /* the comb's last half kick, gradient just behind the face, where
+               the refractivity looked up with it is the face's r_before */
+            rrv_vec3 at = rrv__madd(*o, *d, -rrv__face_gap(*o)), grad;
+            double r_behind = rrv__scene_refractivity(scene, at, &grad);
+            *d = rrv__comb_kick_by(b, *o, *d, b->chord, 0.5 * b->chord, at, r_behind, grad);
+            *d = rrv__cross_face(b, scene, o, *d, b->normal, &r_behind, rng);
+        } else {
+            *d = rrv__cross_face(b, scene, o, *d, b->normal, NULL, rng);
+        }
         break;
     default:
         b->pending = 0;
@@ -5409,6 +5503,7 @@ typedef struct rrv__vertex_bsdf {
 /* In the solver section, below. */
 static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x);
 static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d);
+static int rrv__jump_counts(double jump);
 static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls);
 static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len);
 static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len);
@@ -5670,14 +5765,24 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
         /* A surface lying on the face that ends the segment belongs to it:
            looked for a gap past the end, it cannot slip between this
            segment's end and the next one's start. */
-        has_hit = ctx->bends && cp.path.bender.surface_free
-                      ? 0
-                      : rrv__intersect_scene(scene, cp.o, cp.d,
-                                             segment < DBL_MAX ? segment + rrv__face_gap(rrv__madd(cp.o, cp.d, segment))
-                                                               : DBL_MAX,
-                                             &hit);
-        /* delta tracking along it, up to the surface if one is hit */
-        outcome = rrv__refractive_delta_tracking(ctx, &cp.path, cp.o, cp.d, has_hit ? hit.t : segment, rng, &flight);
+        if (ctx->comb && cp.path.bender.surface_free && segment < DBL_MAX &&
+            !cp.path.bender.support_in_extinction && !rrv__chord_meets_extinction(scene, cp.o, cp.d, segment)) {
+            /* a chord with nothing to meet (as in the loop below), here also
+               one that ends at a face: no ray cast, no tracking */
+            has_hit = 0;
+            outcome = RRV__FLIGHT_PASSED;
+        } else {
+            has_hit = ctx->bends && cp.path.bender.surface_free
+                          ? 0
+                          : rrv__intersect_scene(scene, cp.o, cp.d,
+                                                 segment < DBL_MAX
+                                                     ? segment + rrv__face_gap(rrv__madd(cp.o, cp.d, segment))
+                                                     : DBL_MAX,
+                                                 &hit);
+            /* delta tracking along it, up to the surface if one is hit */
+            outcome =
+                rrv__refractive_delta_tracking(ctx, &cp.path, cp.o, cp.d, has_hit ? hit.t : segment, rng, &flight);
+        }
         if (outcome == RRV__FLIGHT_ABSORBED) break;
         if (outcome == RRV__FLIGHT_CUT) {
             ++ctx->stats.paths_cut;
@@ -5688,16 +5793,19 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             /* the segment's end: a comb kick, an eikonal step, a face */
             int end = cp.path.bender.end;
             if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
+            rrv__finish_segment(&cp.path.bender, scene, &cp.o, &cp.d, rng);
             if (ctx->partition) {
-                if (end == RRV__END_FACE && rrv__face_jumps(scene, rrv__madd(cp.o, cp.d, segment), cp.d)) cp.jumped = 1;
+                /* the jump crossing the face looked up (rrv__face_jumps
+                   would look up the same two refractivities again) */
+                if (end == RRV__END_FACE && rrv__jump_counts(cp.path.bender.face_jump)) cp.jumped = 1;
                 cp.touched = 1;
             }
-            rrv__finish_segment(&cp.path.bender, scene, &cp.o, &cp.d, rng);
             /* Chords with nothing to meet (no surface reaches the support,
                no medium with extinction near them) go from kick to kick
                here: delta tracking and the ray cast would find nothing. */
             while (ctx->comb && cp.path.bender.pending && cp.path.bender.end == RRV__END_KICK &&
                    cp.path.bender.surface_free && cp.steps < ctx->step_bound &&
+                   !cp.path.bender.support_in_extinction &&
                    !rrv__chord_meets_extinction(scene, cp.o, cp.d, cp.path.bender.segment)) {
                 ++cp.steps;
                 ++ctx->stats.events;
@@ -6307,6 +6415,10 @@ static int rrv__clipped_step_jacobi(const rrv_scene *scene, const rrv__bender *b
     }
     return 1;
 }
+
+/* Is a jump of the refractivity across a face (rrv__cross_face's
+   face_jump) one that curved connections cannot solve across? */
+static int rrv__jump_counts(double jump) { return jump > RRV__SOLVE_JUMP; }
 
 /* Does the refractivity jump across the face the ray along d meets at x? */
 static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
