@@ -427,8 +427,10 @@
             about straight NEE's cost, the refractive default (as shoot)
             and, with eikonal, shoot's way for connections that bend
             little; shoot's solve 3.4x cheaper on haze (fused Jacobian
-            lookup, polish memo, the root's own chords); a comb spacing
-            bounded by the gradient's variation, measured and left off
+            lookup, polish memo, the root's own chords); cheaper faces of
+            refractive boxes (float rounding is no interface); a comb
+            spacing bounded by the gradient's variation, measured and
+            left off
      0.5.0  unbiased NEE by default (shoot: curved connections solved with
             the eikonal integrator, left to forward paths with the
             refractive one); shoot shares paths with the
@@ -5525,6 +5527,8 @@ static int rrv__solver_supports_scene(const rrv_scene *scene);
 /* Curved NEE from a vertex, or the count of vertices that could not. */
 static void rrv__curved_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
 {
+    /* shoot solves the connections that bend much, and aims (below) at
+       those that bend little */
     if (ctx->shoot) rrv__shoot_nee(ctx, path, x0, v, rng);
     if (ctx->manifold) rrv__manifold_nee(ctx, path, x0, v, rng);
     else if (ctx->aim) rrv__aim_nee(ctx, path, x0, v, rng);

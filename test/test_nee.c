@@ -268,7 +268,6 @@ static const char caustic_text[] =
 static void test_lens_caustic(void)
 {
     rrv_scene *s = NULL;
-    rrv_error err;
     stats a[NBLOCKS], b[NBLOCKS], c[NBLOCKS];
     int i, peak = 0, compared = 0;
     const int spp = 320;
@@ -328,7 +327,6 @@ static void test_lens_caustic(void)
 static void test_lens_caustic_shoot(void)
 {
     rrv_scene *s = NULL;
-    rrv_error err;
     rrv_render_stats rs;
     stats a[NBLOCKS], b[NBLOCKS];
     int i, peak;
@@ -404,7 +402,6 @@ static const char small_caustic_text[] =
 static void test_small_light_caustic_shoot(void)
 {
     rrv_scene *s = NULL;
-    rrv_error err;
     rrv_render_stats rs;
     stats a[NBLOCKS], b[NBLOCKS];
     int peak;
@@ -490,7 +487,6 @@ static double caustic_manifold_case(rrv_scene *s, const stats *ref, const method
 static void test_lens_caustic_manifold(void)
 {
     rrv_scene *s = NULL;
-    rrv_error err;
     stats a[NBLOCKS];
     const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
     if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
@@ -529,7 +525,6 @@ static const char fog_text[] =
 static void test_fog_in_lens_shoot(void)
 {
     rrv_scene *s = NULL;
-    rrv_error err;
     rrv_render_stats rs;
     stats a[NBLOCKS], b[NBLOCKS];
     const int x0 = 8, y0 = 4, x1 = 24, y1 = 16;
@@ -591,7 +586,6 @@ static void test_nee_key_rejects_unknown_mode(void)
 static void test_classic_ignores_nee(void)
 {
     rrv_scene *s = NULL;
-    rrv_error err;
     int w, h;
     size_t n, i;
     float *x, *y;
@@ -1130,7 +1124,6 @@ static void test_reciprocity(void)
 static void test_partition_is_exclusive(void)
 {
     rrv_scene *s = NULL;
-    rrv_error err;
     rrv__context ctx;
     rrv__rng rng;
     int k, straight = 0, curved = 0, weak = 0;
@@ -1294,7 +1287,6 @@ static void test_manifold_out_of_memory(void)
 static void test_shoot_mis_weights_sum_to_one(void)
 {
     rrv_scene *s = NULL;
-    rrv_error err;
     rrv__context ctx;
     rrv__rng rng;
     const rrv_shape *light;
@@ -1427,7 +1419,6 @@ static const char two_lights_text[] =
 static void test_two_lights_aim(void)
 {
     rrv_scene *s = NULL;
-    rrv_error err;
     rrv_render_stats rs;
     stats a[NBLOCKS], b[NBLOCKS];
     const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
@@ -1458,7 +1449,6 @@ static void test_two_lights_aim(void)
 static void test_aim_weights_sum_to_one(void)
 {
     rrv_scene *s = NULL;
-    rrv_error err;
     rrv__context ctx;
     rrv__rng rng;
     rrv__vertex_bsdf vb;
@@ -1601,7 +1591,6 @@ static int forward_side_weak(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y)
 static void test_weak_class_shared(void)
 {
     rrv_scene *s = NULL;
-    rrv_error err;
     rrv__context ctx;
     rrv__rng rng;
     int k, weak = 0, curved = 0;
