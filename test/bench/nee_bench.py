@@ -9,7 +9,7 @@ sys CPU time of the render process (the machine may be shared, so wall
 time is printed beside it but not used).
 
     python3 test/bench/nee_bench.py [--seconds 20] [--ref-spp 4096] [--light 0.25]
-        [--modes none,straight,shoot] [--old PATH] [--ref-nee shoot]
+        [--modes none,straight,shoot,aim] [--old PATH] [--ref-nee shoot]
 
 --light S replaces the scene's 1 m square light by an S m square one with
 the same centre and power (radiance scaled by 1 / S^2): the smaller the
@@ -43,6 +43,7 @@ MODES = [
     ("none", "none", ""),
     ("straight", "straight", ""),
     ("shoot", "shoot", ""),
+    ("aim", "aim", ""),
     ("manifold chord", "manifold", "manifoldgauge chord"),
     ("manifold iso", "manifold", "manifoldgauge iso"),
     ("manifold chord M=1", "manifold", "manifoldgauge chord manifoldtrials 1"),
