@@ -122,14 +122,7 @@
                  forward path takes the path, which bounds NEE's 1/|det|
                  (unweighted, its square is not integrable there).
                  Everything else (across a sharp interface, to the sky, to
-                 sphere lights) only by forward paths, weight 1. A curved
-                 path whose chord from x0 to where it lands bends little
-                 (an aimed ray would move by at most RRV__SHOOT_AIM_REACH =
-                 0.3 of the light's size: AIM's class) is AIM's instead: y
-                 in that class is not solved for but aimed at, a solved
-                 root never lands there, and the forward path weighs
-                 itself against AIM (weak heat haze costs 1.3x straight
-                 NEE instead of 2.8x solving it all). The
+                 sphere lights) only by forward paths, weight 1. The
                  connection: a point y uniform on a light, Newton on the
                  two angles of the initial direction so that the ray,
                  traced with the same steps camera rays take, first crosses
@@ -424,9 +417,8 @@
 
    HISTORY
      0.6.0  nee aim: bent shadow rays aimed at light samples, unbiased at
-            about straight NEE's cost, the refractive default (as shoot)
-            and, with eikonal, shoot's way for connections that bend
-            little; shoot's solve 3.4x cheaper on haze (fused Jacobian
+            about straight NEE's cost, the refractive default (as shoot);
+            shoot's solve 3.4x cheaper on haze (fused Jacobian
             lookup, polish memo, the root's own chords); cheaper faces of
             refractive boxes (float rounding is no interface); a comb
             spacing bounded by the gradient's variation, measured and
@@ -5064,15 +5056,6 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
 #ifndef RRV__AIM_REACH
 #define RRV__AIM_REACH 1.0
 #endif
-/* The same where shoot could solve the connection instead: aiming gives
-   up its focusing (a lensed light's image is sampled only where it
-   overlaps the straight one), so it takes only the connections that bend
-   least. 0.3: eikonal shoot on scenes/haze.rrv aims nearly all and costs
-   1.4x straight NEE instead of 11x, while on fire_caustic its efficiency
-   falls by a fifth (README.md). */
-#ifndef RRV__SHOOT_AIM_REACH
-#define RRV__SHOOT_AIM_REACH 0.3
-#endif
 
 typedef struct rrv__context {
     const rrv_scene *scene;
@@ -5088,12 +5071,7 @@ typedef struct rrv__context {
     int shoot;               /* nee shoot can run (eikonal, Hessians known) */
     int manifold;            /* nee manifold can run (Hessians known) */
     int aim;                 /* nee aim: bent shadow rays aimed at light
-                                samples (also shoot: where it cannot solve,
-                                and where the connection bends weakly) */
-    int aim_by_landing;      /* shoot and aim share the curved paths: a
-                                path is aim's if its chord to where it lands
-                                is aim's class, shoot's otherwise */
-    double aim_reach;        /* RRV__AIM_REACH, or RRV__SHOOT_AIM_REACH with shoot */
+                                samples (also shoot where it cannot solve) */
     double eta_floor;        /* the lowest eta anywhere (nee shoot and manifold's class) */
     double eta_camera2;      /* (1 + r at the camera)^2: radiance scales as eta^2 */
     double thermal_scale;    /* blackbody radiance at the camera over that in
@@ -5516,7 +5494,6 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
                               rrv__rng *rng);
 static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
 static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w);
-static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double len);
 static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, rrv__rng *rng, rrv_vec3 *y, rrv_vec3 *ny,
                                              double *pdf_area);
 #define RRV__CHAIN_MAX 512 /* comb planes a manifold chain may have (more: wider spacing) */
@@ -5527,10 +5504,8 @@ static int rrv__solver_supports_scene(const rrv_scene *scene);
 /* Curved NEE from a vertex, or the count of vertices that could not. */
 static void rrv__curved_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
 {
-    /* shoot solves the connections that bend much, and aims (below) at
-       those that bend little */
     if (ctx->shoot) rrv__shoot_nee(ctx, path, x0, v, rng);
-    if (ctx->manifold) rrv__manifold_nee(ctx, path, x0, v, rng);
+    else if (ctx->manifold) rrv__manifold_nee(ctx, path, x0, v, rng);
     else if (ctx->aim) rrv__aim_nee(ctx, path, x0, v, rng);
     else if (ctx->partition) ++ctx->stats.solves_unsupported;
 }
@@ -5652,16 +5627,8 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
     int front = rrv__dot(n, cp->d) < 0, c;
     if ((s->L[0] > 0 || s->L[1] > 0 || s->L[2] > 0) && front) {
         double w = 1.0;
-        int aims = 0;
         if (cp->prev_pdf > 0 && ctx->sample_lights && ctx->aim && cp->touched && !cp->jumped &&
             s->kind != RRV_SHAPE_SPHERE) {
-            /* with shoot, only paths whose chord to x is aim's class */
-            double to_x = rrv__length(rrv__sub(x, cp->vertex));
-            aims = !ctx->aim_by_landing ||
-                   (to_x > 0 && rrv__aim_class(ctx, s, cp->vertex, rrv__scale(rrv__sub(x, cp->vertex), 1.0 / to_x),
-                                               to_x) == 1);
-        }
-        if (aims) {
             /* nee aim draws w0 toward this light with a density the path's
                end does not change: the light's straight crossing along w0
                (rrv__aim_nee). A weak chord's path is that straight line, so
@@ -6041,9 +6008,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
        Aiming needs ray geometry that does not hang on the density (the
        Poisson and midpoint schemes refract at null events): there the
        connections stay with forward paths. */
-    ctx.aim = ctx.partition && !ctx.refract_nulls && (nee == RRV_NEE_AIM || nee == RRV_NEE_SHOOT);
-    ctx.aim_by_landing = ctx.shoot;
-    ctx.aim_reach = ctx.shoot ? RRV__SHOOT_AIM_REACH : RRV__AIM_REACH;
+    ctx.aim = ctx.partition && !ctx.refract_nulls && (nee == RRV_NEE_AIM || (nee == RRV_NEE_SHOOT && !ctx.shoot));
     ctx.eta_floor = scene->settings.ambient_ior;
     if (ctx.partition) {
         for (i = 0; i < scene->medium_count; ++i) {
@@ -7050,10 +7015,8 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
         y = rrv__madd(rrv__madd(s->p0, s->e1, u1), s->e2, u2);
     }
     {
-        /* a weak chord is straight NEE's, one that bends little nee aim's
-           (every root to y lands at y, so all of them are aim's then) */
         double to_y = rrv__length(rrv__sub(y, x0));
-        if (!(to_y > 0) || rrv__aim_class(ctx, s, x0, rrv__scale(rrv__sub(y, x0), 1.0 / to_y), to_y) != 2) return;
+        if (!(to_y > 0) || rrv__weak_chord(ctx, x0, rrv__scale(rrv__sub(y, x0), 1.0 / to_y), to_y)) return;
     }
     ny = rrv__normalize(rrv__cross(s->e1, s->e2));
     pdf_area = 1.0 / (rrv__shape_area(s) * choices);
@@ -7130,7 +7093,7 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
 static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double len)
 {
     double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
-    double reach = ctx->aim_reach * sqrt(rrv__shape_area(s)) / len, bound;
+    double reach = RRV__AIM_REACH * sqrt(rrv__shape_area(s)) / len, bound;
     if (!rrv__chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound)) return 2;
     if (bound <= tolerance) return 0;
     return bound <= reach ? 1 : 2;
@@ -7236,12 +7199,6 @@ static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const 
     if (met == -2 || &scene->shapes[met] != s || !(rrv__dot(hit.n, d) < 0)) {
         ++ctx->stats.aim_missed;
         return;
-    }
-    if (ctx->aim_by_landing) {
-        /* shoot's path unless its chord to where it landed is aim's class */
-        double to_hit = rrv__length(rrv__sub(hit.p, x0));
-        if (!(to_hit > 0) || rrv__aim_class(ctx, s, x0, rrv__scale(rrv__sub(hit.p, x0), 1.0 / to_hit), to_hit) != 1)
-            return;
     }
     pdf_dir = rrv__vertex_pdf(v, w0);
     k = rrv__power_heuristic(pdf_aim, pdf_dir) / pdf_aim * rrv__eta_scale(ctx, hit.p) * rrv__path_mis(path);

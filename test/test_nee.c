@@ -426,8 +426,20 @@ static void test_small_light_caustic_shoot(void)
     {
         double vs = stats_se(&b[peak]) * stats_se(&b[peak]) * (double)b[peak].n;
         double vn = stats_se(&a[peak]) * stats_se(&a[peak]) * (double)a[peak].n;
+        double ws = 0, wn = 0;
+        int bx, by;
         SAY("  small light caustic variance per sample: shoot %.3f, none %.3f\n", vs, vn);
         CHECKF(vs * 30 < vn, "small light caustic: variance per sample %.3f with shoot, %.3f with none", vs, vn);
+        /* and over the whole crop, whose rim (light seen past the lens)
+           an estimator can leave to forward paths without it showing at
+           the peak */
+        for (by = y0 / BLOCK; by < y1 / BLOCK; ++by)
+            for (bx = x0 / BLOCK; bx < x1 / BLOCK; ++bx) {
+                ws += sample_variance(&b[by * BLOCKS_X + bx]);
+                wn += sample_variance(&a[by * BLOCKS_X + bx]);
+            }
+        SAY("  small light crop variance per sample, summed over blocks: shoot %.3f, none %.3f\n", ws, wn);
+        CHECKF(ws * 30 < wn, "small light crop: variance per sample %.3f with shoot, %.3f with none", ws, wn);
     }
     rrv_scene_free(s);
 }
@@ -1381,16 +1393,15 @@ static void weak_haze_case(const char *text, size_t size, const char *what)
     /* weak haze turns few rays off the light */
     CHECK(rs.aim_shots > 0 && rs.solves == 0 && rs.aim_missed * 20 < rs.aim_shots);
     CHECKF(vb * 10 < va, "%s: variance per sample %.4f with aim, %.4f with none", what, vb / 16, va / 16);
-    /* eikonal shoot aims too where a connection bends this little, and
-       solves only a few (measured 5 %); the image still agrees with none's */
+    /* eikonal shoot solves these connections; it agrees with none too */
     memset(b, 0, sizeof b);
     memset(&rs, 0, sizeof rs);
     use(s, &eikonal, RRV_NEE_SHOOT);
     s->settings.seed = 53;
     block_samples_rect(s, 64, 0, 0, 24, 24, 6, 6, b, &rs);
-    SAY("  %s, eikonal shoot: %llu solves, %llu aimed rays\n", what, (unsigned long long)rs.solves,
-        (unsigned long long)rs.aim_shots);
-    CHECK(rs.aim_shots > 0 && rs.solves * 5 < rs.aim_shots);
+    SAY("  %s, eikonal shoot: %llu solves, %.1f%% converged\n", what, (unsigned long long)rs.solves,
+        100.0 * (double)rs.solves_converged / (double)rs.solves);
+    CHECK(rs.solves > 0 && rs.aim_shots == 0);
     blocks_agree(a, b, 4, 0, 0, 4, 4, "weak haze, eikonal shoot");
     rrv_scene_free(s);
 }
@@ -1462,7 +1473,6 @@ static void test_aim_weights_sum_to_one(void)
     ctx.comb = ctx.bends = ctx.partition = ctx.aim = ctx.sample_lights = 1;
     ctx.eta_floor = 1;
     ctx.eta_camera2 = 1;
-    ctx.aim_reach = RRV__AIM_REACH;
     light = &s->shapes[s->lights[0]];
     ny = rrv__normalize(rrv__cross(light->e1, light->e2));
     memset(&vb, 0, sizeof vb);
