@@ -4767,8 +4767,10 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
     }
     /* A kick stands for the chords on both sides of it, so a chord must not
        carry a gradient into a stretch without one: where the ray passes
-       from cells with a gradient to cells without, or back, a point falls
-       on the face between them (where the gradient is 0). */
+       from cells with a gradient to cells without (*entering = -1), or back
+       (1), the spacing ends on the face between them, where the gradient
+       bound of one side is 0; there rrv__comb_step kicks nothing but runs
+       the chord on (rrv__comb_run_on). */
     for (;;) {
         double t_face;
         a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
@@ -4882,7 +4884,8 @@ static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 
 /* The comb from x along *d: the chord to the next point at spacing h,
    clipped to the next face, then the kick at x (a half kick when the comb
    starts), then the chord clipped again along the kicked direction, which
-   may reach the face sooner. */
+   may reach the face sooner. A spacing that ends where cells with a
+   gradient begin or end runs on past that point (rrv__comb_run_on). */
 /* Is p inside the box of m by more than margin on every side? */
 static int rrv__deep_inside(const rrv_medium *m, rrv_vec3 p, double margin)
 {
