@@ -5291,6 +5291,14 @@ static void rrv__gather_emission(const rrv__context *ctx, rrv__path *path, const
     for (ch = 0; ch < 3; ++ch) path->L[ch] += path->beta[ch] * c->sigma_a[ch] * Le[ch] * k;
 }
 
+/* The reciprocals of d's components if the comb's planned chord runs
+   along d (rrv__comb_step computed them once for its line), else NULL. */
+static const double *rrv__chord_inv(const rrv__context *ctx, const rrv__bender *b, rrv_vec3 d)
+{
+    return ctx->comb && b->pending && b->line_d.x == d.x && b->line_d.y == d.y && b->line_d.z == d.z ? b->line_inv
+                                                                                                      : NULL;
+}
+
 /* Refractive delta tracking: the seed paper's Algorithm 1, along one straight
    segment o + t d, t < tmax. With refract_nulls off (classic, and the comb
    and eikonal integrators, which bend only at segment ends) it is classic
@@ -5306,14 +5314,6 @@ static void rrv__gather_emission(const rrv__context *ctx, rrv__path *path, const
    spaced points (rrv__comb_step), which free-flight sampling allows since
    it is memoryless. Measured: second order where Algorithm 1 is first
    (README, "Accuracy against closed forms"). */
-/* The reciprocals of d's components if the comb's planned chord runs
-   along d (rrv__comb_step computed them once for its line), else NULL. */
-static const double *rrv__chord_inv(const rrv__context *ctx, const rrv__bender *b, rrv_vec3 d)
-{
-    return ctx->comb && b->pending && b->line_d.x == d.x && b->line_d.y == d.y && b->line_d.z == d.z ? b->line_inv
-                                                                                                      : NULL;
-}
-
 static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rrv_vec3 o, rrv_vec3 d, double tmax,
                                           rrv__rng *rng, rrv__flight *out)
 {
