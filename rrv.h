@@ -1536,12 +1536,16 @@ static int rrv__box_hit(rrv_vec3 lo, rrv_vec3 hi, rrv_vec3 o, rrv_vec3 inv_d, do
     return 1;
 }
 
-/* Closest hit along o + t d, t in (0, tmax); returns 1 and fills hit. */
-static int rrv__intersect_scene(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, double tmax, rrv__hit *hit)
+/* Closest hit along o + t d, t in (0, tmax); returns 1 and fills hit.
+   inv: the reciprocals of d's components (a comb chord has them, see
+   rrv__reciprocals), or NULL to compute them here. */
+static int rrv__intersect_line(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, const double *inv, double tmax,
+                               rrv__hit *hit)
 {
     int stack[64], top = 0, found = 0, node_index = 0;
-    rrv_vec3 inv_d = rrv__v3(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+    rrv_vec3 inv_d;
     if (!scene->bvh_node_count) return 0;
+    inv_d = inv ? rrv__v3(inv[0], inv[1], inv[2]) : rrv__v3(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
     for (;;) {
         const rrv__bvh_node *node = &scene->bvh[node_index];
         double t_enter;
@@ -1566,6 +1570,11 @@ static int rrv__intersect_scene(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, 
         node_index = stack[--top];
     }
     return found;
+}
+
+static int rrv__intersect_scene(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, double tmax, rrv__hit *hit)
+{
+    return rrv__intersect_line(scene, o, d, NULL, tmax, hit);
 }
 
 typedef struct rrv__bvh_build {
@@ -4540,7 +4549,12 @@ typedef struct rrv__bender {
     int reflected;     /* the last face crossed reflected the ray */
     int combing;       /* comb: a comb is running (its first half kick is done) */
     double chord;      /* comb: length of the chord behind the next point */
-    int entering;      /* comb: the next point is where cells with a gradient begin */
+    int entering;      /* comb: the spacing to the next point ends where cells with a
+                          gradient begin (1) or end (-1), else 0 */
+    int behind_split;  /* comb: the chord behind the next point ran on through
+                          stretches without a gradient (rrv__comb_step), so r is
+                          not its midpoint's refractivity: the next kick takes
+                          that from its own lookup */
     rrv__support_view ahead; /* END_KICK: the supports seen from the segment's end
                                 along its direction (the same line as the segment's) */
     rrv_vec3 line_d;   /* the planned segment's direction (set with pending) */
@@ -4573,6 +4587,7 @@ static void rrv__bender_restart(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     b->reflected = 0;
     b->face_known = 0;
     b->face_jump = 0;
+    b->behind_split = 0;
 }
 
 static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikonal, rrv_vec3 o)
@@ -4746,8 +4761,10 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
     }
     /* A kick stands for the chords on both sides of it, so a chord must not
        carry a gradient into a stretch without one: where the ray passes
-       from cells with a gradient to cells without, or back, a point falls
-       on the face between them (where the gradient is 0). */
+       from cells with a gradient to cells without (*entering = -1), or back
+       (1), the spacing ends on the face between them, where the gradient
+       bound of one side is 0; there rrv__comb_step kicks nothing but runs
+       the chord on (rrv__comb_run_on). */
     for (;;) {
         double t_face;
         a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
@@ -4769,7 +4786,7 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
         idx += stride[a];
         if ((grad[idx] > 0) != in_gradient) {
             if (t > RRV__EDGE_NUDGE * (1.0 + rrv__length(x))) {
-                *entering = !in_gradient;
+                *entering = in_gradient ? -1 : 1;
                 return t;
             }
             /* x lay on the face (within rounding): start the cell's spacing here */
@@ -4861,7 +4878,8 @@ static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 
 /* The comb from x along *d: the chord to the next point at spacing h,
    clipped to the next face, then the kick at x (a half kick when the comb
    starts), then the chord clipped again along the kicked direction, which
-   may reach the face sooner. */
+   may reach the face sooner. A spacing that ends where cells with a
+   gradient begin or end runs on past that point (rrv__comb_run_on). */
 /* Is p inside the box of m by more than margin on every side? */
 static int rrv__deep_inside(const rrv_medium *m, rrv_vec3 p, double margin)
 {
@@ -4869,11 +4887,48 @@ static int rrv__deep_inside(const rrv_medium *m, rrv_vec3 p, double margin)
            p.z > m->lo.z + margin && p.z < m->hi.z - margin;
 }
 
+/* How far past the comb point x + d reach the chord ahead runs on, when
+   the spacing to that point ended on a face between majorant cells with
+   and without a gradient (edge, as b->entering). Such a point is not a
+   kick: the gradient bound of the cells on one side is zero there, so its
+   kick would be nothing but the lookup, the chord's ray cast and tracking
+   set-up. The chord runs straight on through the cells without a gradient
+   and a random fraction of a spacing into those with one beyond (as a
+   comb starts, so it does not alias with pixels), and the kick there
+   stands for the stretch with a gradient behind it, which starts at
+   *from. DBL_MAX: the ray leaves the grid's box first. */
+static double rrv__comb_run_on(rrv__bender *b, const rrv_scene *scene, const rrv_medium *medium, rrv_vec3 x,
+                               rrv_vec3 d, double reach, int edge, double *from, rrv__rng *rng)
+{
+    const double inv_tolerance = 1.0 / scene->settings.bend_tolerance;
+    while (edge) {
+        rrv_vec3 p = rrv__madd(x, d, reach);
+        double tau = edge > 0 ? 1.0 - rrv__uniform(rng) : 1.0, t;
+        int next = 0;
+        if (edge > 0) *from = reach;
+        t = rrv__rate_distance(medium->majorant, p, d, b->line_inv, tau, inv_tolerance, &next);
+        if (t == DBL_MAX) return DBL_MAX;
+        reach += t;
+        if (edge > 0) {
+            /* the point past the stretch without a gradient: a kick
+               (whatever the spacing from it meets next) */
+            b->entering = next;
+            return reach;
+        }
+        /* from inside cells without a gradient the spacing ends only where
+           cells with one begin */
+        *from = reach;
+        edge = next;
+    }
+    b->entering = 0;
+    return reach;
+}
+
 static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 *d, double h,
-                           const rrv__support_view *view, const rrv_medium *medium)
+                           const rrv__support_view *view, const rrv_medium *medium, rrv__rng *rng)
 {
     rrv__support_view after, looked;
-    double ahead;
+    double ahead, reach, from = 0;
     if (view->face_unknown) {
         /* The chord's far end deep inside the sole support means its face
            lies beyond it (a box is convex); else the view is looked up now,
@@ -4888,7 +4943,15 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
     } else {
         ahead = rrv__mind(h, view->t_face);
     }
-    if (b->combing) {
+    if (b->combing && b->behind_split) {
+        /* the refractivity at the midpoint of the stretch with a gradient
+           behind, from this point's value and gradient (second order, as
+           r_ahead in rrv__comb_kick_by) */
+        rrv_vec3 grad;
+        double r_here = rrv__kick_lookup(scene, x, medium, &grad);
+        b->r = r_here - 0.5 * b->chord * rrv__dot(grad, *d);
+        *d = rrv__comb_kick_by(b, x, *d, ahead, 0.5 * (b->chord + ahead), x, r_here, grad);
+    } else if (b->combing) {
         *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * (b->chord + ahead), x, medium);
     } else if (b->face_known) {
         /* the first half kick past a face: the gradient just inside it,
@@ -4904,13 +4967,18 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
        and the next kick's spacing */
     b->line_d = *d;
     rrv__reciprocals(*d, b->line_inv);
-    if (b->sole_support && view->inside &&
-        rrv__deep_inside(b->sole_support, rrv__madd(x, *d, ahead), RRV__EDGE_NUDGE * (1.0 + ahead))) {
+    reach = ahead;
+    if (b->entering && ahead == h && medium && scene->settings.mu_eta <= 0)
+        reach = rrv__comb_run_on(b, scene, medium, x, *d, ahead, b->entering, &from, rng);
+    b->behind_split = from > 0;
+    if (b->sole_support && view->inside && reach < DBL_MAX &&
+        rrv__deep_inside(b->sole_support, rrv__madd(x, *d, reach), RRV__EDGE_NUDGE * (1.0 + reach))) {
         /* Both ends of the chord inside the one box support: the chord
            crosses no face, and the look along it (a sixth of a kick's cost)
            waits until a later chord needs its face (face_unknown). x is in
            the box since the view from it is inside. */
-        b->segment = b->chord = ahead;
+        b->segment = reach;
+        b->chord = reach - from;
         b->end = RRV__END_KICK;
         b->surface_free = b->sole_support->majorant->surface_free;
         b->pending = 1;
@@ -4924,16 +4992,18 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
     rrv__look_along(scene, x, *d, &after);
     /* a point within rounding of the face is the face (the view's distance
        to it may come from the previous chord's look, a few ulps off) */
-    if (after.t_face <= ahead + RRV__EDGE_NUDGE * (1.0 + ahead)) {
+    if (reach == DBL_MAX || after.t_face <= reach + RRV__EDGE_NUDGE * (1.0 + reach)) {
         b->segment = after.t_face;
-        b->end = RRV__END_FACE;
+        b->end = after.t_face < DBL_MAX ? RRV__END_FACE : RRV__END_NONE;
     } else {
-        b->segment = ahead;
+        b->segment = reach;
         b->end = RRV__END_KICK;
     }
     b->normal = after.normal;
     b->surface_free = after.inside && after.surface_free;
-    b->chord = b->segment;
+    /* the stretch with a gradient behind the next point or face (none when
+       the face comes within the stretch without) */
+    b->chord = b->segment > from ? b->segment - from : 0;
     b->pending = 1;
     /* The kick point ahead lies on this line before its nearest face: what
        it sees along the line is this view moved up by the chord, so the
@@ -4994,7 +5064,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
            the comb does not alias with pixels */
         const rrv_medium *medium;
         double h = rrv__comb_spacing(scene, b, o, *d, b->line_inv, 1.0 - rrv__uniform(rng), &b->entering, &medium);
-        rrv__comb_step(b, scene, o, d, h, &view, medium);
+        rrv__comb_step(b, scene, o, d, h, &view, medium, rng);
     }
     b->face_known = 0;
 }
@@ -5015,10 +5085,10 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
             /* entering cells with a gradient from a stretch without: the
                first point a random fraction of a spacing in, as at a
                segment's start, so the comb does not alias with pixels */
-            double tau = b->entering ? 1.0 - rrv__uniform(rng) : 1.0;
+            double tau = b->entering > 0 ? 1.0 - rrv__uniform(rng) : 1.0;
             const rrv_medium *medium;
             double h = rrv__comb_spacing(scene, b, *o, *d, b->line_inv, tau, &b->entering, &medium);
-            rrv__comb_step(b, scene, *o, d, h, &view, medium);
+            rrv__comb_step(b, scene, *o, d, h, &view, medium, rng);
         } else {
             /* a kick that turned the chord out through a face it grazed:
                the comb ends here, without an interface to refract */
@@ -5033,6 +5103,7 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
                the refractivity looked up with it is the face's r_before */
             rrv_vec3 at = rrv__madd(*o, *d, -rrv__face_gap(*o)), grad;
             double r_behind = rrv__scene_refractivity(scene, at, &grad);
+            if (b->behind_split) b->r = r_behind - 0.5 * b->chord * rrv__dot(grad, *d);
             *d = rrv__comb_kick_by(b, *o, *d, b->chord, 0.5 * b->chord, at, r_behind, grad);
             *d = rrv__cross_face(b, scene, o, *d, b->normal, &r_behind, rng);
         } else {
@@ -5200,6 +5271,14 @@ static void rrv__gather_emission(const rrv__context *ctx, rrv__path *path, const
     for (ch = 0; ch < 3; ++ch) path->L[ch] += path->beta[ch] * c->sigma_a[ch] * Le[ch] * k;
 }
 
+/* The reciprocals of d's components if the comb's planned chord runs
+   along d (rrv__comb_step computed them once for its line), else NULL. */
+static const double *rrv__chord_inv(const rrv__context *ctx, const rrv__bender *b, rrv_vec3 d)
+{
+    return ctx->comb && b->pending && b->line_d.x == d.x && b->line_d.y == d.y && b->line_d.z == d.z ? b->line_inv
+                                                                                                      : NULL;
+}
+
 /* Refractive delta tracking: the seed paper's Algorithm 1, along one straight
    segment o + t d, t < tmax. With refract_nulls off (classic, and the comb
    and eikonal integrators, which bend only at segment ends) it is classic
@@ -5219,10 +5298,7 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
                                           rrv__rng *rng, rrv__flight *out)
 {
     rrv__walker walkers[RRV__MAX_MEDIA];
-    const rrv__bender *b = &path->bender;
-    /* a comb chord's line has its reciprocals already (rrv__comb_step) */
-    const double *inv_d = ctx->comb && b->pending && b->line_d.x == d.x && b->line_d.y == d.y && b->line_d.z == d.z
-                              ? b->line_inv : NULL;
+    const double *inv_d = rrv__chord_inv(ctx, &path->bender, d);
     int n = rrv__start_walkers(ctx, walkers, ctx->refract_nulls, o, d, inv_d, tmax, rng, &ctx->stats.events);
     while (n > 0) {
         int i, best = 0, ch;
@@ -5745,11 +5821,11 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
         } else {
             has_hit = ctx->bends && cp.path.bender.surface_free
                           ? 0
-                          : rrv__intersect_scene(scene, cp.o, cp.d,
-                                                 segment < DBL_MAX
-                                                     ? segment + rrv__face_gap(rrv__madd(cp.o, cp.d, segment))
-                                                     : DBL_MAX,
-                                                 &hit);
+                          : rrv__intersect_line(scene, cp.o, cp.d, rrv__chord_inv(ctx, &cp.path.bender, cp.d),
+                                                segment < DBL_MAX
+                                                    ? segment + rrv__face_gap(rrv__madd(cp.o, cp.d, segment))
+                                                    : DBL_MAX,
+                                                &hit);
             /* delta tracking along it, up to the surface if one is hit */
             outcome =
                 rrv__refractive_delta_tracking(ctx, &cp.path, cp.o, cp.d, has_hit ? hit.t : segment, rng, &flight);
