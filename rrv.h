@@ -969,7 +969,7 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
 /* ---- rendering -------------------------------------------------------------- */
 
 /* The limits of BOUNDS (see the manual at the top). Scenes beyond the first
-   four are refused at load; the last two cut a walk and count it. */
+   four are refused at load; the next three cut a walk and count it. */
 #define RRV_MIN_IOR 0.1             /* refractive index, everywhere */
 #define RRV_MAX_IOR 10.0
 #define RRV_MAX_OPTICAL_DEPTH 1e12  /* peak extinction times a medium's size */
@@ -977,6 +977,7 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
 #define RRV_MAX_SAMPLE 1e30         /* a sample above it is discarded as non-finite */
 #define RRV_MAX_SEGMENT_EVENTS 4194304L /* collisions of one tracking walk */
 #define RRV_MAX_SEGMENT_STEPS 10000000L /* refraction steps between real vertices */
+#define RRV_MAX_SAMPLE_WORK 16777216L   /* loop iterations and collisions of one camera path */
 #define RRV_MAX_BLOBS 4096          /* blobs in one field: each lookup sums them all */
 
 typedef struct rrv_render_stats {
@@ -1007,6 +1008,8 @@ typedef struct rrv_render_stats {
     uint64_t aim_missed;        /* of which refraction turned off their light (they
                                    met another surface, left the scene or met a
                                    sharp interface); the rest landed or were absorbed */
+    uint64_t cut_samples;       /* of paths_cut, camera paths cut at the bound on a
+                                   whole sample's work (see BOUNDS) */
 } rrv_render_stats;
 
 /* Renders pixels [x0,x1) x [y0,y1) of the image (row 0 at the top) for
@@ -4990,6 +4993,7 @@ typedef struct rrv__context {
     double thermal_scale;    /* blackbody radiance at the camera over that in
                                 ambient air: (eta_camera / eta_ambient)^2 */
     long step_bound;         /* rrv__step_bound: loop iterations between real vertices */
+    uint64_t sample_bound;   /* rrv__sample_bound: loop iterations and collisions of a camera path */
     struct rrv__chain *chain; /* nee manifold's scratch (rrv__chain_new), NULL otherwise */
     rrv_render_stats stats;
 } rrv__context;
@@ -5349,19 +5353,16 @@ static double rrv__eta_scale(const rrv__context *ctx, rrv_vec3 p_emit)
     return ctx->eta_camera2 / (eta * eta);
 }
 
-/* The most iterations of the path loop (refraction events, comb kicks,
-   eikonal steps, box entries) between two real vertices: 16 straight
-   crossings of every medium at its densest rate (a curved ray may run
-   longer than a straight one, but not 16 times through everything), 4
-   times the nominal eikonal rate for halved steps, at most
-   RRV_MAX_SEGMENT_STEPS. Beyond it a ray can only be trapped (total
-   internal reflection, an integrator error that closed an orbit) or the
-   settings absurd; the path is cut and counted. */
-static long rrv__step_bound(const rrv_scene *scene, rrv_integrator integrator)
+/* The loop iterations of one straight crossing of every medium at its
+   densest rate (refraction events, comb kicks, eikonal steps at 4 times
+   their nominal rate for halved steps, 2 for the faces), plus, with
+   tracking, the tentative collisions of that crossing at the peak
+   majorant. */
+static double rrv__crossing_work(const rrv_scene *scene, rrv_integrator integrator, int tracking)
 {
     const rrv_settings *st = &scene->settings;
     int comb = rrv__resolve_scheme(st->refraction) == RRV_REFRACTION_COMB, i;
-    double crossing = 0, bound;
+    double crossing = 0;
     for (i = 0; i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i];
         const struct rrv__majorant_grid *g = m->majorant;
@@ -5378,10 +5379,38 @@ static long rrv__step_bound(const rrv_scene *scene, rrv_integrator integrator)
             else
                 rate = mu_eta + (double)g->density_peak * g->sigma_t_max;
         }
+        if (tracking) rate += (double)g->density_peak * g->sigma_t_max;
         crossing += 2.0 + rate * diag;
     }
-    bound = 64.0 + 16.0 * crossing;
+    return crossing;
+}
+
+/* The most iterations of the path loop (refraction events, comb kicks,
+   eikonal steps, box entries) between two real vertices: 16 straight
+   crossings of every medium at its densest rate (a curved ray may run
+   longer than a straight one, but not 16 times through everything), at
+   most RRV_MAX_SEGMENT_STEPS. Beyond it a ray can only be trapped (total
+   internal reflection, an integrator error that closed an orbit) or the
+   settings absurd; the path is cut and counted. */
+static long rrv__step_bound(const rrv_scene *scene, rrv_integrator integrator)
+{
+    double bound = 64.0 + 16.0 * rrv__crossing_work(scene, integrator, 0);
     return bound < (double)RRV_MAX_SEGMENT_STEPS ? (long)bound : RRV_MAX_SEGMENT_STEPS;
+}
+
+/* The most work of one camera path (a pixel sample): its loop iterations
+   over all legs plus every tentative collision it and its shadow rays
+   sample. Each leg is bounded, but max_depth of them at their bound is no
+   bound a user can wait for (1024 legs of 1e7 eikonal steps). 16 times a
+   path whose every vertex pays one crossing (loop and tracking) for its
+   leg and one for its shadow ray, at most RRV_MAX_SAMPLE_WORK, which the
+   scenes in scenes/ stay far below (README.md, "Work bounds"); the cap is
+   what holds a hostile scene, the scene's own term a cheap one. */
+static uint64_t rrv__sample_bound(const rrv_scene *scene, rrv_integrator integrator)
+{
+    double vertices = rrv__maxd((double)scene->settings.max_depth, 0.0) + 1.0;
+    double bound = 64.0 + 16.0 * 2.0 * vertices * rrv__crossing_work(scene, integrator, 1);
+    return bound < (double)RRV_MAX_SAMPLE_WORK ? (uint64_t)bound : (uint64_t)RRV_MAX_SAMPLE_WORK;
 }
 
 /* What a vertex does to light arriving from a direction, for the solver. */
@@ -5445,6 +5474,8 @@ typedef struct rrv__camera_path {
                             (shots never do). Decide which estimators could have made
                             it (nee shoot and manifold) */
     long steps;          /* loop iterations since the last real vertex (work bound) */
+    uint64_t work, work_end; /* loop iterations of all legs; the sample is cut when they
+                                plus the context's events reach work_end */
 } rrv__camera_path;
 
 /* Next-event estimation along a straight shadow ray (pbrt-v4's SampleLd):
@@ -5637,6 +5668,8 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
     cp.depth = 0;
     cp.touched = cp.jumped = 0;
     cp.steps = 0;
+    cp.work = 0;
+    cp.work_end = ctx->stats.events + ctx->sample_bound;
     rrv__path_start(&cp.path, rng);
     if (ctx->bends) rrv__bender_start(&cp.path.bender, scene, ctx->eikonal, o);
     ++ctx->stats.paths;
@@ -5647,6 +5680,11 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
         int has_hit, outcome;
         if (++cp.steps > ctx->step_bound) {
             ++ctx->stats.paths_cut;
+            break;
+        }
+        if (++cp.work + ctx->stats.events > cp.work_end) {
+            ++ctx->stats.paths_cut;
+            ++ctx->stats.cut_samples;
             break;
         }
         /* the next straight segment */
@@ -5685,8 +5723,10 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                here: delta tracking and the ray cast would find nothing. */
             while (ctx->comb && cp.path.bender.pending && cp.path.bender.end == RRV__END_KICK &&
                    cp.path.bender.surface_free && cp.steps < ctx->step_bound &&
+                   cp.work + ctx->stats.events < cp.work_end &&
                    !rrv__chord_meets_extinction(scene, cp.o, cp.d, cp.path.bender.segment)) {
                 ++cp.steps;
+                ++cp.work;
                 ++ctx->stats.events;
                 rrv__finish_segment(&cp.path.bender, scene, &cp.o, &cp.d, rng);
             }
@@ -5898,6 +5938,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.eikonal = scene->settings.integrator == RRV_INTEGRATOR_EIKONAL;
     ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
     ctx.step_bound = rrv__step_bound(scene, scene->settings.integrator);
+    ctx.sample_bound = rrv__sample_bound(scene, scene->settings.integrator);
     /* shoot by default, also where it cannot solve (the refractive
        integrator), where it aims: manifold solves there, but at 100x-1000x
        straight NEE's cost on a scene like scenes/fire.rrv (README.md), while
@@ -5995,6 +6036,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
         stats->solves_unsupported += ctx.stats.solves_unsupported;
         stats->aim_shots += ctx.stats.aim_shots;
         stats->aim_missed += ctx.stats.aim_missed;
+        stats->cut_samples += ctx.stats.cut_samples;
     }
     rrv__chain_delete(ctx.chain);
     return RRV_OK;
