@@ -278,7 +278,18 @@
        - a leg of a path (between two real vertices) after 64 + 16 times the
          loop iterations of one straight crossing of every medium at its
          densest rate (comb kicks, null events, or 4 / step eikonal steps),
-         at most RRV_MAX_SEGMENT_STEPS = 1e7: only trapped rays get there.
+         at most RRV_MAX_SEGMENT_STEPS = 1e7: only trapped rays get there;
+       - a camera path (one pixel sample; of paths_cut, cut_samples) when
+         its loop iterations over all legs plus the tentative collisions it
+         and its shadow rays sampled pass 64 + 32 (max_depth + 1) times one
+         crossing's iterations and collisions at the peak majorant (a leg
+         and a shadow ray a vertex, 16 times over), at most
+         RRV_MAX_SAMPLE_WORK = 2^24 (a second of one core in eikonal
+         steps): legs each within their bound, 1024 of them (an eikonal
+         step of 1e-6 m in a closed white room) were minutes a sample. It is checked once a loop iteration, so a
+         sample overruns it by at most one walk and one vertex's light
+         sampling. The scenes in scenes/ stay 48x below their own bound and
+         6000x below the cap with every integrator (README.md).
      A cut camera path keeps the light it gathered before the cut; a cut
      shadow ray is dark. That is biased, so it is never silent: the CLI's
      summary line prints the count. A sample above RRV_MAX_SAMPLE = 1e30 is
