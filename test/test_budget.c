@@ -385,6 +385,38 @@ static void test_a_sample_of_long_legs_is_cut_at_its_work_bound(void)
     rrv_scene_free(s);
 }
 
+static void test_a_deep_path_between_surfaces_alone_is_not_cut(void)
+{
+    /* No medium: the scene's term is the vertices' own iterations, so a
+       white room at max_depth 1024 (1025 legs of one iteration, nothing
+       to track) must render uncut with every integrator. */
+    static const rrv_integrator integrators[3] = {RRV_INTEGRATOR_CLASSIC, RRV_INTEGRATOR_REFRACTIVE,
+                                                  RRV_INTEGRATOR_EIKONAL};
+    int k;
+    for (k = 0; k < 3; ++k) {
+        rrv_scene *s = tb_scene(2, 1);
+        rrv_shape *room = tb_shape(s, RRV_SHAPE_SPHERE);
+        rrv_render_stats st;
+        rrv_error err;
+        float img[2 * 1 * 3];
+        int c;
+        room->center = rrv__v3(0, 0, 0);
+        room->radius = 0.9;
+        for (c = 0; c < 3; ++c) s->materials[0].albedo[c] = 1.0;
+        s->camera.eye = rrv__v3(0, 0, -0.5);
+        s->camera.look = rrv__v3(0, 0, 1);
+        s->settings.integrator = integrators[k];
+        s->settings.max_depth = 1024;
+        CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+        memset(&st, 0, sizeof st);
+        memset(img, 0, sizeof img);
+        CHECK(rrv_render_rect(s, 0, 0, 2, 1, 0, 4, img, 2, &st, NULL) == RRV_OK);
+        CHECKF(st.samples == 8 && st.paths_cut == 0, "integrator %d: %llu samples, %llu cut", k,
+               (unsigned long long)st.samples, (unsigned long long)st.paths_cut);
+        rrv_scene_free(s);
+    }
+}
+
 int main(void)
 {
     (void)tb_blobs; /* scene_builder.h's, unused here */
@@ -394,5 +426,6 @@ int main(void)
     RUN(test_tracking_through_a_coarse_grid_is_unbiased);
     RUN(test_hostile_coarse_grids_take_bounded_work);
     RUN(test_a_sample_of_long_legs_is_cut_at_its_work_bound);
+    RUN(test_a_deep_path_between_surfaces_alone_is_not_cut);
     return CHECK_EXIT_CODE();
 }
