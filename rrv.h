@@ -281,10 +281,11 @@
          at most RRV_MAX_SEGMENT_STEPS = 1e7: only trapped rays get there;
        - a camera path (one pixel sample; of paths_cut, cut_samples) when
          its loop iterations over all legs plus the tentative collisions it
-         and its shadow rays sampled pass 64 + 32 (max_depth + 1) times 1
-         plus one crossing's iterations and collisions at the peak majorant
-         (the vertex, a leg and a shadow ray, 16 times over), at most
-         RRV_MAX_SAMPLE_WORK = 2^24 (a second of one core in eikonal
+         and its shadow rays sampled pass 4 (max_depth + 1) (64 + 16 (1 +
+         one crossing's iterations and collisions at the peak majorant)):
+         a leg and a shadow ray a vertex, each at the leg bound with a
+         collision every iteration, so never before the other bounds; at
+         most RRV_MAX_SAMPLE_WORK = 2^24 (a second of one core in eikonal
          steps): legs each within their bound, 1024 of them (an eikonal
          step of 1e-6 m in a closed white room) were minutes a sample. It is checked once a loop iteration, so a
          sample overruns it by at most one walk and one vertex's light
@@ -5412,15 +5413,18 @@ static long rrv__step_bound(const rrv_scene *scene, rrv_integrator integrator)
 /* The most work of one camera path (a pixel sample): its loop iterations
    over all legs plus every tentative collision it and its shadow rays
    sample. Each leg is bounded, but max_depth of them at their bound is no
-   bound a user can wait for (1024 legs of 1e7 eikonal steps). 16 times a
-   path whose every vertex pays its own iteration and one crossing (loop
-   and tracking) for its leg and again for its shadow ray, at most
-   RRV_MAX_SAMPLE_WORK, which the scenes in scenes/ stay far below (BOUNDS);
-   the cap is what holds a hostile scene, the scene's own term a cheap one. */
+   bound a user can wait for (1024 legs of 1e7 eikonal steps). The scene's
+   term is what the other bounds already allow: at each vertex a leg and a
+   shadow ray, each of 64 + 16 crossings (loop and tracking, plus the
+   vertex's own iteration) with a collision at every iteration, so it never
+   cuts a path they would have let finish; what holds a hostile scene is
+   the cap, RRV_MAX_SAMPLE_WORK, which the scenes in scenes/ stay far below
+   (BOUNDS). */
 static uint64_t rrv__sample_bound(const rrv_scene *scene, rrv_integrator integrator)
 {
     double vertices = rrv__maxd((double)scene->settings.max_depth, 0.0) + 1.0;
-    double bound = 64.0 + 16.0 * 2.0 * vertices * (1.0 + rrv__crossing_work(scene, integrator, 1));
+    double leg = 64.0 + 16.0 * (1.0 + rrv__crossing_work(scene, integrator, 1));
+    double bound = vertices * 2.0 * 2.0 * leg;
     return bound < (double)RRV_MAX_SAMPLE_WORK ? (uint64_t)bound : (uint64_t)RRV_MAX_SAMPLE_WORK;
 }
 
