@@ -270,7 +270,8 @@
        - a majorant or baked grid above the grid limit (max_grid_bytes);
        - more than RRV_MAX_BLOBS = 4096 blobs in one field (every lookup
          sums them all: a grid is the tool for more).
-     Cut and counted (rrv_render_stats.paths_cut, of them cut_tracking):
+     Cut and counted (rrv_render_stats.paths_cut, of them cut_tracking and
+     cut_samples):
        - a tracking walk (one medium along one straight segment) after
          64 + 4 (peak majorant x chord) tentative collisions, at most
          RRV_MAX_SEGMENT_EVENTS = 2^22: the count is Poisson with a mean of at
@@ -284,13 +285,15 @@
          and its shadow rays sampled pass 4 (max_depth + 1) (64 + 16 (1 +
          one crossing's iterations and collisions at the peak majorant)):
          a leg and a shadow ray a vertex, each at the leg bound with a
-         collision every iteration, so never before the other bounds; at
-         most RRV_MAX_SAMPLE_WORK = 2^24 (a second of one core in eikonal
-         steps): legs each within their bound, 1024 of them (an eikonal
-         step of 1e-6 m in a closed white room) were minutes a sample. It is checked once a loop iteration, so a
-         sample overruns it by at most one walk and one vertex's light
-         sampling. The scenes in scenes/ stay 48x below their own bound and
-         6000x below the cap with every integrator (README.md).
+         collision every iteration, which a path whose legs are within
+         their bound passes only with collisions beyond 16 crossings a
+         leg; at most RRV_MAX_SAMPLE_WORK = 2^24 (a second of one core in
+         eikonal steps): legs each within their bound, 1025 of them (an
+         eikonal step of 1e-6 m in a closed white room) were minutes a
+         sample. It is checked once a loop iteration, so a sample overruns
+         it by at most one walk and one vertex's light sampling. The
+         scenes in scenes/ stay 310x below the cap with every integrator,
+         NEE and scheme, and 7x below their own term (README.md).
      A cut camera path keeps the light it gathered before the cut; a cut
      shadow ray is dark. That is biased, so it is never silent: the CLI's
      summary line prints the count. A sample above RRV_MAX_SAMPLE = 1e30 is
@@ -1002,8 +1005,9 @@ typedef struct rrv_render_stats {
                            bound (see BOUNDS): what they gathered before the
                            cut is kept, nothing after it */
     uint64_t cut_tracking; /* of which a delta or ratio tracking walk hit its
-                              collision bound; the rest hit the bound on
-                              refraction events, kicks or eikonal steps */
+                              collision bound; the rest hit a leg's bound on
+                              refraction events, kicks or eikonal steps, or
+                              the sample's (cut_samples, at the end) */
     /* nee shoot: */
     uint64_t solves;            /* Newton solves attempted (first tries and trials) */
     uint64_t solves_converged;
