@@ -832,6 +832,7 @@ static void add_stats(rrv_render_stats *into, const rrv_render_stats *from)
     into->solves_unsupported += from->solves_unsupported;
     into->aim_shots += from->aim_shots;
     into->aim_missed += from->aim_missed;
+    into->cut_samples += from->cut_samples;
 }
 
 /* ---- the sample tree ------------------------------------------------------------
@@ -1474,8 +1475,8 @@ static void print_render_summary(int width, int height, int spp, double seconds,
         fprintf(stderr, " (%" PRIu64 " non-finite samples discarded)", stats->nonfinite);
     /* A cut path is a biased sample: never leave it unsaid. */
     if (stats->paths_cut > 0)
-        fprintf(stderr, " (%" PRIu64 " paths cut at a work bound, %" PRIu64 " of them in tracking)",
-                stats->paths_cut, stats->cut_tracking);
+        fprintf(stderr, " (%" PRIu64 " paths cut at a work bound, %" PRIu64 " of them in tracking, %" PRIu64
+                " at the sample's)", stats->paths_cut, stats->cut_tracking, stats->cut_samples);
     if (stats->solves > 0) {
         double n = (double)stats->solves, conv = (double)stats->solves_converged;
         fprintf(stderr, "; curved nee: %" PRIu64 " solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, "

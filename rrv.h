@@ -270,7 +270,8 @@
        - a majorant or baked grid above the grid limit (max_grid_bytes);
        - more than RRV_MAX_BLOBS = 4096 blobs in one field (every lookup
          sums them all: a grid is the tool for more).
-     Cut and counted (rrv_render_stats.paths_cut, of them cut_tracking):
+     Cut and counted (rrv_render_stats.paths_cut, of them cut_tracking and
+     cut_samples):
        - a tracking walk (one medium along one straight segment) after
          64 + 4 (peak majorant x chord) tentative collisions, at most
          RRV_MAX_SEGMENT_EVENTS = 2^22: the count is Poisson with a mean of at
@@ -278,7 +279,21 @@
        - a leg of a path (between two real vertices) after 64 + 16 times the
          loop iterations of one straight crossing of every medium at its
          densest rate (comb kicks, null events, or 4 / step eikonal steps),
-         at most RRV_MAX_SEGMENT_STEPS = 1e7: only trapped rays get there.
+         at most RRV_MAX_SEGMENT_STEPS = 1e7: only trapped rays get there;
+       - a camera path (one pixel sample; of paths_cut, cut_samples) when
+         its loop iterations over all legs plus the tentative collisions it
+         and its shadow rays sampled pass 4 (max_depth + 1) (64 + 16 (1 +
+         one crossing's iterations and collisions at the peak majorant)):
+         a leg and a shadow ray a vertex, each at the leg bound with a
+         collision every iteration, which a path whose legs are within
+         their bound passes only with collisions beyond 16 crossings a
+         leg; at most RRV_MAX_SAMPLE_WORK = 2^24 (a second of one core in
+         eikonal steps): legs each within their bound, 1025 of them (an
+         eikonal step of 1e-6 m in a closed white room) were minutes a
+         sample. It is checked once a loop iteration, so a sample overruns
+         it by at most one walk and one vertex's light sampling. The
+         scenes in scenes/ stay 310x below the cap with every integrator,
+         NEE and scheme, and 7x below their own term (README.md).
      A cut camera path keeps the light it gathered before the cut; a cut
      shadow ray is dark. That is biased, so it is never silent: the CLI's
      summary line prints the count. A sample above RRV_MAX_SAMPLE = 1e30 is
@@ -976,7 +991,7 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
 /* ---- rendering -------------------------------------------------------------- */
 
 /* The limits of BOUNDS (see the manual at the top). Scenes beyond the first
-   four are refused at load; the last two cut a walk and count it. */
+   four are refused at load; the next three cut a walk and count it. */
 #define RRV_MIN_IOR 0.1             /* refractive index, everywhere */
 #define RRV_MAX_IOR 10.0
 #define RRV_MAX_OPTICAL_DEPTH 1e12  /* peak extinction times a medium's size */
@@ -984,6 +999,7 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
 #define RRV_MAX_SAMPLE 1e30         /* a sample above it is discarded as non-finite */
 #define RRV_MAX_SEGMENT_EVENTS 4194304L /* collisions of one tracking walk */
 #define RRV_MAX_SEGMENT_STEPS 10000000L /* refraction steps between real vertices */
+#define RRV_MAX_SAMPLE_WORK 16777216L   /* loop iterations and collisions of one camera path */
 #define RRV_MAX_BLOBS 4096          /* blobs in one field: each lookup sums them all */
 
 typedef struct rrv_render_stats {
@@ -996,8 +1012,9 @@ typedef struct rrv_render_stats {
                            bound (see BOUNDS): what they gathered before the
                            cut is kept, nothing after it */
     uint64_t cut_tracking; /* of which a delta or ratio tracking walk hit its
-                              collision bound; the rest hit the bound on
-                              refraction events, kicks or eikonal steps */
+                              collision bound; the rest hit a leg's bound on
+                              refraction events, kicks or eikonal steps, or
+                              the sample's (cut_samples, at the end) */
     /* nee shoot: */
     uint64_t solves;            /* Newton solves attempted (first tries and trials) */
     uint64_t solves_converged;
@@ -1014,6 +1031,8 @@ typedef struct rrv_render_stats {
     uint64_t aim_missed;        /* of which refraction turned off their light (they
                                    met another surface, left the scene or met a
                                    sharp interface); the rest landed or were absorbed */
+    uint64_t cut_samples;       /* of paths_cut, camera paths cut at the bound on a
+                                   whole sample's work (see BOUNDS) */
 } rrv_render_stats;
 
 /* Renders pixels [x0,x1) x [y0,y1) of the image (row 0 at the top) for
@@ -5148,6 +5167,7 @@ typedef struct rrv__context {
     double thermal_scale;    /* blackbody radiance at the camera over that in
                                 ambient air: (eta_camera / eta_ambient)^2 */
     long step_bound;         /* rrv__step_bound: loop iterations between real vertices */
+    uint64_t sample_bound;   /* rrv__sample_bound: loop iterations and collisions of a camera path */
     struct rrv__chain *chain; /* nee manifold's scratch (rrv__chain_new), NULL otherwise */
     rrv_render_stats stats;
 } rrv__context;
@@ -5512,19 +5532,16 @@ static double rrv__eta_scale(const rrv__context *ctx, rrv_vec3 p_emit)
     return ctx->eta_camera2 / (eta * eta);
 }
 
-/* The most iterations of the path loop (refraction events, comb kicks,
-   eikonal steps, box entries) between two real vertices: 16 straight
-   crossings of every medium at its densest rate (a curved ray may run
-   longer than a straight one, but not 16 times through everything), 4
-   times the nominal eikonal rate for halved steps, at most
-   RRV_MAX_SEGMENT_STEPS. Beyond it a ray can only be trapped (total
-   internal reflection, an integrator error that closed an orbit) or the
-   settings absurd; the path is cut and counted. */
-static long rrv__step_bound(const rrv_scene *scene, rrv_integrator integrator)
+/* The loop iterations of one straight crossing of every medium at its
+   densest rate (refraction events, comb kicks, eikonal steps at 4 times
+   their nominal rate for halved steps, 2 for the faces), plus, with
+   tracking, the tentative collisions of that crossing at the peak
+   majorant. */
+static double rrv__crossing_work(const rrv_scene *scene, rrv_integrator integrator, int tracking)
 {
     const rrv_settings *st = &scene->settings;
     int comb = rrv__resolve_scheme(st->refraction) == RRV_REFRACTION_COMB, i;
-    double crossing = 0, bound;
+    double crossing = 0;
     for (i = 0; i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i];
         const struct rrv__majorant_grid *g = m->majorant;
@@ -5541,10 +5558,41 @@ static long rrv__step_bound(const rrv_scene *scene, rrv_integrator integrator)
             else
                 rate = mu_eta + (double)g->density_peak * g->sigma_t_max;
         }
+        if (tracking) rate += (double)g->density_peak * g->sigma_t_max;
         crossing += 2.0 + rate * diag;
     }
-    bound = 64.0 + 16.0 * crossing;
+    return crossing;
+}
+
+/* The most iterations of the path loop (refraction events, comb kicks,
+   eikonal steps, box entries) between two real vertices: 16 straight
+   crossings of every medium at its densest rate (a curved ray may run
+   longer than a straight one, but not 16 times through everything), at
+   most RRV_MAX_SEGMENT_STEPS. Beyond it a ray can only be trapped (total
+   internal reflection, an integrator error that closed an orbit) or the
+   settings absurd; the path is cut and counted. */
+static long rrv__step_bound(const rrv_scene *scene, rrv_integrator integrator)
+{
+    double bound = 64.0 + 16.0 * rrv__crossing_work(scene, integrator, 0);
     return bound < (double)RRV_MAX_SEGMENT_STEPS ? (long)bound : RRV_MAX_SEGMENT_STEPS;
+}
+
+/* The most work of one camera path (a pixel sample): its loop iterations
+   over all legs plus every tentative collision it and its shadow rays
+   sample. Each leg is bounded, but max_depth of them at their bound is no
+   bound a user can wait for (1024 legs of 1e7 eikonal steps). The scene's
+   term is what the other bounds already allow: at each vertex a leg and a
+   shadow ray, each of 64 + 16 crossings (loop and tracking, plus the
+   vertex's own iteration) with a collision at every iteration, so it never
+   cuts a path they would have let finish; what holds a hostile scene is
+   the cap, RRV_MAX_SAMPLE_WORK, which the scenes in scenes/ stay far below
+   (BOUNDS). */
+static uint64_t rrv__sample_bound(const rrv_scene *scene, rrv_integrator integrator)
+{
+    double vertices = rrv__maxd((double)scene->settings.max_depth, 0.0) + 1.0;
+    double leg = 64.0 + 16.0 * (1.0 + rrv__crossing_work(scene, integrator, 1));
+    double bound = vertices * 2.0 * 2.0 * leg;
+    return bound < (double)RRV_MAX_SAMPLE_WORK ? (uint64_t)bound : (uint64_t)RRV_MAX_SAMPLE_WORK;
 }
 
 /* What a vertex does to light arriving from a direction, for the solver. */
@@ -5608,6 +5656,8 @@ typedef struct rrv__camera_path {
                             (shots never do). Decide which estimators could have made
                             it (nee shoot and manifold) */
     long steps;          /* loop iterations since the last real vertex (work bound) */
+    uint64_t work, work_end; /* loop iterations of all legs; the sample is cut when they
+                                plus the context's events reach work_end */
 } rrv__camera_path;
 
 /* Next-event estimation along a straight shadow ray (pbrt-v4's SampleLd):
@@ -5792,6 +5842,8 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
     cp.depth = 0;
     cp.touched = cp.jumped = 0;
     cp.steps = 0;
+    cp.work = 0;
+    cp.work_end = ctx->stats.events + ctx->sample_bound;
     rrv__path_start(&cp.path, rng);
     if (ctx->bends) rrv__bender_start(&cp.path.bender, scene, ctx->eikonal, o);
     ++ctx->stats.paths;
@@ -5802,6 +5854,11 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
         int has_hit, outcome;
         if (++cp.steps > ctx->step_bound) {
             ++ctx->stats.paths_cut;
+            break;
+        }
+        if (++cp.work + ctx->stats.events > cp.work_end) {
+            ++ctx->stats.paths_cut;
+            ++ctx->stats.cut_samples;
             break;
         }
         /* the next straight segment */
@@ -5852,9 +5909,10 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                here: delta tracking and the ray cast would find nothing. */
             while (ctx->comb && cp.path.bender.pending && cp.path.bender.end == RRV__END_KICK &&
                    cp.path.bender.surface_free && cp.steps < ctx->step_bound &&
-                   !cp.path.bender.support_in_extinction &&
+                   !cp.path.bender.support_in_extinction && cp.work + ctx->stats.events < cp.work_end &&
                    !rrv__chord_meets_extinction(scene, cp.o, cp.d, cp.path.bender.segment)) {
                 ++cp.steps;
+                ++cp.work;
                 ++ctx->stats.events;
                 rrv__finish_segment(&cp.path.bender, scene, &cp.o, &cp.d, rng);
             }
@@ -6066,6 +6124,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.eikonal = scene->settings.integrator == RRV_INTEGRATOR_EIKONAL;
     ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
     ctx.step_bound = rrv__step_bound(scene, scene->settings.integrator);
+    ctx.sample_bound = rrv__sample_bound(scene, scene->settings.integrator);
     /* shoot by default, also where it cannot solve (the refractive
        integrator), where it aims: manifold solves there, but at 100x-1000x
        straight NEE's cost on a scene like scenes/fire.rrv (README.md), while
@@ -6161,6 +6220,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
         stats->solves_unsupported += ctx.stats.solves_unsupported;
         stats->aim_shots += ctx.stats.aim_shots;
         stats->aim_missed += ctx.stats.aim_missed;
+        stats->cut_samples += ctx.stats.cut_samples;
     }
     rrv__chain_delete(ctx.chain);
     return RRV_OK;

@@ -307,6 +307,116 @@ static void test_hostile_coarse_grids_take_bounded_work(void)
     }
 }
 
+/* A closed white sphere (albedo 1: Russian roulette never ends a path)
+   filled with a weak IOR slab, rendered by the eikonal integrator at its
+   smallest accepted step, 1e-6 m, and no light sampling: every leg is a
+   chord of ~1 m, 1e6 steps, under its bound of 1e7, and nothing ends a
+   path before max_depth. */
+static rrv_scene *white_sphere_of_tiny_steps(int max_depth)
+{
+    rrv_scene *s = tb_scene(2, 1);
+    rrv_medium *m = tb_medium(s, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 0.0, 0.0);
+    rrv_shape *room = tb_shape(s, RRV_SHAPE_SPHERE);
+    int c;
+    m->ior.kind = RRV_FIELD_SLAB;
+    m->ior.base = 0.01;
+    m->ior.gradient = 0.01;
+    m->ior.normal = rrv__v3(0, 1, 0);
+    m->ior.center = rrv__v3(0, 0, 0);
+    room->center = rrv__v3(0, 0, 0);
+    room->radius = 0.9;
+    for (c = 0; c < 3; ++c) s->materials[0].albedo[c] = 1.0;
+    s->camera.eye = rrv__v3(0, 0, -0.5);
+    s->camera.look = rrv__v3(0, 0, 1);
+    s->settings.integrator = RRV_INTEGRATOR_EIKONAL;
+    s->settings.step = 1e-6;
+    s->settings.nee = RRV_NEE_NONE;
+    s->settings.max_depth = max_depth;
+    return s;
+}
+
+static void test_a_sample_of_long_legs_is_cut_at_its_work_bound(void)
+{
+    /* Two legs (max_depth 1) take E steps a sample, uncut; 1025 legs would
+       take ~512 E, over 50 times RRV_MAX_SAMPLE_WORK (measured: E = 2.7e6,
+       so 1.4e9 steps, minutes a sample).
+       With max_depth 1024 every sample must be cut at the sample's bound
+       (no leg at its own), counted, its steps (events here: no tracking)
+       at most the bound and at least a quarter of it (each step is a loop
+       iteration and an event, so the cut comes at half). */
+    rrv_scene *s = white_sphere_of_tiny_steps(1);
+    rrv_render_stats st;
+    rrv_error err;
+    float img[2 * 1 * 3];
+    double two_legs;
+    int i;
+    CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+    CHECKF(rrv__step_bound(s, RRV_INTEGRATOR_EIKONAL) == RRV_MAX_SEGMENT_STEPS, "step bound %ld",
+           rrv__step_bound(s, RRV_INTEGRATOR_EIKONAL));
+    CHECKF(rrv__sample_bound(s, RRV_INTEGRATOR_EIKONAL) == (uint64_t)RRV_MAX_SAMPLE_WORK, "sample bound %llu",
+           (unsigned long long)rrv__sample_bound(s, RRV_INTEGRATOR_EIKONAL));
+    memset(&st, 0, sizeof st);
+    memset(img, 0, sizeof img);
+    CHECK(rrv_render_rect(s, 0, 0, 2, 1, 0, 1, img, 2, &st, NULL) == RRV_OK);
+    two_legs = (double)st.events / (double)st.samples;
+    printf("  max_depth 1: %.3g steps a sample, %llu cut\n", two_legs, (unsigned long long)st.paths_cut);
+    CHECKF(st.samples == 2 && st.paths_cut == 0, "%llu samples, %llu cut", (unsigned long long)st.samples,
+           (unsigned long long)st.paths_cut);
+    CHECKF(two_legs * 512 > 50.0 * RRV_MAX_SAMPLE_WORK, "two legs take only %g steps", two_legs);
+    rrv_scene_free(s);
+
+    s = white_sphere_of_tiny_steps(1024);
+    CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+    memset(&st, 0, sizeof st);
+    memset(img, 0, sizeof img);
+    CHECK(rrv_render_rect(s, 0, 0, 2, 1, 0, 1, img, 2, &st, NULL) == RRV_OK);
+    printf("  max_depth 1024: %.3g steps a sample, %llu of %llu samples cut at the sample's bound\n",
+           (double)st.events / (double)st.samples, (unsigned long long)st.cut_samples,
+           (unsigned long long)st.samples);
+    CHECKF(st.samples == 2 && st.cut_samples == st.samples && st.paths_cut == st.cut_samples &&
+               st.cut_tracking == 0,
+           "%llu samples, %llu cut, %llu of them at the sample's bound", (unsigned long long)st.samples,
+           (unsigned long long)st.paths_cut, (unsigned long long)st.cut_samples);
+    CHECKF(st.events <= st.samples * (uint64_t)RRV_MAX_SAMPLE_WORK &&
+               st.events >= st.samples * (uint64_t)(RRV_MAX_SAMPLE_WORK / 4),
+           "%llu steps in %llu samples", (unsigned long long)st.events, (unsigned long long)st.samples);
+    /* what the cut samples gathered is kept: no light here, so 0, finite */
+    for (i = 0; i < 6; ++i) CHECKF(img[i] == 0.0f, "pixel value %g", img[i]);
+    rrv_scene_free(s);
+}
+
+static void test_a_deep_path_between_surfaces_alone_is_not_cut(void)
+{
+    /* No medium: the scene's term is the vertices' own iterations, so a
+       white room at max_depth 1024 (1025 legs of one iteration, nothing
+       to track) must render uncut with every integrator. */
+    static const rrv_integrator integrators[3] = {RRV_INTEGRATOR_CLASSIC, RRV_INTEGRATOR_REFRACTIVE,
+                                                  RRV_INTEGRATOR_EIKONAL};
+    int k;
+    for (k = 0; k < 3; ++k) {
+        rrv_scene *s = tb_scene(2, 1);
+        rrv_shape *room = tb_shape(s, RRV_SHAPE_SPHERE);
+        rrv_render_stats st;
+        rrv_error err;
+        float img[2 * 1 * 3];
+        int c;
+        room->center = rrv__v3(0, 0, 0);
+        room->radius = 0.9;
+        for (c = 0; c < 3; ++c) s->materials[0].albedo[c] = 1.0;
+        s->camera.eye = rrv__v3(0, 0, -0.5);
+        s->camera.look = rrv__v3(0, 0, 1);
+        s->settings.integrator = integrators[k];
+        s->settings.max_depth = 1024;
+        CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+        memset(&st, 0, sizeof st);
+        memset(img, 0, sizeof img);
+        CHECK(rrv_render_rect(s, 0, 0, 2, 1, 0, 4, img, 2, &st, NULL) == RRV_OK);
+        CHECKF(st.samples == 8 && st.paths_cut == 0, "integrator %d: %llu samples, %llu cut", k,
+               (unsigned long long)st.samples, (unsigned long long)st.paths_cut);
+        rrv_scene_free(s);
+    }
+}
+
 int main(void)
 {
     (void)tb_blobs; /* scene_builder.h's, unused here */
@@ -315,5 +425,7 @@ int main(void)
     RUN(test_finer_cells_never_cost_a_refusal);
     RUN(test_tracking_through_a_coarse_grid_is_unbiased);
     RUN(test_hostile_coarse_grids_take_bounded_work);
+    RUN(test_a_sample_of_long_legs_is_cut_at_its_work_bound);
+    RUN(test_a_deep_path_between_surfaces_alone_is_not_cut);
     return CHECK_EXIT_CODE();
 }
