@@ -5299,6 +5299,19 @@ static const double *rrv__chord_inv(const rrv__context *ctx, const rrv__bender *
                                                                                                       : NULL;
 }
 
+/* The first surface on the bender's planned segment from o along d, or 0
+   (also where the bender knows none reaches the segment). A surface lying
+   on the face that ends the segment belongs to it: looked for a gap past
+   the end, it cannot slip between this segment's end and the next one's
+   start. */
+static int rrv__segment_hit(const rrv__context *ctx, const rrv__bender *b, rrv_vec3 o, rrv_vec3 d, double segment,
+                            rrv__hit *hit)
+{
+    if (b->surface_free) return 0;
+    return rrv__intersect_line(ctx->scene, o, d, rrv__chord_inv(ctx, b, d),
+                               segment < DBL_MAX ? segment + rrv__face_gap(rrv__madd(o, d, segment)) : DBL_MAX, hit);
+}
+
 /* Refractive delta tracking: the seed paper's Algorithm 1, along one straight
    segment o + t d, t < tmax. With refract_nulls off (classic, and the comb
    and eikonal integrators, which bend only at segment ends) it is classic
@@ -5866,9 +5879,6 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             if (!cp.path.bender.pending) rrv__plan_segment(&cp.path.bender, scene, cp.o, &cp.d, rng);
             segment = cp.path.bender.segment;
         }
-        /* A surface lying on the face that ends the segment belongs to it:
-           looked for a gap past the end, it cannot slip between this
-           segment's end and the next one's start. */
         if (ctx->comb && cp.path.bender.surface_free && segment < DBL_MAX &&
             !cp.path.bender.support_in_extinction && !rrv__chord_meets_extinction(scene, cp.o, cp.d, segment)) {
             /* a chord with nothing to meet (as in the loop below), here also
@@ -5876,13 +5886,8 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             has_hit = 0;
             outcome = RRV__FLIGHT_PASSED;
         } else {
-            has_hit = ctx->bends && cp.path.bender.surface_free
-                          ? 0
-                          : rrv__intersect_line(scene, cp.o, cp.d, rrv__chord_inv(ctx, &cp.path.bender, cp.d),
-                                                segment < DBL_MAX
-                                                    ? segment + rrv__face_gap(rrv__madd(cp.o, cp.d, segment))
-                                                    : DBL_MAX,
-                                                &hit);
+            has_hit = ctx->bends ? rrv__segment_hit(ctx, &cp.path.bender, cp.o, cp.d, segment, &hit)
+                                 : rrv__intersect_line(scene, cp.o, cp.d, NULL, DBL_MAX, &hit);
             /* delta tracking along it, up to the surface if one is hit */
             outcome =
                 rrv__refractive_delta_tracking(ctx, &cp.path, cp.o, cp.d, has_hit ? hit.t : segment, rng, &flight);
@@ -7280,21 +7285,14 @@ static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *
     rrv__bender_start(&b, scene, ctx->eikonal, o);
     for (;;) {
         double segment, reach, Ts[3];
-        int has_hit, c;
+        int has_hit, c, end;
         if (++steps > ctx->step_bound) {
             ++ctx->stats.paths_cut;
             return -1;
         }
         if (!b.pending) rrv__plan_segment(&b, scene, o, d, rng);
         segment = b.segment;
-        /* a surface on the face that ends the segment belongs to it, as in
-           rrv__trace_path */
-        has_hit = b.surface_free ? 0
-                                 : rrv__intersect_scene(scene, o, *d,
-                                                        segment < DBL_MAX
-                                                            ? segment + rrv__face_gap(rrv__madd(o, *d, segment))
-                                                            : DBL_MAX,
-                                                        hit);
+        has_hit = rrv__segment_hit(ctx, &b, o, *d, segment, hit);
         if (!has_hit && !(segment < DBL_MAX)) return -2;
         reach = has_hit ? hit->t : segment;
         if (rrv__chord_meets_extinction(scene, o, *d, reach)) {
@@ -7303,9 +7301,11 @@ static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *
             if (!(T[0] > 0 || T[1] > 0 || T[2] > 0)) return -1;
         }
         if (has_hit) return hit->shape;
-        if (b.end == RRV__END_FACE && rrv__face_jumps(scene, rrv__madd(o, *d, segment), *d)) return -2;
-        if (b.end == RRV__END_KICK || b.end == RRV__END_STEP) ++ctx->stats.events;
+        end = b.end;
+        if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
         rrv__finish_segment(&b, scene, &o, d, rng);
+        /* the jump the face's crossing looked up, as the forward path reads it */
+        if (end == RRV__END_FACE && rrv__jump_counts(b.face_jump)) return -2;
     }
 }
 
