@@ -8,16 +8,12 @@
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
+#include "say.h"
 #include "scene_builder.h"
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-static int verbose;
-#define SAY(...)                                                                                                       \
-    do {                                                                                                               \
-        if (verbose) printf(__VA_ARGS__);                                                                              \
-    } while (0)
 
 typedef struct method {
     rrv_integrator integrator;
@@ -513,10 +509,9 @@ static void test_float_rounding_is_no_interface(void)
 
 int main(int argc, char **argv)
 {
-    const char *v = getenv("BOUNDARY_VERBOSE");
     (void)argc;
     (void)argv;
-    verbose = v && *v && *v != '0';
+    say_from_env("BOUNDARY_VERBOSE");
     RUN(test_surface_on_box_face);
     RUN(test_constant_ambient_ior_is_classic);
     RUN(test_interface_orders_from_outside);

@@ -19,14 +19,9 @@
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
+#include "say.h"
 #include "scene_builder.h"
 
-static int verbose;
-
-#define SAY(...)                                                                                                       \
-    do {                                                                                                               \
-        if (verbose) printf(__VA_ARGS__);                                                                              \
-    } while (0)
 
 /* ---- scenes ------------------------------------------------------------------------ */
 
@@ -1071,10 +1066,9 @@ static void test_cubic_setting_parsed(void)
 
 int main(int argc, char **argv)
 {
-    const char *v = getenv("GRIN_VERBOSE");
     (void)argc;
     (void)argv;
-    verbose = v && *v && *v != '0';
+    say_from_env("GRIN_VERBOSE");
     (void)tb_shape; /* the shared builder's; unused here */
     RUN(test_refract_identity);
     RUN(test_refract_denormal_gradient);

@@ -18,16 +18,12 @@
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
+#include "say.h"
 #include "scene_builder.h"
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-static int verbose;
-#define SAY(...)                                                                                                       \
-    do {                                                                                                               \
-        if (verbose) printf(__VA_ARGS__);                                                                              \
-    } while (0)
 
 /* ---- fields to differentiate ------------------------------------------------------- */
 
@@ -760,7 +756,7 @@ static void test_memo_and_kept_chords_change_nothing(void)
 
 int main(void)
 {
-    verbose = getenv("HESSIAN_VERBOSE") != NULL;
+    say_from_env("HESSIAN_VERBOSE");
     (void)tb_shape; /* the shared builder's; unused here */
     (void)tb_medium;
     RUN(test_ior_grid_trilinear);

@@ -12,16 +12,12 @@
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
+#include "say.h"
 #include "scene_builder.h"
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-static int verbose;
-#define SAY(...)                                                                                                       \
-    do {                                                                                                               \
-        if (verbose) printf(__VA_ARGS__);                                                                              \
-    } while (0)
 
 typedef struct method {
     rrv_integrator integrator;
@@ -354,10 +350,9 @@ static void test_triangle_light_irradiance(void) { light_shape_case(RRV_SHAPE_TR
 
 int main(int argc, char **argv)
 {
-    const char *v = getenv("INTEGRATORS_VERBOSE");
     (void)argc;
     (void)argv;
-    verbose = v && *v && *v != '0';
+    say_from_env("INTEGRATORS_VERBOSE");
     RUN(test_white_furnace_every_integrator);
     RUN(test_chromatic_furnace_every_integrator);
     RUN(test_refractive_furnace_lens);

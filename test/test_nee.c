@@ -48,16 +48,12 @@ static double aim_reach = 1.0;
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
+#include "say.h"
 #include "scene_builder.h"
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-static int verbose;
-#define SAY(...)                                                                                                       \
-    do {                                                                                                               \
-        if (verbose) printf(__VA_ARGS__);                                                                              \
-    } while (0)
 
 typedef struct method {
     rrv_integrator integrator;
@@ -118,6 +114,16 @@ static void block_samples_rect(const rrv_scene *s, int spp, int x0, int y0, int 
 static void block_samples(const rrv_scene *s, int spp, int bw, int bh, stats *blocks)
 {
     block_samples_rect(s, spp, 0, 0, s->camera.width, s->camera.height, bw, bh, blocks, NULL);
+}
+
+/* The blocks (bw x bw pixels) of the rectangle rendered by method m with
+   nee and seed, added into blocks. */
+static void render_blocks(rrv_scene *s, const method *m, rrv_nee nee, uint64_t seed, int spp, int x0, int y0, int x1,
+                          int y1, int bw, stats *blocks, rrv_render_stats *rs)
+{
+    use(s, m, nee);
+    s->settings.seed = seed;
+    block_samples_rect(s, spp, x0, y0, x1, y1, bw, bw, blocks, rs);
 }
 
 /* Blocks bx0..bx1-1, by0..by1-1 (row length per_row) of two independent
@@ -335,12 +341,8 @@ static void test_lens_caustic_shoot(void)
     memset(a, 0, sizeof a);
     memset(b, 0, sizeof b);
     memset(&rs, 0, sizeof rs);
-    use(s, &comb, RRV_NEE_NONE);
-    s->settings.seed = 4;
-    block_samples_rect(s, 640, x0, y0, x1, y1, BLOCK, BLOCK, a, NULL);
-    use(s, &eikonal, RRV_NEE_SHOOT);
-    s->settings.seed = 5;
-    block_samples_rect(s, 24, x0, y0, x1, y1, BLOCK, BLOCK, b, &rs);
+    render_blocks(s, &comb, RRV_NEE_NONE, 4, 640, x0, y0, x1, y1, BLOCK, a, NULL);
+    render_blocks(s, &eikonal, RRV_NEE_SHOOT, 5, 24, x0, y0, x1, y1, BLOCK, b, &rs);
     peak = blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, "lens caustic, eikonal shoot");
     SAY("  shoot: %llu solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, %.0f segments a chain\n",
         (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)rs.solves,
@@ -410,12 +412,8 @@ static void test_small_light_caustic_shoot(void)
     memset(a, 0, sizeof a);
     memset(b, 0, sizeof b);
     memset(&rs, 0, sizeof rs);
-    use(s, &comb, RRV_NEE_NONE);
-    s->settings.seed = 51;
-    block_samples_rect(s, 4096, x0, y0, x1, y1, BLOCK, BLOCK, a, NULL);
-    use(s, &eikonal, RRV_NEE_SHOOT);
-    s->settings.seed = 52;
-    block_samples_rect(s, 16, x0, y0, x1, y1, BLOCK, BLOCK, b, &rs);
+    render_blocks(s, &comb, RRV_NEE_NONE, 51, 4096, x0, y0, x1, y1, BLOCK, a, NULL);
+    render_blocks(s, &eikonal, RRV_NEE_SHOOT, 52, 16, x0, y0, x1, y1, BLOCK, b, &rs);
     peak = blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, "small light, eikonal shoot");
     SAY("  small light shoot: %llu solves, %.1f%% converged, %.1f iterations, %.2f trials a connection\n",
         (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)rs.solves,
@@ -503,9 +501,7 @@ static void test_lens_caustic_manifold(void)
     const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
     if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
     memset(a, 0, sizeof a);
-    use(s, &comb, RRV_NEE_NONE);
-    s->settings.seed = 40;
-    block_samples_rect(s, 640, x0, y0, x1, y1, BLOCK, BLOCK, a, NULL);
+    render_blocks(s, &comb, RRV_NEE_NONE, 40, 640, x0, y0, x1, y1, BLOCK, a, NULL);
     caustic_manifold_case(s, a, &eikonal, RRV_GAUGE_CHORD, 0, 8, 41, "manifold chord", 1);
     caustic_manifold_case(s, a, &comb, RRV_GAUGE_CHORD, 0, 8, 42, "manifold chord, comb", 1);
     /* The ISO gauge's vertices keep the chord's IOR levels, which the
@@ -544,12 +540,8 @@ static void test_fog_in_lens_shoot(void)
     memset(a, 0, sizeof a);
     memset(b, 0, sizeof b);
     memset(&rs, 0, sizeof rs);
-    use(s, &eikonal, RRV_NEE_NONE);
-    s->settings.seed = 7;
-    block_samples_rect(s, 1024, x0, y0, x1, y1, BLOCK, BLOCK, a, NULL);
-    use(s, &eikonal, RRV_NEE_SHOOT);
-    s->settings.seed = 8;
-    block_samples_rect(s, 16, x0, y0, x1, y1, BLOCK, BLOCK, b, &rs);
+    render_blocks(s, &eikonal, RRV_NEE_NONE, 7, 1024, x0, y0, x1, y1, BLOCK, a, NULL);
+    render_blocks(s, &eikonal, RRV_NEE_SHOOT, 8, 16, x0, y0, x1, y1, BLOCK, b, &rs);
     blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, "fog in the lens, eikonal shoot");
     SAY("  fog shoot: %llu solves, %.1f%% converged, %llu connections\n", (unsigned long long)rs.solves,
         100.0 * rs.solves_converged / (double)rs.solves, (unsigned long long)rs.solve_connections);
@@ -1380,9 +1372,7 @@ static void weak_haze_case(const char *text, size_t size, const char *what)
     use(s, &comb, RRV_NEE_NONE);
     s->settings.seed = 51;
     block_samples(s, 512, 6, 6, a);
-    use(s, &comb, RRV_NEE_AIM);
-    s->settings.seed = 52;
-    block_samples_rect(s, 64, 0, 0, 24, 24, 6, 6, b, &rs);
+    render_blocks(s, &comb, RRV_NEE_AIM, 52, 64, 0, 0, 24, 24, 6, b, &rs);
     blocks_agree(a, b, 4, 0, 0, 4, 4, what);
     for (i = 0; i < 16; ++i) {
         va += sample_variance(&a[i]);
@@ -1396,9 +1386,7 @@ static void weak_haze_case(const char *text, size_t size, const char *what)
     /* eikonal shoot solves these connections; it agrees with none too */
     memset(b, 0, sizeof b);
     memset(&rs, 0, sizeof rs);
-    use(s, &eikonal, RRV_NEE_SHOOT);
-    s->settings.seed = 53;
-    block_samples_rect(s, 64, 0, 0, 24, 24, 6, 6, b, &rs);
+    render_blocks(s, &eikonal, RRV_NEE_SHOOT, 53, 64, 0, 0, 24, 24, 6, b, &rs);
     SAY("  %s, eikonal shoot: %llu solves, %.1f%% converged\n", what, (unsigned long long)rs.solves,
         100.0 * (double)rs.solves_converged / (double)rs.solves);
     CHECK(rs.solves > 0 && rs.aim_shots == 0);
@@ -1437,9 +1425,7 @@ static void test_two_lights_aim(void)
     memset(a, 0, sizeof a);
     memset(b, 0, sizeof b);
     memset(&rs, 0, sizeof rs);
-    use(s, &comb, RRV_NEE_NONE);
-    s->settings.seed = 61;
-    block_samples_rect(s, 640, x0, y0, x1, y1, BLOCK, BLOCK, a, NULL);
+    render_blocks(s, &comb, RRV_NEE_NONE, 61, 640, x0, y0, x1, y1, BLOCK, a, NULL);
     use(s, &comb, RRV_NEE_AIM);
     s->settings.seed = 62;
     aim_reach = 1e30; /* aim through the lens too */
@@ -1669,9 +1655,8 @@ static void test_weak_class_flat_support(void)
 
 int main(void)
 {
-    const char *v = getenv("NEE_VERBOSE");
     only = getenv("NEE_ONLY");
-    verbose = v && *v && *v != '0';
+    say_from_env("NEE_VERBOSE");
     (void)tb_shape; /* the caustic scene is parsed, not built */
     NEE_RUN(test_nee_key);
     NEE_RUN(test_nee_key_rejects_unknown_mode);
