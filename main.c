@@ -832,6 +832,8 @@ static void add_stats(rrv_render_stats *into, const rrv_render_stats *from)
     into->solves_unsupported += from->solves_unsupported;
     into->aim_shots += from->aim_shots;
     into->aim_missed += from->aim_missed;
+    into->cone_shots += from->cone_shots;
+    into->cone_counted += from->cone_counted;
     into->cut_samples += from->cut_samples;
 }
 
@@ -1487,6 +1489,9 @@ static void print_render_summary(int width, int height, int spp, double seconds,
     if (stats->aim_shots > 0)
         fprintf(stderr, "; aimed nee: %" PRIu64 " bent shadow rays, %.1f%% turned off their light", stats->aim_shots,
                 100.0 * (double)stats->aim_missed / (double)stats->aim_shots);
+    if (stats->cone_shots > 0)
+        fprintf(stderr, "; %" PRIu64 " rays drawn toward strong refraction, %.2f%% landed on a light past a weak chord",
+                stats->cone_shots, 100.0 * (double)stats->cone_counted / (double)stats->cone_shots);
     if (stats->solves_unsupported > 0)
         fprintf(stderr, "; %" PRIu64 " vertices had no curved nee (the poisson and midpoint schemes cannot aim, "
                 "manifold needs an IOR with a known Hessian): their curved connections were left to forward paths",

@@ -1031,6 +1031,10 @@ typedef struct rrv_render_stats {
     uint64_t aim_missed;        /* of which refraction turned off their light (they
                                    met another surface, left the scene or met a
                                    sharp interface); the rest landed or were absorbed */
+    /* nee shoot and manifold, toward strongly refracting supports: */
+    uint64_t cone_shots;        /* bent rays drawn in a support's cone (a lens's) for
+                                   the paths no solve stands for (rrv__cone_nee) */
+    uint64_t cone_counted;      /* of which one landed on a light as such a path */
     uint64_t cut_samples;       /* of paths_cut, camera paths cut at the bound on a
                                    whole sample's work (see BOUNDS) */
 } rrv_render_stats;
@@ -5147,6 +5151,13 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
 #define RRV__AIM_REACH 1.0
 #endif
 
+/* The supports toward which nee shoot and manifold draw rays of their own
+   (rrv__cone_nee): those that can turn a ray by more than RRV__CONE_BEND
+   radians across their diameter, at most RRV__CONE_MAX, the first listed.
+   Efficiency only: the estimate is unbiased with any choice. */
+#define RRV__CONE_BEND 0.05
+#define RRV__CONE_MAX 8
+
 typedef struct rrv__context {
     const rrv_scene *scene;
     int refract_nulls;       /* refract at null events (Poisson, midpoint schemes) */
@@ -5163,6 +5174,9 @@ typedef struct rrv__context {
     int aim;                 /* nee aim: bent shadow rays aimed at light
                                 samples (also shoot where it cannot solve) */
     double eta_floor;        /* the lowest eta anywhere (nee shoot and manifold's class) */
+    int cone_count;          /* strongly refracting supports (rrv__cone_setup) */
+    rrv_vec3 cone_center[RRV__CONE_MAX]; /* and the spheres that bound them */
+    double cone_radius[RRV__CONE_MAX];
     double eta_camera2;      /* (1 + r at the camera)^2: radiance scales as eta^2 */
     double thermal_scale;    /* blackbody radiance at the camera over that in
                                 ambient air: (eta_camera / eta_ambient)^2 */
@@ -5631,6 +5645,9 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
                               rrv__rng *rng);
 static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
 static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w);
+static double rrv__cone_pdf(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0);
+static void rrv__cone_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
+static void rrv__cone_setup(rrv__context *ctx);
 static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, rrv__rng *rng, rrv_vec3 *y, rrv_vec3 *ny,
                                              double *pdf_area);
 #define RRV__CHAIN_MAX 512 /* comb planes a manifold chain may have (more: wider spacing) */
@@ -5643,6 +5660,7 @@ static void rrv__curved_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, con
 {
     if (ctx->shoot) rrv__shoot_nee(ctx, path, x0, v, rng);
     else if (ctx->manifold) rrv__manifold_nee(ctx, path, x0, v, rng);
+    if (ctx->shoot || ctx->manifold) rrv__cone_nee(ctx, path, x0, v, rng);
     else if (ctx->aim) rrv__aim_nee(ctx, path, x0, v, rng);
     else if (ctx->partition) ++ctx->stats.solves_unsupported;
 }
@@ -5781,8 +5799,8 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
                            : 0;
             if (!(ctx->partition && cp->touched) || weak == 1)
                 w = rrv__power_heuristic(cp->prev_pdf, rrv__emitter_pdf(s, cp->vertex, x, n) / rrv__light_choices(scene));
-            else if (weak == 2)
-                w = 1.0; /* a root no light sample stands for */
+            else if (weak == 2) /* a root no light sample stands for: the cones' (rrv__cone_nee) */
+                w = rrv__power_heuristic(cp->prev_pdf, rrv__cone_pdf(ctx, cp->vertex, cp->w0));
             else if (ctx->shoot && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
                 w = rrv__shoot_forward_weight(ctx, cp->vertex, cp->w0, cp->prev_pdf, s, x); /* MIS with shooting */
             else if (ctx->manifold && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
@@ -6167,6 +6185,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
         }
         ctx.eta_floor = rrv__maxd(ctx.eta_floor, RRV_MIN_IOR);
     }
+    if (ctx.shoot || ctx.manifold) rrv__cone_setup(&ctx);
     if (ctx.manifold && !(ctx.chain = rrv__chain_new(RRV__CHAIN_MAX)))
         return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "rrv_render_rect: out of memory for nee manifold's chain");
     rrv__camera_setup(&scene->camera, &frame);
@@ -6225,6 +6244,8 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
         stats->solves_unsupported += ctx.stats.solves_unsupported;
         stats->aim_shots += ctx.stats.aim_shots;
         stats->aim_missed += ctx.stats.aim_missed;
+        stats->cone_shots += ctx.stats.cone_shots;
+        stats->cone_counted += ctx.stats.cone_counted;
         stats->cut_samples += ctx.stats.cut_samples;
     }
     rrv__chain_delete(ctx.chain);
@@ -7338,6 +7359,155 @@ static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const 
     }
     pdf_dir = rrv__vertex_pdf(v, w0);
     k = rrv__power_heuristic(pdf_aim, pdf_dir) / pdf_aim * rrv__eta_scale(ctx, hit.p) * rrv__path_mis(path);
+    for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
+}
+
+/* ---- rays drawn toward strong supports: the roots of weak chords ---------------------
+   A connection whose straight chord passes beside a lens is straight
+   NEE's (rrv__weak_chord), yet the lens may bend other rays from x0 onto
+   the same point of the light: roots of that chord that no light sample
+   stands for (rrv__forward_weak 2). Forward paths find them only as often
+   as the vertex's own sampling sends rays into the lens, and carry the
+   light's full radiance when they do: under small lights the heaviest
+   tail of nee shoot's error (README.md, "Weak connections"). So where a
+   support turns rays strongly, nee shoot and manifold also draw at every
+   vertex outside it one direction w0 uniformly in the cone of the sphere
+   that bounds it (one support picked uniformly among those whose sphere
+   does not hold x0), trace the bent ray along w0 as camera rays are traced,
+   and count the light it lands on if the path is such a root. The density
+   of w0 (rrv__cone_pdf) is a function of x0 and w0 alone, so the power
+   heuristic against the vertex's own sampling is exact, and a forward
+   path of that class weighs itself the same way. No light sample, no
+   solve: the cost of one shadow ray. */
+
+/* The strongly refracting supports of the scene and the spheres that
+   bound them: a Luneburg or fish-eye profile's own sphere, else the
+   medium's box's. Strong: the majorant's peak |grad eta| over the lowest
+   eta, times the diameter, exceeds RRV__CONE_BEND. */
+static void rrv__cone_setup(rrv__context *ctx)
+{
+    const rrv_scene *scene = ctx->scene;
+    int i;
+    ctx->cone_count = 0;
+    for (i = 0; i < scene->medium_count && ctx->cone_count < RRV__CONE_MAX; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        rrv_vec3 center;
+        double radius;
+        if (!rrv__medium_refracts(m) || !m->majorant) continue;
+        if (rrv__has_sphere_support(m)) {
+            center = m->ior.center;
+            radius = m->ior.radius;
+        } else {
+            center = rrv__scale(rrv__add(m->lo, m->hi), 0.5);
+            radius = 0.5 * rrv__length(rrv__sub(m->hi, m->lo));
+        }
+        if (!(radius > 0) || !((double)m->majorant->grad_peak * 2.0 * radius / ctx->eta_floor > RRV__CONE_BEND)) continue;
+        ctx->cone_center[ctx->cone_count] = center;
+        ctx->cone_radius[ctx->cone_count++] = radius;
+    }
+}
+
+/* The squared sine of the half angle of support k's cone from x0 (*axis
+   from x0 to its centre, *dist its length), or 0 where x0 is inside its
+   sphere: no cone. */
+static double rrv__cone_sin2(const rrv__context *ctx, int k, rrv_vec3 x0, rrv_vec3 *axis, double *dist)
+{
+    double r = ctx->cone_radius[k], d2;
+    *axis = rrv__sub(ctx->cone_center[k], x0);
+    d2 = rrv__dot(*axis, *axis);
+    if (!(d2 > r * r * (1.0 + 1e-9))) return 0.0;
+    *dist = sqrt(d2);
+    return r * r / d2;
+}
+
+/* The solid-angle density with which rrv__cone_nee draws w0 from x0. */
+static double rrv__cone_pdf(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0)
+{
+    double sum = 0;
+    int k, eligible = 0;
+    for (k = 0; k < ctx->cone_count; ++k) {
+        rrv_vec3 axis;
+        double dist = 1, sin2 = rrv__cone_sin2(ctx, k, x0, &axis, &dist), cos_max;
+        if (!(sin2 > 0)) continue;
+        ++eligible;
+        cos_max = sqrt(1.0 - sin2);
+        /* over 2 pi (1 - cos_max), without the cancellation of small cones */
+        if (rrv__dot(w0, axis) >= cos_max * dist) sum += (1.0 + cos_max) / (2.0 * RRV__PI * sin2);
+    }
+    return eligible ? sum / eligible : 0.0;
+}
+
+/* A direction from x0 uniform in the cone of one strong support, picked
+   uniformly among those whose sphere does not hold x0, and its density
+   (rrv__cone_pdf); 0 where no support has a cone from x0 (nothing drawn)
+   or the direction rounded out of its cone. */
+static double rrv__cone_sample(const rrv__context *ctx, rrv_vec3 x0, rrv__rng *rng, rrv_vec3 *w0)
+{
+    rrv_vec3 axis = {0, 0, 1}, t, b;
+    double dist = 1, sin2 = 0, u, u1, u2, one_minus_cos, sin_t;
+    int pick, eligible = 0, k;
+    for (k = 0; k < ctx->cone_count; ++k)
+        if (rrv__cone_sin2(ctx, k, x0, &axis, &dist) > 0) ++eligible;
+    if (!eligible) return 0.0;
+    /* one statement each: C leaves the order of arguments unspecified */
+    u = rrv__uniform(rng);
+    u1 = rrv__uniform(rng);
+    u2 = rrv__uniform(rng);
+    pick = (int)(u * eligible);
+    if (pick >= eligible) pick = eligible - 1;
+    for (k = 0; k < ctx->cone_count; ++k) {
+        sin2 = rrv__cone_sin2(ctx, k, x0, &axis, &dist);
+        if (sin2 > 0 && pick-- == 0) break;
+    }
+    /* 1 - cos theta uniform on [0, 1 - cos_max] */
+    one_minus_cos = u1 * sin2 / (1.0 + sqrt(1.0 - sin2));
+    sin_t = sqrt(fmax(0.0, one_minus_cos * (2.0 - one_minus_cos)));
+    axis = rrv__scale(axis, 1.0 / dist);
+    rrv__frame(axis, &t, &b);
+    *w0 = rrv__normalize(rrv__add(rrv__scale(axis, 1.0 - one_minus_cos),
+                                  rrv__add(rrv__scale(t, sin_t * cos(2.0 * RRV__PI * u2)),
+                                           rrv__scale(b, sin_t * sin(2.0 * RRV__PI * u2)))));
+    return rrv__cone_pdf(ctx, x0, *w0);
+}
+
+/* Where the bent ray from x0 along w0 lands as a root of a weak chord
+   (rrv__forward_weak 2) on the front of a quad or triangle light: that
+   light (*hit, T the transmittance up to it), else NULL. */
+static const rrv_shape *rrv__cone_trace(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv__rng *rng, rrv__hit *hit,
+                                        double T[3])
+{
+    const rrv_shape *s;
+    rrv_vec3 d = w0;
+    double to_x;
+    int met = rrv__aim_trace(ctx, x0, &d, rng, hit, T);
+    if (met < 0) return NULL;
+    s = &ctx->scene->shapes[met];
+    if (s->kind == RRV_SHAPE_SPHERE || !(s->L[0] > 0 || s->L[1] > 0 || s->L[2] > 0) || !(rrv__dot(hit->n, d) < 0))
+        return NULL;
+    to_x = rrv__length(rrv__sub(hit->p, x0));
+    if (!(to_x > 0) || rrv__forward_weak(ctx, x0, w0, rrv__scale(rrv__sub(hit->p, x0), 1.0 / to_x), to_x) != 2)
+        return NULL;
+    return s;
+}
+
+/* The ray toward a strong support from vertex x0 (the section's comment
+   says why it is unbiased). Draws no random number where no support has
+   a cone from x0, so scenes without strong supports render as before. */
+static void rrv__cone_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
+{
+    rrv_vec3 w0;
+    rrv__hit hit;
+    double pdf_cone = rrv__cone_sample(ctx, x0, rng, &w0), f[3], T[3], k;
+    const rrv_shape *s;
+    int c;
+    if (!(pdf_cone > 0) || !(pdf_cone < DBL_MAX)) return;
+    rrv__vertex_eval(v, w0, f);
+    if (!(f[0] > 0 || f[1] > 0 || f[2] > 0)) return;
+    ++ctx->stats.cone_shots;
+    if (!(s = rrv__cone_trace(ctx, x0, w0, rng, &hit, T))) return;
+    ++ctx->stats.cone_counted;
+    k = rrv__power_heuristic(pdf_cone, rrv__vertex_pdf(v, w0)) / pdf_cone * rrv__eta_scale(ctx, hit.p) *
+        rrv__path_mis(path);
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
 

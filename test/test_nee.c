@@ -348,7 +348,10 @@ static void test_lens_caustic_shoot(void)
         (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)rs.solves,
         rs.solve_iterations / (double)rs.solves, rs.solve_trials / (double)rs.solve_connections,
         rs.solve_segments / (double)rs.solves_converged);
+    SAY("  shoot's rays toward the lens: %llu, %llu of them landed as roots of weak chords\n",
+        (unsigned long long)rs.cone_shots, (unsigned long long)rs.cone_counted);
     CHECK(rs.solves > 0 && rs.solve_connections > 0 && rs.solves_unsupported == 0);
+    CHECK(rs.cone_shots > 0 && rs.cone_counted > 0);
     /* the curved connections do the work: per sample, the caustic's
        variance is far below that of forward tracing (measured 41x) */
     {
@@ -415,9 +418,11 @@ static void test_small_light_caustic_shoot(void)
     render_blocks(s, &comb, RRV_NEE_NONE, 51, 4096, x0, y0, x1, y1, BLOCK, a, NULL);
     render_blocks(s, &eikonal, RRV_NEE_SHOOT, 52, 16, x0, y0, x1, y1, BLOCK, b, &rs);
     peak = blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, "small light, eikonal shoot");
-    SAY("  small light shoot: %llu solves, %.1f%% converged, %.1f iterations, %.2f trials a connection\n",
+    SAY("  small light shoot: %llu solves, %.1f%% converged, %.1f iterations, %.2f trials a connection; %llu rays "
+        "toward the lens, %llu of them counted (roots of weak chords)\n",
         (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)rs.solves,
-        rs.solve_iterations / (double)rs.solves, rs.solve_trials / (double)rs.solve_connections);
+        rs.solve_iterations / (double)rs.solves, rs.solve_trials / (double)rs.solve_connections,
+        (unsigned long long)rs.cone_shots, (unsigned long long)rs.cone_counted);
     /* the target for the caustic scene: 90 % of solves converge */
     CHECKF(rs.solves > 1000 && rs.solves_converged >= 0.9 * rs.solves, "%llu of %llu solves converged",
            (unsigned long long)rs.solves_converged, (unsigned long long)rs.solves);
@@ -1489,6 +1494,151 @@ static void test_aim_weights_sum_to_one(void)
     rrv_scene_free(s);
 }
 
+/* The rays nee shoot draws toward strong supports (rrv__cone_nee).
+   (1) Their density: two lenses whose cones from x0 overlap; the mean of
+   1 / pdf over the sampler's directions is the solid angle of the union of
+   the cones, which uniform directions on the sphere also measure; and
+   pdf integrates to 1 over the sphere. Both within 4 standard errors.
+   (2) What they carry, at floor points beside the lens of the caustic
+   scene: the light that reaches x0 as a root of a weak chord (the lens
+   bends it onto a point whose chord passes beside the lens), estimated by
+   the vertex's cosine sampling (the forward path's way) and by the cones;
+   the two agree within 4 standard errors, and their MIS combination,
+   which is what renders, agrees with both. */
+static const char two_lens_text[] =
+    "camera eye 0 0.6 -1.8  look 0 0 0.2  up 0 1 0  fov 40  resolution 8 8\n"
+    "render maxdepth 1 step 0.01\n"
+    "quad origin -0.5 3 -0.5  u 1 0 0  v 0 0 1  L 10 10 10\n"
+    "medium a box -0.5 0.7 -0.5 0.5 1.7 0.5  sigma_a 0 0 0  sigma_s 0 0 0\n"
+    "ior a luneburg center 0 1.2 0 radius 0.5\n"
+    "medium b box 0.1 0.6 -0.4 0.9 1.4 0.4  sigma_a 0 0 0  sigma_s 0 0 0\n"
+    "ior b luneburg center 0.5 1.0 0 radius 0.4\n";
+
+static void cone_context(rrv__context *ctx, const rrv_scene *s)
+{
+    solver_context(ctx, s);
+    ctx->partition = ctx->shoot = ctx->sample_lights = 1;
+    ctx->eta_floor = 1;
+    ctx->step_bound = rrv__step_bound(s, RRV_INTEGRATOR_EIKONAL);
+    rrv__cone_setup(ctx);
+}
+
+static void test_cone_density(void)
+{
+    rrv_scene *s = NULL;
+    rrv__context ctx;
+    rrv__rng rng;
+    const rrv_vec3 x0 = rrv__v3(0.2, 0.0, -0.3);
+    stats inv, in_union, whole;
+    int k;
+    if (!(s = parse_text(two_lens_text, sizeof two_lens_text - 1, "two lenses"))) return;
+    cone_context(&ctx, s);
+    CHECKF(ctx.cone_count == 2, "two lenses: %d strong supports", ctx.cone_count);
+    memset(&inv, 0, sizeof inv);
+    memset(&in_union, 0, sizeof in_union);
+    memset(&whole, 0, sizeof whole);
+    rrv__rng_seed(&rng, 61, 0, 0);
+    for (k = 0; k < 200000; ++k) {
+        rrv_vec3 w;
+        double pdf = rrv__cone_sample(&ctx, x0, &rng, &w), u1, u2;
+        if (pdf > 0) stats_add(&inv, 1.0 / pdf);
+        else stats_add(&inv, 0.0);
+        u1 = rrv__uniform(&rng);
+        u2 = rrv__uniform(&rng);
+        w = rrv__sample_uniform_sphere(u1, u2);
+        pdf = rrv__cone_pdf(&ctx, x0, w);
+        stats_add(&in_union, pdf > 0 ? 4.0 * RRV__PI : 0.0);
+        stats_add(&whole, 4.0 * RRV__PI * pdf);
+    }
+    SAY("  cones: union %.5f +- %.5f sr from the sampler, %.5f +- %.5f sr by uniform directions; "
+        "integral of pdf %.5f +- %.5f\n",
+        stats_mean(&inv), stats_se(&inv), stats_mean(&in_union), stats_se(&in_union), stats_mean(&whole),
+        stats_se(&whole));
+    CHECKF(fabs(stats_mean(&inv) - stats_mean(&in_union)) <=
+               4 * sqrt(stats_se(&inv) * stats_se(&inv) + stats_se(&in_union) * stats_se(&in_union)),
+           "cones' union: %.5f from the sampler, %.5f by uniform directions", stats_mean(&inv),
+           stats_mean(&in_union));
+    CHECKF(fabs(stats_mean(&whole) - 1.0) <= 4 * stats_se(&whole), "cones' pdf integrates to %.5f +- %.5f",
+           stats_mean(&whole), stats_se(&whole));
+    /* x0 inside a lens's sphere has no cone toward it */
+    {
+        /* inside lens a, outside lens b: only b's cone */
+        rrv_vec3 inside_a = rrv__v3(0, 1.2, 0), to_b = rrv__normalize(rrv__sub(rrv__v3(0.5, 1.0, 0), inside_a));
+        CHECK(rrv__cone_pdf(&ctx, inside_a, to_b) > 0 && rrv__cone_pdf(&ctx, inside_a, rrv__scale(to_b, -1.0)) == 0);
+        ctx.cone_count = 1;
+        CHECK(rrv__cone_pdf(&ctx, inside_a, to_b) == 0);
+    }
+    rrv_scene_free(s);
+}
+
+static void test_cone_weak_roots(void)
+{
+    rrv_scene *s = NULL;
+    rrv__context ctx;
+    rrv__rng rng;
+    rrv__vertex_bsdf vb;
+    static const double xs[2] = {1.3, -0.8};
+    int p;
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
+    cone_context(&ctx, s);
+    CHECK(ctx.cone_count == 1);
+    memset(&vb, 0, sizeof vb);
+    vb.surface = 1;
+    vb.n = rrv__v3(0, 1, 0);
+    vb.albedo[0] = vb.albedo[1] = vb.albedo[2] = 1;
+    rrv__rng_seed(&rng, 62, 0, 0);
+    for (p = 0; p < 2; ++p) {
+        const rrv_vec3 x0 = rrv__v3(xs[p], 1e-5, 0.1);
+        stats fwd, cone, mis;
+        int k, landed_fwd = 0, landed_cone = 0;
+        double d, se;
+        memset(&fwd, 0, sizeof fwd);
+        memset(&cone, 0, sizeof cone);
+        memset(&mis, 0, sizeof mis);
+        for (k = 0; k < 200000; ++k) {
+            rrv__hit hit;
+            rrv_vec3 w;
+            double T[3], u1, u2, pdf_dir, pdf_cone, a = 0, b = 0;
+            const rrv_shape *light;
+            u2 = rrv__uniform(&rng);
+            u1 = rrv__uniform(&rng);
+            w = rrv__sample_cosine_hemisphere(vb.n, u1, u2);
+            pdf_dir = rrv__vertex_pdf(&vb, w);
+            if ((light = rrv__cone_trace(&ctx, x0, w, &rng, &hit, T))) {
+                ++landed_fwd;
+                a = T[0] * light->L[0]; /* f / pdf = albedo */
+                b = a * rrv__power_heuristic(pdf_dir, rrv__cone_pdf(&ctx, x0, w));
+            }
+            stats_add(&fwd, a);
+            pdf_cone = rrv__cone_sample(&ctx, x0, &rng, &w);
+            a = 0;
+            if (pdf_cone > 0 && (light = rrv__cone_trace(&ctx, x0, w, &rng, &hit, T))) {
+                double f = rrv__vertex_pdf(&vb, w); /* the cosine lobe over pi, albedo 1 */
+                ++landed_cone;
+                a = f * T[0] * light->L[0] / pdf_cone;
+                b += a * rrv__power_heuristic(pdf_cone, f);
+            }
+            stats_add(&cone, a);
+            stats_add(&mis, b);
+        }
+        d = stats_mean(&fwd) - stats_mean(&cone);
+        se = sqrt(stats_se(&fwd) * stats_se(&fwd) + stats_se(&cone) * stats_se(&cone));
+        SAY("  weak chords' roots at x = %.2f: forward %.4f +- %.4f (%d landed), cones %.4f +- %.4f (%d landed), "
+            "both by MIS %.4f +- %.4f\n",
+            xs[p], stats_mean(&fwd), stats_se(&fwd), landed_fwd, stats_mean(&cone), stats_se(&cone), landed_cone,
+            stats_mean(&mis), stats_se(&mis));
+        CHECKF(landed_fwd > 100 && landed_cone > 3 * landed_fwd, "x = %.2f: %d forward and %d cone rays landed",
+               xs[p], landed_fwd, landed_cone);
+        CHECKF(fabs(d) <= 4 * se, "x = %.2f: forward %.4f, cones %.4f, difference %.4f over 4 se %.4f", xs[p],
+               stats_mean(&fwd), stats_mean(&cone), d, 4 * se);
+        d = stats_mean(&mis) - stats_mean(&cone);
+        se = sqrt(stats_se(&mis) * stats_se(&mis) + stats_se(&cone) * stats_se(&cone));
+        CHECKF(fabs(d) <= 4 * se, "x = %.2f: MIS %.4f, cones %.4f, difference %.4f over 4 se %.4f", xs[p],
+               stats_mean(&mis), stats_mean(&cone), d, 4 * se);
+    }
+    rrv_scene_free(s);
+}
+
 /* NEE_ONLY=NAME runs only the tests whose name contains NAME (development). */
 static const char *only;
 #define NEE_RUN(fn)                                                                                                    \
@@ -1670,6 +1820,8 @@ int main(void)
     NEE_RUN(test_weak_haze_aim);
     NEE_RUN(test_two_lights_aim);
     NEE_RUN(test_aim_weights_sum_to_one);
+    NEE_RUN(test_cone_density);
+    NEE_RUN(test_cone_weak_roots);
     NEE_RUN(test_lens_caustic_manifold);
     NEE_RUN(test_luneburg_two_point);
     NEE_RUN(test_jacobian_against_differences);
