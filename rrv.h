@@ -210,7 +210,13 @@
      same function of its two ends, and, if its chord is weak but the path
      itself turned (it left x0 at an angle to the chord larger than the
      chord's bound on bending), it is another root of those two ends that no
-     light sample stands for, so it counts with weight 1. A build may set
+     light sample stands for. With aim it counts with weight 1; with shoot
+     and manifold it is shared by the power heuristic with one more ray a
+     vertex, drawn uniformly in the cone of a strongly refracting support
+     (one that can turn a ray by more than 0.05 rad across it: a lens) and
+     traced bent, which counts the light it lands on only for such roots
+     (rrv__cone_nee; the cone's density is a function of x0 and w0, so the
+     weights are exact). A build may set
      RRV__WEAK_BEND to K > 0 to treat chords whose bound on bending (the
      integral along the chord of each majorant cell's max |grad eta| over
      the lowest eta) is at most K bend tolerances as straight too: on weak
@@ -7077,8 +7083,9 @@ static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, doub
    bound leaves within that angle of it); 2 if the chord is weak but the
    path left at a wider angle: another root of the same two ends (a ray
    bent by a lens into a point whose chord only grazes it), which straight
-   NEE never samples and curved NEE skips for weak chords, so the forward
-   path alone counts it, weight 1. */
+   NEE never samples and curved NEE skips for weak chords: the forward path
+   counts it in full, or with shoot and manifold shares it with the rays
+   drawn toward strong supports (rrv__cone_nee). */
 static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len)
 {
     double bound;
