@@ -636,6 +636,15 @@ static rrv_scene *lens_scene(double step, rrv_stepper stepper)
     return s;
 }
 
+/* A vertex on a white floor facing up (y). */
+static void white_floor_vertex(rrv__vertex_bsdf *vb)
+{
+    memset(vb, 0, sizeof *vb);
+    vb->surface = 1;
+    vb->n = rrv__v3(0, 1, 0);
+    vb->albedo[0] = vb->albedo[1] = vb->albedo[2] = 1;
+}
+
 static void solver_context(rrv__context *ctx, const rrv_scene *s)
 {
     memset(ctx, 0, sizeof *ctx);
@@ -1582,10 +1591,7 @@ static void test_cone_weak_roots(void)
     if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
     cone_context(&ctx, s);
     CHECK(ctx.cone_count == 1);
-    memset(&vb, 0, sizeof vb);
-    vb.surface = 1;
-    vb.n = rrv__v3(0, 1, 0);
-    vb.albedo[0] = vb.albedo[1] = vb.albedo[2] = 1;
+    white_floor_vertex(&vb);
     rrv__rng_seed(&rng, 62, 0, 0);
     for (p = 0; p < 2; ++p) {
         const rrv_vec3 x0 = rrv__v3(xs[p], 1e-5, 0.1);
@@ -1670,10 +1676,7 @@ static void test_partition_manifold(void)
     }
     solver_context(&ctx, s);
     ctx.partition = ctx.manifold = 1;
-    memset(&vb, 0, sizeof vb);
-    vb.surface = 1;
-    vb.n = rrv__v3(0, 1, 0);
-    vb.albedo[0] = vb.albedo[1] = vb.albedo[2] = 1;
+    white_floor_vertex(&vb);
     rrv__rng_seed(&rng, 23, 0, 0);
     for (k = 0; k < 300; ++k) {
         rrv_vec3 x0 = rrv__v3(4.0 * rrv__uniform(&rng) - 2.0, 1e-5, 4.0 * rrv__uniform(&rng) - 2.0);
