@@ -4595,6 +4595,8 @@ typedef struct rrv__bender {
                                   medium with extinction: every chord in it
                                   meets extinction (rrv__chord_meets_extinction) */
     uint64_t holds_support;    /* bit i: media[i]'s box holds the sole support's */
+    double inv_tolerance;      /* 1 / bend_tolerance, for the comb's spacings
+                                  (a division a kick before) */
     int chord_inside;  /* the planned segment is a comb chord with both ends
                           inside the sole support (its end by more than
                           rounding): walkers of a medium whose box holds the
@@ -4634,6 +4636,7 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikona
     if (supports != 1 || rrv__has_sphere_support(b->sole_support)) b->sole_support = NULL;
     b->support_in_extinction = 0;
     b->holds_support = 0;
+    b->inv_tolerance = 1.0 / scene->settings.bend_tolerance;
     b->chord_inside = 0;
     for (i = 0; b->sole_support && i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i], *s = b->sole_support;
@@ -4749,12 +4752,12 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
    grid round differently (by ~1e-7): their kicks move by as much. DBL_MAX if the ray leaves the box first. A DDA of its own,
    with the steps of the majorant iterator's; inv_d holds the reciprocals of
    d's components (the chord's, computed once for its whole line). */
-static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x, rrv_vec3 d, const double inv_d[3],
-                                 double tau, double inv_tolerance, int *entering)
+static double rrv__rate_distance(const struct rrv__majorant_grid *g, const rrv_vec3 *x, const rrv_vec3 *d,
+                                 const double inv_d[3], double tau, double inv_tolerance, int *entering)
 {
     /* arrays, not rrv__axis: the comb calls this at every kick, and the
        per-axis selects and library fmin calls were half its cost */
-    const double xs[3] = {x.x, x.y, x.z}, ds[3] = {d.x, d.y, d.z};
+    const double xs[3] = {x->x, x->y, x->z}, ds[3] = {d->x, d->y, d->z};
     const double lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
     const double inv_cell[3] = {g->inv_cell.x, g->inv_cell.y, g->inv_cell.z};
     const float *grad = g->grad_max, *wanders = g->jacobian_wander;
@@ -4818,7 +4821,7 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
         if (cell[a] < 0 || cell[a] >= g->n[a]) return DBL_MAX;
         idx += stride[a];
         if ((grad[idx] > 0) != in_gradient) {
-            if (t > RRV__EDGE_NUDGE * (1.0 + rrv__length(x))) {
+            if (t > RRV__EDGE_NUDGE * (1.0 + rrv__length(*x))) {
                 *entering = in_gradient ? -1 : 1;
                 return t;
             }
@@ -4846,8 +4849,9 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
    1 / mu_eta when it is fixed, else from the majorant cells' gradient bounds
    (rrv__rate_distance). *medium is the refractive medium that holds x, the
    one whose field rrv__scene_refractivity would read there (NULL if none). */
-static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, rrv_vec3 x, rrv_vec3 d,
-                                const double inv_d[3], double tau, int *entering, const rrv_medium **medium)
+static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, const rrv_vec3 *x,
+                                const rrv_vec3 *d, const double inv_d[3], double tau, int *entering,
+                                const rrv_medium **medium)
 {
     int i;
     *entering = 0;
@@ -4855,10 +4859,10 @@ static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, rr
         /* with a sole support, the search is its box alone */
         const rrv_medium *m = b->sole_support ? b->sole_support : &scene->media[i];
         if (b->sole_support) i = 0;
-        if (!rrv__medium_refracts(m) || !rrv__inside_box(x, m->lo, m->hi)) continue;
+        if (!rrv__medium_refracts(m) || !rrv__inside_box(*x, m->lo, m->hi)) continue;
         *medium = m;
         if (scene->settings.mu_eta > 0) return tau / scene->settings.mu_eta;
-        return rrv__rate_distance(m->majorant, x, d, inv_d, tau, 1.0 / scene->settings.bend_tolerance, entering);
+        return rrv__rate_distance(m->majorant, x, d, inv_d, tau, b->inv_tolerance, entering);
     }
     *medium = NULL;
     return fmin(scene->settings.step, 1.0);
@@ -4875,17 +4879,18 @@ static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, rr
    (2 eta c) per point, and near turning points (c ~ 0) the ratio is noise
    that Snell amplifies to O(sqrt) kicks of either sign. The gradient is
    evaluated at grad_at (x, or a point just inside the support at its edge). */
-/* The kick with the refractivity r_here and its gradient grad at grad_at. */
-static rrv_vec3 rrv__comb_kick_by(rrv__bender *b, rrv_vec3 x, rrv_vec3 d, double h, double h_bar, rrv_vec3 grad_at,
-                                  double r_here, rrv_vec3 grad)
+/* The kick of *d with the refractivity r_here and its gradient grad at
+   grad_at. Vectors by pointer: a vector passed by value goes through the
+   stack, and the comb kicks several times a ray. */
+static void rrv__comb_kick_by(rrv__bender *b, const rrv_vec3 *x, rrv_vec3 *d, double h, double h_bar,
+                              const rrv_vec3 *grad_at, double r_here, const rrv_vec3 *grad)
 {
     /* The refractivity at the midpoint of the chord ahead, from the value and
        gradient fetched anyway: its O(h^2) error keeps the kick second order
        (measured), and it halves the field lookups per kick. */
-    double r_ahead = r_here + rrv__dot(grad, rrv__sub(rrv__madd(x, d, 0.5 * h), grad_at));
-    d = rrv__normalize(rrv__madd(rrv__scale(d, 1.0 + b->r), grad, h_bar));
+    double r_ahead = r_here + rrv__dot(*grad, rrv__sub(rrv__madd(*x, *d, 0.5 * h), *grad_at));
+    *d = rrv__normalize(rrv__madd(rrv__scale(*d, 1.0 + b->r), *grad, h_bar));
     b->r = r_ahead;
-    return d;
 }
 
 /* The refractivity and its gradient at p for a kick. medium, when given, is
@@ -4900,12 +4905,12 @@ static double rrv__kick_lookup(const rrv_scene *scene, rrv_vec3 p, const rrv_med
                     : rrv__scene_refractivity(scene, p, grad);
 }
 
-static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double h,
-                               double h_bar, rrv_vec3 grad_at, const rrv_medium *medium)
+static void rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, const rrv_vec3 *x, rrv_vec3 *d, double h,
+                           double h_bar, const rrv_vec3 *grad_at, const rrv_medium *medium)
 {
     rrv_vec3 grad;
-    double r_here = rrv__kick_lookup(scene, grad_at, medium, &grad);
-    return rrv__comb_kick_by(b, x, d, h, h_bar, grad_at, r_here, grad);
+    double r_here = rrv__kick_lookup(scene, *grad_at, medium, &grad);
+    rrv__comb_kick_by(b, x, d, h, h_bar, grad_at, r_here, &grad);
 }
 
 /* The comb from x along *d: the chord to the next point at spacing h,
@@ -4930,16 +4935,16 @@ static int rrv__deep_inside(const rrv_medium *m, rrv_vec3 p, double margin)
    comb starts, so it does not alias with pixels), and the kick there
    stands for the stretch with a gradient behind it, which starts at
    *from. DBL_MAX: the ray leaves the grid's box first. */
-static double rrv__comb_run_on(rrv__bender *b, const rrv_scene *scene, const rrv_medium *medium, rrv_vec3 x,
+static double rrv__comb_run_on(rrv__bender *b, const rrv_medium *medium, rrv_vec3 x,
                                rrv_vec3 d, double reach, int edge, double *from, rrv__rng *rng)
 {
-    const double inv_tolerance = 1.0 / scene->settings.bend_tolerance;
+    const double inv_tolerance = b->inv_tolerance;
     while (edge) {
         rrv_vec3 p = rrv__madd(x, d, reach);
         double tau = edge > 0 ? 1.0 - rrv__uniform(rng) : 1.0, t;
         int next = 0;
         if (edge > 0) *from = reach;
-        t = rrv__rate_distance(medium->majorant, p, d, b->line_inv, tau, inv_tolerance, &next);
+        t = rrv__rate_distance(medium->majorant, &p, &d, b->line_inv, tau, inv_tolerance, &next);
         if (t == DBL_MAX) return DBL_MAX;
         reach += t;
         if (edge > 0) {
@@ -4983,17 +4988,18 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
         rrv_vec3 grad;
         double r_here = rrv__kick_lookup(scene, x, medium, &grad);
         b->r = r_here - 0.5 * b->chord * rrv__dot(grad, *d);
-        *d = rrv__comb_kick_by(b, x, *d, ahead, 0.5 * (b->chord + ahead), x, r_here, grad);
+        rrv__comb_kick_by(b, &x, d, ahead, 0.5 * (b->chord + ahead), &x, r_here, &grad);
     } else if (b->combing) {
-        *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * (b->chord + ahead), x, medium);
+        rrv__comb_kick(b, scene, &x, d, ahead, 0.5 * (b->chord + ahead), &x, medium);
     } else if (b->face_known) {
         /* the first half kick past a face: the gradient just inside it,
            which crossing the face looked up with the refractivity */
-        *d = rrv__comb_kick_by(b, x, *d, ahead, 0.5 * ahead, b->face_at, b->r, b->face_grad);
+        rrv__comb_kick_by(b, &x, d, ahead, 0.5 * ahead, &b->face_at, b->r, &b->face_grad);
         b->combing = 1;
     } else {
         /* the first half kick takes its gradient just ahead, inside */
-        *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * ahead, rrv__madd(x, *d, 1e-3 * ahead), NULL);
+        rrv_vec3 inside = rrv__madd(x, *d, 1e-3 * ahead);
+        rrv__comb_kick(b, scene, &x, d, ahead, 0.5 * ahead, &inside, NULL);
         b->combing = 1;
     }
     /* the chord's line: its reciprocals serve the chord's delta tracking
@@ -5002,7 +5008,7 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
     rrv__reciprocals(*d, b->line_inv);
     reach = ahead;
     if (b->entering && ahead == h && medium && scene->settings.mu_eta <= 0)
-        reach = rrv__comb_run_on(b, scene, medium, x, *d, ahead, b->entering, &from, rng);
+        reach = rrv__comb_run_on(b, medium, x, *d, ahead, b->entering, &from, rng);
     b->behind_split = from > 0;
     if (b->sole_support && view->inside && reach < DBL_MAX &&
         rrv__deep_inside(b->sole_support, rrv__madd(x, *d, reach), RRV__EDGE_NUDGE * (1.0 + reach))) {
@@ -5099,7 +5105,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
         /* the first point a uniformly random fraction of a spacing ahead, so
            the comb does not alias with pixels */
         const rrv_medium *medium;
-        double h = rrv__comb_spacing(scene, b, o, *d, b->line_inv, 1.0 - rrv__uniform(rng), &b->entering, &medium);
+        double h = rrv__comb_spacing(scene, b, &o, d, b->line_inv, 1.0 - rrv__uniform(rng), &b->entering, &medium);
         rrv__comb_step(b, scene, o, d, h, &view, medium, rng);
     }
     b->face_known = 0;
@@ -5115,16 +5121,16 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
         *d = b->next_d;
         b->pending = 0;
         break;
-    case RRV__END_KICK: {
-        rrv__support_view view = b->ahead;
-        if (view.inside) {
+    case RRV__END_KICK:
+        /* rrv__comb_step reads the view ahead before it writes the next */
+        if (b->ahead.inside) {
             /* entering cells with a gradient from a stretch without: the
                first point a random fraction of a spacing in, as at a
                segment's start, so the comb does not alias with pixels */
             double tau = b->entering > 0 ? 1.0 - rrv__uniform(rng) : 1.0;
             const rrv_medium *medium;
-            double h = rrv__comb_spacing(scene, b, *o, *d, b->line_inv, tau, &b->entering, &medium);
-            rrv__comb_step(b, scene, *o, d, h, &view, medium, rng);
+            double h = rrv__comb_spacing(scene, b, o, d, b->line_inv, tau, &b->entering, &medium);
+            rrv__comb_step(b, scene, *o, d, h, &b->ahead, medium, rng);
         } else {
             /* a kick that turned the chord out through a face it grazed:
                the comb ends here, without an interface to refract */
@@ -5132,7 +5138,6 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
             b->pending = b->combing = 0;
         }
         break;
-    }
     case RRV__END_FACE:
         if (b->combing) {
             /* the comb's last half kick, gradient just behind the face, where
@@ -5140,7 +5145,7 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
             rrv_vec3 at = rrv__madd(*o, *d, -rrv__face_gap(*o)), grad;
             double r_behind = rrv__scene_refractivity(scene, at, &grad);
             if (b->behind_split) b->r = r_behind - 0.5 * b->chord * rrv__dot(grad, *d);
-            *d = rrv__comb_kick_by(b, *o, *d, b->chord, 0.5 * b->chord, at, r_behind, grad);
+            rrv__comb_kick_by(b, o, d, b->chord, 0.5 * b->chord, &at, r_behind, &grad);
             *d = rrv__cross_face(b, scene, o, *d, b->normal, &r_behind, rng);
         } else {
             *d = rrv__cross_face(b, scene, o, *d, b->normal, NULL, rng);
