@@ -4135,13 +4135,14 @@ typedef struct rrv__majorant_iterator {
    [0, tmax] exactly: the box's exit along each axis exceeds tmax by that
    margin, far more than the clip's rounding, and o's entry is behind it. */
 static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_medium *m, int with_refraction,
-                                        const rrv_settings *s, rrv_vec3 o, rrv_vec3 d, const double *inv_d,
-                                        double tmax, int inside)
+                                        const rrv_settings *s, const rrv_vec3 *o, const rrv_vec3 *d,
+                                        const double *inv_d, double tmax, int inside)
 {
     /* arrays, not rrv__axis: walkers restart at every comb point, where
-       this set-up was most of a restart's cost */
+       this set-up was most of a restart's cost (and the vectors by pointer:
+       by value they go through the stack) */
     const struct rrv__majorant_grid *g = m->majorant;
-    const double os[3] = {o.x, o.y, o.z}, ds[3] = {d.x, d.y, d.z};
+    const double os[3] = {o->x, o->y, o->z}, ds[3] = {d->x, d->y, d->z};
     const double box_lo[3] = {m->lo.x, m->lo.y, m->lo.z}, box_hi[3] = {m->hi.x, m->hi.y, m->hi.z};
     const double lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
     const double inv_cell[3] = {g->inv_cell.x, g->inv_cell.y, g->inv_cell.z};
@@ -4231,7 +4232,8 @@ typedef struct rrv__walker {
 
 /* A walk along o + t d, t in [0, tmax); inv_d and inside as for the iterator. */
 static int rrv__walker_start_line(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
-                                  rrv_vec3 o, rrv_vec3 d, const double *inv_d, double tmax, int inside)
+                                  const rrv_vec3 *o, const rrv_vec3 *d, const double *inv_d, double tmax,
+                                  int inside)
 {
     const struct rrv__majorant_grid *g = m->majorant;
     double t0, t1;
@@ -4259,7 +4261,7 @@ static int rrv__walker_start_line(rrv__walker *w, const rrv_medium *m, int with_
 static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
                              rrv_vec3 o, rrv_vec3 d, double tmax)
 {
-    return rrv__walker_start_line(w, m, with_refraction, s, o, d, NULL, tmax, 0);
+    return rrv__walker_start_line(w, m, with_refraction, s, &o, &d, NULL, tmax, 0);
 }
 
 static void rrv__walker_refraction_only(rrv__walker *w) { w->cells.density_weight = 0.0; }
@@ -5237,8 +5239,8 @@ static void rrv__path_reweight(rrv__path *path, const double f[3])
 
 /* inside: bit i, the chord lies inside media[i]'s box (rrv__bender's chord_inside). */
 static int rrv__start_walkers(const rrv__context *ctx, rrv__walker *walkers, int with_refraction,
-                              rrv_vec3 o, rrv_vec3 d, const double *inv_d, uint64_t inside, double tmax,
-                              rrv__rng *rng, uint64_t *events)
+                              const rrv_vec3 *o, const rrv_vec3 *d, const double *inv_d, uint64_t inside,
+                              double tmax, rrv__rng *rng, uint64_t *events)
 {
     const rrv_scene *scene = ctx->scene;
     int i, n = 0;
@@ -5359,7 +5361,7 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
     /* the planned comb chord, if it lies inside the sole support: the media
        whose boxes hold the support need not clip it */
     uint64_t inside = inv_d && path->bender.chord_inside ? path->bender.holds_support : 0;
-    int n = rrv__start_walkers(ctx, walkers, ctx->refract_nulls, o, d, inv_d, inside, tmax, rng,
+    int n = rrv__start_walkers(ctx, walkers, ctx->refract_nulls, &o, &d, inv_d, inside, tmax, rng,
                                &ctx->stats.events);
     while (n > 0) {
         int i, best = 0, ch;
