@@ -2645,9 +2645,11 @@ static double rrv__blend8(const float *d, size_t sx, size_t sy, size_t sz, const
    comb's kicks spent most of their lookup in rrv__grid_locate's divisions
    and per-channel set-up). */
 /* The cell of the refraction grid holding p: its first sample (4 channels
-   a sample), the strides of a row and a slice, the offsets t in it. */
-static const float *rrv__refraction_cell(const struct rrv__majorant_grid *mg, rrv_vec3 p, size_t *sy, size_t *sz,
-                                         double t[3])
+   a sample), the strides of a row and a slice, the offsets t in it.
+   Inline (as the comb's other per-kick helpers below): a call was a tenth
+   of a kick's lookup. */
+static inline const float *rrv__refraction_cell(const struct rrv__majorant_grid *mg, rrv_vec3 p, size_t *sy,
+                                                size_t *sz, double t[3])
 {
     const rrv_grid *g = &mg->refraction;
     const double u[3] = {(p.x - g->lo.x) * mg->refraction_scale.x, (p.y - g->lo.y) * mg->refraction_scale.y,
@@ -4754,44 +4756,52 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
    grid round differently (by ~1e-7): their kicks move by as much. DBL_MAX if the ray leaves the box first. A DDA of its own,
    with the steps of the majorant iterator's; inv_d holds the reciprocals of
    d's components (the chord's, computed once for its whole line). */
+/* One axis of rrv__rate_distance's cell walk set-up: the cell of x (clamped
+   into the grid before the cast: a far point must not overflow the int),
+   the step, the distance to the cell's next face and between faces.
+   Inline, a call per axis, rather than a loop over arrays: the comb walks
+   at every kick, and each axis then stays in registers (the loop was two
+   thirds of the walk's cost). */
+static inline void rrv__walk_axis(double x, double d, double inv, double lo, double cs, double inv_cell, int n,
+                                  int *cell, int *step, double *t_next, double *t_delta)
+{
+    double c = (x - lo) * inv_cell;
+    int k = !(c >= 0) ? 0 : c >= n - 1 ? n - 1 : (int)c;
+    *cell = k;
+    if (d != 0) {
+        *step = d > 0 ? 1 : -1;
+        *t_next = (lo + (k + (d > 0)) * cs - x) * inv;
+        *t_delta = cs * (inv > 0 ? inv : -inv);
+        if (*t_next < 0) *t_next = 0;
+    } else {
+        *step = 0;
+        *t_next = *t_delta = DBL_MAX;
+    }
+}
+
 static double rrv__rate_distance(const struct rrv__majorant_grid *g, const rrv_vec3 *x, const rrv_vec3 *d,
                                  const double inv_d[3], double tau, double inv_tolerance, int *entering)
 {
-    /* arrays, not rrv__axis: the comb calls this at every kick, and the
-       per-axis selects and library fmin calls were half its cost */
-    const double xs[3] = {x->x, x->y, x->z}, ds[3] = {d->x, d->y, d->z};
-    const double lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
-    const double inv_cell[3] = {g->inv_cell.x, g->inv_cell.y, g->inv_cell.z};
     const float *grad = g->grad_max, *wanders = g->jacobian_wander;
     double t_next[3], t_delta[3], t = 0, need = tau, cap, cell_min, wander = 0;
     /* h^2 wander <= 4 tau tolerance: the chord's share of a kick's error (above) */
     const double budget = wanders ? RRV__COMB_WANDER_BUDGET * tau / inv_tolerance : 0;
-    ptrdiff_t stride[3], idx = 0;
+    const ptrdiff_t row = g->n[0], slice = (ptrdiff_t)g->n[0] * g->n[1];
+    ptrdiff_t stride[3], idx;
     int cell[3], step[3], a, in_gradient;
-    stride[0] = 1;
-    stride[1] = g->n[0];
-    stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
-    for (a = 0; a < 3; ++a) {
-        /* the cell clamped into the grid (clamped before
-           the cast: a far point must not overflow the int) */
-        double c = (xs[a] - lo[a]) * inv_cell[a];
-        cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
-        idx += stride[a] * cell[a];
-        if (ds[a] != 0) {
-            double inv = inv_d[a];
-            step[a] = ds[a] > 0 ? 1 : -1;
-            t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) * inv;
-            t_delta[a] = cs[a] * (inv > 0 ? inv : -inv);
-            stride[a] *= step[a];
-            if (t_next[a] < 0) t_next[a] = 0;
-        } else {
-            step[a] = 0;
-            t_next[a] = t_delta[a] = DBL_MAX;
-        }
-    }
+    rrv__walk_axis(x->x, d->x, inv_d[0], g->lo.x, g->cell.x, g->inv_cell.x, g->n[0], &cell[0], &step[0],
+                   &t_next[0], &t_delta[0]);
+    rrv__walk_axis(x->y, d->y, inv_d[1], g->lo.y, g->cell.y, g->inv_cell.y, g->n[1], &cell[1], &step[1],
+                   &t_next[1], &t_delta[1]);
+    rrv__walk_axis(x->z, d->z, inv_d[2], g->lo.z, g->cell.z, g->inv_cell.z, g->n[2], &cell[2], &step[2],
+                   &t_next[2], &t_delta[2]);
+    idx = cell[0] + row * cell[1] + slice * cell[2];
+    stride[0] = step[0] < 0 ? -1 : 1;
+    stride[1] = step[1] < 0 ? -row : row;
+    stride[2] = step[2] < 0 ? -slice : slice;
     in_gradient = grad[idx] > 0;
-    cell_min = cs[0] < cs[1] ? cs[0] : cs[1];
-    if (cs[2] < cell_min) cell_min = cs[2];
+    cell_min = g->cell.x < g->cell.y ? g->cell.x : g->cell.y;
+    if (g->cell.z < cell_min) cell_min = g->cell.z;
     cap = tau * RRV__COMB_MAX_CELLS * cell_min;
     if (wanders && wanders[idx] >= 0) {
         cap = DBL_MAX;
@@ -4850,10 +4860,11 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, const rrv_v
 /* Comb spacing from x along d (inv_d: its reciprocals), tau spacings:
    1 / mu_eta when it is fixed, else from the majorant cells' gradient bounds
    (rrv__rate_distance). *medium is the refractive medium that holds x, the
-   one whose field rrv__scene_refractivity would read there (NULL if none). */
-static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, const rrv_vec3 *x,
-                                const rrv_vec3 *d, const double inv_d[3], double tau, int *entering,
-                                const rrv_medium **medium)
+   one whose field rrv__scene_refractivity would read there (NULL if none).
+   Inline: the comb's every kick asks. */
+static inline double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, const rrv_vec3 *x,
+                                       const rrv_vec3 *d, const double inv_d[3], double tau, int *entering,
+                                       const rrv_medium **medium)
 {
     int i;
     *entering = 0;
@@ -4882,10 +4893,10 @@ static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, co
    that Snell amplifies to O(sqrt) kicks of either sign. The gradient is
    evaluated at grad_at (x, or a point just inside the support at its edge). */
 /* The kick of *d with the refractivity r_here and its gradient grad at
-   grad_at. Vectors by pointer: a vector passed by value goes through the
-   stack, and the comb kicks several times a ray. */
-static void rrv__comb_kick_by(rrv__bender *b, const rrv_vec3 *x, rrv_vec3 *d, double h, double h_bar,
-                              const rrv_vec3 *grad_at, double r_here, const rrv_vec3 *grad)
+   grad_at. Vectors by pointer and inline: a vector passed by value goes
+   through the stack, and the comb kicks several times a ray. */
+static inline void rrv__comb_kick_by(rrv__bender *b, const rrv_vec3 *x, rrv_vec3 *d, double h, double h_bar,
+                                     const rrv_vec3 *grad_at, double r_here, const rrv_vec3 *grad)
 {
     /* The refractivity at the midpoint of the chord ahead, from the value and
        gradient fetched anyway: its O(h^2) error keeps the kick second order
@@ -4898,7 +4909,8 @@ static void rrv__comb_kick_by(rrv__bender *b, const rrv_vec3 *x, rrv_vec3 *d, do
 /* The refractivity and its gradient at p for a kick. medium, when given, is
    the one rrv__scene_refractivity would find at p (the spacing's search
    found it), so the search is not repeated. */
-static double rrv__kick_lookup(const rrv_scene *scene, rrv_vec3 p, const rrv_medium *medium, rrv_vec3 *grad)
+static inline double rrv__kick_lookup(const rrv_scene *scene, rrv_vec3 p, const rrv_medium *medium,
+                                      rrv_vec3 *grad)
 {
     const struct rrv__majorant_grid *mg = medium ? medium->majorant : NULL;
     return mg && mg->refraction.data && !mg->cubic && rrv__inside_box(p, mg->refraction.lo, mg->refraction.hi)
@@ -5860,8 +5872,8 @@ static int rrv__russian_roulette(rrv__camera_path *cp, rrv__rng *rng)
    Its bounding box against the media's boxes: no divisions, and a false
    yes only costs the ordinary walk. The box by comparisons: the comb asks
    at every kick, and rrv__vmin's six fmin/fmax are library calls (three
-   quarters of this test's cost). */
-static int rrv__chord_meets_extinction(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, double len)
+   quarters of this test's cost); inline for the same reason. */
+static inline int rrv__chord_meets_extinction(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, double len)
 {
     rrv_vec3 e = rrv__madd(o, d, len);
     rrv_vec3 lo = rrv__v3(rrv__mind(o.x, e.x), rrv__mind(o.y, e.y), rrv__mind(o.z, e.z));
