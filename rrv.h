@@ -4128,6 +4128,31 @@ typedef struct rrv__majorant_iterator {
     int done;
 } rrv__majorant_iterator;
 
+/* One axis of the iterator's set-up: the cell of o + t0 d clamped into the
+   grid (clamped before the cast: a far point must not overflow the int),
+   the step, the distance to the cell's next face and between faces. */
+static inline void rrv__iterator_axis(double o, double d, double inv, double t0, double lo, double cs,
+                                      double inv_cell, int n, int *cell, int *step, double *t_next,
+                                      double *t_delta)
+{
+    double c = (o + t0 * d - lo) * inv_cell;
+    int k = !(c >= 0) ? 0 : c >= n - 1 ? n - 1 : (int)c;
+    *cell = k;
+    if (d > 0) {
+        *step = 1;
+        *t_next = (lo + (k + 1) * cs - o) * inv;
+        *t_delta = cs * inv;
+    } else if (d < 0) {
+        *step = -1;
+        *t_next = (lo + k * cs - o) * inv;
+        *t_delta = -cs * inv;
+    } else {
+        *step = 0;
+        *t_next = DBL_MAX;
+        *t_delta = DBL_MAX;
+    }
+}
+
 /* Sets the iterator on the ray o + t d, t in [0, tmax). Returns 0 if the
    ray misses the box or the medium has nothing to collide with. inv_d: the
    reciprocals of d's components when the caller has them (a comb chord's
@@ -4171,26 +4196,13 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
     it->t = t0;
     it->t_end = t1;
     it->done = 0;
-    for (a = 0; a < 3; ++a) {
-        /* the cell of o + t0 d clamped into the grid (clamped before
-           the cast: a far point must not overflow the int) */
-        double c = (os[a] + t0 * ds[a] - lo[a]) * inv_cell[a];
-        int k = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
-        it->cell[a] = k;
-        if (ds[a] > 0) {
-            it->step[a] = 1;
-            it->t_next[a] = (lo[a] + (k + 1) * cs[a] - os[a]) * inv[a];
-            it->t_delta[a] = cs[a] * inv[a];
-        } else if (ds[a] < 0) {
-            it->step[a] = -1;
-            it->t_next[a] = (lo[a] + k * cs[a] - os[a]) * inv[a];
-            it->t_delta[a] = -cs[a] * inv[a];
-        } else {
-            it->step[a] = 0;
-            it->t_next[a] = DBL_MAX;
-            it->t_delta[a] = DBL_MAX;
-        }
-    }
+    /* a call per axis, not a loop: each axis then stays in registers */
+    rrv__iterator_axis(os[0], ds[0], inv[0], t0, lo[0], cs[0], inv_cell[0], g->n[0], &it->cell[0], &it->step[0],
+                       &it->t_next[0], &it->t_delta[0]);
+    rrv__iterator_axis(os[1], ds[1], inv[1], t0, lo[1], cs[1], inv_cell[1], g->n[1], &it->cell[1], &it->step[1],
+                       &it->t_next[1], &it->t_delta[1]);
+    rrv__iterator_axis(os[2], ds[2], inv[2], t0, lo[2], cs[2], inv_cell[2], g->n[2], &it->cell[2], &it->step[2],
+                       &it->t_next[2], &it->t_delta[2]);
     return 1;
 }
 
