@@ -4794,7 +4794,9 @@ static inline void rrv__walk_axis(double x, double d, double inv, double lo, dou
 static double rrv__rate_distance(const struct rrv__majorant_grid *g, const rrv_vec3 *x, const rrv_vec3 *d,
                                  const double inv_d[3], double tau, double inv_tolerance, int *entering)
 {
-    const float *grad = g->grad_max, *wanders = g->jacobian_wander;
+    /* the wander bounds exist only in a RRV__COMB_WANDER build: without
+       it the compiler drops their tests from the walk */
+    const float *grad = g->grad_max, *wanders = RRV__COMB_WANDER ? g->jacobian_wander : NULL;
     double t_next[3], t_delta[3], t = 0, need = tau, cap, cell_min, wander = 0;
     /* h^2 wander <= 4 tau tolerance: the chord's share of a kick's error (above) */
     const double budget = wanders ? RRV__COMB_WANDER_BUDGET * tau / inv_tolerance : 0;
@@ -5353,9 +5355,9 @@ static const double *rrv__chord_inv(const rrv__context *ctx, const rrv__bender *
    (also where the bender knows none reaches the segment). A surface lying
    on the face that ends the segment belongs to it: looked for a gap past
    the end, it cannot slip between this segment's end and the next one's
-   start. */
-static int rrv__segment_hit(const rrv__context *ctx, const rrv__bender *b, rrv_vec3 o, rrv_vec3 d, double segment,
-                            rrv__hit *hit)
+   start. Inline: the comb asks at every chord, most often in vain. */
+static inline int rrv__segment_hit(const rrv__context *ctx, const rrv__bender *b, rrv_vec3 o, rrv_vec3 d,
+                                   double segment, rrv__hit *hit)
 {
     if (b->surface_free) return 0;
     return rrv__intersect_line(ctx->scene, o, d, rrv__chord_inv(ctx, b, d),
