@@ -2655,9 +2655,11 @@ static double rrv__blend8(const float *d, size_t sx, size_t sy, size_t sz, const
    comb's kicks spent most of their lookup in rrv__grid_locate's divisions
    and per-channel set-up). */
 /* The cell of the refraction grid holding p: its first sample (4 channels
-   a sample), the strides of a row and a slice, the offsets t in it. */
-static const float *rrv__refraction_cell(const struct rrv__majorant_grid *mg, rrv_vec3 p, size_t *sy, size_t *sz,
-                                         double t[3])
+   a sample), the strides of a row and a slice, the offsets t in it.
+   Inline (as the comb's other per-kick helpers below): a call was a tenth
+   of a kick's lookup. */
+static inline const float *rrv__refraction_cell(const struct rrv__majorant_grid *mg, rrv_vec3 p, size_t *sy,
+                                                size_t *sz, double t[3])
 {
     const rrv_grid *g = &mg->refraction;
     const double u[3] = {(p.x - g->lo.x) * mg->refraction_scale.x, (p.y - g->lo.y) * mg->refraction_scale.y,
@@ -4136,18 +4138,48 @@ typedef struct rrv__majorant_iterator {
     int done;
 } rrv__majorant_iterator;
 
+/* One axis of the iterator's set-up: the cell of o + t0 d clamped into the
+   grid (clamped before the cast: a far point must not overflow the int),
+   the step, the distance to the cell's next face and between faces. */
+static inline void rrv__iterator_axis(double o, double d, double inv, double t0, double lo, double cs,
+                                      double inv_cell, int n, int *cell, int *step, double *t_next,
+                                      double *t_delta)
+{
+    double c = (o + t0 * d - lo) * inv_cell;
+    int k = !(c >= 0) ? 0 : c >= n - 1 ? n - 1 : (int)c;
+    *cell = k;
+    if (d > 0) {
+        *step = 1;
+        *t_next = (lo + (k + 1) * cs - o) * inv;
+        *t_delta = cs * inv;
+    } else if (d < 0) {
+        *step = -1;
+        *t_next = (lo + k * cs - o) * inv;
+        *t_delta = -cs * inv;
+    } else {
+        *step = 0;
+        *t_next = DBL_MAX;
+        *t_delta = DBL_MAX;
+    }
+}
+
 /* Sets the iterator on the ray o + t d, t in [0, tmax). Returns 0 if the
    ray misses the box or the medium has nothing to collide with. inv_d: the
    reciprocals of d's components when the caller has them (a comb chord's
-   line), else NULL. */
+   line), else NULL. inside (only with inv_d): o lies in the box and o +
+   tmax d inside it by more than rounding (a comb chord deep inside a
+   support this box holds, rrv__comb_step), where the clip below gives
+   [0, tmax] exactly: the box's exit along each axis exceeds tmax by that
+   margin, far more than the clip's rounding, and o's entry is behind it. */
 static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_medium *m, int with_refraction,
-                                        const rrv_settings *s, rrv_vec3 o, rrv_vec3 d, const double *inv_d,
-                                        double tmax)
+                                        const rrv_settings *s, const rrv_vec3 *o, const rrv_vec3 *d,
+                                        const double *inv_d, double tmax, int inside)
 {
     /* arrays, not rrv__axis: walkers restart at every comb point, where
-       this set-up was most of a restart's cost */
+       this set-up was most of a restart's cost (and the vectors by pointer:
+       by value they go through the stack) */
     const struct rrv__majorant_grid *g = m->majorant;
-    const double os[3] = {o.x, o.y, o.z}, ds[3] = {d.x, d.y, d.z};
+    const double os[3] = {o->x, o->y, o->z}, ds[3] = {d->x, d->y, d->z};
     const double box_lo[3] = {m->lo.x, m->lo.y, m->lo.z}, box_hi[3] = {m->hi.x, m->hi.y, m->hi.z};
     const double lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
     const double inv_cell[3] = {g->inv_cell.x, g->inv_cell.y, g->inv_cell.z};
@@ -4157,6 +4189,7 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
     for (a = 0; a < 3; ++a) {
         double ta, tb;
         inv[a] = inv_d ? inv_d[a] : 1.0 / ds[a];
+        if (inside) continue;
         ta = (box_lo[a] - os[a]) * inv[a];
         tb = (box_hi[a] - os[a]) * inv[a];
         if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
@@ -4173,26 +4206,13 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
     it->t = t0;
     it->t_end = t1;
     it->done = 0;
-    for (a = 0; a < 3; ++a) {
-        /* the cell of o + t0 d clamped into the grid (clamped before
-           the cast: a far point must not overflow the int) */
-        double c = (os[a] + t0 * ds[a] - lo[a]) * inv_cell[a];
-        int k = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
-        it->cell[a] = k;
-        if (ds[a] > 0) {
-            it->step[a] = 1;
-            it->t_next[a] = (lo[a] + (k + 1) * cs[a] - os[a]) * inv[a];
-            it->t_delta[a] = cs[a] * inv[a];
-        } else if (ds[a] < 0) {
-            it->step[a] = -1;
-            it->t_next[a] = (lo[a] + k * cs[a] - os[a]) * inv[a];
-            it->t_delta[a] = -cs[a] * inv[a];
-        } else {
-            it->step[a] = 0;
-            it->t_next[a] = DBL_MAX;
-            it->t_delta[a] = DBL_MAX;
-        }
-    }
+    /* a call per axis, not a loop: each axis then stays in registers */
+    rrv__iterator_axis(os[0], ds[0], inv[0], t0, lo[0], cs[0], inv_cell[0], g->n[0], &it->cell[0], &it->step[0],
+                       &it->t_next[0], &it->t_delta[0]);
+    rrv__iterator_axis(os[1], ds[1], inv[1], t0, lo[1], cs[1], inv_cell[1], g->n[1], &it->cell[1], &it->step[1],
+                       &it->t_next[1], &it->t_delta[1]);
+    rrv__iterator_axis(os[2], ds[2], inv[2], t0, lo[2], cs[2], inv_cell[2], g->n[2], &it->cell[2], &it->step[2],
+                       &it->t_next[2], &it->t_delta[2]);
     return 1;
 }
 
@@ -4234,13 +4254,14 @@ typedef struct rrv__walker {
                                     walk did not leave the box */
 } rrv__walker;
 
-/* A walk along o + t d, t in [0, tmax); inv_d as for the iterator. */
+/* A walk along o + t d, t in [0, tmax); inv_d and inside as for the iterator. */
 static int rrv__walker_start_line(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
-                                  rrv_vec3 o, rrv_vec3 d, const double *inv_d, double tmax)
+                                  const rrv_vec3 *o, const rrv_vec3 *d, const double *inv_d, double tmax,
+                                  int inside)
 {
     const struct rrv__majorant_grid *g = m->majorant;
     double t0, t1;
-    if (!rrv__majorant_iterator_start(&w->cells, m, with_refraction, s, o, d, inv_d, tmax)) return 0;
+    if (!rrv__majorant_iterator_start(&w->cells, m, with_refraction, s, o, d, inv_d, tmax, inside)) return 0;
     t0 = w->cells.t;
     t1 = w->cells.t_end;
     w->medium = m;
@@ -4264,7 +4285,7 @@ static int rrv__walker_start_line(rrv__walker *w, const rrv_medium *m, int with_
 static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
                              rrv_vec3 o, rrv_vec3 d, double tmax)
 {
-    return rrv__walker_start_line(w, m, with_refraction, s, o, d, NULL, tmax);
+    return rrv__walker_start_line(w, m, with_refraction, s, &o, &d, NULL, tmax, 0);
 }
 
 static void rrv__walker_refraction_only(rrv__walker *w) { w->cells.density_weight = 0.0; }
@@ -4599,6 +4620,13 @@ typedef struct rrv__bender {
     int support_in_extinction; /* the sole support's box lies in the box of a
                                   medium with extinction: every chord in it
                                   meets extinction (rrv__chord_meets_extinction) */
+    uint64_t holds_support;    /* bit i: media[i]'s box holds the sole support's */
+    double inv_tolerance;      /* 1 / bend_tolerance, for the comb's spacings
+                                  (a division a kick before) */
+    int chord_inside;  /* the planned segment is a comb chord with both ends
+                          inside the sole support (its end by more than
+                          rounding): walkers of a medium whose box holds the
+                          support need not clip it (rrv__majorant_iterator_start) */
 } rrv__bender;
 
 static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
@@ -4633,11 +4661,16 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikona
         }
     if (supports != 1 || rrv__has_sphere_support(b->sole_support)) b->sole_support = NULL;
     b->support_in_extinction = 0;
+    b->holds_support = 0;
+    b->inv_tolerance = 1.0 / scene->settings.bend_tolerance;
+    b->chord_inside = 0;
     for (i = 0; b->sole_support && i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i], *s = b->sole_support;
-        if (!m->majorant->empty && m->lo.x <= s->lo.x && m->lo.y <= s->lo.y && m->lo.z <= s->lo.z &&
-            s->hi.x <= m->hi.x && s->hi.y <= m->hi.y && s->hi.z <= m->hi.z)
-            b->support_in_extinction = 1;
+        if (m->lo.x <= s->lo.x && m->lo.y <= s->lo.y && m->lo.z <= s->lo.z && s->hi.x <= m->hi.x &&
+            s->hi.y <= m->hi.y && s->hi.z <= m->hi.z) {
+            b->holds_support |= (uint64_t)1 << i;
+            if (!m->majorant->empty) b->support_in_extinction = 1;
+        }
     }
     rrv__bender_restart(b, scene, o);
 }
@@ -4745,44 +4778,54 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
    grid round differently (by ~1e-7): their kicks move by as much. DBL_MAX if the ray leaves the box first. A DDA of its own,
    with the steps of the majorant iterator's; inv_d holds the reciprocals of
    d's components (the chord's, computed once for its whole line). */
-static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x, rrv_vec3 d, const double inv_d[3],
-                                 double tau, double inv_tolerance, int *entering)
+/* One axis of rrv__rate_distance's cell walk set-up: the cell of x (clamped
+   into the grid before the cast: a far point must not overflow the int),
+   the step, the distance to the cell's next face and between faces.
+   Inline, a call per axis, rather than a loop over arrays: the comb walks
+   at every kick, and each axis then stays in registers (the loop was two
+   thirds of the walk's cost). */
+static inline void rrv__walk_axis(double x, double d, double inv, double lo, double cs, double inv_cell, int n,
+                                  int *cell, int *step, double *t_next, double *t_delta)
 {
-    /* arrays, not rrv__axis: the comb calls this at every kick, and the
-       per-axis selects and library fmin calls were half its cost */
-    const double xs[3] = {x.x, x.y, x.z}, ds[3] = {d.x, d.y, d.z};
-    const double lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
-    const double inv_cell[3] = {g->inv_cell.x, g->inv_cell.y, g->inv_cell.z};
-    const float *grad = g->grad_max, *wanders = g->jacobian_wander;
+    double c = (x - lo) * inv_cell;
+    int k = !(c >= 0) ? 0 : c >= n - 1 ? n - 1 : (int)c;
+    *cell = k;
+    if (d != 0) {
+        *step = d > 0 ? 1 : -1;
+        *t_next = (lo + (k + (d > 0)) * cs - x) * inv;
+        *t_delta = cs * (inv > 0 ? inv : -inv);
+        if (*t_next < 0) *t_next = 0;
+    } else {
+        *step = 0;
+        *t_next = *t_delta = DBL_MAX;
+    }
+}
+
+static double rrv__rate_distance(const struct rrv__majorant_grid *g, const rrv_vec3 *x, const rrv_vec3 *d,
+                                 const double inv_d[3], double tau, double inv_tolerance, int *entering)
+{
+    /* the wander bounds exist only in a RRV__COMB_WANDER build: without
+       it the compiler drops their tests from the walk */
+    const float *grad = g->grad_max, *wanders = RRV__COMB_WANDER ? g->jacobian_wander : NULL;
     double t_next[3], t_delta[3], t = 0, need = tau, cap, cell_min, wander = 0;
     /* h^2 wander <= 4 tau tolerance: the chord's share of a kick's error (above) */
     const double budget = wanders ? RRV__COMB_WANDER_BUDGET * tau / inv_tolerance : 0;
-    ptrdiff_t stride[3], idx = 0;
+    const ptrdiff_t row = g->n[0], slice = (ptrdiff_t)g->n[0] * g->n[1];
+    ptrdiff_t stride[3], idx;
     int cell[3], step[3], a, in_gradient;
-    stride[0] = 1;
-    stride[1] = g->n[0];
-    stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
-    for (a = 0; a < 3; ++a) {
-        /* the cell clamped into the grid (clamped before
-           the cast: a far point must not overflow the int) */
-        double c = (xs[a] - lo[a]) * inv_cell[a];
-        cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
-        idx += stride[a] * cell[a];
-        if (ds[a] != 0) {
-            double inv = inv_d[a];
-            step[a] = ds[a] > 0 ? 1 : -1;
-            t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) * inv;
-            t_delta[a] = cs[a] * (inv > 0 ? inv : -inv);
-            stride[a] *= step[a];
-            if (t_next[a] < 0) t_next[a] = 0;
-        } else {
-            step[a] = 0;
-            t_next[a] = t_delta[a] = DBL_MAX;
-        }
-    }
+    rrv__walk_axis(x->x, d->x, inv_d[0], g->lo.x, g->cell.x, g->inv_cell.x, g->n[0], &cell[0], &step[0],
+                   &t_next[0], &t_delta[0]);
+    rrv__walk_axis(x->y, d->y, inv_d[1], g->lo.y, g->cell.y, g->inv_cell.y, g->n[1], &cell[1], &step[1],
+                   &t_next[1], &t_delta[1]);
+    rrv__walk_axis(x->z, d->z, inv_d[2], g->lo.z, g->cell.z, g->inv_cell.z, g->n[2], &cell[2], &step[2],
+                   &t_next[2], &t_delta[2]);
+    idx = cell[0] + row * cell[1] + slice * cell[2];
+    stride[0] = step[0] < 0 ? -1 : 1;
+    stride[1] = step[1] < 0 ? -row : row;
+    stride[2] = step[2] < 0 ? -slice : slice;
     in_gradient = grad[idx] > 0;
-    cell_min = cs[0] < cs[1] ? cs[0] : cs[1];
-    if (cs[2] < cell_min) cell_min = cs[2];
+    cell_min = g->cell.x < g->cell.y ? g->cell.x : g->cell.y;
+    if (g->cell.z < cell_min) cell_min = g->cell.z;
     cap = tau * RRV__COMB_MAX_CELLS * cell_min;
     if (wanders && wanders[idx] >= 0) {
         cap = DBL_MAX;
@@ -4814,7 +4857,7 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
         if (cell[a] < 0 || cell[a] >= g->n[a]) return DBL_MAX;
         idx += stride[a];
         if ((grad[idx] > 0) != in_gradient) {
-            if (t > RRV__EDGE_NUDGE * (1.0 + rrv__length(x))) {
+            if (t > RRV__EDGE_NUDGE * (1.0 + rrv__length(*x))) {
                 *entering = in_gradient ? -1 : 1;
                 return t;
             }
@@ -4841,9 +4884,11 @@ static double rrv__rate_distance(const struct rrv__majorant_grid *g, rrv_vec3 x,
 /* Comb spacing from x along d (inv_d: its reciprocals), tau spacings:
    1 / mu_eta when it is fixed, else from the majorant cells' gradient bounds
    (rrv__rate_distance). *medium is the refractive medium that holds x, the
-   one whose field rrv__scene_refractivity would read there (NULL if none). */
-static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, rrv_vec3 x, rrv_vec3 d,
-                                const double inv_d[3], double tau, int *entering, const rrv_medium **medium)
+   one whose field rrv__scene_refractivity would read there (NULL if none).
+   Inline: the comb's every kick asks. */
+static inline double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, const rrv_vec3 *x,
+                                       const rrv_vec3 *d, const double inv_d[3], double tau, int *entering,
+                                       const rrv_medium **medium)
 {
     int i;
     *entering = 0;
@@ -4851,10 +4896,10 @@ static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, rr
         /* with a sole support, the search is its box alone */
         const rrv_medium *m = b->sole_support ? b->sole_support : &scene->media[i];
         if (b->sole_support) i = 0;
-        if (!rrv__medium_refracts(m) || !rrv__inside_box(x, m->lo, m->hi)) continue;
+        if (!rrv__medium_refracts(m) || !rrv__inside_box(*x, m->lo, m->hi)) continue;
         *medium = m;
         if (scene->settings.mu_eta > 0) return tau / scene->settings.mu_eta;
-        return rrv__rate_distance(m->majorant, x, d, inv_d, tau, 1.0 / scene->settings.bend_tolerance, entering);
+        return rrv__rate_distance(m->majorant, x, d, inv_d, tau, b->inv_tolerance, entering);
     }
     *medium = NULL;
     return fmin(scene->settings.step, 1.0);
@@ -4871,23 +4916,25 @@ static double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender *b, rr
    (2 eta c) per point, and near turning points (c ~ 0) the ratio is noise
    that Snell amplifies to O(sqrt) kicks of either sign. The gradient is
    evaluated at grad_at (x, or a point just inside the support at its edge). */
-/* The kick with the refractivity r_here and its gradient grad at grad_at. */
-static rrv_vec3 rrv__comb_kick_by(rrv__bender *b, rrv_vec3 x, rrv_vec3 d, double h, double h_bar, rrv_vec3 grad_at,
-                                  double r_here, rrv_vec3 grad)
+/* The kick of *d with the refractivity r_here and its gradient grad at
+   grad_at. Vectors by pointer and inline: a vector passed by value goes
+   through the stack, and the comb kicks several times a ray. */
+static inline void rrv__comb_kick_by(rrv__bender *b, const rrv_vec3 *x, rrv_vec3 *d, double h, double h_bar,
+                                     const rrv_vec3 *grad_at, double r_here, const rrv_vec3 *grad)
 {
     /* The refractivity at the midpoint of the chord ahead, from the value and
        gradient fetched anyway: its O(h^2) error keeps the kick second order
        (measured), and it halves the field lookups per kick. */
-    double r_ahead = r_here + rrv__dot(grad, rrv__sub(rrv__madd(x, d, 0.5 * h), grad_at));
-    d = rrv__normalize(rrv__madd(rrv__scale(d, 1.0 + b->r), grad, h_bar));
+    double r_ahead = r_here + rrv__dot(*grad, rrv__sub(rrv__madd(*x, *d, 0.5 * h), *grad_at));
+    *d = rrv__normalize(rrv__madd(rrv__scale(*d, 1.0 + b->r), *grad, h_bar));
     b->r = r_ahead;
-    return d;
 }
 
 /* The refractivity and its gradient at p for a kick. medium, when given, is
    the one rrv__scene_refractivity would find at p (the spacing's search
    found it), so the search is not repeated. */
-static double rrv__kick_lookup(const rrv_scene *scene, rrv_vec3 p, const rrv_medium *medium, rrv_vec3 *grad)
+static inline double rrv__kick_lookup(const rrv_scene *scene, rrv_vec3 p, const rrv_medium *medium,
+                                      rrv_vec3 *grad)
 {
     const struct rrv__majorant_grid *mg = medium ? medium->majorant : NULL;
     return mg && mg->refraction.data && !mg->cubic && rrv__inside_box(p, mg->refraction.lo, mg->refraction.hi)
@@ -4896,12 +4943,12 @@ static double rrv__kick_lookup(const rrv_scene *scene, rrv_vec3 p, const rrv_med
                     : rrv__scene_refractivity(scene, p, grad);
 }
 
-static rrv_vec3 rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d, double h,
-                               double h_bar, rrv_vec3 grad_at, const rrv_medium *medium)
+static void rrv__comb_kick(rrv__bender *b, const rrv_scene *scene, const rrv_vec3 *x, rrv_vec3 *d, double h,
+                           double h_bar, const rrv_vec3 *grad_at, const rrv_medium *medium)
 {
     rrv_vec3 grad;
-    double r_here = rrv__kick_lookup(scene, grad_at, medium, &grad);
-    return rrv__comb_kick_by(b, x, d, h, h_bar, grad_at, r_here, grad);
+    double r_here = rrv__kick_lookup(scene, *grad_at, medium, &grad);
+    rrv__comb_kick_by(b, x, d, h, h_bar, grad_at, r_here, &grad);
 }
 
 /* The comb from x along *d: the chord to the next point at spacing h,
@@ -4926,16 +4973,16 @@ static int rrv__deep_inside(const rrv_medium *m, rrv_vec3 p, double margin)
    comb starts, so it does not alias with pixels), and the kick there
    stands for the stretch with a gradient behind it, which starts at
    *from. DBL_MAX: the ray leaves the grid's box first. */
-static double rrv__comb_run_on(rrv__bender *b, const rrv_scene *scene, const rrv_medium *medium, rrv_vec3 x,
+static double rrv__comb_run_on(rrv__bender *b, const rrv_medium *medium, rrv_vec3 x,
                                rrv_vec3 d, double reach, int edge, double *from, rrv__rng *rng)
 {
-    const double inv_tolerance = 1.0 / scene->settings.bend_tolerance;
+    const double inv_tolerance = b->inv_tolerance;
     while (edge) {
         rrv_vec3 p = rrv__madd(x, d, reach);
         double tau = edge > 0 ? 1.0 - rrv__uniform(rng) : 1.0, t;
         int next = 0;
         if (edge > 0) *from = reach;
-        t = rrv__rate_distance(medium->majorant, p, d, b->line_inv, tau, inv_tolerance, &next);
+        t = rrv__rate_distance(medium->majorant, &p, &d, b->line_inv, tau, inv_tolerance, &next);
         if (t == DBL_MAX) return DBL_MAX;
         reach += t;
         if (edge > 0) {
@@ -4979,17 +5026,18 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
         rrv_vec3 grad;
         double r_here = rrv__kick_lookup(scene, x, medium, &grad);
         b->r = r_here - 0.5 * b->chord * rrv__dot(grad, *d);
-        *d = rrv__comb_kick_by(b, x, *d, ahead, 0.5 * (b->chord + ahead), x, r_here, grad);
+        rrv__comb_kick_by(b, &x, d, ahead, 0.5 * (b->chord + ahead), &x, r_here, &grad);
     } else if (b->combing) {
-        *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * (b->chord + ahead), x, medium);
+        rrv__comb_kick(b, scene, &x, d, ahead, 0.5 * (b->chord + ahead), &x, medium);
     } else if (b->face_known) {
         /* the first half kick past a face: the gradient just inside it,
            which crossing the face looked up with the refractivity */
-        *d = rrv__comb_kick_by(b, x, *d, ahead, 0.5 * ahead, b->face_at, b->r, b->face_grad);
+        rrv__comb_kick_by(b, &x, d, ahead, 0.5 * ahead, &b->face_at, b->r, &b->face_grad);
         b->combing = 1;
     } else {
         /* the first half kick takes its gradient just ahead, inside */
-        *d = rrv__comb_kick(b, scene, x, *d, ahead, 0.5 * ahead, rrv__madd(x, *d, 1e-3 * ahead), NULL);
+        rrv_vec3 inside = rrv__madd(x, *d, 1e-3 * ahead);
+        rrv__comb_kick(b, scene, &x, d, ahead, 0.5 * ahead, &inside, NULL);
         b->combing = 1;
     }
     /* the chord's line: its reciprocals serve the chord's delta tracking
@@ -4998,7 +5046,7 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
     rrv__reciprocals(*d, b->line_inv);
     reach = ahead;
     if (b->entering && ahead == h && medium && scene->settings.mu_eta <= 0)
-        reach = rrv__comb_run_on(b, scene, medium, x, *d, ahead, b->entering, &from, rng);
+        reach = rrv__comb_run_on(b, medium, x, *d, ahead, b->entering, &from, rng);
     b->behind_split = from > 0;
     if (b->sole_support && view->inside && reach < DBL_MAX &&
         rrv__deep_inside(b->sole_support, rrv__madd(x, *d, reach), RRV__EDGE_NUDGE * (1.0 + reach))) {
@@ -5011,6 +5059,7 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
         b->end = RRV__END_KICK;
         b->surface_free = b->sole_support->majorant->surface_free;
         b->pending = 1;
+        b->chord_inside = 1;
         b->ahead.inside = 1;
         b->ahead.surface_free = b->surface_free;
         b->ahead.face_unknown = 1;
@@ -5018,6 +5067,7 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
         b->ahead.normal = rrv__v3(0, 0, 1);
         return;
     }
+    b->chord_inside = 0;
     rrv__look_along(scene, x, *d, &after);
     /* a point within rounding of the face is the face (the view's distance
        to it may come from the previous chord's look, a few ulps off) */
@@ -5077,6 +5127,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     rrv__reciprocals(*d, b->line_inv);
     rrv__look_along(scene, o, *d, &view);
     b->pending = 1;
+    b->chord_inside = 0;
     b->segment = view.t_face;
     b->end = view.t_face < DBL_MAX ? RRV__END_FACE : RRV__END_NONE;
     b->normal = view.normal;
@@ -5092,7 +5143,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
         /* the first point a uniformly random fraction of a spacing ahead, so
            the comb does not alias with pixels */
         const rrv_medium *medium;
-        double h = rrv__comb_spacing(scene, b, o, *d, b->line_inv, 1.0 - rrv__uniform(rng), &b->entering, &medium);
+        double h = rrv__comb_spacing(scene, b, &o, d, b->line_inv, 1.0 - rrv__uniform(rng), &b->entering, &medium);
         rrv__comb_step(b, scene, o, d, h, &view, medium, rng);
     }
     b->face_known = 0;
@@ -5108,16 +5159,16 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
         *d = b->next_d;
         b->pending = 0;
         break;
-    case RRV__END_KICK: {
-        rrv__support_view view = b->ahead;
-        if (view.inside) {
+    case RRV__END_KICK:
+        /* rrv__comb_step reads the view ahead before it writes the next */
+        if (b->ahead.inside) {
             /* entering cells with a gradient from a stretch without: the
                first point a random fraction of a spacing in, as at a
                segment's start, so the comb does not alias with pixels */
             double tau = b->entering > 0 ? 1.0 - rrv__uniform(rng) : 1.0;
             const rrv_medium *medium;
-            double h = rrv__comb_spacing(scene, b, *o, *d, b->line_inv, tau, &b->entering, &medium);
-            rrv__comb_step(b, scene, *o, d, h, &view, medium, rng);
+            double h = rrv__comb_spacing(scene, b, o, d, b->line_inv, tau, &b->entering, &medium);
+            rrv__comb_step(b, scene, *o, d, h, &b->ahead, medium, rng);
         } else {
             /* a kick that turned the chord out through a face it grazed:
                the comb ends here, without an interface to refract */
@@ -5125,7 +5176,6 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
             b->pending = b->combing = 0;
         }
         break;
-    }
     case RRV__END_FACE:
         if (b->combing) {
             /* the comb's last half kick, gradient just behind the face, where
@@ -5133,7 +5183,7 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
             rrv_vec3 at = rrv__madd(*o, *d, -rrv__face_gap(*o)), grad;
             double r_behind = rrv__scene_refractivity(scene, at, &grad);
             if (b->behind_split) b->r = r_behind - 0.5 * b->chord * rrv__dot(grad, *d);
-            *d = rrv__comb_kick_by(b, *o, *d, b->chord, 0.5 * b->chord, at, r_behind, grad);
+            rrv__comb_kick_by(b, o, d, b->chord, 0.5 * b->chord, &at, r_behind, &grad);
             *d = rrv__cross_face(b, scene, o, *d, b->normal, &r_behind, rng);
         } else {
             *d = rrv__cross_face(b, scene, o, *d, b->normal, NULL, rng);
@@ -5233,15 +5283,17 @@ static void rrv__path_reweight(rrv__path *path, const double f[3])
     }
 }
 
+/* inside: bit i, the chord lies inside media[i]'s box (rrv__bender's chord_inside). */
 static int rrv__start_walkers(const rrv__context *ctx, rrv__walker *walkers, int with_refraction,
-                              rrv_vec3 o, rrv_vec3 d, const double *inv_d, double tmax, rrv__rng *rng,
-                              uint64_t *events)
+                              const rrv_vec3 *o, const rrv_vec3 *d, const double *inv_d, uint64_t inside,
+                              double tmax, rrv__rng *rng, uint64_t *events)
 {
     const rrv_scene *scene = ctx->scene;
     int i, n = 0;
     for (i = 0; i < scene->medium_count; ++i) {
         rrv__walker *w = &walkers[n];
-        if (rrv__walker_start_line(w, &scene->media[i], with_refraction, &scene->settings, o, d, inv_d, tmax)) {
+        if (rrv__walker_start_line(w, &scene->media[i], with_refraction, &scene->settings, o, d, inv_d, tmax,
+                                   (int)(inside >> i & 1))) {
             rrv__walker_advance(w, rng, events);
             if (w->t_event < DBL_MAX) ++n;
         }
@@ -5323,9 +5375,9 @@ static const double *rrv__chord_inv(const rrv__context *ctx, const rrv__bender *
    (also where the bender knows none reaches the segment). A surface lying
    on the face that ends the segment belongs to it: looked for a gap past
    the end, it cannot slip between this segment's end and the next one's
-   start. */
-static int rrv__segment_hit(const rrv__context *ctx, const rrv__bender *b, rrv_vec3 o, rrv_vec3 d, double segment,
-                            rrv__hit *hit)
+   start. Inline: the comb asks at every chord, most often in vain. */
+static inline int rrv__segment_hit(const rrv__context *ctx, const rrv__bender *b, rrv_vec3 o, rrv_vec3 d,
+                                   double segment, rrv__hit *hit)
 {
     if (b->surface_free) return 0;
     return rrv__intersect_line(ctx->scene, o, d, rrv__chord_inv(ctx, b, d),
@@ -5352,7 +5404,11 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
 {
     rrv__walker walkers[RRV__MAX_MEDIA];
     const double *inv_d = rrv__chord_inv(ctx, &path->bender, d);
-    int n = rrv__start_walkers(ctx, walkers, ctx->refract_nulls, o, d, inv_d, tmax, rng, &ctx->stats.events);
+    /* the planned comb chord, if it lies inside the sole support: the media
+       whose boxes hold the support need not clip it */
+    uint64_t inside = inv_d && path->bender.chord_inside ? path->bender.holds_support : 0;
+    int n = rrv__start_walkers(ctx, walkers, ctx->refract_nulls, &o, &d, inv_d, inside, tmax, rng,
+                               &ctx->stats.events);
     while (n > 0) {
         int i, best = 0, ch;
         rrv__walker *w;
@@ -5852,10 +5908,14 @@ static int rrv__russian_roulette(rrv__camera_path *cp, rrv__rng *rng)
 
 /* Might the chord o + t d, t in [0, len], meet a medium with extinction?
    Its bounding box against the media's boxes: no divisions, and a false
-   yes only costs the ordinary walk. */
-static int rrv__chord_meets_extinction(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, double len)
+   yes only costs the ordinary walk. The box by comparisons: the comb asks
+   at every kick, and rrv__vmin's six fmin/fmax are library calls (three
+   quarters of this test's cost); inline for the same reason. */
+static inline int rrv__chord_meets_extinction(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, double len)
 {
-    rrv_vec3 e = rrv__madd(o, d, len), lo = rrv__vmin(o, e), hi = rrv__vmax(o, e);
+    rrv_vec3 e = rrv__madd(o, d, len);
+    rrv_vec3 lo = rrv__v3(rrv__mind(o.x, e.x), rrv__mind(o.y, e.y), rrv__mind(o.z, e.z));
+    rrv_vec3 hi = rrv__v3(rrv__maxd(o.x, e.x), rrv__maxd(o.y, e.y), rrv__maxd(o.z, e.z));
     int i;
     for (i = 0; i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i];
