@@ -3051,6 +3051,63 @@ static int rrv__profile_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
     return 1;
 }
 
+/* rrv__profile_refractivity, rrv__profile_gradient and (with H)
+   rrv__profile_hessian of the Luneburg, fish-eye and slab profiles at one
+   point, the same numbers: a Luneburg lens takes one square root for all
+   three where the three functions take one each, and an eikonal step
+   looks up four points (eight with nee shoot's Jacobi field). 0 for the
+   other kinds, left to those functions. */
+static int rrv__profile_fused(const rrv_field *f, rrv_vec3 p, double *r, rrv_vec3 *grad, double H[9])
+{
+    rrv_vec3 d = rrv__sub(p, f->center);
+    double R2 = f->radius * f->radius, q, a, b, dd[3];
+    int i, j;
+    switch (f->kind) {
+    case RRV_FIELD_LUNEBURG: {
+        double s;
+        q = rrv__dot(d, d) / R2;
+        if (q >= 1.0) {
+            *r = 0.0;
+            *grad = rrv__v3(0, 0, 0);
+            if (H) for (i = 0; i < 9; ++i) H[i] = 0;
+            return 1;
+        }
+        s = sqrt(2.0 - q);
+        *r = s - 1.0;
+        a = -1.0 / (R2 * s);
+        *grad = rrv__scale(d, a);
+        if (!H) return 1;
+        b = -1.0 / (R2 * R2 * s * s * s);
+        break;
+    }
+    case RRV_FIELD_FISHEYE:
+        q = rrv__dot(d, d) / R2;
+        if (q >= 1.0) {
+            *r = f->n0 * 0.5 - 1.0;
+            *grad = rrv__v3(0, 0, 0);
+            if (H) for (i = 0; i < 9; ++i) H[i] = 0;
+            return 1;
+        }
+        *r = f->n0 / (1.0 + q) - 1.0;
+        a = -2.0 * f->n0 / (R2 * (1.0 + q) * (1.0 + q));
+        *grad = rrv__scale(d, a);
+        if (!H) return 1;
+        b = 8.0 * f->n0 / (R2 * R2 * (1.0 + q) * (1.0 + q) * (1.0 + q));
+        break;
+    case RRV_FIELD_SLAB:
+        *r = f->base + f->gradient * rrv__dot(d, f->normal);
+        *grad = rrv__scale(f->normal, f->gradient);
+        if (H) for (i = 0; i < 9; ++i) H[i] = 0;
+        return 1;
+    default:
+        return 0;
+    }
+    dd[0] = d.x; dd[1] = d.y; dd[2] = d.z;
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j) H[3 * i + j] = (i == j ? a : 0.0) + b * dd[i] * dd[j];
+    return 1;
+}
+
 /* Refractivity and its gradient for one refractive medium at p. For a gas,
    grad r = r (grad P / P - grad T / T) (CONVENTIONS). */
 static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double ambient_r, rrv_vec3 *grad)
@@ -3058,6 +3115,10 @@ static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double
     double r;
     const rrv_grid *baked = rrv__refraction_grid_at(m, p);
     if (baked) return rrv__baked_refractivity(m, baked, p, grad);
+    if (!m->ior_from_gas && rrv__profile_fused(rrv__field_of(m, RRV__IOR), p, &r, grad, NULL)) {
+        *grad = rrv__scale(*grad, m->ior_scale);
+        return m->ior_scale * r;
+    }
     r = rrv__refractivity(m, p, ambient_r);
     if (m->ior_from_gas) {
         double T = fmax(rrv__temperature(m, p), 1e-3), P = rrv__pressure(m, p);
@@ -3112,13 +3173,21 @@ static int rrv__refractivity_hessian(const rrv_medium *m, rrv_vec3 p, double amb
 
 /* rrv__refractivity_gradient and rrv__refractivity_hessian at one point:
    the same numbers, and for a baked trilinear grid one cell lookup for all
-   three (the Jacobi fields of nee shoot take both at every stage of every
+   three, for the closed-form profiles one evaluation (rrv__profile_fused)
+   (the Jacobi fields of nee shoot take both at every stage of every
    step). */
 static double rrv__refractivity_gradient_hessian(const rrv_medium *m, rrv_vec3 p, double ambient_r, rrv_vec3 *grad,
                                                  double H[9])
 {
     const rrv_grid *baked = rrv__refraction_grid_at(m, p);
+    double r;
+    int k;
     if (baked && !m->majorant->cubic) return rrv__refraction_lookup_jacobian_fused(m->majorant, p, grad, H);
+    if (!baked && !m->ior_from_gas && rrv__profile_fused(rrv__field_of(m, RRV__IOR), p, &r, grad, H)) {
+        *grad = rrv__scale(*grad, m->ior_scale);
+        for (k = 0; k < 9; ++k) H[k] *= m->ior_scale;
+        return m->ior_scale * r;
+    }
     rrv__refractivity_hessian(m, p, ambient_r, H);
     return rrv__refractivity_gradient(m, p, ambient_r, grad);
 }
