@@ -6561,33 +6561,49 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
     }
 }
 
-/* An eikonal step that a face cut short (h < step) has a length that
-   depends on where it starts, and so does where the curve hands over to
-   the straight segment behind it: dh enters as x1 += d1 dh, d1 += kappa1 dh
-   (kappa1 = dd/ds at x1). Two cuts, as in rrv__eikonal_plan: h = t_face(x,
-   d) - nudge along the straight line, differentiated exactly; or, when the
-   chord itself reaches a face, the step's end held on that face (the
-   nudge neglected). J holds the field at the step's start, J1 the field at
-   its end for fixed h, updated here. Returns 0 at a grazing face. */
+/* An eikonal step shorter than the scene's (h < step) may have a length
+   that depends on where it starts, and so does where the curve hands over
+   to the straight segment behind it: dh enters as x1 += d1 dh, d1 +=
+   kappa1 dh (kappa1 = dd/ds at x1). rrv__eikonal_plan asks for min(step,
+   t_face - nudge) along the straight line, which the step control
+   (rrv__eikonal_step_controlled) may halve k times, exactly: then h =
+   t_face(x, d) 2^-k - nudge 2^-k, differentiated exactly (dh = 0 if the
+   scene's step was asked for: halving alone moves nothing). Or, when the
+   chord itself reached a face and the step was taken again shorter, the
+   step's end is held on that face (the nudge neglected); that second step
+   halved by the control (its end short of the face, its length a function
+   of the first step's chord) has no derivative here and counts as a grazing
+   face. J holds the field at the step's start, J1 the field at its end for
+   fixed h, updated here. Returns 0 at a grazing face. */
 static int rrv__clipped_step_jacobi(const rrv_scene *scene, const rrv__bender *b, rrv_vec3 x, rrv_vec3 d_start,
                                     rrv_vec3 chord, double len, const rrv__jacobi *J, rrv__jacobi *J1)
 {
     rrv__support_view view;
     rrv_vec3 x1 = rrv__madd(x, chord, len), d1 = b->next_d, g1, kappa;
-    double eta1 = rrv__eta_gradient(scene, x1, &g1), dh[2], nd;
-    int j;
-    kappa = rrv__scale(rrv__madd(g1, d1, -rrv__dot(d1, g1)), 1.0 / eta1);
+    double eta1, dh[2], nd, first, asked = b->h, scale = 1.0, slack;
+    int j, halvings;
     rrv__look_along(scene, x, d_start, &view);
-    if (fabs(b->h - (view.t_face - RRV__EDGE_NUDGE)) <= 1e-12 * (1.0 + view.t_face)) {
+    first = fmin(scene->settings.step, view.t_face - RRV__EDGE_NUDGE);
+    slack = 1e-12 * (1.0 + view.t_face);
+    for (halvings = 0; halvings < 12 && asked < first - slack; ++halvings) {
+        asked *= 2.0;
+        scale *= 0.5;
+    }
+    if (fabs(asked - first) <= slack) {
+        if (!(view.t_face - RRV__EDGE_NUDGE < scene->settings.step)) return 1; /* halved, not cut */
         nd = rrv__dot(view.normal, d_start);
         if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
-        for (j = 0; j < 2; ++j) dh[j] = -rrv__dot(view.normal, rrv__madd(J->x[j], J->d[j], view.t_face)) / nd;
+        for (j = 0; j < 2; ++j)
+            dh[j] = -scale * rrv__dot(view.normal, rrv__madd(J->x[j], J->d[j], view.t_face)) / nd;
     } else {
         rrv__look_along(scene, x, chord, &view);
+        if (!(view.t_face < 1.5 * len)) return 0; /* the second step halved */
         nd = rrv__dot(view.normal, d1);
         if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
         for (j = 0; j < 2; ++j) dh[j] = -rrv__dot(view.normal, J1->x[j]) / nd;
     }
+    eta1 = rrv__eta_gradient(scene, x1, &g1);
+    kappa = rrv__scale(rrv__madd(g1, d1, -rrv__dot(d1, g1)), 1.0 / eta1);
     for (j = 0; j < 2; ++j) {
         J1->x[j] = rrv__madd(J1->x[j], d1, dh[j]);
         J1->d[j] = rrv__madd(J1->d[j], kappa, dh[j]);
