@@ -6484,53 +6484,84 @@ static rrv_vec3 rrv__mat_apply(const double H[9], rrv_vec3 v)
    two angles of its initial direction. */
 typedef struct rrv__jacobi { rrv_vec3 x[2], d[2]; } rrv__jacobi;
 
-/* Carries a Jacobi field through one rrv__eikonal_step of length h from
-   (x, d): the exact derivative of that discrete map, including the
-   renormalisation of the direction that ends each step. */
-static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x, rrv_vec3 d,
-                                     rrv__jacobi *J)
+/* What one eikonal step of length h looked up at its stages (eta, its
+   gradient and the gradient's derivative: four points for RK4, x and the
+   drift's end for leapfrog) and made of them, so that a shot takes the
+   step and carries its Jacobi field through it from one set of lookups. */
+typedef struct rrv__step_stages {
+    double h;
+    rrv_vec3 x[4], v[4], g[4];
+    double eta[4], H[4][9];
+    rrv_vec3 v1;      /* eta d at the step's end, before the renormalisation */
+} rrv__step_stages;
+
+/* rrv__eikonal_step from (x, d), the same arithmetic and so the same
+   *x_out, *d_out and return bit for bit (eta and its gradient from
+   rrv__eta_gradient_hessian are rrv__eta_gradient's), keeping its stages. */
+static int rrv__eikonal_step_staged(const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x, rrv_vec3 d,
+                                    rrv_vec3 *x_out, rrv_vec3 *d_out, rrv__step_stages *st)
 {
-    rrv_vec3 g, v, v1, dx[2], dv[2];
-    double H[9], eta = rrv__eta_gradient_hessian(scene, x, &g, H), n1;
+    double spread = 0, eta = rrv__eta_gradient_hessian(scene, x, &st->g[0], st->H[0]);
+    rrv_vec3 v = rrv__scale(d, eta);
+    st->h = h;
+    st->x[0] = x;
+    st->v[0] = v;
+    st->eta[0] = eta;
+    if (stepper != RRV_STEPPER_LEAPFROG) {
+        rrv_vec3 kx[4];
+        int s;
+        kx[0] = rrv__scale(v, 1.0 / eta);
+        for (s = 1; s < 4; ++s) {
+            const double reach = s < 3 ? 0.5 * h : h;
+            st->x[s] = rrv__madd(x, kx[s - 1], reach);
+            st->v[s] = rrv__madd(v, st->g[s - 1], reach);
+            st->eta[s] = rrv__eta_gradient_hessian(scene, st->x[s], &st->g[s], st->H[s]);
+            kx[s] = rrv__scale(st->v[s], 1.0 / st->eta[s]);
+        }
+        *x_out = rrv__madd(x, rrv__add(rrv__add(kx[0], kx[3]), rrv__scale(rrv__add(kx[1], kx[2]), 2.0)), h / 6.0);
+        st->v1 = rrv__madd(v, rrv__add(rrv__add(st->g[0], st->g[3]), rrv__scale(rrv__add(st->g[1], st->g[2]), 2.0)),
+                           h / 6.0);
+        spread = rrv__length(rrv__sub(rrv__add(st->g[0], st->g[3]), rrv__add(st->g[1], st->g[2])));
+    } else {
+        /* rrv__leapfrog_kdk; the half-kicked v is kept in v[0] */
+        st->v[0] = rrv__madd(v, st->g[0], 0.5 * h);
+        st->x[1] = *x_out = rrv__madd(x, st->v[0], h / eta);
+        st->eta[1] = rrv__eta_gradient_hessian(scene, st->x[1], &st->g[1], st->H[1]);
+        st->v1 = rrv__madd(st->v[0], st->g[1], 0.5 * h * st->eta[1] / eta);
+    }
+    *d_out = rrv__normalize(st->v1);
+    return h * spread > RRV__FEATURE_BEND * eta;
+}
+
+/* Carries a Jacobi field through the step whose stages st holds (from
+   (x, d) as rrv__eikonal_step_staged took it): the exact derivative of that
+   discrete map, including the renormalisation of the direction that ends
+   the step. */
+static void rrv__step_stages_jacobi(const rrv__step_stages *st, rrv_stepper stepper, rrv_vec3 d, rrv__jacobi *J)
+{
+    const double h = st->h, eta = st->eta[0];
+    const rrv_vec3 g = st->g[0];
+    rrv_vec3 dx[2], dv[2], v1 = st->v1;
     int j;
-    v = rrv__scale(d, eta);
     for (j = 0; j < 2; ++j) {
         dx[j] = J->x[j];
         dv[j] = rrv__madd(rrv__scale(d, rrv__dot(g, dx[j])), J->d[j], eta); /* v = eta(x) d */
     }
     if (stepper != RRV_STEPPER_LEAPFROG) {
         static const double reach[3] = {0.5, 0.5, 1.0}, weight[4] = {1, 2, 2, 1};
-        rrv_vec3 xs[4], vs[4], gs[4], kx[4], kv[4], sx[2], sv[2], ax[2], av[2];
-        double es[4], inv_e[4], e2[4], Hs[4][9];
+        rrv_vec3 sx[2], sv[2], ax[2], av[2];
         int s;
-        /* the first stage is at x, already looked up */
-        xs[0] = x; vs[0] = v; es[0] = eta; gs[0] = g;
-        memcpy(Hs[0], H, sizeof H);
-        for (s = 0; s < 4; ++s) {
-            if (s) es[s] = rrv__eta_gradient_hessian(scene, xs[s], &gs[s], Hs[s]);
-            inv_e[s] = 1.0 / es[s];
-            e2[s] = es[s] * es[s];
-            kx[s] = rrv__scale(vs[s], inv_e[s]);
-            kv[s] = gs[s];
-            if (s < 3) {
-                xs[s + 1] = rrv__madd(x, kx[s], reach[s] * h);
-                vs[s + 1] = rrv__madd(v, kv[s], reach[s] * h);
-            }
-        }
-        v1 = v;
-        for (s = 0; s < 4; ++s) v1 = rrv__madd(v1, kv[s], weight[s] * h / 6.0);
-        /* both columns stage by stage (each column's operations as they
-           were, so the same numbers) */
+        /* both columns stage by stage */
         for (j = 0; j < 2; ++j) {
             ax[j] = sx[j] = dx[j];
             av[j] = sv[j] = dv[j];
         }
         for (s = 0; s < 4; ++s) {
-            const double wh = weight[s] * h / 6.0;
+            const double wh = weight[s] * h / 6.0, inv_e = 1.0 / st->eta[s], e2 = st->eta[s] * st->eta[s];
             for (j = 0; j < 2; ++j) {
                 /* d(v / eta) = dv / eta - v (grad eta . dx) / eta^2; d(grad eta) = H dx */
-                rrv_vec3 kxs = rrv__sub(rrv__scale(sv[j], inv_e[s]), rrv__scale(vs[s], rrv__dot(gs[s], sx[j]) / e2[s]));
-                rrv_vec3 kvs = rrv__mat_apply(Hs[s], sx[j]);
+                rrv_vec3 kxs = rrv__sub(rrv__scale(sv[j], inv_e), rrv__scale(st->v[s], rrv__dot(st->g[s], sx[j]) / e2));
+                rrv_vec3 kvs = rrv__mat_apply(st->H[s], sx[j]);
                 ax[j] = rrv__madd(ax[j], kxs, wh);
                 av[j] = rrv__madd(av[j], kvs, wh);
                 if (s < 3) {
@@ -6543,78 +6574,130 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
             J->x[j] = ax[j];
             dv[j] = av[j];
         }
+        /* the end's eta d summed stage by stage, as the columns are (it
+           differs from the step's own sum in rounding only) */
+        v1 = st->v[0];
+        for (s = 0; s < 4; ++s) v1 = rrv__madd(v1, st->g[s], weight[s] * h / 6.0);
     } else {
         /* kick (h/2) grad eta, drift (h / eta) v, kick (h/2) (eta1/eta) grad eta1 */
-        rrv_vec3 vh = rrv__madd(v, g, 0.5 * h), x1, g1;
-        double H1[9], eta1;
-        x1 = rrv__madd(x, vh, h / eta);
-        eta1 = rrv__eta_gradient_hessian(scene, x1, &g1, H1);
-        v1 = rrv__madd(vh, g1, 0.5 * h * eta1 / eta);
+        const rrv_vec3 vh = st->v[0], g1 = st->g[1];
+        const double eta1 = st->eta[1];
         for (j = 0; j < 2; ++j) {
-            rrv_vec3 dvh = rrv__madd(dv[j], rrv__mat_apply(H, dx[j]), 0.5 * h);
+            rrv_vec3 dvh = rrv__madd(dv[j], rrv__mat_apply(st->H[0], dx[j]), 0.5 * h);
             double ge = rrv__dot(g, dx[j]);
             rrv_vec3 dx1 = rrv__add(dx[j], rrv__scale(rrv__sub(rrv__scale(dvh, 1.0 / eta),
                                                                  rrv__scale(vh, ge / (eta * eta))), h));
             double deta1 = rrv__dot(g1, dx1);
             rrv_vec3 kick = rrv__add(rrv__scale(g1, (deta1 / eta - eta1 * ge / (eta * eta))),
-                                     rrv__scale(rrv__mat_apply(H1, dx1), eta1 / eta));
+                                     rrv__scale(rrv__mat_apply(st->H[1], dx1), eta1 / eta));
             J->x[j] = dx1;
             dv[j] = rrv__madd(dvh, kick, 0.5 * h);
         }
     }
-    n1 = rrv__length(v1);
     {
-        double inv_n1 = 1.0 / n1;
+        double inv_n1 = 1.0 / rrv__length(v1);
         rrv_vec3 d1 = rrv__scale(v1, inv_n1);
         for (j = 0; j < 2; ++j) J->d[j] = rrv__scale(rrv__madd(dv[j], d1, -rrv__dot(d1, dv[j])), inv_n1);
     }
 }
 
-/* An eikonal step shorter than the scene's (h < step) may have a length
-   that depends on where it starts, and so does where the curve hands over
-   to the straight segment behind it: dh enters as x1 += d1 dh, d1 +=
-   kappa1 dh (kappa1 = dd/ds at x1). rrv__eikonal_plan asks for min(step,
-   t_face - nudge) along the straight line, which the step control
-   (rrv__eikonal_step_controlled) may halve k times, exactly: then h =
-   t_face(x, d) 2^-k - nudge 2^-k, differentiated exactly (dh = 0 if the
-   scene's step was asked for: halving alone moves nothing). Or, when the
-   chord itself reached a face and the step was taken again shorter, the
-   step's end is held on that face (the nudge neglected); that second step
-   halved by the control (its end short of the face, its length a function
-   of the first step's chord) has no derivative here and counts as a grazing
-   face. J holds the field at the step's start, J1 the field at its end for
-   fixed h, updated here. Returns 0 at a grazing face. */
-static int rrv__clipped_step_jacobi(const rrv_scene *scene, const rrv__bender *b, rrv_vec3 x, rrv_vec3 d_start,
-                                    rrv_vec3 chord, double len, const rrv__jacobi *J, rrv__jacobi *J1)
+/* rrv__eikonal_step_controlled with rrv__eikonal_step_staged: the same step,
+   its stages in st. */
+static double rrv__eikonal_step_controlled_staged(const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x,
+                                                  rrv_vec3 d, rrv_vec3 *x_out, rrv_vec3 *d_out, rrv__step_stages *st,
+                                                  int *halvings)
 {
-    rrv__support_view view;
-    rrv_vec3 x1 = rrv__madd(x, chord, len), d1 = b->next_d, g1, kappa;
-    double eta1, dh[2], nd, first, asked = b->h, scale = 1.0, slack;
-    int j, halvings;
-    rrv__look_along(scene, x, d_start, &view);
-    first = fmin(scene->settings.step, view.t_face - RRV__EDGE_NUDGE);
+    *halvings = 0;
+    while (rrv__eikonal_step_staged(scene, stepper, h, x, d, x_out, d_out, st) && *halvings < 12 &&
+           h > 4 * RRV__EDGE_NUDGE) {
+        h *= 0.5;
+        ++*halvings;
+    }
+    return h;
+}
+
+/* rrv__plan_segment for a shot's eikonal bender, with the Jacobi field:
+   the same segment, direction and bender state bit for bit (it follows
+   rrv__plan_segment's eikonal branch and rrv__eikonal_plan, and
+   rrv__finish_segment then runs as after them), each step's stages looked
+   up once for the step and its Jacobi field, and the faces that cut the
+   step known from planning it. J holds the field at o; for a step (END_STEP)
+   *J1 gets it at the step's end. A step shorter than the scene's (h <
+   step) may have a length that depends on where it starts, and so does
+   where the curve hands over to the straight segment behind it: dh enters
+   as x1 += d1 dh, d1 += kappa1 dh (kappa1 = dd/ds at x1). The plan asks for
+   min(step, t_face - nudge) along the straight line, which the step control
+   may halve k times, exactly: then h = (t_face(x, d) - nudge) 2^-k,
+   differentiated exactly (dh = 0 if the scene's step was asked for: halving
+   alone moves nothing). Or, when the chord itself reached a face and the
+   step was taken again shorter, the step's end is held on that face (the
+   nudge neglected); that second step halved by the control (its end short
+   of the face, its length a function of the first step's chord) has no
+   derivative here and counts as a grazing face. Returns 0 at a grazing
+   face. */
+static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, rrv_vec3 *d, const rrv__jacobi *J,
+                           rrv__jacobi *J1)
+{
+    const double nudge = RRV__EDGE_NUDGE, step = scene->settings.step;
+    const rrv_stepper stepper = scene->settings.stepper;
+    rrv__support_view view, along;
+    rrv__step_stages st;
+    rrv_vec3 d_start = *d, x1, chord, g1, kappa;
+    double h, first, len, eta1, dh[2], nd, asked, scale = 1.0, slack;
+    int j, halvings, again = 0;
+    b->line_d = *d;
+    rrv__reciprocals(*d, b->line_inv);
+    rrv__look_along(scene, o, *d, &view);
+    b->pending = 1;
+    b->segment = view.t_face;
+    b->end = view.t_face < DBL_MAX ? RRV__END_FACE : RRV__END_NONE;
+    b->normal = view.normal;
+    b->surface_free = 0;
+    b->face_known = 0;
+    if (!view.inside || !(view.t_face > 2 * nudge)) return 1;
+    first = fmin(step, view.t_face - nudge);
+    h = rrv__eikonal_step_controlled_staged(scene, stepper, first, o, d_start, &x1, &b->next_d, &st, &halvings);
+    chord = rrv__sub(x1, o);
+    len = rrv__length(chord);
+    rrv__look_along(scene, o, rrv__scale(chord, 1.0 / len), &along);
+    if (along.t_face < len + nudge && along.t_face > 2 * nudge) {
+        h = rrv__eikonal_step_controlled_staged(scene, stepper, h * (along.t_face - nudge) / len, o, d_start, &x1,
+                                                &b->next_d, &st, &again);
+        chord = rrv__sub(x1, o);
+        len = rrv__length(chord);
+    }
+    *d = rrv__scale(chord, 1.0 / len);
+    b->h = h;
+    b->segment = len;
+    b->end = RRV__END_STEP;
+    *J1 = *J;
+    rrv__step_stages_jacobi(&st, stepper, d_start, J1);
+    if (!(h < step)) return 1;
+    /* which cut made h: told apart by its length, as a step of the first
+       cut rounded differently would be */
+    asked = h;
     slack = 1e-12 * (1.0 + view.t_face);
     for (halvings = 0; halvings < 12 && asked < first - slack; ++halvings) {
         asked *= 2.0;
         scale *= 0.5;
     }
     if (fabs(asked - first) <= slack) {
-        if (!(view.t_face - RRV__EDGE_NUDGE < scene->settings.step)) return 1; /* halved, not cut */
+        if (!(view.t_face - nudge < step)) return 1; /* halved, not cut */
         nd = rrv__dot(view.normal, d_start);
         if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
         for (j = 0; j < 2; ++j)
             dh[j] = -scale * rrv__dot(view.normal, rrv__madd(J->x[j], J->d[j], view.t_face)) / nd;
     } else {
-        rrv__look_along(scene, x, chord, &view);
+        rrv__look_along(scene, o, *d, &view);
         if (!(view.t_face < 1.5 * len)) return 0; /* the second step halved */
-        nd = rrv__dot(view.normal, d1);
+        nd = rrv__dot(view.normal, b->next_d);
         if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
         for (j = 0; j < 2; ++j) dh[j] = -rrv__dot(view.normal, J1->x[j]) / nd;
     }
-    eta1 = rrv__eta_gradient(scene, x1, &g1);
-    kappa = rrv__scale(rrv__madd(g1, d1, -rrv__dot(d1, g1)), 1.0 / eta1);
+    eta1 = rrv__eta_gradient(scene, rrv__madd(o, *d, len), &g1);
+    kappa = rrv__scale(rrv__madd(g1, b->next_d, -rrv__dot(b->next_d, g1)), 1.0 / eta1);
     for (j = 0; j < 2; ++j) {
-        J1->x[j] = rrv__madd(J1->x[j], d1, dh[j]);
+        J1->x[j] = rrv__madd(J1->x[j], b->next_d, dh[j]);
         J1->d[j] = rrv__madd(J1->d[j], kappa, dh[j]);
     }
     return 1;
@@ -6700,18 +6783,16 @@ static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec
     if (T) T[0] = T[1] = T[2] = 1.0;
     if (kept) kept->n = 0;
     for (n = 0; n < RRV__SOLVE_SEGMENTS; ++n) {
-        rrv_vec3 d_start = d, dc[2];
+        rrv_vec3 dc[2];
         rrv__jacobi J1 = J;
         double len, s;
         int j;
-        rrv__plan_segment(&b, scene, x, &d, &fixed);
+        if (T) rrv__plan_segment(&b, scene, x, &d, &fixed);
+        else if (!rrv__shoot_plan(&b, scene, x, &d, &J, &J1)) break;
         len = b.segment;
         if (b.end == RRV__END_STEP && T) {
             for (j = 0; j < 2; ++j) dc[j] = J.d[j];
         } else if (b.end == RRV__END_STEP) {
-            rrv__eikonal_step_jacobi(scene, scene->settings.stepper, b.h, x, d_start, &J1);
-            if (b.h < scene->settings.step && !rrv__clipped_step_jacobi(scene, &b, x, d_start, d, len, &J, &J1))
-                break;
             for (j = 0; j < 2; ++j) {
                 rrv_vec3 w = rrv__scale(rrv__sub(J1.x[j], J.x[j]), 1.0 / len);
                 dc[j] = rrv__madd(w, d, -rrv__dot(w, d));
