@@ -3077,7 +3077,7 @@ static int rrv__profile_fused(const rrv_field *f, rrv_vec3 p, double *r, rrv_vec
         a = -1.0 / (R2 * s);
         *grad = rrv__scale(d, a);
         if (!H) return 1;
-        b = -1.0 / (R2 * R2 * s * s * s);
+        b = a * a * a * R2; /* -1 / (R2^2 s^3) */
         break;
     }
     case RRV_FIELD_FISHEYE:
@@ -3104,7 +3104,7 @@ static int rrv__profile_fused(const rrv_field *f, rrv_vec3 p, double *r, rrv_vec
     }
     dd[0] = d.x; dd[1] = d.y; dd[2] = d.z;
     for (i = 0; i < 3; ++i)
-        for (j = 0; j < 3; ++j) H[3 * i + j] = (i == j ? a : 0.0) + b * dd[i] * dd[j];
+        for (j = i; j < 3; ++j) H[3 * i + j] = H[3 * j + i] = (i == j ? a : 0.0) + b * dd[i] * dd[j];
     return 1;
 }
 
@@ -3184,6 +3184,7 @@ static double rrv__refractivity_gradient_hessian(const rrv_medium *m, rrv_vec3 p
     int k;
     if (baked && !m->majorant->cubic) return rrv__refraction_lookup_jacobian_fused(m->majorant, p, grad, H);
     if (!baked && !m->ior_from_gas && rrv__profile_fused(rrv__field_of(m, RRV__IOR), p, &r, grad, H)) {
+        if (m->ior_scale == 1.0) return r;
         *grad = rrv__scale(*grad, m->ior_scale);
         for (k = 0; k < 9; ++k) H[k] *= m->ior_scale;
         return m->ior_scale * r;
@@ -6557,10 +6558,10 @@ static void rrv__step_stages_jacobi(const rrv__step_stages *st, rrv_stepper step
             av[j] = sv[j] = dv[j];
         }
         for (s = 0; s < 4; ++s) {
-            const double wh = weight[s] * h / 6.0, inv_e = 1.0 / st->eta[s], e2 = st->eta[s] * st->eta[s];
+            const double wh = weight[s] * h / 6.0, inv_e = 1.0 / st->eta[s], inv_e2 = inv_e * inv_e;
             for (j = 0; j < 2; ++j) {
                 /* d(v / eta) = dv / eta - v (grad eta . dx) / eta^2; d(grad eta) = H dx */
-                rrv_vec3 kxs = rrv__sub(rrv__scale(sv[j], inv_e), rrv__scale(st->v[s], rrv__dot(st->g[s], sx[j]) / e2));
+                rrv_vec3 kxs = rrv__sub(rrv__scale(sv[j], inv_e), rrv__scale(st->v[s], rrv__dot(st->g[s], sx[j]) * inv_e2));
                 rrv_vec3 kvs = rrv__mat_apply(st->H[s], sx[j]);
                 ax[j] = rrv__madd(ax[j], kxs, wh);
                 av[j] = rrv__madd(av[j], kvs, wh);
