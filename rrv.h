@@ -2996,61 +2996,6 @@ static rrv_vec3 rrv__profile_gradient(const rrv_field *f, rrv_vec3 p)
     }
 }
 
-/* The derivative of rrv__profile_gradient (unscaled); 0 where there is
-   none here. The radial profiles have grad r = phi'(d) e (e = d / |d|), so
-   H = phi'' e e^T + (phi' / |d|) (I - e e^T), written as a I + b d d^T. */
-static int rrv__profile_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
-{
-    rrv_vec3 d = rrv__sub(p, f->center);
-    double R2 = f->radius * f->radius, q, a = 0, b = 0, dd[3];
-    int i, j;
-    for (i = 0; i < 9; ++i) H[i] = 0;
-    switch (f->kind) {
-    case RRV_FIELD_CONSTANT:
-    case RRV_FIELD_SLAB:
-        return 1;
-    case RRV_FIELD_LUNEBURG: {
-        double s;
-        q = rrv__dot(d, d) / R2;
-        if (q >= 1.0) return 1;
-        s = sqrt(2.0 - q);
-        a = -1.0 / (R2 * s);
-        b = -1.0 / (R2 * R2 * s * s * s);
-        break;
-    }
-    case RRV_FIELD_FISHEYE:
-        q = rrv__dot(d, d) / R2;
-        if (q >= 1.0) return 1;
-        a = -2.0 * f->n0 / (R2 * (1.0 + q) * (1.0 + q));
-        b = 8.0 * f->n0 / (R2 * R2 * (1.0 + q) * (1.0 + q) * (1.0 + q));
-        break;
-    case RRV_FIELD_SHELL: {
-        /* phi' = A / (2 e) (sech^2 u - sech^2 v), u = (r - inner) / e, v =
-           (r - R) / e; phi'' = A / e^2 (sech^2 v tanh v - sech^2 u tanh u).
-           At the centre the gradient (zero there) is not differentiable; it
-           is measure zero and gets the limit along a ray, phi'' I. */
-        double r = rrv__length(d), inner = f->radius - f->thickness, e = f->edge;
-        double cu = cosh((r - inner) / e), cv = cosh((r - f->radius) / e);
-        double su = 1.0 / (cu * cu), sv = 1.0 / (cv * cv);
-        double d1 = f->amplitude * 0.5 * (su - sv) / e;
-        double d2 = f->amplitude * (sv * tanh((r - f->radius) / e) - su * tanh((r - inner) / e)) / (e * e);
-        if (r == 0) {
-            a = d2;
-            break;
-        }
-        a = d1 / r;
-        b = (d2 - a) / (r * r);
-        break;
-    }
-    default:
-        return rrv__field_hessian(f, p, H);
-    }
-    dd[0] = d.x; dd[1] = d.y; dd[2] = d.z;
-    for (i = 0; i < 3; ++i)
-        for (j = 0; j < 3; ++j) H[3 * i + j] = (i == j ? a : 0.0) + b * dd[i] * dd[j];
-    return 1;
-}
-
 /* rrv__profile_refractivity, rrv__profile_gradient and (with H)
    rrv__profile_hessian of the Luneburg, fish-eye and slab profiles at one
    point, the same numbers: a Luneburg lens takes one square root for all
@@ -3105,6 +3050,51 @@ static int rrv__profile_fused(const rrv_field *f, rrv_vec3 p, double *r, rrv_vec
     dd[0] = d.x; dd[1] = d.y; dd[2] = d.z;
     for (i = 0; i < 3; ++i)
         for (j = i; j < 3; ++j) H[3 * i + j] = H[3 * j + i] = (i == j ? a : 0.0) + b * dd[i] * dd[j];
+    return 1;
+}
+
+/* The derivative of rrv__profile_gradient (unscaled); 0 where there is
+   none here. The radial profiles have grad r = phi'(d) e (e = d / |d|), so
+   H = phi'' e e^T + (phi' / |d|) (I - e e^T), written as a I + b d d^T. */
+static int rrv__profile_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
+{
+    rrv_vec3 d = rrv__sub(p, f->center);
+    double q, a = 0, b = 0, dd[3];
+    int i, j;
+    for (i = 0; i < 9; ++i) H[i] = 0;
+    switch (f->kind) {
+    case RRV_FIELD_CONSTANT:
+        return 1;
+    case RRV_FIELD_LUNEBURG:
+    case RRV_FIELD_FISHEYE:
+    case RRV_FIELD_SLAB: {
+        rrv_vec3 g;
+        return rrv__profile_fused(f, p, &q, &g, H);
+    }
+    case RRV_FIELD_SHELL: {
+        /* phi' = A / (2 e) (sech^2 u - sech^2 v), u = (r - inner) / e, v =
+           (r - R) / e; phi'' = A / e^2 (sech^2 v tanh v - sech^2 u tanh u).
+           At the centre the gradient (zero there) is not differentiable; it
+           is measure zero and gets the limit along a ray, phi'' I. */
+        double r = rrv__length(d), inner = f->radius - f->thickness, e = f->edge;
+        double cu = cosh((r - inner) / e), cv = cosh((r - f->radius) / e);
+        double su = 1.0 / (cu * cu), sv = 1.0 / (cv * cv);
+        double d1 = f->amplitude * 0.5 * (su - sv) / e;
+        double d2 = f->amplitude * (sv * tanh((r - f->radius) / e) - su * tanh((r - inner) / e)) / (e * e);
+        if (r == 0) {
+            a = d2;
+            break;
+        }
+        a = d1 / r;
+        b = (d2 - a) / (r * r);
+        break;
+    }
+    default:
+        return rrv__field_hessian(f, p, H);
+    }
+    dd[0] = d.x; dd[1] = d.y; dd[2] = d.z;
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j) H[3 * i + j] = (i == j ? a : 0.0) + b * dd[i] * dd[j];
     return 1;
 }
 
