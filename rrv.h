@@ -3098,6 +3098,53 @@ static int rrv__profile_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
     return 1;
 }
 
+/* A gas whose temperature is a sum of blobs and whose pressure is uniform
+   (the fire plumes): rrv__refractivity, rrv__refractivity_gradient and
+   (with H) rrv__refractivity_hessian at p, the same numbers, from one
+   exponential a blob where the three take four between them. 0 for other
+   gases (or a baked one), left to those functions. */
+static int rrv__gas_fused(const rrv_medium *m, rrv_vec3 p, double *r, rrv_vec3 *grad, double H[9])
+{
+    const rrv_field *tf = rrv__field_of(m, RRV__TEMPERATURE), *pf = rrv__field_of(m, RRV__PRESSURE);
+    double sum = tf->base, T, P, ts = m->temperaturescale, HT[9], gt[3], k1;
+    rrv_vec3 gT = rrv__v3(0, 0, 0);
+    int i, k, l;
+    if (m->temperature.kind == RRV_FIELD_NONE || tf->kind != RRV_FIELD_BLOBS ||
+        !(pf->kind == RRV_FIELD_NONE || pf->kind == RRV_FIELD_CONSTANT))
+        return 0;
+    if (H) for (k = 0; k < 9; ++k) HT[k] = 0;
+    for (i = 0; i < tf->blob_count; ++i) {
+        const rrv_blob *b = &tf->blobs[i];
+        rrv_vec3 d = rrv__sub(p, b->center);
+        double s2 = b->radius * b->radius, q = rrv__dot(d, d) / s2, e, w, ee[3];
+        if (!(q < 72.0)) continue; /* the cut-off of the value, gradient and Hessian */
+        e = exp(-0.5 * q);
+        sum += b->weight * e;
+        gT = rrv__madd(gT, d, -b->weight * e / s2);
+        if (!H) continue;
+        w = b->weight * e / s2;
+        ee[0] = d.x; ee[1] = d.y; ee[2] = d.z;
+        for (k = 0; k < 3; ++k)
+            for (l = 0; l < 3; ++l) HT[3 * k + l] += w * (ee[k] * ee[l] / s2 - (k == l ? 1.0 : 0.0));
+    }
+    P = m->pressure.kind == RRV_FIELD_NONE ? m->P_ref : pf->value;
+    T = (sum - m->temperatureoffset) * ts; /* rrv__temperature */
+    *r = m->ior_scale * ((m->eta_ref - 1.0) * (P / m->P_ref) * (m->T_ref / fmax(T, 1e-3)));
+    T = fmax(T, 1e-3);
+    gT = rrv__scale(gT, ts);
+    /* grad P = 0: grad r = r (0 / P - grad T / T) */
+    *grad = rrv__scale(rrv__sub(rrv__scale(rrv__v3(0, 0, 0), 1.0 / P), rrv__scale(gT, 1.0 / T)), *r);
+    if (!H) return 1;
+    gt[0] = gT.x / T; gt[1] = gT.y / T; gt[2] = gT.z / T;
+    for (k = 0; k < 3; ++k)
+        for (l = 0; l < 3; ++l) {
+            double u_k = 0.0 - gt[k], u_l = 0.0 - gt[l];
+            k1 = u_k * u_l + 0.0 / P - 0.0 * 0.0 - HT[3 * k + l] * ts / T + gt[k] * gt[l];
+            H[3 * k + l] = *r * k1;
+        }
+    return 1;
+}
+
 /* Refractivity and its gradient for one refractive medium at p. For a gas,
    grad r = r (grad P / P - grad T / T) (CONVENTIONS). */
 static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double ambient_r, rrv_vec3 *grad)
@@ -3109,6 +3156,7 @@ static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double
         *grad = rrv__scale(*grad, m->ior_scale);
         return m->ior_scale * r;
     }
+    if (m->ior_from_gas && rrv__gas_fused(m, p, &r, grad, NULL)) return r;
     r = rrv__refractivity(m, p, ambient_r);
     if (m->ior_from_gas) {
         double T = fmax(rrv__temperature(m, p), 1e-3), P = rrv__pressure(m, p);
@@ -3179,6 +3227,7 @@ static double rrv__refractivity_gradient_hessian(const rrv_medium *m, rrv_vec3 p
         for (k = 0; k < 9; ++k) H[k] *= m->ior_scale;
         return m->ior_scale * r;
     }
+    if (!baked && m->ior_from_gas && rrv__gas_fused(m, p, &r, grad, H)) return r;
     rrv__refractivity_hessian(m, p, ambient_r, H);
     return rrv__refractivity_gradient(m, p, ambient_r, grad);
 }
