@@ -3120,12 +3120,18 @@ static int rrv__gas_fused(const rrv_medium *m, rrv_vec3 p, double *r, rrv_vec3 *
         if (!(q < 72.0)) continue; /* the cut-off of the value, gradient and Hessian */
         e = exp(-0.5 * q);
         sum += b->weight * e;
-        gT = rrv__madd(gT, d, -b->weight * e / s2);
+        w = -b->weight * e / s2; /* -(weight e / s2) exactly */
+        gT = rrv__madd(gT, d, w);
         if (!H) continue;
-        w = b->weight * e / s2;
+        w = -w;
         ee[0] = d.x; ee[1] = d.y; ee[2] = d.z;
         for (k = 0; k < 3; ++k)
-            for (l = 0; l < 3; ++l) HT[3 * k + l] += w * (ee[k] * ee[l] / s2 - (k == l ? 1.0 : 0.0));
+            for (l = k; l < 3; ++l) {
+                /* symmetric: ee[k] ee[l] is ee[l] ee[k] to the bit */
+                double add = w * (ee[k] * ee[l] / s2 - (k == l ? 1.0 : 0.0));
+                HT[3 * k + l] += add;
+                if (l != k) HT[3 * l + k] += add;
+            }
     }
     P = m->pressure.kind == RRV_FIELD_NONE ? m->P_ref : pf->value;
     T = (sum - m->temperatureoffset) * ts; /* rrv__temperature */
