@@ -3008,34 +3008,81 @@ static rrv_vec3 rrv__profile_gradient(const rrv_field *f, rrv_vec3 p)
     }
 }
 
+/* rrv__profile_refractivity, rrv__profile_gradient and (with H)
+   rrv__profile_hessian of the Luneburg, fish-eye and slab profiles at one
+   point, the same numbers: a Luneburg lens takes one square root for all
+   three where the three functions take one each, and an eikonal step
+   looks up four points (eight with nee shoot's Jacobi field). 0 for the
+   other kinds, left to those functions. */
+static int rrv__profile_fused(const rrv_field *f, rrv_vec3 p, double *r, rrv_vec3 *grad, double H[9])
+{
+    rrv_vec3 d = rrv__sub(p, f->center);
+    double R2 = f->radius * f->radius, q, a, b, dd[3];
+    int i, j;
+    switch (f->kind) {
+    case RRV_FIELD_LUNEBURG: {
+        double s;
+        q = rrv__dot(d, d) / R2;
+        if (q >= 1.0) {
+            *r = 0.0;
+            *grad = rrv__v3(0, 0, 0);
+            if (H) for (i = 0; i < 9; ++i) H[i] = 0;
+            return 1;
+        }
+        s = sqrt(2.0 - q);
+        *r = s - 1.0;
+        a = -1.0 / (R2 * s);
+        *grad = rrv__scale(d, a);
+        if (!H) return 1;
+        b = a * a * a * R2; /* -1 / (R2^2 s^3) */
+        break;
+    }
+    case RRV_FIELD_FISHEYE:
+        q = rrv__dot(d, d) / R2;
+        if (q >= 1.0) {
+            *r = f->n0 * 0.5 - 1.0;
+            *grad = rrv__v3(0, 0, 0);
+            if (H) for (i = 0; i < 9; ++i) H[i] = 0;
+            return 1;
+        }
+        *r = f->n0 / (1.0 + q) - 1.0;
+        a = -2.0 * f->n0 / (R2 * (1.0 + q) * (1.0 + q));
+        *grad = rrv__scale(d, a);
+        if (!H) return 1;
+        b = 8.0 * f->n0 / (R2 * R2 * (1.0 + q) * (1.0 + q) * (1.0 + q));
+        break;
+    case RRV_FIELD_SLAB:
+        *r = f->base + f->gradient * rrv__dot(d, f->normal);
+        *grad = rrv__scale(f->normal, f->gradient);
+        if (H) for (i = 0; i < 9; ++i) H[i] = 0;
+        return 1;
+    default:
+        return 0;
+    }
+    dd[0] = d.x; dd[1] = d.y; dd[2] = d.z;
+    for (i = 0; i < 3; ++i)
+        for (j = i; j < 3; ++j) H[3 * i + j] = H[3 * j + i] = (i == j ? a : 0.0) + b * dd[i] * dd[j];
+    return 1;
+}
+
 /* The derivative of rrv__profile_gradient (unscaled); 0 where there is
    none here. The radial profiles have grad r = phi'(d) e (e = d / |d|), so
    H = phi'' e e^T + (phi' / |d|) (I - e e^T), written as a I + b d d^T. */
 static int rrv__profile_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
 {
     rrv_vec3 d = rrv__sub(p, f->center);
-    double R2 = f->radius * f->radius, q, a = 0, b = 0, dd[3];
+    double q, a = 0, b = 0, dd[3];
     int i, j;
     for (i = 0; i < 9; ++i) H[i] = 0;
     switch (f->kind) {
     case RRV_FIELD_CONSTANT:
-    case RRV_FIELD_SLAB:
         return 1;
-    case RRV_FIELD_LUNEBURG: {
-        double s;
-        q = rrv__dot(d, d) / R2;
-        if (q >= 1.0) return 1;
-        s = sqrt(2.0 - q);
-        a = -1.0 / (R2 * s);
-        b = -1.0 / (R2 * R2 * s * s * s);
-        break;
-    }
+    case RRV_FIELD_LUNEBURG:
     case RRV_FIELD_FISHEYE:
-        q = rrv__dot(d, d) / R2;
-        if (q >= 1.0) return 1;
-        a = -2.0 * f->n0 / (R2 * (1.0 + q) * (1.0 + q));
-        b = 8.0 * f->n0 / (R2 * R2 * (1.0 + q) * (1.0 + q) * (1.0 + q));
-        break;
+    case RRV_FIELD_SLAB: {
+        rrv_vec3 g;
+        return rrv__profile_fused(f, p, &q, &g, H);
+    }
     case RRV_FIELD_SHELL: {
         /* phi' = A / (2 e) (sech^2 u - sech^2 v), u = (r - inner) / e, v =
            (r - R) / e; phi'' = A / e^2 (sech^2 v tanh v - sech^2 u tanh u).
@@ -3063,6 +3110,59 @@ static int rrv__profile_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
     return 1;
 }
 
+/* A gas whose temperature is a sum of blobs and whose pressure is uniform
+   (the fire plumes): rrv__refractivity, rrv__refractivity_gradient and
+   (with H) rrv__refractivity_hessian at p, the same numbers, from one
+   exponential a blob where the three take four between them. 0 for other
+   gases (or a baked one), left to those functions. */
+static int rrv__gas_fused(const rrv_medium *m, rrv_vec3 p, double *r, rrv_vec3 *grad, double H[9])
+{
+    const rrv_field *tf = rrv__field_of(m, RRV__TEMPERATURE), *pf = rrv__field_of(m, RRV__PRESSURE);
+    double sum = tf->base, T, P, ts = m->temperaturescale, HT[9], gt[3], k1;
+    rrv_vec3 gT = rrv__v3(0, 0, 0);
+    int i, k, l;
+    if (m->temperature.kind == RRV_FIELD_NONE || tf->kind != RRV_FIELD_BLOBS ||
+        !(pf->kind == RRV_FIELD_NONE || pf->kind == RRV_FIELD_CONSTANT))
+        return 0;
+    if (H) for (k = 0; k < 9; ++k) HT[k] = 0;
+    for (i = 0; i < tf->blob_count; ++i) {
+        const rrv_blob *b = &tf->blobs[i];
+        rrv_vec3 d = rrv__sub(p, b->center);
+        double s2 = b->radius * b->radius, q = rrv__dot(d, d) / s2, e, w, ee[3];
+        if (!(q < 72.0)) continue; /* the cut-off of the value, gradient and Hessian */
+        e = exp(-0.5 * q);
+        sum += b->weight * e;
+        w = -b->weight * e / s2; /* -(weight e / s2) exactly */
+        gT = rrv__madd(gT, d, w);
+        if (!H) continue;
+        w = -w;
+        ee[0] = d.x; ee[1] = d.y; ee[2] = d.z;
+        for (k = 0; k < 3; ++k)
+            for (l = k; l < 3; ++l) {
+                /* symmetric: ee[k] ee[l] is ee[l] ee[k] to the bit */
+                double add = w * (ee[k] * ee[l] / s2 - (k == l ? 1.0 : 0.0));
+                HT[3 * k + l] += add;
+                if (l != k) HT[3 * l + k] += add;
+            }
+    }
+    P = m->pressure.kind == RRV_FIELD_NONE ? m->P_ref : pf->value;
+    T = (sum - m->temperatureoffset) * ts; /* rrv__temperature */
+    *r = m->ior_scale * ((m->eta_ref - 1.0) * (P / m->P_ref) * (m->T_ref / fmax(T, 1e-3)));
+    T = fmax(T, 1e-3);
+    gT = rrv__scale(gT, ts);
+    /* grad P = 0: grad r = r (0 / P - grad T / T) */
+    *grad = rrv__scale(rrv__sub(rrv__scale(rrv__v3(0, 0, 0), 1.0 / P), rrv__scale(gT, 1.0 / T)), *r);
+    if (!H) return 1;
+    gt[0] = gT.x / T; gt[1] = gT.y / T; gt[2] = gT.z / T;
+    for (k = 0; k < 3; ++k)
+        for (l = 0; l < 3; ++l) {
+            double u_k = 0.0 - gt[k], u_l = 0.0 - gt[l];
+            k1 = u_k * u_l + 0.0 / P - 0.0 * 0.0 - HT[3 * k + l] * ts / T + gt[k] * gt[l];
+            H[3 * k + l] = *r * k1;
+        }
+    return 1;
+}
+
 /* Refractivity and its gradient for one refractive medium at p. For a gas,
    grad r = r (grad P / P - grad T / T) (CONVENTIONS). */
 static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double ambient_r, rrv_vec3 *grad)
@@ -3070,6 +3170,11 @@ static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double
     double r;
     const rrv_grid *baked = rrv__refraction_grid_at(m, p);
     if (baked) return rrv__baked_refractivity(m, baked, p, grad);
+    if (!m->ior_from_gas && rrv__profile_fused(rrv__field_of(m, RRV__IOR), p, &r, grad, NULL)) {
+        *grad = rrv__scale(*grad, m->ior_scale);
+        return m->ior_scale * r;
+    }
+    if (m->ior_from_gas && rrv__gas_fused(m, p, &r, grad, NULL)) return r;
     r = rrv__refractivity(m, p, ambient_r);
     if (m->ior_from_gas) {
         double T = fmax(rrv__temperature(m, p), 1e-3), P = rrv__pressure(m, p);
@@ -3124,13 +3229,23 @@ static int rrv__refractivity_hessian(const rrv_medium *m, rrv_vec3 p, double amb
 
 /* rrv__refractivity_gradient and rrv__refractivity_hessian at one point:
    the same numbers, and for a baked trilinear grid one cell lookup for all
-   three (the Jacobi fields of nee shoot take both at every stage of every
+   three, for the closed-form profiles one evaluation (rrv__profile_fused)
+   (the Jacobi fields of nee shoot take both at every stage of every
    step). */
 static double rrv__refractivity_gradient_hessian(const rrv_medium *m, rrv_vec3 p, double ambient_r, rrv_vec3 *grad,
                                                  double H[9])
 {
     const rrv_grid *baked = rrv__refraction_grid_at(m, p);
+    double r;
+    int k;
     if (baked && !m->majorant->cubic) return rrv__refraction_lookup_jacobian_fused(m->majorant, p, grad, H);
+    if (!baked && !m->ior_from_gas && rrv__profile_fused(rrv__field_of(m, RRV__IOR), p, &r, grad, H)) {
+        if (m->ior_scale == 1.0) return r;
+        *grad = rrv__scale(*grad, m->ior_scale);
+        for (k = 0; k < 9; ++k) H[k] *= m->ior_scale;
+        return m->ior_scale * r;
+    }
+    if (!baked && m->ior_from_gas && rrv__gas_fused(m, p, &r, grad, H)) return r;
     rrv__refractivity_hessian(m, p, ambient_r, H);
     return rrv__refractivity_gradient(m, p, ambient_r, grad);
 }
@@ -6398,8 +6513,17 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
 #define RRV__SOLVE_ITERATIONS 20
 #define RRV__SOLVE_TRIALS 64          /* cap on the trials that estimate 1/p */
 #define RRV__SOLVE_RESTARTS 3         /* seeds a solve may try */
+#ifndef RRV__SOLVE_COARSE
 #define RRV__SOLVE_COARSE 8           /* eikonal: a solve first converges with steps this much longer */
+#endif
 #define RRV__SOLVE_SAME_ROOT 1e-5     /* roots whose directions differ less are one */
+/* Halvings of the Newton step a solve may make: on the lens caustic (h =
+   0.2, floor to light) 0.3 % of the solves that converged halved more than
+   twice, and every one that failed by halving halved four times or more,
+   after 9.4 shots on average (README.md). */
+#ifndef RRV__SOLVE_HALVINGS
+#define RRV__SOLVE_HALVINGS 3
+#endif
 #define RRV__SOLVE_SEGMENTS 200000L   /* a shot longer than this is a failed one */
 /* A face where the refractivity jumps by more than this is a sharp interface
    (Fresnel, total internal reflection): paths across one are not shot but
@@ -6493,53 +6617,84 @@ static rrv_vec3 rrv__mat_apply(const double H[9], rrv_vec3 v)
    two angles of its initial direction. */
 typedef struct rrv__jacobi { rrv_vec3 x[2], d[2]; } rrv__jacobi;
 
-/* Carries a Jacobi field through one rrv__eikonal_step of length h from
-   (x, d): the exact derivative of that discrete map, including the
-   renormalisation of the direction that ends each step. */
-static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x, rrv_vec3 d,
-                                     rrv__jacobi *J)
+/* What one eikonal step of length h looked up at its stages (eta, its
+   gradient and the gradient's derivative: four points for RK4, x and the
+   drift's end for leapfrog) and made of them, so that a shot takes the
+   step and carries its Jacobi field through it from one set of lookups. */
+typedef struct rrv__step_stages {
+    double h;
+    rrv_vec3 x[4], v[4], g[4];
+    double eta[4], H[4][9];
+    rrv_vec3 v1;      /* eta d at the step's end, before the renormalisation */
+} rrv__step_stages;
+
+/* rrv__eikonal_step from (x, d), the same arithmetic and so the same
+   *x_out, *d_out and return bit for bit (eta and its gradient from
+   rrv__eta_gradient_hessian are rrv__eta_gradient's), keeping its stages. */
+static int rrv__eikonal_step_staged(const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x, rrv_vec3 d,
+                                    rrv_vec3 *x_out, rrv_vec3 *d_out, rrv__step_stages *st)
 {
-    rrv_vec3 g, v, v1, dx[2], dv[2];
-    double H[9], eta = rrv__eta_gradient_hessian(scene, x, &g, H), n1;
+    double spread = 0, eta = rrv__eta_gradient_hessian(scene, x, &st->g[0], st->H[0]);
+    rrv_vec3 v = rrv__scale(d, eta);
+    st->h = h;
+    st->x[0] = x;
+    st->v[0] = v;
+    st->eta[0] = eta;
+    if (stepper != RRV_STEPPER_LEAPFROG) {
+        rrv_vec3 kx[4];
+        int s;
+        kx[0] = rrv__scale(v, 1.0 / eta);
+        for (s = 1; s < 4; ++s) {
+            const double reach = s < 3 ? 0.5 * h : h;
+            st->x[s] = rrv__madd(x, kx[s - 1], reach);
+            st->v[s] = rrv__madd(v, st->g[s - 1], reach);
+            st->eta[s] = rrv__eta_gradient_hessian(scene, st->x[s], &st->g[s], st->H[s]);
+            kx[s] = rrv__scale(st->v[s], 1.0 / st->eta[s]);
+        }
+        *x_out = rrv__madd(x, rrv__add(rrv__add(kx[0], kx[3]), rrv__scale(rrv__add(kx[1], kx[2]), 2.0)), h / 6.0);
+        st->v1 = rrv__madd(v, rrv__add(rrv__add(st->g[0], st->g[3]), rrv__scale(rrv__add(st->g[1], st->g[2]), 2.0)),
+                           h / 6.0);
+        spread = rrv__length(rrv__sub(rrv__add(st->g[0], st->g[3]), rrv__add(st->g[1], st->g[2])));
+    } else {
+        /* rrv__leapfrog_kdk; the half-kicked v is kept in v[0] */
+        st->v[0] = rrv__madd(v, st->g[0], 0.5 * h);
+        st->x[1] = *x_out = rrv__madd(x, st->v[0], h / eta);
+        st->eta[1] = rrv__eta_gradient_hessian(scene, st->x[1], &st->g[1], st->H[1]);
+        st->v1 = rrv__madd(st->v[0], st->g[1], 0.5 * h * st->eta[1] / eta);
+    }
+    *d_out = rrv__normalize(st->v1);
+    return h * spread > RRV__FEATURE_BEND * eta;
+}
+
+/* Carries a Jacobi field through the step whose stages st holds (from
+   (x, d) as rrv__eikonal_step_staged took it): the exact derivative of that
+   discrete map, including the renormalisation of the direction that ends
+   the step. */
+static void rrv__step_stages_jacobi(const rrv__step_stages *st, rrv_stepper stepper, rrv_vec3 d, rrv__jacobi *J)
+{
+    const double h = st->h, eta = st->eta[0];
+    const rrv_vec3 g = st->g[0];
+    rrv_vec3 dx[2], dv[2], v1 = st->v1;
     int j;
-    v = rrv__scale(d, eta);
     for (j = 0; j < 2; ++j) {
         dx[j] = J->x[j];
         dv[j] = rrv__madd(rrv__scale(d, rrv__dot(g, dx[j])), J->d[j], eta); /* v = eta(x) d */
     }
     if (stepper != RRV_STEPPER_LEAPFROG) {
         static const double reach[3] = {0.5, 0.5, 1.0}, weight[4] = {1, 2, 2, 1};
-        rrv_vec3 xs[4], vs[4], gs[4], kx[4], kv[4], sx[2], sv[2], ax[2], av[2];
-        double es[4], inv_e[4], e2[4], Hs[4][9];
+        rrv_vec3 sx[2], sv[2], ax[2], av[2];
         int s;
-        /* the first stage is at x, already looked up */
-        xs[0] = x; vs[0] = v; es[0] = eta; gs[0] = g;
-        memcpy(Hs[0], H, sizeof H);
-        for (s = 0; s < 4; ++s) {
-            if (s) es[s] = rrv__eta_gradient_hessian(scene, xs[s], &gs[s], Hs[s]);
-            inv_e[s] = 1.0 / es[s];
-            e2[s] = es[s] * es[s];
-            kx[s] = rrv__scale(vs[s], inv_e[s]);
-            kv[s] = gs[s];
-            if (s < 3) {
-                xs[s + 1] = rrv__madd(x, kx[s], reach[s] * h);
-                vs[s + 1] = rrv__madd(v, kv[s], reach[s] * h);
-            }
-        }
-        v1 = v;
-        for (s = 0; s < 4; ++s) v1 = rrv__madd(v1, kv[s], weight[s] * h / 6.0);
-        /* both columns stage by stage (each column's operations as they
-           were, so the same numbers) */
+        /* both columns stage by stage */
         for (j = 0; j < 2; ++j) {
             ax[j] = sx[j] = dx[j];
             av[j] = sv[j] = dv[j];
         }
         for (s = 0; s < 4; ++s) {
-            const double wh = weight[s] * h / 6.0;
+            const double wh = weight[s] * h / 6.0, inv_e = 1.0 / st->eta[s], inv_e2 = inv_e * inv_e;
             for (j = 0; j < 2; ++j) {
                 /* d(v / eta) = dv / eta - v (grad eta . dx) / eta^2; d(grad eta) = H dx */
-                rrv_vec3 kxs = rrv__sub(rrv__scale(sv[j], inv_e[s]), rrv__scale(vs[s], rrv__dot(gs[s], sx[j]) / e2[s]));
-                rrv_vec3 kvs = rrv__mat_apply(Hs[s], sx[j]);
+                rrv_vec3 kxs = rrv__sub(rrv__scale(sv[j], inv_e), rrv__scale(st->v[s], rrv__dot(st->g[s], sx[j]) * inv_e2));
+                rrv_vec3 kvs = rrv__mat_apply(st->H[s], sx[j]);
                 ax[j] = rrv__madd(ax[j], kxs, wh);
                 av[j] = rrv__madd(av[j], kvs, wh);
                 if (s < 3) {
@@ -6552,62 +6707,130 @@ static void rrv__eikonal_step_jacobi(const rrv_scene *scene, rrv_stepper stepper
             J->x[j] = ax[j];
             dv[j] = av[j];
         }
+        /* the end's eta d summed stage by stage, as the columns are (it
+           differs from the step's own sum in rounding only) */
+        v1 = st->v[0];
+        for (s = 0; s < 4; ++s) v1 = rrv__madd(v1, st->g[s], weight[s] * h / 6.0);
     } else {
         /* kick (h/2) grad eta, drift (h / eta) v, kick (h/2) (eta1/eta) grad eta1 */
-        rrv_vec3 vh = rrv__madd(v, g, 0.5 * h), x1, g1;
-        double H1[9], eta1;
-        x1 = rrv__madd(x, vh, h / eta);
-        eta1 = rrv__eta_gradient_hessian(scene, x1, &g1, H1);
-        v1 = rrv__madd(vh, g1, 0.5 * h * eta1 / eta);
+        const rrv_vec3 vh = st->v[0], g1 = st->g[1];
+        const double eta1 = st->eta[1];
         for (j = 0; j < 2; ++j) {
-            rrv_vec3 dvh = rrv__madd(dv[j], rrv__mat_apply(H, dx[j]), 0.5 * h);
+            rrv_vec3 dvh = rrv__madd(dv[j], rrv__mat_apply(st->H[0], dx[j]), 0.5 * h);
             double ge = rrv__dot(g, dx[j]);
             rrv_vec3 dx1 = rrv__add(dx[j], rrv__scale(rrv__sub(rrv__scale(dvh, 1.0 / eta),
                                                                  rrv__scale(vh, ge / (eta * eta))), h));
             double deta1 = rrv__dot(g1, dx1);
             rrv_vec3 kick = rrv__add(rrv__scale(g1, (deta1 / eta - eta1 * ge / (eta * eta))),
-                                     rrv__scale(rrv__mat_apply(H1, dx1), eta1 / eta));
+                                     rrv__scale(rrv__mat_apply(st->H[1], dx1), eta1 / eta));
             J->x[j] = dx1;
             dv[j] = rrv__madd(dvh, kick, 0.5 * h);
         }
     }
-    n1 = rrv__length(v1);
     {
-        double inv_n1 = 1.0 / n1;
+        double inv_n1 = 1.0 / rrv__length(v1);
         rrv_vec3 d1 = rrv__scale(v1, inv_n1);
         for (j = 0; j < 2; ++j) J->d[j] = rrv__scale(rrv__madd(dv[j], d1, -rrv__dot(d1, dv[j])), inv_n1);
     }
 }
 
-/* An eikonal step that a face cut short (h < step) has a length that
-   depends on where it starts, and so does where the curve hands over to
-   the straight segment behind it: dh enters as x1 += d1 dh, d1 += kappa1 dh
-   (kappa1 = dd/ds at x1). Two cuts, as in rrv__eikonal_plan: h = t_face(x,
-   d) - nudge along the straight line, differentiated exactly; or, when the
-   chord itself reaches a face, the step's end held on that face (the
-   nudge neglected). J holds the field at the step's start, J1 the field at
-   its end for fixed h, updated here. Returns 0 at a grazing face. */
-static int rrv__clipped_step_jacobi(const rrv_scene *scene, const rrv__bender *b, rrv_vec3 x, rrv_vec3 d_start,
-                                    rrv_vec3 chord, double len, const rrv__jacobi *J, rrv__jacobi *J1)
+/* rrv__eikonal_step_controlled with rrv__eikonal_step_staged: the same step,
+   its stages in st. */
+static double rrv__eikonal_step_controlled_staged(const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x,
+                                                  rrv_vec3 d, rrv_vec3 *x_out, rrv_vec3 *d_out, rrv__step_stages *st,
+                                                  int *halvings)
 {
-    rrv__support_view view;
-    rrv_vec3 x1 = rrv__madd(x, chord, len), d1 = b->next_d, g1, kappa;
-    double eta1 = rrv__eta_gradient(scene, x1, &g1), dh[2], nd;
-    int j;
-    kappa = rrv__scale(rrv__madd(g1, d1, -rrv__dot(d1, g1)), 1.0 / eta1);
-    rrv__look_along(scene, x, d_start, &view);
-    if (fabs(b->h - (view.t_face - RRV__EDGE_NUDGE)) <= 1e-12 * (1.0 + view.t_face)) {
+    *halvings = 0;
+    while (rrv__eikonal_step_staged(scene, stepper, h, x, d, x_out, d_out, st) && *halvings < 12 &&
+           h > 4 * RRV__EDGE_NUDGE) {
+        h *= 0.5;
+        ++*halvings;
+    }
+    return h;
+}
+
+/* rrv__plan_segment for a shot's eikonal bender, with the Jacobi field:
+   the same segment, direction and bender state bit for bit (it follows
+   rrv__plan_segment's eikonal branch and rrv__eikonal_plan, and
+   rrv__finish_segment then runs as after them), each step's stages looked
+   up once for the step and its Jacobi field, and the faces that cut the
+   step known from planning it. J holds the field at o; for a step (END_STEP)
+   *J1 gets it at the step's end. A step shorter than the scene's (h <
+   step) may have a length that depends on where it starts, and so does
+   where the curve hands over to the straight segment behind it: dh enters
+   as x1 += d1 dh, d1 += kappa1 dh (kappa1 = dd/ds at x1). The plan asks for
+   min(step, t_face - nudge) along the straight line, which the step control
+   may halve k times, exactly: then h = (t_face(x, d) - nudge) 2^-k,
+   differentiated exactly (dh = 0 if the scene's step was asked for: halving
+   alone moves nothing). Or, when the chord itself reached a face and the
+   step was taken again shorter, the step's end is held on that face (the
+   nudge neglected); that second step halved by the control (its end short
+   of the face, its length a function of the first step's chord) has no
+   derivative here and counts as a grazing face. Returns 0 at a grazing
+   face. */
+static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, rrv_vec3 *d, const rrv__jacobi *J,
+                           rrv__jacobi *J1)
+{
+    const double nudge = RRV__EDGE_NUDGE, step = scene->settings.step;
+    const rrv_stepper stepper = scene->settings.stepper;
+    rrv__support_view view, along;
+    rrv__step_stages st;
+    rrv_vec3 d_start = *d, x1, chord, g1, kappa;
+    double h, first, len, eta1, dh[2], nd, asked, scale = 1.0, slack;
+    int j, halvings, again = 0;
+    b->line_d = *d;
+    rrv__reciprocals(*d, b->line_inv);
+    rrv__look_along(scene, o, *d, &view);
+    b->pending = 1;
+    b->segment = view.t_face;
+    b->end = view.t_face < DBL_MAX ? RRV__END_FACE : RRV__END_NONE;
+    b->normal = view.normal;
+    b->surface_free = 0;
+    b->face_known = 0;
+    if (!view.inside || !(view.t_face > 2 * nudge)) return 1;
+    first = fmin(step, view.t_face - nudge);
+    h = rrv__eikonal_step_controlled_staged(scene, stepper, first, o, d_start, &x1, &b->next_d, &st, &halvings);
+    chord = rrv__sub(x1, o);
+    len = rrv__length(chord);
+    rrv__look_along(scene, o, rrv__scale(chord, 1.0 / len), &along);
+    if (along.t_face < len + nudge && along.t_face > 2 * nudge) {
+        h = rrv__eikonal_step_controlled_staged(scene, stepper, h * (along.t_face - nudge) / len, o, d_start, &x1,
+                                                &b->next_d, &st, &again);
+        chord = rrv__sub(x1, o);
+        len = rrv__length(chord);
+    }
+    *d = rrv__scale(chord, 1.0 / len);
+    b->h = h;
+    b->segment = len;
+    b->end = RRV__END_STEP;
+    *J1 = *J;
+    rrv__step_stages_jacobi(&st, stepper, d_start, J1);
+    if (!(h < step)) return 1;
+    /* which cut made h: told apart by its length, as a step of the first
+       cut rounded differently would be */
+    asked = h;
+    slack = 1e-12 * (1.0 + view.t_face);
+    for (halvings = 0; halvings < 12 && asked < first - slack; ++halvings) {
+        asked *= 2.0;
+        scale *= 0.5;
+    }
+    if (fabs(asked - first) <= slack) {
+        if (!(view.t_face - nudge < step)) return 1; /* halved, not cut */
         nd = rrv__dot(view.normal, d_start);
         if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
-        for (j = 0; j < 2; ++j) dh[j] = -rrv__dot(view.normal, rrv__madd(J->x[j], J->d[j], view.t_face)) / nd;
+        for (j = 0; j < 2; ++j)
+            dh[j] = -scale * rrv__dot(view.normal, rrv__madd(J->x[j], J->d[j], view.t_face)) / nd;
     } else {
-        rrv__look_along(scene, x, chord, &view);
-        nd = rrv__dot(view.normal, d1);
+        rrv__look_along(scene, o, *d, &view);
+        if (!(view.t_face < 1.5 * len)) return 0; /* the second step halved */
+        nd = rrv__dot(view.normal, b->next_d);
         if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
         for (j = 0; j < 2; ++j) dh[j] = -rrv__dot(view.normal, J1->x[j]) / nd;
     }
+    eta1 = rrv__eta_gradient(scene, rrv__madd(o, *d, len), &g1);
+    kappa = rrv__scale(rrv__madd(g1, b->next_d, -rrv__dot(b->next_d, g1)), 1.0 / eta1);
     for (j = 0; j < 2; ++j) {
-        J1->x[j] = rrv__madd(J1->x[j], d1, dh[j]);
+        J1->x[j] = rrv__madd(J1->x[j], b->next_d, dh[j]);
         J1->d[j] = rrv__madd(J1->d[j], kappa, dh[j]);
     }
     return 1;
@@ -6693,18 +6916,16 @@ static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec
     if (T) T[0] = T[1] = T[2] = 1.0;
     if (kept) kept->n = 0;
     for (n = 0; n < RRV__SOLVE_SEGMENTS; ++n) {
-        rrv_vec3 d_start = d, dc[2];
+        rrv_vec3 dc[2];
         rrv__jacobi J1 = J;
         double len, s;
         int j;
-        rrv__plan_segment(&b, scene, x, &d, &fixed);
+        if (T) rrv__plan_segment(&b, scene, x, &d, &fixed);
+        else if (!rrv__shoot_plan(&b, scene, x, &d, &J, &J1)) break;
         len = b.segment;
         if (b.end == RRV__END_STEP && T) {
             for (j = 0; j < 2; ++j) dc[j] = J.d[j];
         } else if (b.end == RRV__END_STEP) {
-            rrv__eikonal_step_jacobi(scene, scene->settings.stepper, b.h, x, d_start, &J1);
-            if (b.h < scene->settings.step && !rrv__clipped_step_jacobi(scene, &b, x, d_start, d, len, &J, &J1))
-                break;
             for (j = 0; j < 2; ++j) {
                 rrv_vec3 w = rrv__scale(rrv__sub(J1.x[j], J.x[j]), 1.0 / len);
                 dc[j] = rrv__madd(w, d, -rrv__dot(w, d));
@@ -6843,7 +7064,7 @@ static int rrv__solve_shot_to(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const 
     rrv_vec3 w = seed, w_prev = seed, e1, e2, p1 = rrv__v3(0, 0, 0), p2 = p1;
     double prev_norm = DBL_MAX, step = 1.0, delta[2] = {0, 0};
     double tol = tolerance * (1.0 + rrv__length(rrv__sub(y, x0)));
-    int it, have_prev = 0;
+    int it, have_prev = 0, halvings = 0;
     root->iterations = 0;
     for (it = 0; it < RRV__SOLVE_ITERATIONS; ++it) {
         rrv__shot shot;
@@ -6859,11 +7080,11 @@ static int rrv__solve_shot_to(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const 
         }
         if (!(norm < prev_norm)) {
             /* worse, or lost: back to the last good direction, half the
-               step; worse after three halvings, the linear model is wrong
-               (on the lens caustic: a ray grazing a support's rim, whose
-               endpoint moves as the square root of its depth), and no
-               solve that converged there needed a step below 1/4 */
-            if (!have_prev) return 0;
+               step. A solve that halved RRV__SOLVE_HALVINGS times in all
+               (or the step to 1/8) is one whose linear model is wrong (on
+               the lens caustic: a ray grazing a support's rim, whose
+               endpoint moves as the square root of its depth) */
+            if (!have_prev || ++halvings >= RRV__SOLVE_HALVINGS) return 0;
             step *= 0.5;
             if (step < 1.0 / 8) return 0;
             w = rrv__normalize(rrv__add(w_prev, rrv__add(rrv__scale(p1, step * delta[0]), rrv__scale(p2, step * delta[1]))));

@@ -176,6 +176,25 @@ static rrv_scene *gas_blob_scene(void)
     return s;
 }
 
+/* A gas from blobs of temperature at the ambient pressure (the fire
+   plumes' kind, which rrv__gas_fused takes). */
+static rrv_scene *gas_blob_temperature_scene(void)
+{
+    rrv_scene *s = empty_scene();
+    int m = add_medium(s, 1, 40.0);
+    rrv_field t;
+    rrv_blob *b;
+    memset(&t, 0, sizeof t);
+    b = tb_blobs(&t, 3);
+    b[0].center = rrv__v3(0, -0.2, 0); b[0].radius = 0.4; b[0].weight = 600;
+    b[1].center = rrv__v3(0.2, 0.3, 0.1); b[1].radius = 0.25; b[1].weight = 300;
+    b[2].center = rrv__v3(-0.3, 0.1, -0.2); b[2].radius = 0.1; b[2].weight = -250;
+    t.base = 300;
+    set_field(s, m, RRV_MEDIUM_TEMPERATURE, &t);
+    prepare(s);
+    return s;
+}
+
 /* One analytic IOR profile (or blobs) at the origin. */
 static rrv_scene *profile_scene(rrv_field_kind kind)
 {
@@ -521,6 +540,61 @@ static void test_fused_lookup_matches_corner_sums(void)
     rrv_scene_free(noise);
 }
 
+/* The fused evaluations (rrv__profile_fused, rrv__gas_fused), which camera
+   rays and shots take their steps from, give bit for bit what the
+   separate functions give: rrv__refractivity's value, the gradient
+   composed from rrv__profile_gradient or from the temperature field's
+   rrv__field_gradient (grad r = -r grad T / T), and
+   rrv__refractivity_hessian's matrix. */
+static void test_fused_fields_are_the_parts(void)
+{
+    rrv_scene *scenes[3];
+    static const char *names[3] = {"Luneburg", "fish-eye", "gas, blob temperature"};
+    int k, i, a;
+    scenes[0] = profile_scene(RRV_FIELD_LUNEBURG);
+    scenes[1] = profile_scene(RRV_FIELD_FISHEYE);
+    scenes[2] = gas_blob_temperature_scene();
+    for (k = 0; k < 3; ++k) {
+        const rrv_medium *m = &scenes[k]->media[0];
+        double ambient_r = scenes[k]->settings.ambient_ior - 1.0;
+        rrv__rng rng;
+        int same = 1, fused = 1;
+        rrv__rng_seed(&rng, 60 + (uint64_t)k, 0, 0);
+        if (m->ior_from_gas) {
+            double r0;
+            rrv_vec3 g0;
+            fused = rrv__gas_fused(m, rrv__v3(0, 0, 0), &r0, &g0, NULL);
+        } else {
+            double r0;
+            rrv_vec3 g0;
+            fused = rrv__profile_fused(rrv__field_of(m, RRV__IOR), rrv__v3(0, 0, 0), &r0, &g0, NULL);
+        }
+        CHECKF(fused, "%s: not taken by the fused evaluation", names[k]);
+        for (i = 0; i < 500; ++i) {
+            double u0 = rrv__uniform(&rng), u1 = rrv__uniform(&rng), u2 = rrv__uniform(&rng);
+            rrv_vec3 p = rrv__v3(2 * u0 - 1, 2 * u1 - 1, 2 * u2 - 1), g, g2, g_ref;
+            double H[9], H_ref[9], r = rrv__refractivity_gradient(m, p, ambient_r, &g);
+            double r2 = rrv__refractivity_gradient_hessian(m, p, ambient_r, &g2, H);
+            double r_ref = rrv__refractivity(m, p, ambient_r);
+            if (m->ior_from_gas) {
+                double T = fmax(rrv__temperature(m, p), 1e-3), P = rrv__pressure(m, p);
+                rrv_vec3 gT = rrv__scale(rrv__field_gradient(rrv__field_of(m, RRV__TEMPERATURE), p),
+                                         m->temperaturescale);
+                rrv_vec3 gP = rrv__field_gradient(rrv__field_of(m, RRV__PRESSURE), p);
+                g_ref = rrv__scale(rrv__sub(rrv__scale(gP, 1.0 / P), rrv__scale(gT, 1.0 / T)), r_ref);
+            } else {
+                g_ref = rrv__scale(rrv__profile_gradient(rrv__field_of(m, RRV__IOR), p), m->ior_scale);
+            }
+            rrv__refractivity_hessian(m, p, ambient_r, H_ref);
+            same &= r == r_ref && r2 == r_ref && g.x == g_ref.x && g.y == g_ref.y && g.z == g_ref.z;
+            same &= g2.x == g_ref.x && g2.y == g_ref.y && g2.z == g_ref.z;
+            for (a = 0; a < 9; ++a) same &= H[a] == H_ref[a];
+        }
+        CHECKF(same, "%s: the fused evaluation differs from the separate functions", names[k]);
+        rrv_scene_free(scenes[k]);
+    }
+}
+
 /* rrv__eta_gradient_hessian, which the Jacobi steps call, gives exactly
    what rrv__eta_gradient and rrv__scene_hessian give, for every kind it
    dispatches on (the fused grid lookup, the cubic spline, an unbaked
@@ -769,6 +843,7 @@ int main(void)
     RUN(test_profiles);
     RUN(test_nanovdb_stencil);
     RUN(test_fused_lookup_matches_corner_sums);
+    RUN(test_fused_fields_are_the_parts);
     RUN(test_eta_gradient_hessian_is_both);
     RUN(test_shoot_jacobian_in_grids);
     RUN(test_solve_through_grid);
