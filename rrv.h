@@ -5328,6 +5328,11 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
    Efficiency only: the estimate is unbiased with any choice. */
 #define RRV__CONE_BEND 0.05
 #define RRV__CONE_MAX 8
+/* The share of vertices that draw such a ray: each crosses the support,
+   the dearest part of any ray there, and most find no light. */
+#ifndef RRV__CONE_RATE
+#define RRV__CONE_RATE 0.5
+#endif
 
 typedef struct rrv__context {
     const rrv_scene *scene;
@@ -7708,7 +7713,8 @@ static double rrv__cone_sin2(const rrv__context *ctx, int k, rrv_vec3 x0, rrv_ve
     return r * r / d2;
 }
 
-/* The solid-angle density with which rrv__cone_nee draws w0 from x0. */
+/* The solid-angle density with which rrv__cone_nee draws w0 from x0, the
+   share of vertices that draw included. */
 static double rrv__cone_pdf(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0)
 {
     double sum = 0;
@@ -7722,13 +7728,14 @@ static double rrv__cone_pdf(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0)
         /* over 2 pi (1 - cos_max), without the cancellation of small cones */
         if (rrv__dot(w0, axis) >= cos_max * dist) sum += (1.0 + cos_max) / (2.0 * RRV__PI * sin2);
     }
-    return eligible ? sum / eligible : 0.0;
+    return eligible ? RRV__CONE_RATE * sum / eligible : 0.0;
 }
 
-/* A direction from x0 uniform in the cone of one strong support, picked
-   uniformly among those whose sphere does not hold x0, and its density
-   (rrv__cone_pdf); 0 where no support has a cone from x0 (nothing drawn)
-   or the direction rounded out of its cone. */
+/* At a share RRV__CONE_RATE of the vertices, a direction from x0 uniform
+   in the cone of one strong support, picked uniformly among those whose
+   sphere does not hold x0, and its density (rrv__cone_pdf, the rate
+   included); 0 where no ray is drawn (nothing at all where no support has
+   a cone from x0) or the direction rounded out of its cone. */
 static double rrv__cone_sample(const rrv__context *ctx, rrv_vec3 x0, rrv__rng *rng, rrv_vec3 *w0)
 {
     rrv_vec3 axis = {0, 0, 1}, t, b;
@@ -7738,6 +7745,7 @@ static double rrv__cone_sample(const rrv__context *ctx, rrv_vec3 x0, rrv__rng *r
         if (rrv__cone_sin2(ctx, k, x0, &axis, &dist) > 0) ++eligible;
     if (!eligible) return 0.0;
     /* one statement each: C leaves the order of arguments unspecified */
+    if (rrv__uniform(rng) >= RRV__CONE_RATE) return 0.0;
     u = rrv__uniform(rng);
     u1 = rrv__uniform(rng);
     u2 = rrv__uniform(rng);

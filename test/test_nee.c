@@ -1505,9 +1505,10 @@ static void test_aim_weights_sum_to_one(void)
 
 /* The rays nee shoot draws toward strong supports (rrv__cone_nee).
    (1) Their density: two lenses whose cones from x0 overlap; the mean of
-   1 / pdf over the sampler's directions is the solid angle of the union of
-   the cones, which uniform directions on the sphere also measure; and
-   pdf integrates to 1 over the sphere. Both within 4 standard errors.
+   1 / pdf over the sampler's directions (0 where a vertex draws none) is
+   the solid angle of the union of the cones, which uniform directions on
+   the sphere also measure; and pdf integrates over the sphere to the share
+   of vertices that draw. Both within 4 standard errors.
    (2) What they carry, at floor points beside the lens of the caustic
    scene: the light that reaches x0 as a root of a weak chord (the lens
    bends it onto a point whose chord passes beside the lens), estimated by
@@ -1567,8 +1568,9 @@ static void test_cone_density(void)
                4 * sqrt(stats_se(&inv) * stats_se(&inv) + stats_se(&in_union) * stats_se(&in_union)),
            "cones' union: %.5f from the sampler, %.5f by uniform directions", stats_mean(&inv),
            stats_mean(&in_union));
-    CHECKF(fabs(stats_mean(&whole) - 1.0) <= 4 * stats_se(&whole), "cones' pdf integrates to %.5f +- %.5f",
-           stats_mean(&whole), stats_se(&whole));
+    /* to the share of vertices that draw a ray */
+    CHECKF(fabs(stats_mean(&whole) - RRV__CONE_RATE) <= 4 * stats_se(&whole),
+           "cones' pdf integrates to %.5f +- %.5f, not %g", stats_mean(&whole), stats_se(&whole), RRV__CONE_RATE);
     /* x0 inside a lens's sphere has no cone toward it */
     {
         /* inside lens a, outside lens b: only b's cone */
@@ -1596,7 +1598,7 @@ static void test_cone_weak_roots(void)
     for (p = 0; p < 2; ++p) {
         const rrv_vec3 x0 = rrv__v3(xs[p], 1e-5, 0.1);
         stats fwd, cone, mis;
-        int k, landed_fwd = 0, landed_cone = 0;
+        int k, landed_fwd = 0, landed_cone = 0, drawn = 0;
         double d, se;
         memset(&fwd, 0, sizeof fwd);
         memset(&cone, 0, sizeof cone);
@@ -1617,6 +1619,7 @@ static void test_cone_weak_roots(void)
             }
             stats_add(&fwd, a);
             pdf_cone = rrv__cone_sample(&ctx, x0, &rng, &w);
+            if (pdf_cone > 0) ++drawn;
             a = 0;
             if (pdf_cone > 0 && (light = rrv__cone_trace(&ctx, x0, w, &rng, &hit, T))) {
                 double f = rrv__vertex_pdf(&vb, w); /* the cosine lobe over pi, albedo 1 */
@@ -1633,8 +1636,9 @@ static void test_cone_weak_roots(void)
             "both by MIS %.4f +- %.4f\n",
             xs[p], stats_mean(&fwd), stats_se(&fwd), landed_fwd, stats_mean(&cone), stats_se(&cone), landed_cone,
             stats_mean(&mis), stats_se(&mis));
-        CHECKF(landed_fwd > 100 && landed_cone > 3 * landed_fwd, "x = %.2f: %d forward and %d cone rays landed",
-               xs[p], landed_fwd, landed_cone);
+        /* a cone ray finds them several times as often as a forward one */
+        CHECKF(landed_fwd > 100 && landed_cone * 200000.0 > 3.0 * landed_fwd * drawn,
+               "x = %.2f: %d of 200000 forward and %d of %d cone rays landed", xs[p], landed_fwd, landed_cone, drawn);
         CHECKF(fabs(d) <= 4 * se, "x = %.2f: forward %.4f, cones %.4f, difference %.4f over 4 se %.4f", xs[p],
                stats_mean(&fwd), stats_mean(&cone), d, 4 * se);
         d = stats_mean(&mis) - stats_mean(&cone);
