@@ -3157,14 +3157,15 @@ static int rrv__gas_fused(const rrv_medium *m, rrv_vec3 p, double *r, rrv_vec3 *
     *r = m->ior_scale * ((m->eta_ref - 1.0) * (P / m->P_ref) * (m->T_ref / fmax(T, 1e-3)));
     T = fmax(T, 1e-3);
     gT = rrv__scale(gT, ts);
-    /* grad P = 0: grad r = r (0 / P - grad T / T) */
-    *grad = rrv__scale(rrv__sub(rrv__scale(rrv__v3(0, 0, 0), 1.0 / P), rrv__scale(gT, 1.0 / T)), *r);
+    /* rrv__refractivity_gradient and _hessian with grad P = 0, in their
+       order of operations: grad r = -r grad T / T, H = r (u u^T - H_T / T +
+       g g^T), u = -g, g = grad T / T */
+    *grad = rrv__scale(rrv__scale(gT, -1.0 / T), *r);
     if (!H) return 1;
     gt[0] = gT.x / T; gt[1] = gT.y / T; gt[2] = gT.z / T;
     for (k = 0; k < 3; ++k)
         for (l = 0; l < 3; ++l) {
-            double u_k = 0.0 - gt[k], u_l = 0.0 - gt[l];
-            k1 = u_k * u_l + 0.0 / P - 0.0 * 0.0 - HT[3 * k + l] * ts / T + gt[k] * gt[l];
+            k1 = gt[k] * gt[l] - HT[3 * k + l] * ts / T + gt[k] * gt[l];
             H[3 * k + l] = *r * k1;
         }
     return 1;
