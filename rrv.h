@@ -5646,10 +5646,29 @@ typedef struct rrv__light_sample {
     rrv_vec3 point;   /* on the emitter, for the radiance scale with IOR */
 } rrv__light_sample;
 
-static int rrv__sample_light(const rrv_scene *scene, rrv_vec3 p, rrv__rng *rng, rrv__light_sample *ls)
+/* The random numbers of a vertex's one light sample: which emitter (u) and
+   where on it (u1, u2). Straight NEE and the curved estimators (shoot, aim,
+   manifold) take the same draw, so each light point goes to the one
+   estimator its connection's class names (straight for a weak chord,
+   curved otherwise), as a sample routed by its class rather than two
+   independent samples of which each discards the other's part: at a floor
+   point that sees part of a light straight and part through a lens, the
+   two parts then no longer add their variances (the sum of two estimates
+   that are each zero half the time). */
+typedef struct rrv__light_draw { double u, u1, u2; } rrv__light_draw;
+
+static void rrv__draw_light(rrv__rng *rng, rrv__light_draw *draw)
+{
+    /* one a statement: the order of evaluation of arguments is unspecified */
+    draw->u = rrv__uniform(rng);
+    draw->u1 = rrv__uniform(rng);
+    draw->u2 = rrv__uniform(rng);
+}
+
+static int rrv__sample_light(const rrv_scene *scene, rrv_vec3 p, const rrv__light_draw *draw, rrv__light_sample *ls)
 {
     int choices = rrv__light_choices(scene), pick, c;
-    double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng);
+    const double u = draw->u, u1 = draw->u1, u2 = draw->u2;
     if (!choices) return 0;
     pick = (int)(u * choices);
     if (pick >= choices) pick = choices - 1;
@@ -5829,31 +5848,35 @@ static int rrv__jump_counts(double jump);
 static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls);
 static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len);
 static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len);
-static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
+static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                           const rrv__light_draw *draw, rrv__rng *rng);
 static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir, const rrv_shape *s,
                                         rrv_vec3 x);
 static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
-                              rrv__rng *rng);
-static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
+                              const rrv__light_draw *draw, rrv__rng *rng);
+static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                         const rrv__light_draw *draw, rrv__rng *rng);
 static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w);
 static double rrv__cone_pdf(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0);
 static void rrv__cone_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
 static void rrv__cone_setup(rrv__context *ctx);
-static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, rrv__rng *rng, rrv_vec3 *y, rrv_vec3 *ny,
-                                             double *pdf_area);
+static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 *y,
+                                             rrv_vec3 *ny, double *pdf_area);
 #define RRV__CHAIN_MAX 512 /* comb planes a manifold chain may have (more: wider spacing) */
 static struct rrv__chain *rrv__chain_new(int cap);
 static void rrv__chain_delete(struct rrv__chain *ch);
 static int rrv__solver_supports_scene(const rrv_scene *scene);
 static double rrv__solve_coarse_step(const rrv_scene *scene, double eta_floor);
 
-/* Curved NEE from a vertex, or the count of vertices that could not. */
-static void rrv__curved_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
+/* Curved NEE from a vertex (the light point of draw, straight NEE's), or
+   the count of vertices that could not. */
+static void rrv__curved_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                            const rrv__light_draw *draw, rrv__rng *rng)
 {
-    if (ctx->shoot) rrv__shoot_nee(ctx, path, x0, v, rng);
-    else if (ctx->manifold) rrv__manifold_nee(ctx, path, x0, v, rng);
+    if (ctx->shoot) rrv__shoot_nee(ctx, path, x0, v, draw, rng);
+    else if (ctx->manifold) rrv__manifold_nee(ctx, path, x0, v, draw, rng);
     if (ctx->shoot || ctx->manifold) rrv__cone_nee(ctx, path, x0, v, rng);
-    else if (ctx->aim) rrv__aim_nee(ctx, path, x0, v, rng);
+    else if (ctx->aim) rrv__aim_nee(ctx, path, x0, v, draw, rng);
     else if (ctx->partition) ++ctx->stats.solves_unsupported;
 }
 
@@ -5884,17 +5907,18 @@ typedef struct rrv__camera_path {
 } rrv__camera_path;
 
 /* Next-event estimation along a straight shadow ray (pbrt-v4's SampleLd):
-   one light sample, its ratio-tracked transmittance, the power heuristic
-   against the vertex's own sampling (phase function or cosine lobe). */
+   one light sample (draw, shared with curved NEE), its ratio-tracked
+   transmittance, the power heuristic against the vertex's own sampling
+   (phase function or cosine lobe). */
 static void rrv__sample_direct_light(rrv__context *ctx, rrv__path *path, rrv_vec3 x, const rrv__vertex_bsdf *v,
-                                     rrv__rng *rng)
+                                     const rrv__light_draw *draw, rrv__rng *rng)
 {
     static const double white[3] = {1.0, 1.0, 1.0};
     rrv__light_sample ls;
     const double *tint = white;
     double pdf, T[3], k;
     int c;
-    if (!ctx->sample_lights || !rrv__sample_light(ctx->scene, x, rng, &ls) || !rrv__straight_allowed(ctx, x, &ls))
+    if (!ctx->sample_lights || !rrv__sample_light(ctx->scene, x, draw, &ls) || !rrv__straight_allowed(ctx, x, &ls))
         return;
     if (v->surface) {
         pdf = rrv__dot(v->n, ls.wi);
@@ -5908,6 +5932,18 @@ static void rrv__sample_direct_light(rrv__context *ctx, rrv__path *path, rrv_vec
     if (!(T[0] > 0 || T[1] > 0 || T[2] > 0)) return;
     k = pdf * rrv__power_heuristic(ls.pdf, pdf) / ls.pdf * rrv__eta_scale(ctx, ls.point) * rrv__path_mis(path);
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * tint[c] * T[c] * ls.L[c] * k;
+}
+
+/* A real vertex's next-event estimation: one light draw, taken by straight
+   NEE and, where paths are sorted into classes, by curved NEE. Without
+   light sampling (nee none) nothing is drawn. */
+static void rrv__vertex_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, const rrv__vertex_bsdf *v, rrv__rng *rng)
+{
+    rrv__light_draw draw;
+    if (!ctx->sample_lights) return;
+    rrv__draw_light(rng, &draw);
+    rrv__sample_direct_light(ctx, path, x, v, &draw, rng);
+    if (ctx->partition) rrv__curved_nee(ctx, path, x, v, &draw, rng);
 }
 
 /* What every real vertex does once its light is sampled and its next
@@ -5934,8 +5970,7 @@ static int rrv__scatter_in_medium(rrv__context *ctx, rrv__camera_path *cp, rrv_v
     memset(&vb, 0, sizeof vb);
     vb.g = g;
     vb.d_in = d_in;
-    rrv__sample_direct_light(ctx, &cp->path, x, &vb, rng);
-    if (ctx->partition) rrv__curved_nee(ctx, &cp->path, x, &vb, rng);
+    rrv__vertex_nee(ctx, &cp->path, x, &vb, rng);
     {
         /* two statements: C leaves the order of arguments unspecified,
            and gcc and clang once drew these in opposite orders */
@@ -6008,8 +6043,7 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
     vb.surface = 1;
     vb.n = n;
     rrv__material_albedo(&scene->materials[s->material], x, n, vb.albedo);
-    rrv__sample_direct_light(ctx, &cp->path, p, &vb, rng);
-    if (ctx->partition) rrv__curved_nee(ctx, &cp->path, p, &vb, rng);
+    rrv__vertex_nee(ctx, &cp->path, p, &vb, rng);
     {
         double u2 = rrv__uniform(rng), u1 = rrv__uniform(rng); /* in this order on every compiler */
         cp->d = rrv__sample_cosine_hemisphere(n, u1, u2);
@@ -7490,34 +7524,22 @@ static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3
    and the forward path takes them, which keeps the estimate's 1/|det|
    bounded. The sky and sphere lights (whose samples cover only what is
    seen straight) are left to forward paths. */
-static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
+static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                           const rrv__light_draw *draw, rrv__rng *rng)
 {
     const rrv_scene *scene = ctx->scene;
-    int choices = rrv__light_choices(scene), pick, count, c;
-    const rrv_shape *s;
+    int count, c;
     rrv_vec3 y, ny, e1, e2;
     rrv__root root, again;
     rrv__polish_memo memo;
     rrv__chords kept;
-    double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng), pdf_area, T[3], f[3], k;
-    if (!choices) return;
-    pick = (int)(u * choices);
-    if (pick >= choices) pick = choices - 1;
-    if (pick == scene->light_count) return;
-    s = &scene->shapes[scene->lights[pick]];
-    if (s->kind == RRV_SHAPE_SPHERE) return;
-    if (s->kind == RRV_SHAPE_TRIANGLE) {
-        double su = sqrt(u1);
-        y = rrv__madd(rrv__madd(s->p0, s->e1, 1.0 - su), s->e2, u2 * su);
-    } else {
-        y = rrv__madd(rrv__madd(s->p0, s->e1, u1), s->e2, u2);
-    }
+    double pdf_area, T[3], f[3], k;
+    const rrv_shape *s = rrv__pick_area_light(scene, draw, &y, &ny, &pdf_area);
+    if (!s) return;
     {
         double to_y = rrv__length(rrv__sub(y, x0));
         if (!(to_y > 0) || rrv__weak_chord(ctx, x0, rrv__scale(rrv__sub(y, x0), 1.0 / to_y), to_y)) return;
     }
-    ny = rrv__normalize(rrv__cross(s->e1, s->e2));
-    pdf_area = 1.0 / (rrv__shape_area(s) * choices);
     ++ctx->stats.solves;
     memo.valid = 0;
     if (!rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &memo, &kept, &root)) {
@@ -7667,14 +7689,15 @@ static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *
 }
 
 /* nee aim from vertex x0 (the section's comment says why it is unbiased). */
-static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
+static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                         const rrv__light_draw *draw, rrv__rng *rng)
 {
     const rrv_scene *scene = ctx->scene;
     rrv_vec3 y, ny, w0, d;
     rrv__hit hit;
     double pdf_area, to_y, pdf_aim, pdf_dir, f[3], T[3], k;
     int c, met;
-    const rrv_shape *s = rrv__pick_area_light(scene, rng, &y, &ny, &pdf_area);
+    const rrv_shape *s = rrv__pick_area_light(scene, draw, &y, &ny, &pdf_area);
     (void)pdf_area;
     if (!s) return;
     to_y = rrv__length(rrv__sub(y, x0));
@@ -8782,12 +8805,12 @@ static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__
 /* A point y uniform on one area light (quads and triangles; the sky and
    sphere lights are left to forward paths), its normal and area pdf
    (selection included). Draws three numbers whatever it returns. */
-static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, rrv__rng *rng, rrv_vec3 *y, rrv_vec3 *ny,
-                                             double *pdf_area)
+static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 *y,
+                                             rrv_vec3 *ny, double *pdf_area)
 {
     int choices = rrv__light_choices(scene), pick;
     const rrv_shape *s;
-    double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng);
+    const double u = draw->u, u1 = draw->u1, u2 = draw->u2;
     if (!choices) return NULL;
     pick = (int)(u * choices);
     if (pick >= choices) pick = choices - 1;
@@ -8849,7 +8872,7 @@ static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, r
    low where a root's basin is small, Zeltner et al.'s biased SMS). The
    partition of path space is shoot's (manual, NEXT-EVENT ESTIMATION). */
 static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
-                              rrv__rng *rng)
+                              const rrv__light_draw *draw, rrv__rng *rng)
 {
     const rrv_scene *scene = ctx->scene;
     const rrv_settings *st = &scene->settings;
@@ -8857,7 +8880,7 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
     rrv__mroot root, again;
     rrv_vec3 y, ny, roots[RRV__MANIFOLD_ROOTS];
     double pdf_area, carried[3], k;
-    const rrv_shape *s = rrv__pick_area_light(scene, rng, &y, &ny, &pdf_area);
+    const rrv_shape *s = rrv__pick_area_light(scene, draw, &y, &ny, &pdf_area);
     int c, count, nroots = 0, trial;
     double to_y;
     if (!s || !ch) return;

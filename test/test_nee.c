@@ -1649,6 +1649,73 @@ static void test_cone_weak_roots(void)
     rrv_scene_free(s);
 }
 
+/* Straight NEE and nee shoot take one light draw (rrv__light_draw): each
+   light point goes to the estimator its chord's class names, never to
+   both, so at a floor point that sees part of the light straight and part
+   through the lens their sum varies less than two independent samples'
+   (those add their variances; the routed one saves 2 mean_s mean_c). The
+   check runs at the lens's step 0.2 (a faster solve; the classes are the
+   step's own). Means agree within 4 standard errors; the variance check has
+   a margin of 20 % against an expected saving of about half. */
+static const char coarse_caustic_text[] =
+    "camera eye 0 0.6 -1.8  look 0 0 0.2  up 0 1 0  fov 40  resolution 32 24\n"
+    "render maxdepth 1 step 0.2\n"
+    "material white diffuse albedo 1 1 1\n"
+    "quad origin -3 0 -3  u 6 0 0  v 0 0 6  material white\n"
+    "quad origin -0.5 3 -0.5  u 1 0 0  v 0 0 1  L 10 10 10\n"
+    "medium lens box -0.5 0.7 -0.5 0.5 1.7 0.5  sigma_a 0 0 0  sigma_s 0 0 0\n"
+    "ior lens luneburg center 0 1.2 0 radius 0.5\n";
+
+static void test_shared_light_draw(void)
+{
+    rrv_scene *s = NULL;
+    rrv__context ctx;
+    rrv__rng rng;
+    rrv__vertex_bsdf vb;
+    const rrv_vec3 x0 = rrv__v3(0.1, 1e-5, 0.9);
+    stats shared, apart;
+    int k, both = 0, straight = 0, curved = 0;
+    double d, se, var_shared, var_apart;
+    if (!(s = parse_text(coarse_caustic_text, sizeof coarse_caustic_text - 1, "coarse caustic"))) return;
+    cone_context(&ctx, s);
+    ctx.eta_camera2 = 1;
+    white_floor_vertex(&vb);
+    rrv__rng_seed(&rng, 71, 0, 0);
+    memset(&shared, 0, sizeof shared);
+    memset(&apart, 0, sizeof apart);
+    for (k = 0; k < 20000; ++k) {
+        rrv__light_draw draw, other;
+        rrv__path a, b, c;
+        rrv__draw_light(&rng, &draw);
+        rrv__draw_light(&rng, &other);
+        rrv__path_start(&a, &rng);
+        b = c = a;
+        rrv__sample_direct_light(&ctx, &a, x0, &vb, &draw, &rng);
+        rrv__shoot_nee(&ctx, &b, x0, &vb, &draw, &rng);
+        rrv__shoot_nee(&ctx, &c, x0, &vb, &other, &rng);
+        straight += a.L[1] > 0;
+        curved += b.L[1] > 0;
+        both += a.L[1] > 0 && b.L[1] > 0;
+        stats_add(&shared, a.L[1] + b.L[1]);
+        stats_add(&apart, a.L[1] + c.L[1]);
+    }
+    d = stats_mean(&shared) - stats_mean(&apart);
+    se = sqrt(stats_se(&shared) * stats_se(&shared) + stats_se(&apart) * stats_se(&apart));
+    var_shared = sample_variance(&shared);
+    var_apart = sample_variance(&apart);
+    SAY("  one light draw at (0.1, 0, 0.9): %d straight, %d curved, %d both; routed %.4f +- %.4f (variance %.4f), "
+        "two draws %.4f +- %.4f (variance %.4f)\n",
+        straight, curved, both, stats_mean(&shared), stats_se(&shared), var_shared, stats_mean(&apart),
+        stats_se(&apart), var_apart);
+    CHECKF(both == 0, "%d light points counted by straight NEE and by shoot", both);
+    CHECKF(straight > 2000 && curved > 2000, "the point must see the light both ways: %d straight, %d curved", straight,
+           curved);
+    CHECKF(fabs(d) <= 4 * se, "routed %.4f against two draws %.4f: difference %.4f over 4 se %.4f", stats_mean(&shared),
+           stats_mean(&apart), d, 4 * se);
+    CHECKF(var_shared < 0.8 * var_apart, "routed variance %.4f, two draws' %.4f", var_shared, var_apart);
+    rrv_scene_free(s);
+}
+
 /* NEE_ONLY=NAME runs only the tests whose name contains NAME (development). */
 static const char *only;
 #define NEE_RUN(fn)                                                                                                    \
@@ -1829,6 +1896,7 @@ int main(void)
     NEE_RUN(test_aim_weights_sum_to_one);
     NEE_RUN(test_cone_density);
     NEE_RUN(test_cone_weak_roots);
+    NEE_RUN(test_shared_light_draw);
     NEE_RUN(test_lens_caustic_manifold);
     NEE_RUN(test_luneburg_two_point);
     NEE_RUN(test_jacobian_against_differences);
