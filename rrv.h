@@ -4659,6 +4659,65 @@ static void rrv__look_along(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, rrv_
     }
 }
 
+/* How near to o any face of a support can be: a lower bound on the distance
+   for every direction at once, and what rrv__look_along then finds for
+   every direction alike (inside, surface_free), so that an eikonal step
+   deep inside a support can skip its looks (rrv__safe_reach). Inside a box
+   the bound is the distance to its nearest plane, outside it the largest
+   gap on one axis (the Euclidean distance is at least that); a sphere's
+   faces lie in its box, so they count only from inside the box, as
+   | |o - c| - R |. Every face a look offers lies on one of these surfaces,
+   and along a unit direction it is at least this far (the look divides
+   gaps by components of size at most 1). The allowance taken off covers
+   the look's rounding with room to spare: its gaps and divisions round by
+   ulps of the coordinates; its sphere's square root, where the line grazes
+   the sphere, by up to sqrt(ulp) R, but there the distance along the line
+   exceeds | |o - c| - R | by far more. With the bound positive, no face
+   lies between o and that margin, so the look's sign tests of inside go
+   the way these comparisons go. Returns the bound, <= 0 when o is within
+   the allowance of a face. */
+static double rrv__support_safety(const rrv_scene *scene, rrv_vec3 o, int *inside, int *surface_free)
+{
+    const double os[3] = {o.x, o.y, o.z};
+    double safe = DBL_MAX, big = rrv__maxd(fabs(o.x), rrv__maxd(fabs(o.y), fabs(o.z)));
+    int i;
+    *inside = *surface_free = 0;
+    /* the comparisons below would pass over a NaN: a ray gone wrong is
+       left to the looks, whatever they make of it */
+    if (!(fabs(o.x) + fabs(o.y) + fabs(o.z) < DBL_MAX)) return 0;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        const double lo_box[3] = {m->lo.x, m->lo.y, m->lo.z}, hi_box[3] = {m->hi.x, m->hi.y, m->hi.z};
+        double gap = -DBL_MAX, dist;
+        int a, in_medium;
+        if (!rrv__medium_refracts(m)) continue;
+        /* gap: the largest signed distance outside one axis's slab,
+           negative inside the box (then minus the nearest plane's distance) */
+        for (a = 0; a < 3; ++a) {
+            gap = rrv__maxd(gap, rrv__maxd(lo_box[a] - os[a], os[a] - hi_box[a]));
+            big = rrv__maxd(big, rrv__maxd(fabs(lo_box[a]), fabs(hi_box[a])));
+        }
+        in_medium = gap < 0;
+        dist = fabs(gap);
+        if (rrv__has_sphere_support(m)) {
+            const rrv_field *f = &m->ior;
+            double sphere = rrv__length(rrv__sub(o, f->center)) - f->radius;
+            big = rrv__maxd(big, f->radius + rrv__maxd(fabs(f->center.x),
+                                                        rrv__maxd(fabs(f->center.y), fabs(f->center.z))));
+            if (in_medium) {
+                dist = rrv__mind(dist, fabs(sphere));
+                in_medium = sphere < 0;
+            }
+        }
+        safe = rrv__mind(safe, dist);
+        if (in_medium) {
+            *inside = 1;
+            if (m->majorant->surface_free) *surface_free = 1;
+        }
+    }
+    return safe - 1e-9 * (1.0 + big);
+}
+
 /* Fresnel reflectance of unpolarised light at a smooth dielectric interface,
    from the cosines of incidence and transmission. */
 static double rrv__fresnel(double eta_i, double eta_t, double cos_i, double cos_t)
@@ -4750,6 +4809,11 @@ typedef struct rrv__bender {
                           inside the sole support (its end by more than
                           rounding): walkers of a medium whose box holds the
                           support need not clip it (rrv__majorant_iterator_start) */
+    rrv_vec3 safe_at;  /* eikonal: from every point within sqrt(safe_inner2) of safe_at */
+    double safe_inner2;/* no face lies within safe_reach and the point is inside a
+                          support (rrv__safe_reach); <= 0: no such ball */
+    double safe_reach;
+    int safe_surface_free; /* a support holding the ball has no surface reaching into it */
 } rrv__bender;
 
 static rrv_refraction_scheme rrv__resolve_scheme(rrv_refraction_scheme s)
@@ -4787,6 +4851,14 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikona
     b->holds_support = 0;
     b->inv_tolerance = 1.0 / scene->settings.bend_tolerance;
     b->chord_inside = 0;
+    b->safe_at = o;
+    b->safe_inner2 = 0;
+    /* past the step by a sixteenth: RK4's stage slopes v / eta are not
+       unit, so nothing bounds its chord by the step (in a smooth field it
+       falls short of it but for terms of fifth order; test_grin saw none
+       longer), and a chord beyond reach is looked along after all */
+    b->safe_reach = scene->settings.step * (1.0 + 1.0 / 16) + 2 * RRV__EDGE_NUDGE;
+    b->safe_surface_free = 0;
     for (i = 0; b->sole_support && i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i], *s = b->sole_support;
         if (m->lo.x <= s->lo.x && m->lo.y <= s->lo.y && m->lo.z <= s->lo.z && s->hi.x <= m->hi.x &&
@@ -4796,6 +4868,54 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikona
         }
     }
     rrv__bender_restart(b, scene, o);
+}
+
+/* A lower bound on the t_face of every look from o along a unit direction
+   (the bender's safe_reach) when o lies in the bender's safety ball, or in
+   a fresh one at o, which then replaces it; else 0, also where o is
+   outside every support: a ray there runs straight to the face, whose
+   distance only the look gives. An eikonal step skips a look whose outcome
+   the bound already decides, and its result is the same bit for bit,
+   because each use compares t_face with a threshold and t_face >= bound
+   makes that comparison go as it does for the bound: planning asks for
+   min(step, t_face - nudge), which is step when bound - nudge >= step
+   (rounding is monotonic); the chord is cut when its look finds a face
+   within len + nudge, which none is when bound >= len + nudge. The chord
+   is tested as taken, not bounded in advance. The ball's test compares
+   squares (no square root a step); their rounding is far inside the
+   allowance rrv__support_safety took off. */
+static double rrv__safe_reach_fresh(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o)
+{
+    int inside, surface_free;
+    double inner = rrv__support_safety(scene, o, &inside, &surface_free) - b->safe_reach;
+    if (!inside || !(inner > 0)) return 0;
+    b->safe_at = o;
+    b->safe_inner2 = inner * inner;
+    b->safe_surface_free = surface_free;
+    return b->safe_reach;
+}
+
+static inline double rrv__safe_reach(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o)
+{
+    rrv_vec3 off = rrv__sub(o, b->safe_at);
+    return rrv__dot(off, off) < b->safe_inner2 ? b->safe_reach : rrv__safe_reach_fresh(b, scene, o);
+}
+
+/* Does the bound let a step from o skip planning's look? */
+static int rrv__safe_for_step(const rrv_scene *scene, double reach)
+{
+    return reach - RRV__EDGE_NUDGE >= scene->settings.step;
+}
+
+/* The view every look from o would give within reach: inside, no face
+   nearer than reach (its normal unused: the step ends the segment). */
+static void rrv__safe_view(const rrv__bender *b, double reach, rrv__support_view *v)
+{
+    v->inside = 1;
+    v->surface_free = b->safe_surface_free;
+    v->face_unknown = 0;
+    v->t_face = reach;
+    v->normal = rrv__v3(0, 0, 1);
 }
 
 /* Snell at a null event at x (Poisson and midpoint schemes). */
@@ -5216,9 +5336,10 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
 
 /* One eikonal step of at most h from x that stops short of the next face
    (a step ending past it would take its closing kick from the other side's
-   gradient); the curved step is shortened if its chord would cross a face. */
+   gradient); the curved step is shortened if its chord would cross a face.
+   No face comes within reach of x (rrv__safe_reach). */
 static void rrv__eikonal_plan(rrv__bender *b, const rrv_scene *scene, rrv_stepper stepper, double h, rrv_vec3 x,
-                              rrv_vec3 *d, const rrv__support_view *view)
+                              rrv_vec3 *d, const rrv__support_view *view, double reach)
 {
     const double nudge = RRV__EDGE_NUDGE;
     rrv_vec3 x1, chord;
@@ -5227,7 +5348,8 @@ static void rrv__eikonal_plan(rrv__bender *b, const rrv_scene *scene, rrv_steppe
     h = rrv__eikonal_step_controlled(scene, stepper, fmin(h, view->t_face - nudge), x, *d, &x1, &b->next_d);
     chord = rrv__sub(x1, x);
     len = rrv__length(chord);
-    rrv__look_along(scene, x, rrv__scale(chord, 1.0 / len), &along);
+    if (reach < len + nudge) rrv__look_along(scene, x, rrv__scale(chord, 1.0 / len), &along);
+    else along.t_face = DBL_MAX;
     if (along.t_face < len + nudge && along.t_face > 2 * nudge) {
         h = rrv__eikonal_step_controlled(scene, stepper, h * (along.t_face - nudge) / len, x, *d, &x1, &b->next_d);
         chord = rrv__sub(x1, x);
@@ -5246,9 +5368,11 @@ static void rrv__eikonal_plan(rrv__bender *b, const rrv_scene *scene, rrv_steppe
 static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, rrv_vec3 *d, rrv__rng *rng)
 {
     rrv__support_view view;
+    double reach = b->eikonal ? rrv__safe_reach(b, scene, o) : 0;
     b->line_d = *d;
     rrv__reciprocals(*d, b->line_inv);
-    rrv__look_along(scene, o, *d, &view);
+    if (b->eikonal && rrv__safe_for_step(scene, reach)) rrv__safe_view(b, reach, &view);
+    else rrv__look_along(scene, o, *d, &view);
     b->pending = 1;
     b->chord_inside = 0;
     b->segment = view.t_face;
@@ -5261,7 +5385,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     }
     if (b->eikonal) {
         if (view.t_face > 2 * RRV__EDGE_NUDGE)
-            rrv__eikonal_plan(b, scene, scene->settings.stepper, scene->settings.step, o, d, &view);
+            rrv__eikonal_plan(b, scene, scene->settings.stepper, scene->settings.step, o, d, &view, reach);
     } else if (b->scheme == RRV_REFRACTION_COMB) {
         /* the first point a uniformly random fraction of a spacing ahead, so
            the comb does not alias with pixels */
@@ -6832,11 +6956,12 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
     rrv__support_view view, along;
     rrv__step_stages st;
     rrv_vec3 d_start = *d, x1, chord, g1, kappa;
-    double h, first, len, eta1, dh[2], nd, asked, scale = 1.0, slack;
-    int j, halvings, again = 0;
+    double h, first, len, eta1, dh[2], nd, asked, scale = 1.0, slack, reach = rrv__safe_reach(b, scene, o);
+    int j, halvings, again = 0, seen = !rrv__safe_for_step(scene, reach);
     b->line_d = *d;
     rrv__reciprocals(*d, b->line_inv);
-    rrv__look_along(scene, o, *d, &view);
+    if (seen) rrv__look_along(scene, o, *d, &view);
+    else rrv__safe_view(b, reach, &view);
     b->pending = 1;
     b->segment = view.t_face;
     b->end = view.t_face < DBL_MAX ? RRV__END_FACE : RRV__END_NONE;
@@ -6848,8 +6973,12 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
     h = rrv__eikonal_step_controlled_staged(scene, stepper, first, o, d_start, &x1, &b->next_d, &st, &halvings);
     chord = rrv__sub(x1, o);
     len = rrv__length(chord);
-    rrv__look_along(scene, o, rrv__scale(chord, 1.0 / len), &along);
+    if (reach < len + nudge) rrv__look_along(scene, o, rrv__scale(chord, 1.0 / len), &along);
+    else along.t_face = DBL_MAX;
     if (along.t_face < len + nudge && along.t_face > 2 * nudge) {
+        /* which cut made the step is told below by the view's own t_face
+           (the slack) and normal, which the bound does not give */
+        if (!seen) rrv__look_along(scene, o, d_start, &view);
         h = rrv__eikonal_step_controlled_staged(scene, stepper, h * (along.t_face - nudge) / len, o, d_start, &x1,
                                                 &b->next_d, &st, &again);
         chord = rrv__sub(x1, o);
@@ -6865,6 +6994,9 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
     /* which cut made h: told apart by its length, as a step of the first
        cut rounded differently would be */
     asked = h;
+    /* (a view from the safety bound has its own t_face, but there first is
+       step, which a step only halved doubles back to exactly, and the
+       return below is taken whatever the slack) */
     slack = 1e-12 * (1.0 + view.t_face);
     for (halvings = 0; halvings < 12 && asked < first - slack; ++halvings) {
         asked *= 2.0;
