@@ -753,7 +753,8 @@ typedef enum rrv_manifold_gauge {
 
 /* Where a pixel's samples take their random numbers. */
 typedef enum rrv_sampler {
-    RRV_SAMPLER_DEFAULT = 0, /* PCG for now */
+    RRV_SAMPLER_DEFAULT = 0, /* Sobol (README.md, "Samplers": never more than a few
+                                per cent worse than PCG, up to 6x better) */
     RRV_SAMPLER_PCG,         /* an independent PCG32 stream per (pixel, sample) */
     RRV_SAMPLER_SOBOL        /* the first RRV_SOBOL_DIMENSIONS numbers of a sample
                                 from Owen-scrambled Sobol pairs per pixel, the
@@ -6493,7 +6494,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
                          "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
     memset(&ctx, 0, sizeof ctx);
     ctx.scene = scene;
-    sobol = scene->settings.sampler == RRV_SAMPLER_SOBOL;
+    sobol = scene->settings.sampler != RRV_SAMPLER_PCG;
     if (scene->settings.integrator == RRV_INTEGRATOR_REFRACTIVE) {
         ctx.comb = rrv__resolve_scheme(scene->settings.refraction) == RRV_REFRACTION_COMB;
         ctx.refract_nulls = !ctx.comb;
@@ -6691,7 +6692,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
    (rrv__solve_coarse_step), each turning a ray by at most about
    RRV__SOLVE_COARSE_BEND radians */
 #ifndef RRV__SOLVE_COARSE
-#define RRV__SOLVE_COARSE 32
+#define RRV__SOLVE_COARSE 8
 #endif
 #ifndef RRV__SOLVE_COARSE_BEND
 #define RRV__SOLVE_COARSE_BEND 0.6
@@ -7347,12 +7348,16 @@ static rrv_vec3 rrv__solver_seed(rrv_vec3 x0, rrv_vec3 y, rrv__rng *rng)
    by RRV__SOLVE_COARSE_BEND radians (|d'| = |grad_perp eta| / eta), and
    never shorter than the scene's. The coarse stage only has to land its
    root in the basin where the polish at the scene's step converges in a
-   shot or two, and RK4's error at a step that turns a ray by a fraction of
-   a radian is far below that basin. Measured on scenes/lens_caustic.rrv
-   (eikonal, nee shoot, 64x48 crop, 8 spp, one thread): at step 0.01 a
-   fixed factor of 8 took 3.27 s of CPU, 32 2.39 s, 64 3.00 s; at step 0.2
-   a factor of 1 took 1.03 s, 8 1.45 s; with this rule the coarse step is
-   0.3 there (the lens's peak |grad eta| is 2 per metre). */
+   shot or two. Longer is not safe: a root whose basin the coarse stage
+   never converges to has probability zero, a bias, not noise. At 32x the
+   scene's step (1.6 m on scenes/fire_caustic.rrv, whose hot blobs are
+   0.1-0.2 m across) the caustic rendered 2 % dark, 6 standard errors off
+   its reference in a block of the test of test/ref/, while the lens
+   caustic's crop at its step 0.01 was 27 % faster. The bend's cap matters
+   where the scene's step is long: on scenes/lens_caustic.rrv at step 0.2
+   (eikonal, nee shoot, 64x48 crop, 8 spp, one thread) 8x took 1.45 s of
+   CPU and the scene's own step 1.03 s; the cap gives 0.3 there (the
+   lens's peak |grad eta| is 2 per metre). */
 static double rrv__solve_coarse_step(const rrv_scene *scene, double eta_floor)
 {
     double step = scene->settings.step, coarse = RRV__SOLVE_COARSE * step, peak = 0;

@@ -68,6 +68,9 @@ static image_mean render_mean(rrv_scene *s, int spp_per_chunk, int chunks)
     double sum = 0, sum2 = 0;
     float *img = (float *)malloc(n * sizeof(float));
     out.first = (float *)calloc(n, sizeof(float));
+    /* the ranges are independent only with independent samples (the
+       default sampler's ranges are parts of one stratified sequence) */
+    s->settings.sampler = RRV_SAMPLER_PCG;
     for (k = 0; k < chunks; ++k) {
         double m = 0;
         memset(img, 0, n * sizeof(float));

@@ -63,6 +63,9 @@ static stats pixel_samples_cut(rrv_scene *s, int spp, int channel, rrv_render_st
     int w = s->camera.width, h = s->camera.height, k, i;
     float *img = (float *)malloc((size_t)w * h * 3 * sizeof(float));
     stats st = {0, 0, 0};
+    /* independent samples, as the standard error assumes (the default
+       sampler's are stratified within a pixel) */
+    s->settings.sampler = RRV_SAMPLER_PCG;
     for (k = 0; k < spp; ++k) {
         memset(img, 0, (size_t)w * h * 3 * sizeof(float));
         rrv_render_rect(s, 0, 0, w, h, k, k + 1, img, w, rs, NULL);

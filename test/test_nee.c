@@ -96,11 +96,15 @@ static rrv_scene *parse_text(const char *text, size_t size, const char *name)
 /* Renders pixels [x0,x1) x [y0,y1) one sample index at a time and files
    each pixel sample of the green channel into the stats of its block (bw x
    bh pixels, numbered over the whole image). */
-static void block_samples_rect(const rrv_scene *s, int spp, int x0, int y0, int x1, int y1, int bw, int bh,
+static void block_samples_rect(rrv_scene *s, int spp, int x0, int y0, int x1, int y1, int bw, int bh,
                                stats *blocks, rrv_render_stats *rs)
 {
     int w = x1 - x0, h = y1 - y0, k, x, y, per_row = s->camera.width / bw;
     float *img = (float *)malloc((size_t)w * h * 3 * sizeof(float));
+    /* the standard errors below treat a pixel's samples as independent:
+       the default sampler's are stratified, and the bounds would be looser
+       than they say */
+    s->settings.sampler = RRV_SAMPLER_PCG;
     for (k = 0; k < spp; ++k) {
         memset(img, 0, (size_t)w * h * 3 * sizeof(float));
         rrv_render_rect(s, x0, y0, x1, y1, k, k + 1, img, w, rs, NULL);
@@ -111,7 +115,7 @@ static void block_samples_rect(const rrv_scene *s, int spp, int x0, int y0, int 
     free(img);
 }
 
-static void block_samples(const rrv_scene *s, int spp, int bw, int bh, stats *blocks)
+static void block_samples(rrv_scene *s, int spp, int bw, int bh, stats *blocks)
 {
     block_samples_rect(s, spp, 0, 0, s->camera.width, s->camera.height, bw, bh, blocks, NULL);
 }
