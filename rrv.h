@@ -437,6 +437,13 @@
        (eta_c / eta_e)^2; thermal emission follows Kirchhoff (above).
 
    HISTORY
+     0.8.0  Sobol sampler by default (up to 6x less variance where light
+            is sampled through refraction, within a few per cent
+            elsewhere); one light draw a vertex shared by straight and
+            curved NEE; eikonal steps skip their support looks inside a
+            safety ball (bit-identical); shoot's coarse stage capped at
+            0.6 rad a step (lens caustic under the 1 m light: shoot 7x
+            none, from 1.5x)
      0.7.0  nee shoot and manifold also draw rays toward strongly
             refracting supports, for the roots of weak chords that
             forward paths carried alone (the heavy tail of small-light
@@ -480,7 +487,7 @@
 #include <stdint.h>
 
 #define RRV_VERSION_MAJOR 0
-#define RRV_VERSION_MINOR 7
+#define RRV_VERSION_MINOR 8
 #define RRV_VERSION_PATCH 0
 
 #ifndef RRV_DEF
