@@ -437,13 +437,13 @@
        (eta_c / eta_e)^2; thermal emission follows Kirchhoff (above).
 
    HISTORY
-     0.8.0  Sobol sampler by default (up to 6x less variance where light
-            is sampled through refraction, within a few per cent
-            elsewhere); one light draw a vertex shared by straight and
-            curved NEE; eikonal steps skip their support looks inside a
-            safety ball (bit-identical); shoot's coarse stage capped at
-            0.6 rad a step (lens caustic under the 1 m light: shoot 7x
-            none, from 1.5x)
+     0.8.0  one light draw a vertex shared by straight and curved NEE;
+            eikonal steps skip their support looks inside a safety ball
+            (bit-identical); shoot's coarse stage capped at 0.6 rad a
+            step; the Sobol sampler measured on every scene (up to 6x
+            less variance where light is sampled through refraction:
+            lens caustic, 1 m light, shoot 7x none with sobol), not yet
+            the default
      0.7.0  nee shoot and manifold also draw rays toward strongly
             refracting supports, for the roots of weak chords that
             forward paths carried alone (the heavy tail of small-light
@@ -760,8 +760,8 @@ typedef enum rrv_manifold_gauge {
 
 /* Where a pixel's samples take their random numbers. */
 typedef enum rrv_sampler {
-    RRV_SAMPLER_DEFAULT = 0, /* Sobol (README.md, "Samplers": never more than a few
-                                per cent worse than PCG, up to 6x better) */
+    RRV_SAMPLER_DEFAULT = 0, /* PCG for now (README.md, "Samplers": Sobol is up to 6x
+                                better where light is sampled through refraction) */
     RRV_SAMPLER_PCG,         /* an independent PCG32 stream per (pixel, sample) */
     RRV_SAMPLER_SOBOL        /* the first RRV_SOBOL_DIMENSIONS numbers of a sample
                                 from Owen-scrambled Sobol pairs per pixel, the
@@ -6501,7 +6501,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
                          "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
     memset(&ctx, 0, sizeof ctx);
     ctx.scene = scene;
-    sobol = scene->settings.sampler != RRV_SAMPLER_PCG;
+    sobol = scene->settings.sampler == RRV_SAMPLER_SOBOL;
     if (scene->settings.integrator == RRV_INTEGRATOR_REFRACTIVE) {
         ctx.comb = rrv__resolve_scheme(scene->settings.refraction) == RRV_REFRACTION_COMB;
         ctx.refract_nulls = !ctx.comb;

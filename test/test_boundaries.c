@@ -69,7 +69,7 @@ static image_mean render_mean(rrv_scene *s, int spp_per_chunk, int chunks)
     float *img = (float *)malloc(n * sizeof(float));
     out.first = (float *)calloc(n, sizeof(float));
     /* the ranges are independent only with independent samples (the
-       default sampler's ranges are parts of one stratified sequence) */
+       ranges of a Sobol sampler are parts of one stratified sequence) */
     s->settings.sampler = RRV_SAMPLER_PCG;
     for (k = 0; k < chunks; ++k) {
         double m = 0;

@@ -63,8 +63,8 @@ static stats pixel_samples_cut(rrv_scene *s, int spp, int channel, rrv_render_st
     int w = s->camera.width, h = s->camera.height, k, i;
     float *img = (float *)malloc((size_t)w * h * 3 * sizeof(float));
     stats st = {0, 0, 0};
-    /* independent samples, as the standard error assumes (the default
-       sampler's are stratified within a pixel) */
+    /* independent samples, as the standard error assumes (a Sobol
+       sampler's are stratified within a pixel), whatever the default */
     s->settings.sampler = RRV_SAMPLER_PCG;
     for (k = 0; k < spp; ++k) {
         memset(img, 0, (size_t)w * h * 3 * sizeof(float));

@@ -102,7 +102,7 @@ static void block_samples_rect(rrv_scene *s, int spp, int x0, int y0, int x1, in
     int w = x1 - x0, h = y1 - y0, k, x, y, per_row = s->camera.width / bw;
     float *img = (float *)malloc((size_t)w * h * 3 * sizeof(float));
     /* the standard errors below treat a pixel's samples as independent:
-       the default sampler's are stratified, and the bounds would be looser
+       Sobol's are stratified, and the bounds would be looser
        than they say */
     s->settings.sampler = RRV_SAMPLER_PCG;
     for (k = 0; k < spp; ++k) {
