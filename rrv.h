@@ -5490,7 +5490,6 @@ typedef struct rrv__context {
     int aim;                 /* nee aim: bent shadow rays aimed at light
                                 samples (also shoot where it cannot solve) */
     double eta_floor;        /* the lowest eta anywhere (nee shoot and manifold's class) */
-    double coarse_step;      /* nee shoot's eikonal step for solves from a seed (rrv__solve_coarse_step) */
     int cone_count;          /* strongly refracting supports (rrv__cone_setup) */
     rrv_vec3 cone_center[RRV__CONE_MAX]; /* and the spheres that bound them */
     double cone_radius[RRV__CONE_MAX];
@@ -5789,6 +5788,27 @@ typedef struct rrv__light_sample {
    that are each zero half the time). */
 typedef struct rrv__light_draw { double u, u1, u2; } rrv__light_draw;
 
+/* Which of the rrv__light_choices the draw picks: an index into
+   scene->lights, or light_count for the environment; -1 if there is none.
+   Straight and curved NEE pick through here, so one draw names one light. */
+static int rrv__light_pick(const rrv_scene *scene, const rrv__light_draw *draw)
+{
+    int choices = rrv__light_choices(scene), pick;
+    if (!choices) return -1;
+    pick = (int)(draw->u * choices);
+    return pick >= choices ? choices - 1 : pick;
+}
+
+/* The point of a quad or triangle light that (u1, u2) names, uniform in area. */
+static rrv_vec3 rrv__area_light_point(const rrv_shape *s, double u1, double u2)
+{
+    if (s->kind == RRV_SHAPE_TRIANGLE) {
+        double su = sqrt(u1);
+        return rrv__madd(rrv__madd(s->p0, s->e1, 1.0 - su), s->e2, u2 * su);
+    }
+    return rrv__madd(rrv__madd(s->p0, s->e1, u1), s->e2, u2);
+}
+
 static void rrv__draw_light(rrv__rng *rng, rrv__light_draw *draw)
 {
     /* one a statement: the order of evaluation of arguments is unspecified */
@@ -5799,11 +5819,9 @@ static void rrv__draw_light(rrv__rng *rng, rrv__light_draw *draw)
 
 static int rrv__sample_light(const rrv_scene *scene, rrv_vec3 p, const rrv__light_draw *draw, rrv__light_sample *ls)
 {
-    int choices = rrv__light_choices(scene), pick, c;
-    const double u = draw->u, u1 = draw->u1, u2 = draw->u2;
-    if (!choices) return 0;
-    pick = (int)(u * choices);
-    if (pick >= choices) pick = choices - 1;
+    int choices = rrv__light_choices(scene), pick = rrv__light_pick(scene, draw), c;
+    const double u1 = draw->u1, u2 = draw->u2;
+    if (pick < 0) return 0;
     if (pick == scene->light_count) {
         ls->wi = rrv__sample_uniform_sphere(u1, u2);
         ls->dist = DBL_MAX;
@@ -5832,12 +5850,7 @@ static int rrv__sample_light(const rrv_scene *scene, rrv_vec3 p, const rrv__ligh
             ls->pdf = 1.0 / (2.0 * RRV__PI * one_minus_cos_max * choices);
             q = rrv__madd(p, ls->wi, ls->dist);
         } else {
-            if (s->kind == RRV_SHAPE_TRIANGLE) {
-                double su = sqrt(u1);
-                q = rrv__madd(rrv__madd(s->p0, s->e1, 1.0 - su), s->e2, u2 * su);
-            } else {
-                q = rrv__madd(rrv__madd(s->p0, s->e1, u1), s->e2, u2);
-            }
+            q = rrv__area_light_point(s, u1, u2);
             nq = rrv__normalize(rrv__cross(s->e1, s->e2));
             ls->wi = rrv__sub(q, p);
             ls->dist = rrv__length(ls->wi);
@@ -5998,7 +6011,6 @@ static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__
 static struct rrv__chain *rrv__chain_new(int cap);
 static void rrv__chain_delete(struct rrv__chain *ch);
 static int rrv__solver_supports_scene(const rrv_scene *scene);
-static double rrv__solve_coarse_step(const rrv_scene *scene, double eta_floor);
 
 /* Curved NEE from a vertex (the light point of draw, straight NEE's), or
    the count of vertices that could not. */
@@ -6548,7 +6560,6 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
         ctx.eta_floor = rrv__maxd(ctx.eta_floor, RRV_MIN_IOR);
     }
     if (ctx.shoot || ctx.manifold) rrv__cone_setup(&ctx);
-    if (ctx.shoot) ctx.coarse_step = rrv__solve_coarse_step(scene, ctx.eta_floor);
     if (ctx.manifold && !(ctx.chain = rrv__chain_new(RRV__CHAIN_MAX)))
         return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "rrv_render_rect: out of memory for nee manifold's chain");
     rrv__camera_setup(&scene->camera, &frame);
@@ -7424,9 +7435,8 @@ static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, co
     rrv__context coarse = *ctx;
     rrv__root near;
     int k, shots = 0, found = 0;
-    /* a context set up by hand (tests) may leave it 0 */
-    coarse_scene.settings.step = ctx->coarse_step > 0 ? ctx->coarse_step
-                                                      : rrv__solve_coarse_step(ctx->scene, ctx->eta_floor > 0 ? ctx->eta_floor : 1.0);
+    /* a context set up by hand (tests) may leave eta_floor 0 */
+    coarse_scene.settings.step = rrv__solve_coarse_step(ctx->scene, ctx->eta_floor > 0 ? ctx->eta_floor : 1.0);
     coarse.scene = &coarse_scene;
     for (k = 0; k < RRV__SOLVE_RESTARTS && !found; ++k) {
         rrv_vec3 seed = rrv__solver_seed(x0, y, rng);
@@ -8952,23 +8962,14 @@ static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__
 static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 *y,
                                              rrv_vec3 *ny, double *pdf_area)
 {
-    int choices = rrv__light_choices(scene), pick;
+    int pick = rrv__light_pick(scene, draw);
     const rrv_shape *s;
-    const double u = draw->u, u1 = draw->u1, u2 = draw->u2;
-    if (!choices) return NULL;
-    pick = (int)(u * choices);
-    if (pick >= choices) pick = choices - 1;
-    if (pick == scene->light_count) return NULL;
+    if (pick < 0 || pick == scene->light_count) return NULL;
     s = &scene->shapes[scene->lights[pick]];
     if (s->kind == RRV_SHAPE_SPHERE) return NULL;
-    if (s->kind == RRV_SHAPE_TRIANGLE) {
-        double su = sqrt(u1);
-        *y = rrv__madd(rrv__madd(s->p0, s->e1, 1.0 - su), s->e2, u2 * su);
-    } else {
-        *y = rrv__madd(rrv__madd(s->p0, s->e1, u1), s->e2, u2);
-    }
+    *y = rrv__area_light_point(s, draw->u1, draw->u2);
     *ny = rrv__normalize(rrv__cross(s->e1, s->e2));
-    *pdf_area = 1.0 / (rrv__shape_area(s) * choices);
+    *pdf_area = 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
     return s;
 }
 

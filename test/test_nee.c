@@ -1658,18 +1658,9 @@ static void test_cone_weak_roots(void)
    both, so at a floor point that sees part of the light straight and part
    through the lens their sum varies less than two independent samples'
    (those add their variances; the routed one saves 2 mean_s mean_c). The
-   check runs at the lens's step 0.2 (a faster solve; the classes are the
-   step's own). Means agree within 4 standard errors; the variance check has
+   check runs the caustic scene at step 0.2 (a faster solve; the classes
+   are the step's own). Means agree within 4 standard errors; the variance check has
    a margin of 20 % against an expected saving of about half. */
-static const char coarse_caustic_text[] =
-    "camera eye 0 0.6 -1.8  look 0 0 0.2  up 0 1 0  fov 40  resolution 32 24\n"
-    "render maxdepth 1 step 0.2\n"
-    "material white diffuse albedo 1 1 1\n"
-    "quad origin -3 0 -3  u 6 0 0  v 0 0 6  material white\n"
-    "quad origin -0.5 3 -0.5  u 1 0 0  v 0 0 1  L 10 10 10\n"
-    "medium lens box -0.5 0.7 -0.5 0.5 1.7 0.5  sigma_a 0 0 0  sigma_s 0 0 0\n"
-    "ior lens luneburg center 0 1.2 0 radius 0.5\n";
-
 static void test_shared_light_draw(void)
 {
     rrv_scene *s = NULL;
@@ -1680,7 +1671,8 @@ static void test_shared_light_draw(void)
     stats shared, apart;
     int k, both = 0, straight = 0, curved = 0;
     double d, se, var_shared, var_apart;
-    if (!(s = parse_text(coarse_caustic_text, sizeof coarse_caustic_text - 1, "coarse caustic"))) return;
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
+    s->settings.step = 0.2;
     cone_context(&ctx, s);
     ctx.eta_camera2 = 1;
     white_floor_vertex(&vb);
