@@ -73,7 +73,9 @@
 
    INTEGRATORS (rrv_settings.integrator)
      classic     IOR 1 everywhere: delta tracking, ratio-tracked NEE with MIS,
-                 spectral MIS for chromatic media. The production baseline.
+                 spectral MIS for chromatic media (channels whose extinctions
+                 differ more than 4x walk with majorants of their own). The
+                 production baseline.
      refractive  the same, with rays bent inside media that carry an IOR.
                  Scheme (rrv_settings.refraction): COMB, the default, kicks
                  the direction at regularly spaced points with the leapfrog
@@ -279,7 +281,9 @@
      Cut and counted (rrv_render_stats.paths_cut, of them cut_tracking and
      cut_samples):
        - a tracking walk (one medium along one straight segment) after
-         64 + 4 (peak majorant x chord) tentative collisions, at most
+         64 + 4 (peak majorant x chord) tentative collisions (the majorant
+         of the channels it walks for: a channel whose extinction is 4x
+         below the densest walks with one of its own), at most
          RRV_MAX_SEGMENT_EVENTS = 2^22: the count is Poisson with a mean of at
          most the second term, so a correct walk never gets there (P < 1e-30);
        - a leg of a path (between two real vertices) after 64 + 16 times the
@@ -2520,6 +2524,11 @@ struct rrv__majorant_grid {
     rrv_vec3 inv_cell;     /* 1 / cell: a point's cell by multiplication */
     rrv_vec3 refraction_scale; /* (n - 1) / (hi - lo) of the refraction grid */
     double sigma_t_max;    /* max over channels of (sigma_a + sigma_s) * scale */
+    double channel_scale[3]; /* per channel, the extinction its walks take for the
+                              majorant's (times density_max): its channel group's
+                              largest (rrv__group_channels) */
+    int channel_groups;    /* 1 (grey or mildly chromatic): one majorant serves all
+                              channels, as before there were groups */
     float *density_max;    /* per cell */
     float *grad_max;       /* per cell max |grad r|, NULL if the medium does not refract */
     float *jacobian_wander; /* with RRV__COMB_WANDER, per cell bound on |J(p) - J(q)|, J the
@@ -4090,6 +4099,37 @@ static void rrv__majorant_lattice(const rrv_scene *scene, const rrv_medium *m, i
     g->inv_cell = rrv__v3(1.0 / g->cell.x, 1.0 / g->cell.y, 1.0 / g->cell.z);
 }
 
+/* Channels whose extinctions lie within this factor of the largest in
+   their group share that largest as their majorant's scale. One majorant
+   for every channel costs each channel the densest one's collisions: with
+   sigma_t (4, 6e10, 6) per metre a walk for red (the hero, or its shadow
+   ray's ratio tracking, whose weight never falls) takes 1e10 collisions a
+   metre; grouped, no channel walks faster than 4 times its own rate. 4
+   keeps every scene in scenes/ (blast's 2.9 : 2.7 the most chromatic) in
+   one group, where tracking is exactly what one majorant gives. */
+#define RRV__CHANNEL_GROUP_SPAN 4.0
+
+/* Sorts the channels by extinction k and groups them from the densest
+   down: a channel joins the group whose largest is at most SPAN times its
+   own, else opens the next (scales and count into g). */
+static void rrv__group_channels(struct rrv__majorant_grid *g, const double k[3])
+{
+    int order[3] = {0, 1, 2}, i, j;
+    double top = 0;
+    for (i = 0; i < 3; ++i)
+        for (j = i + 1; j < 3; ++j)
+            if (k[order[j]] > k[order[i]]) { int t = order[i]; order[i] = order[j]; order[j] = t; }
+    g->channel_groups = 0;
+    for (i = 0; i < 3; ++i) {
+        double kc = k[order[i]];
+        if (i == 0 || kc * RRV__CHANNEL_GROUP_SPAN < top) {
+            top = kc;
+            ++g->channel_groups;
+        }
+        g->channel_scale[order[i]] = top;
+    }
+}
+
 static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, size_t *baked_bytes, rrv_error *err)
 {
     struct rrv__majorant_grid *g;
@@ -4114,7 +4154,14 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
         rrv_result res = rrv__bake_refraction(scene, m, baked_bytes, err);
         if (res != RRV_OK) return res;
     }
-    for (x = 0; x < 3; ++x) g->sigma_t_max = rrv__maxd(g->sigma_t_max, (m->sigma_a[x] + m->sigma_s[x]) * m->scale);
+    {
+        double k[3];
+        for (x = 0; x < 3; ++x) {
+            k[x] = (m->sigma_a[x] + m->sigma_s[x]) * m->scale;
+            g->sigma_t_max = rrv__maxd(g->sigma_t_max, k[x]);
+        }
+        rrv__group_channels(g, k);
+    }
     /* density bounds; gradient bounds where it refracts; Jacobian wander
        bounds where that gradient is a baked trilinear blend */
     arrays = !refracts ? 1 : RRV__COMB_WANDER && g->refraction.data && rrv__flat_beyond_bake(m) ? 3 : 2;
@@ -4256,12 +4303,15 @@ static void rrv__medium_Le(const rrv_medium *m, rrv_vec3 p, double given_scale, 
 typedef struct rrv__majorant_segment {
     double t0, t1;   /* the piece of the ray o + t d inside one cell */
     double majorant; /* 1/m, bounds the extinction (plus refraction rate) there */
+    double density_max; /* the cell's density bound (times the density weight) */
 } rrv__majorant_segment;
 
 typedef struct rrv__majorant_iterator {
     const struct rrv__majorant_grid *grid;
     int with_refraction;  /* add the refraction event rate to the majorant */
     double density_weight;/* 1, or 0 to see refraction events only (rrv trace) */
+    double sigma_t_sample;/* the extinction scale of the majorant: sigma_t_max, or
+                             one channel group's (rrv__walker_sample_scale) */
     double mu_eta_fixed, inv_tolerance;
     double t, t_end;      /* where the next segment starts; where the ray leaves the box */
     int cell[3], step[3];
@@ -4331,6 +4381,7 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
     it->grid = g;
     it->with_refraction = with_refraction && g->grad_max != NULL;
     it->density_weight = 1.0;
+    it->sigma_t_sample = g->sigma_t_max;
     it->mu_eta_fixed = s->mu_eta;
     /* a division per walk, which delta tracking's walks (one a comb chord) need not pay */
     it->inv_tolerance = it->with_refraction ? 1.0 / s->bend_tolerance : 0.0;
@@ -4357,7 +4408,8 @@ static int rrv__majorant_iterator_next(rrv__majorant_iterator *it, rrv__majorant
     if (it->done) return 0;
     seg->t0 = it->t;
     seg->t1 = rrv__mind(it->t_next[a], it->t_end);
-    seg->majorant = g->density_max[c] * g->sigma_t_max * it->density_weight;
+    seg->density_max = g->density_max[c] * it->density_weight;
+    seg->majorant = g->density_max[c] * it->sigma_t_sample * it->density_weight;
     if (it->with_refraction)
         seg->majorant += it->mu_eta_fixed > 0 ? it->mu_eta_fixed : g->grad_max[c] * it->inv_tolerance;
     it->t = seg->t1;
@@ -4383,34 +4435,58 @@ typedef struct rrv__walker {
     long budget;                 /* tentative collisions left before the walk is cut */
     int cut;                     /* the budget ran out: t_event is DBL_MAX, yet the
                                     walk did not leave the box */
+    /* Channel groups (rrv__group_channels) in spectral delta tracking: a
+       medium whose channels walk with different majorants reweights the
+       path by each channel's majorant transmittance over the hero's, so the
+       walk must know its density bound integrated up to any moment: it
+       pauses at every cell face (at_face: the pending t_event is a face, not
+       a collision), where the integral restarts with the next cell's bound. */
+    int pauses;
+    int at_face;
+    double depth;                /* integral of density_max from the walk's start to t */
+    double applied;              /* the part of depth the path has been reweighted for */
 } rrv__walker;
+
+/* The walk's bound on tentative collisions (rrv__walker_start_line). */
+static void rrv__walker_budget(rrv__walker *w, const rrv_settings *s)
+{
+    /* The count of tentative collisions on the chord is Poisson with a mean
+       of at most the peak majorant times the chord, so 64 plus four times
+       that mean is never reached by a correct walk (probability below
+       1e-30); only a hostile scene reaches the fixed cap. */
+    const struct rrv__majorant_grid *g = w->cells.grid;
+    double mu = (double)g->density_peak * w->cells.sigma_t_sample, bound;
+    if (w->cells.with_refraction) mu += s->mu_eta > 0 ? s->mu_eta : g->grad_peak / s->bend_tolerance;
+    bound = 64.0 + 4.0 * mu * (w->cells.t_end - w->cells.t);
+    w->budget = bound < (double)RRV_MAX_SEGMENT_EVENTS ? (long)bound : RRV_MAX_SEGMENT_EVENTS;
+}
 
 /* A walk along o + t d, t in [0, tmax); inv_d and inside as for the iterator. */
 static int rrv__walker_start_line(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
                                   const rrv_vec3 *o, const rrv_vec3 *d, const double *inv_d, double tmax,
                                   int inside)
 {
-    const struct rrv__majorant_grid *g = m->majorant;
-    double t0, t1;
     if (!rrv__majorant_iterator_start(&w->cells, m, with_refraction, s, o, d, inv_d, tmax, inside)) return 0;
-    t0 = w->cells.t;
-    t1 = w->cells.t_end;
     w->medium = m;
     w->in_cell = 0;
-    w->t = t0;
+    w->t = w->cells.t;
     w->cut = 0;
-    {
-        /* The count of tentative collisions on the chord is Poisson with a
-           mean of at most the peak majorant times the chord, so 64 plus four
-           times that mean is never reached by a correct walk (probability
-           below 1e-30); only a hostile scene reaches the fixed cap. */
-        double mu = (double)g->density_peak * g->sigma_t_max, bound;
-        if (w->cells.with_refraction) mu += s->mu_eta > 0 ? s->mu_eta : g->grad_peak / s->bend_tolerance;
-        bound = 64.0 + 4.0 * mu * (t1 - t0);
-        w->budget = bound < (double)RRV_MAX_SEGMENT_EVENTS ? (long)bound : RRV_MAX_SEGMENT_EVENTS;
-    }
+    w->pauses = 0;
+    w->at_face = 0;
+    w->depth = w->applied = 0;
+    rrv__walker_budget(w, s);
     w->t_event = DBL_MAX;
     return 1;
+}
+
+/* Before the first advance: the walk takes channel `channel`'s group's
+   majorant (rrv__group_channels) instead of the largest; with `pauses`, it
+   stops at cell faces too (rrv__walker). Its bound shrinks with the rate. */
+static void rrv__walker_sample_channel(rrv__walker *w, const rrv_settings *s, int channel, int pauses)
+{
+    w->cells.sigma_t_sample = w->cells.grid->channel_scale[channel];
+    w->pauses = pauses;
+    rrv__walker_budget(w, s);
 }
 
 static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refraction, const rrv_settings *s,
@@ -4439,12 +4515,21 @@ static void rrv__walker_advance(rrv__walker *w, rrv__rng *rng, uint64_t *events)
                     w->cut = 1;
                     break;
                 }
+                if (w->pauses) w->depth += w->cell.density_max * (t - w->t);
                 w->t = t;
                 w->t_event = t;
                 w->majorant = w->cell.majorant;
+                w->at_face = 0;
                 ++*events;
                 return;
             }
+        }
+        if (w->pauses) {
+            w->depth += w->cell.density_max * (w->cell.t1 - w->t);
+            w->t = w->t_event = w->cell.t1;
+            w->in_cell = 0;
+            w->at_face = 1;
+            return;
         }
         w->t = w->cell.t1;
         w->in_cell = 0;
@@ -5544,9 +5629,11 @@ static void rrv__path_reweight(rrv__path *path, const double f[3])
 }
 
 /* inside: bit i, the chord lies inside media[i]'s box (rrv__bender's chord_inside). */
+/* hero: the channel that samples the collisions (rrv__path); a medium
+   with channel groups walks with its group's majorant and pauses at faces. */
 static int rrv__start_walkers(const rrv__context *ctx, rrv__walker *walkers, int with_refraction,
                               const rrv_vec3 *o, const rrv_vec3 *d, const double *inv_d, uint64_t inside,
-                              double tmax, rrv__rng *rng, uint64_t *events)
+                              double tmax, int hero, rrv__rng *rng, uint64_t *events)
 {
     const rrv_scene *scene = ctx->scene;
     int i, n = 0;
@@ -5554,6 +5641,7 @@ static int rrv__start_walkers(const rrv__context *ctx, rrv__walker *walkers, int
         rrv__walker *w = &walkers[n];
         if (rrv__walker_start_line(w, &scene->media[i], with_refraction, &scene->settings, o, d, inv_d, tmax,
                                    (int)(inside >> i & 1))) {
+            if (w->cells.grid->channel_groups > 1) rrv__walker_sample_channel(w, &scene->settings, hero, 1);
             rrv__walker_advance(w, rng, events);
             if (w->t_event < DBL_MAX) ++n;
         }
@@ -5562,7 +5650,10 @@ static int rrv__start_walkers(const rrv__context *ctx, rrv__walker *walkers, int
 }
 
 /* Ratio tracking (Novak et al. 2014) of the transmittance along a straight
-   segment, per channel, with Russian roulette once it is small. */
+   segment, per channel, with Russian roulette once it is small. A medium
+   whose channels fall into several groups (rrv__group_channels) is walked
+   once per group, each walk with its group's majorant: a weight that
+   stays near 1 (a thin channel's) must not pay for a dense channel's rate. */
 static void rrv__ratio_tracking_transmittance(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, double tmax,
                                               rrv__rng *rng, double T[3])
 {
@@ -5570,30 +5661,50 @@ static void rrv__ratio_tracking_transmittance(rrv__context *ctx, rrv_vec3 o, rrv
     int i;
     T[0] = T[1] = T[2] = 1.0;
     for (i = 0; i < scene->medium_count; ++i) {
-        rrv__walker w;
         const rrv_medium *m = &scene->media[i];
+        int lead;
         if (m->density.kind == RRV_FIELD_NONE) continue;
-        if (!rrv__walker_start(&w, m, 0, &scene->settings, o, d, tmax)) continue;
-        for (;;) {
-            rrv__coeffs c;
-            int ch;
-            double tmaxc;
-            rrv__walker_advance(&w, rng, &ctx->stats.events);
-            if (w.t_event == DBL_MAX) {
-                if (!w.cut) break;
-                /* Cut: dark is the one answer that cannot blow up. */
-                ++ctx->stats.paths_cut;
-                ++ctx->stats.cut_tracking;
-                T[0] = T[1] = T[2] = 0;
-                return;
-            }
-            rrv__medium_coeffs(m, rrv__madd(o, d, w.t_event), &c);
-            for (ch = 0; ch < 3; ++ch) T[ch] *= 1.0 - (c.sigma_a[ch] + c.sigma_s[ch]) / w.majorant;
-            tmaxc = rrv__max3(T);
-            if (tmaxc <= 0) { T[0] = T[1] = T[2] = 0; return; }
-            if (tmaxc < 0.1) {
-                if (rrv__uniform(rng) < 0.5) { T[0] = T[1] = T[2] = 0; return; }
-                T[0] *= 2; T[1] *= 2; T[2] *= 2;
+        for (lead = 0; lead < 3; ++lead) {
+            rrv__walker w;
+            const double *scale = m->majorant ? m->majorant->channel_scale : NULL;
+            int member[3], ch, grouped = scale && m->majorant->channel_groups > 1;
+            for (ch = 0; ch < 3; ++ch) member[ch] = !grouped || scale[ch] == scale[lead];
+            /* a group is walked from its first channel; one group, once */
+            if (grouped ? (lead > 0 && member[0]) || (lead > 1 && member[1]) || !(scale[lead] > 0) : lead > 0)
+                continue;
+            if (!rrv__walker_start(&w, m, 0, &scene->settings, o, d, tmax)) break;
+            if (grouped) rrv__walker_sample_channel(&w, &scene->settings, lead, 0);
+            for (;;) {
+                rrv__coeffs c;
+                double tmaxc = 0;
+                rrv__walker_advance(&w, rng, &ctx->stats.events);
+                if (w.t_event == DBL_MAX) {
+                    if (!w.cut) break;
+                    /* Cut: dark is the one answer that cannot blow up. */
+                    ++ctx->stats.paths_cut;
+                    ++ctx->stats.cut_tracking;
+                    T[0] = T[1] = T[2] = 0;
+                    return;
+                }
+                rrv__medium_coeffs(m, rrv__madd(o, d, w.t_event), &c);
+                for (ch = 0; ch < 3; ++ch)
+                    if (member[ch]) {
+                        T[ch] *= 1.0 - (c.sigma_a[ch] + c.sigma_s[ch]) / w.majorant;
+                        tmaxc = rrv__maxd(tmaxc, T[ch]);
+                    }
+                if (tmaxc < 0.1 && tmaxc > 0) {
+                    if (rrv__uniform(rng) < 0.5) {
+                        tmaxc = 0;
+                    } else {
+                        for (ch = 0; ch < 3; ++ch) T[ch] *= member[ch] ? 2.0 : 1.0;
+                    }
+                }
+                if (!(tmaxc > 0)) {
+                    for (ch = 0; ch < 3; ++ch)
+                        if (member[ch]) T[ch] = 0;
+                    if (!(rrv__max3(T) > 0)) return;
+                    break;
+                }
             }
         }
     }
@@ -5611,10 +5722,17 @@ typedef struct rrv__flight {
    sigma_a Le / mu at every tentative collision, not only at absorptions, so
    emission converges without waiting for the rare absorption event. */
 static void rrv__gather_emission(const rrv__context *ctx, rrv__path *path, const rrv_medium *m, rrv_vec3 x,
-                                 const rrv__coeffs *c, double mu)
+                                 const rrv__coeffs *c, double mu, const double *mu_channels)
 {
     double Le[3], k = rrv__path_mis(path) / mu, given = 1.0;
     int ch;
+    /* with channel groups, each channel's collision density is its own
+       majorant's: the balance heuristic over those densities weighs the
+       ratios by them (pbrt-v4's choice; weighing by the ratios alone, the
+       transmittances, also sums to one over the heroes) */
+    if (mu_channels)
+        k = 3.0 / (path->ratio[0] * mu_channels[0] + path->ratio[1] * mu_channels[1] +
+                   path->ratio[2] * mu_channels[2]);
     if (ctx->bends) {
         double eta = 1.0 + rrv__scene_refractivity(ctx->scene, x, NULL);
         given = ctx->eta_camera2 / (eta * eta);
@@ -5644,6 +5762,37 @@ static inline int rrv__segment_hit(const rrv__context *ctx, const rrv__bender *b
                                segment < DBL_MAX ? segment + rrv__face_gap(rrv__madd(o, d, segment)) : DBL_MAX, hit);
 }
 
+/* Spectral MIS where a medium's channels walk with different majorants
+   (channel groups, rrv__walker): channel c's path density carries its own
+   majorant transmittance exp(-k_c D), D the density bound integrated along
+   the walk, where the hero's walk carries exp(-k_hero D). Reweights the
+   path (beta and ratio alike: for delta tracking's choices the integrand
+   and each channel's density share the factor) by their quotient for the
+   part of each pausing walker's D from where it was last reweighted to t.
+   A pausing walker's last event and pending one share a cell, which holds
+   t (t comes no later than any pending event), so D at t is exact. */
+static void rrv__reweight_channel_depths(rrv__path *path, rrv__walker *walkers, int n, double t)
+{
+    double e[3] = {0, 0, 0};
+    int i, c, any = 0;
+    for (i = 0; i < n; ++i) {
+        rrv__walker *w = &walkers[i];
+        const double *k = w->cells.grid->channel_scale;
+        double D;
+        if (!w->pauses) continue;
+        D = w->depth - w->cell.density_max * (w->t - t);
+        if (!(D > w->applied)) continue;
+        for (c = 0; c < 3; ++c) e[c] -= (k[c] - k[path->hero]) * (D - w->applied);
+        w->applied = D;
+        any = 1;
+    }
+    if (any) {
+        double f[3];
+        for (c = 0; c < 3; ++c) f[c] = exp(e[c]);
+        rrv__path_reweight(path, f);
+    }
+}
+
 /* Refractive delta tracking: the seed paper's Algorithm 1, along one straight
    segment o + t d, t < tmax. With refract_nulls off (classic, and the comb
    and eikonal integrators, which bend only at segment ends) it is classic
@@ -5667,7 +5816,7 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
     /* the planned comb chord, if it lies inside the sole support: the media
        whose boxes hold the support need not clip it */
     uint64_t inside = inv_d && path->bender.chord_inside ? path->bender.holds_support : 0;
-    int n = rrv__start_walkers(ctx, walkers, ctx->refract_nulls, &o, &d, inv_d, inside, tmax, rng,
+    int n = rrv__start_walkers(ctx, walkers, ctx->refract_nulls, &o, &d, inv_d, inside, tmax, path->hero, rng,
                                &ctx->stats.events);
     while (n > 0) {
         int i, best = 0, ch;
@@ -5675,19 +5824,36 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
         const rrv_medium *m;
         rrv_vec3 x;
         rrv__coeffs c;
-        double mu, pa, ps, u;
+        double mu, pa, ps, u, mu_channels[3];
         /* 1. sample a distance with the majorant: the earliest tentative
               collision of all media (each walker has drawn its own) */
         for (i = 1; i < n; ++i)
             if (walkers[i].t_event < walkers[best].t_event) best = i;
         w = &walkers[best];
         if (w->t_event >= tmax) break;
+        if (w->at_face) {
+            /* a pausing walker's cell face: no collision, only its depth */
+            rrv__reweight_channel_depths(path, w, 1, w->t_event);
+            rrv__walker_advance(w, rng, &ctx->stats.events);
+            if (w->t_event == DBL_MAX) {
+                if (w->cut) return RRV__FLIGHT_CUT;
+                walkers[best] = walkers[--n];
+            }
+            continue;
+        }
         m = w->medium;
         mu = w->majorant;
+        if (w->pauses) {
+            const double *k = w->cells.grid->channel_scale;
+            rrv__reweight_channel_depths(path, walkers, n, w->t_event);
+            for (ch = 0; ch < 3; ++ch) mu_channels[ch] = mu + w->cell.density_max * (k[ch] - k[path->hero]);
+        } else {
+            mu_channels[0] = mu_channels[1] = mu_channels[2] = mu;
+        }
         x = rrv__madd(o, d, w->t_event);
         rrv__medium_coeffs(m, x, &c);
         /* 2. absorb: emission (gathered at every collision, see above) */
-        if (rrv__medium_emits(m)) rrv__gather_emission(ctx, path, m, x, &c, mu);
+        if (rrv__medium_emits(m)) rrv__gather_emission(ctx, path, m, x, &c, mu, w->pauses ? mu_channels : NULL);
         /* 3. sample the event A, S or N with probabilities sigma_a / mu,
               sigma_s / mu and sigma_n / mu */
         pa = c.sigma_a[path->hero] / mu;
@@ -5703,7 +5869,7 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
         }
         {
             double sigma_n[3];
-            for (ch = 0; ch < 3; ++ch) sigma_n[ch] = mu - c.sigma_a[ch] - c.sigma_s[ch];
+            for (ch = 0; ch < 3; ++ch) sigma_n[ch] = mu_channels[ch] - c.sigma_a[ch] - c.sigma_s[ch];
             if (sigma_n[0] != sigma_n[1] || sigma_n[1] != sigma_n[2]) rrv__path_reweight(path, sigma_n);
         }
         /* 4. null: refract by Snell's law with the ratio of the IOR the ray
@@ -5723,6 +5889,7 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
             walkers[best] = walkers[--n];
         }
     }
+    rrv__reweight_channel_depths(path, walkers, n, tmax);
     return RRV__FLIGHT_PASSED;
 }
 

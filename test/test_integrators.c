@@ -129,6 +129,14 @@ static void test_chromatic_furnace_every_integrator(void)
     furnace(1.0, 2.0, 4.0, 256, 0.03, "chromatic furnace");
 }
 
+/* 1 : 10 : 100 puts each channel in a group of its own (rrv__group_channels):
+   each hero walks with its own majorant and the path is reweighted by the
+   others' majorant transmittances. */
+static void test_channel_group_furnace_every_integrator(void)
+{
+    furnace(0.2, 2.0, 20.0, 256, 0.03, "channel-group furnace");
+}
+
 /* ---- refractive furnaces ------------------------------------------------------ */
 
 static void test_refractive_furnace_lens(void)
@@ -358,6 +366,7 @@ int main(int argc, char **argv)
     say_from_env("INTEGRATORS_VERBOSE");
     RUN(test_white_furnace_every_integrator);
     RUN(test_chromatic_furnace_every_integrator);
+    RUN(test_channel_group_furnace_every_integrator);
     RUN(test_refractive_furnace_lens);
     RUN(test_refractive_furnace_sharp_box);
     RUN(test_camera_inside_luneburg);
