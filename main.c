@@ -95,7 +95,7 @@ static const char render_help[] =
     "                         unbiased, noisier) or straight (straight shadow\n"
     "                         rays: fast, biased near refracting media)\n"
     "  --sampler NAME         pcg or sobol (Owen-scrambled, per pixel); default:\n"
-    "                         the scene's, else pcg\n"
+    "                         the scene's, else sobol\n"
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop (an EXR\n"

@@ -13,8 +13,8 @@ time is printed beside it but not used).
 
 --light S replaces the scene's 1 m square light by an S m square one with
 the same centre and power (radiance scaled by 1 / S^2): the smaller the
-light, the sharper the caustic. Modes "none sobol" and "shoot sobol" are
-those with the Sobol sampler instead of the default PCG one (the
+light, the sharper the caustic. Modes "none pcg" and "shoot pcg" are
+those with the PCG sampler instead of the default Sobol one (the
 reference keeps the default). --modes runs only the named modes; --old
 also renders `shoot` with another build (row "shoot, old build"), to
 compare versions on one reference. --ref-nee renders the reference with
@@ -45,8 +45,8 @@ MODES = [
     ("none", "none", ""),
     ("straight", "straight", ""),
     ("shoot", "shoot", ""),
-    ("none sobol", "none", "sampler sobol"),
-    ("shoot sobol", "shoot", "sampler sobol"),
+    ("none pcg", "none", "sampler pcg"),
+    ("shoot pcg", "shoot", "sampler pcg"),
     ("aim", "aim", ""),
     ("manifold chord", "manifold", "manifoldgauge chord"),
     ("manifold iso", "manifold", "manifoldgauge iso"),
