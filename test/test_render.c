@@ -130,33 +130,71 @@ static double stats_se(const stats *s)
     return sqrt(fmax(s->sum2 / s->n - m * m, 0) / s->n);
 }
 
-/* Checks ratio tracking and delta tracking against exp(-tau) for a ray. */
-static void check_transmittance(rrv_scene *s, rrv_vec3 o, rrv_vec3 d, double tmax, double tau, const char *what)
+/* A context for calling the tracking functions directly. */
+static void tracking_context(rrv__context *ctx, rrv_scene *s)
+{
+    memset(ctx, 0, sizeof *ctx);
+    ctx->scene = s;
+    ctx->eta_camera2 = 1;
+}
+
+/* Ratio tracking, delta tracking (passing) and the collision estimator of
+   emission, every channel against its closed form, where the media's
+   channels walk with different majorants (rrv__group_channels). emitted:
+   the expected emission gathered along the ray, or NULL. */
+static void check_channels(rrv_scene *s, rrv_vec3 o, rrv_vec3 d, double tmax, const double tau[3],
+                           const double *emitted, int n, const char *what)
 {
     rrv__context ctx;
     rrv__rng rng;
-    stats ratio = {0, 0, 0}, delta = {0, 0, 0};
-    double expected = exp(-tau);
-    int i, n = 200000;
-    memset(&ctx, 0, sizeof ctx);
-    ctx.scene = s;
-    ctx.eta_camera2 = 1;
-    rrv__rng_seed(&rng, 5, 0, 0);
+    stats ratio[3], delta[3], glow[3];
+    int i, c;
+    tracking_context(&ctx, s);
+    memset(ratio, 0, sizeof ratio);
+    memset(delta, 0, sizeof delta);
+    memset(glow, 0, sizeof glow);
+    rrv__rng_seed(&rng, 9, 0, 0);
     for (i = 0; i < n; ++i) {
-        double T[3];
+        double T[3], mis;
         rrv__path path;
         rrv__flight flight;
         int outcome;
         rrv__ratio_tracking_transmittance(&ctx, o, d, tmax, &rng, T);
-        stats_add(&ratio, T[1]);
         rrv__path_start(&path, &rng);
         outcome = rrv__refractive_delta_tracking(&ctx, &path, o, d, tmax, &rng, &flight);
-        stats_add(&delta, outcome == RRV__FLIGHT_PASSED ? path.beta[1] * rrv__path_mis(&path) : 0.0);
+        mis = rrv__path_mis(&path);
+        for (c = 0; c < 3; ++c) {
+            stats_add(&ratio[c], T[c]);
+            stats_add(&delta[c], outcome == RRV__FLIGHT_PASSED ? path.beta[c] * mis : 0.0);
+            stats_add(&glow[c], path.L[c]);
+        }
     }
-    CHECKF(fabs(stats_mean(&ratio) - expected) < 4 * stats_se(&ratio), "%s: ratio tracking %g +- %g, exp(-tau) %g",
-           what, stats_mean(&ratio), stats_se(&ratio), expected);
-    CHECKF(fabs(stats_mean(&delta) - expected) < 4 * stats_se(&delta), "%s: delta tracking %g +- %g, exp(-tau) %g",
-           what, stats_mean(&delta), stats_se(&delta), expected);
+    for (c = 0; c < 3; ++c) {
+        double expected = exp(-tau[c]);
+        /* 1e-12: a channel whose transmittance is 0 to double precision */
+        CHECKF(fabs(stats_mean(&ratio[c]) - expected) < 4 * stats_se(&ratio[c]) + 1e-12,
+               "%s, channel %d: ratio tracking %g +- %g, exp(-tau) %g", what, c, stats_mean(&ratio[c]),
+               stats_se(&ratio[c]), expected);
+        CHECKF(fabs(stats_mean(&delta[c]) - expected) < 4 * stats_se(&delta[c]) + 1e-12,
+               "%s, channel %d: delta tracking %g +- %g, exp(-tau) %g", what, c, stats_mean(&delta[c]),
+               stats_se(&delta[c]), expected);
+        /* bounds that could not see a 5 % error would prove nothing (a
+           channel below 0.05 is tested only for its mean) */
+        CHECKF(expected < 0.05 || stats_se(&delta[c]) < 0.0125 * expected, "%s, channel %d: delta se %g too large",
+               what, c, stats_se(&delta[c]));
+        if (emitted)
+            CHECKF(fabs(stats_mean(&glow[c]) - emitted[c]) < 4 * stats_se(&glow[c]),
+                   "%s, channel %d: emission %g +- %g, expected %g", what, c, stats_mean(&glow[c]),
+                   stats_se(&glow[c]), emitted[c]);
+    }
+}
+
+/* Checks ratio tracking and delta tracking against exp(-tau) for a ray
+   (every channel the same). */
+static void check_transmittance(rrv_scene *s, rrv_vec3 o, rrv_vec3 d, double tmax, double tau, const char *what)
+{
+    const double taus[3] = {tau, tau, tau};
+    check_channels(s, o, d, tmax, taus, NULL, 200000, what);
 }
 
 static void test_transmittance_homogeneous(void)
@@ -214,59 +252,6 @@ static void test_transmittance_grid_ramp(void)
 }
 
 /* ---- channel groups: one majorant per group of channels -------------------- */
-
-/* Ratio tracking, delta tracking (passing) and the collision estimator of
-   emission, every channel against its closed form, where the media's
-   channels walk with different majorants (rrv__group_channels). emitted:
-   the expected emission gathered along the ray, or NULL. */
-static void check_channels(rrv_scene *s, rrv_vec3 o, rrv_vec3 d, double tmax, const double tau[3],
-                           const double *emitted, int n, const char *what)
-{
-    rrv__context ctx;
-    rrv__rng rng;
-    stats ratio[3], delta[3], glow[3];
-    int i, c;
-    memset(&ctx, 0, sizeof ctx);
-    memset(ratio, 0, sizeof ratio);
-    memset(delta, 0, sizeof delta);
-    memset(glow, 0, sizeof glow);
-    ctx.scene = s;
-    ctx.eta_camera2 = 1;
-    rrv__rng_seed(&rng, 9, 0, 0);
-    for (i = 0; i < n; ++i) {
-        double T[3], mis;
-        rrv__path path;
-        rrv__flight flight;
-        int outcome;
-        rrv__ratio_tracking_transmittance(&ctx, o, d, tmax, &rng, T);
-        rrv__path_start(&path, &rng);
-        outcome = rrv__refractive_delta_tracking(&ctx, &path, o, d, tmax, &rng, &flight);
-        mis = rrv__path_mis(&path);
-        for (c = 0; c < 3; ++c) {
-            stats_add(&ratio[c], T[c]);
-            stats_add(&delta[c], outcome == RRV__FLIGHT_PASSED ? path.beta[c] * mis : 0.0);
-            stats_add(&glow[c], path.L[c]);
-        }
-    }
-    for (c = 0; c < 3; ++c) {
-        double expected = exp(-tau[c]);
-        /* 1e-12: a channel whose transmittance is 0 to double precision */
-        CHECKF(fabs(stats_mean(&ratio[c]) - expected) < 4 * stats_se(&ratio[c]) + 1e-12,
-               "%s, channel %d: ratio tracking %g +- %g, exp(-tau) %g", what, c, stats_mean(&ratio[c]),
-               stats_se(&ratio[c]), expected);
-        CHECKF(fabs(stats_mean(&delta[c]) - expected) < 4 * stats_se(&delta[c]) + 1e-12,
-               "%s, channel %d: delta tracking %g +- %g, exp(-tau) %g", what, c, stats_mean(&delta[c]),
-               stats_se(&delta[c]), expected);
-        /* bounds that could not see a 5 % error would prove nothing (a
-           channel below 0.05 is tested only for its mean) */
-        CHECKF(expected < 0.05 || stats_se(&delta[c]) < 0.0125 * expected, "%s, channel %d: delta se %g too large",
-               what, c, stats_se(&delta[c]));
-        if (emitted)
-            CHECKF(fabs(stats_mean(&glow[c]) - emitted[c]) < 4 * stats_se(&glow[c]),
-                   "%s, channel %d: emission %g +- %g, expected %g", what, c, stats_mean(&glow[c]),
-                   stats_se(&glow[c]), emitted[c]);
-    }
-}
 
 static void test_channel_groups(void)
 {
@@ -360,9 +345,7 @@ static void test_channel_groups_bound_work(void)
     m->sigma_s[1] = 6e10;
     m->sigma_s[2] = 0.6;
     CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
-    memset(&ctx, 0, sizeof ctx);
-    ctx.scene = s;
-    ctx.eta_camera2 = 1;
+    tracking_context(&ctx, s);
     rrv__rng_seed(&rng, 3, 0, 0);
     for (i = 0; i < n; ++i) {
         double T[3];
@@ -681,9 +664,7 @@ static void test_tracking_walks_are_bounded(void)
     cells = (size_t)m->majorant->n[0] * m->majorant->n[1] * m->majorant->n[2];
     for (c = 0; c < cells; ++c) m->majorant->density_max[c] = 1e30f;
     m->majorant->density_peak = 1e30f;
-    memset(&ctx, 0, sizeof ctx);
-    ctx.scene = s;
-    ctx.eta_camera2 = 1;
+    tracking_context(&ctx, s);
     rrv__rng_seed(&rng, 1, 2, 3);
     rrv__ratio_tracking_transmittance(&ctx, rrv__v3(-2, 0.1, 0.2), rrv__v3(1, 0, 0), DBL_MAX, &rng, T);
     CHECK(T[0] == 0 && T[1] == 0 && T[2] == 0);
