@@ -4520,11 +4520,13 @@ static void rrv__walker_advance(rrv__walker *w, rrv__rng *rng, uint64_t *events)
                     w->cut = 1;
                     break;
                 }
-                if (w->pauses) w->depth += w->cell.density_max * (t - w->t);
+                if (w->pauses) {
+                    w->depth += w->cell.density_max * (t - w->t);
+                    w->at_face = 0;
+                }
                 w->t = t;
                 w->t_event = t;
                 w->majorant = w->cell.majorant;
-                w->at_face = 0;
                 ++*events;
                 return;
             }
@@ -5633,9 +5635,10 @@ static void rrv__path_reweight(rrv__path *path, const double f[3])
     }
 }
 
-/* inside: bit i, the chord lies inside media[i]'s box (rrv__bender's chord_inside). */
-/* hero: the channel that samples the collisions (rrv__path); a medium
-   with channel groups walks with its group's majorant and pauses at faces. */
+/* inside: bit i, the chord lies inside media[i]'s box (rrv__bender's
+   chord_inside). hero: the channel that samples the collisions (rrv__path);
+   a medium with channel groups walks with its group's majorant and pauses
+   at faces. */
 static int rrv__start_walkers(const rrv__context *ctx, rrv__walker *walkers, int with_refraction,
                               const rrv_vec3 *o, const rrv_vec3 *d, const double *inv_d, uint64_t inside,
                               double tmax, int hero, rrv__rng *rng, uint64_t *events)
