@@ -4450,6 +4450,8 @@ typedef struct rrv__walker {
     int at_face;
     double depth;                /* integral of density_max from the walk's start to t */
     double applied;              /* the part of depth the path has been reweighted for */
+    double tau_left;             /* optical depth (majorant units) the drawn flight has
+                                    left beyond t; 0: none drawn (rrv__walker_advance) */
 } rrv__walker;
 
 /* The walk's bound on tentative collisions (rrv__walker_start_line). */
@@ -4479,6 +4481,7 @@ static int rrv__walker_start_line(rrv__walker *w, const rrv_medium *m, int with_
     w->pauses = 0;
     w->at_face = 0;
     w->depth = w->applied = 0;
+    w->tau_left = 0;
     rrv__walker_budget(w, s);
     w->t_event = DBL_MAX;
     return 1;
@@ -4503,9 +4506,12 @@ static int rrv__walker_start(rrv__walker *w, const rrv_medium *m, int with_refra
 static void rrv__walker_refraction_only(rrv__walker *w) { w->cells.density_weight = 0.0; }
 
 /* Moves the walker to its next tentative collision (t_event), or sets
-   t_event = DBL_MAX when it leaves the box first. A free flight that
-   crosses into the next cell restarts there with that cell's majorant,
-   which the memorylessness of the exponential allows. */
+   t_event = DBL_MAX when it leaves the box first. The flight is drawn as
+   an optical depth (an Exp(1) number of majorant units) and walked cell by
+   cell, each cell spending its majorant times its length of it: inverse-CDF
+   sampling of the piecewise constant rate, one random number a collision
+   where drawing a new flight in every cell (as memorylessness also allows)
+   took one a cell crossed. */
 static void rrv__walker_advance(rrv__walker *w, rrv__rng *rng, uint64_t *events)
 {
     for (;;) {
@@ -4514,8 +4520,13 @@ static void rrv__walker_advance(rrv__walker *w, rrv__rng *rng, uint64_t *events)
             w->in_cell = 1;
         }
         if (w->cell.majorant > 0) {
-            double t = w->t + rrv__sample_free_flight(w->cell.majorant, rng);
-            if (t < w->cell.t1) {
+            double span = w->cell.t1 > w->t ? (w->cell.t1 - w->t) * w->cell.majorant : 0.0;
+            if (!(w->tau_left > 0)) w->tau_left = rrv__sample_free_flight(1.0, rng);
+            if (w->tau_left >= span) {
+                w->tau_left -= span;
+            } else {
+                double t = w->t + w->tau_left / w->cell.majorant;
+                w->tau_left = 0;
                 if (--w->budget < 0) {
                     w->cut = 1;
                     break;
