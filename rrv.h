@@ -445,7 +445,9 @@
             walk with majorants of their own (a thin channel no longer
             takes a dense one's collisions: sigma_t 4, 6e10, 6 per metre
             took 4e6-collision walks); with that, the Sobol sampler is the
-            default (lens caustic, 1 m light: shoot 7x none, from 1.6x)
+            default (lens caustic, 1 m light: shoot 7x none, from 1.6x);
+            free flights drawn as an optical depth walked through the
+            majorant cells (one random number a collision, not a cell)
      0.8.0  one light draw a vertex shared by straight and curved NEE;
             eikonal steps skip their support looks inside a safety ball
             (bit-identical); shoot's coarse stage capped at 0.6 rad a
