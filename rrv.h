@@ -4318,7 +4318,7 @@ typedef struct rrv__majorant_iterator {
     int with_refraction;  /* add the refraction event rate to the majorant */
     double density_weight;/* 1, or 0 to see refraction events only (rrv trace) */
     double sigma_t_sample;/* the extinction scale of the majorant: sigma_t_max, or
-                             one channel group's (rrv__walker_sample_scale) */
+                             one channel group's (rrv__walker_sample_channel) */
     double mu_eta_fixed, inv_tolerance;
     double t, t_end;      /* where the next segment starts; where the ray leaves the box */
     int cell[3], step[3];
@@ -5687,14 +5687,14 @@ static void rrv__ratio_tracking_transmittance(rrv__context *ctx, rrv_vec3 o, rrv
         if (m->density.kind == RRV_FIELD_NONE) continue;
         for (lead = 0; lead < 3; ++lead) {
             rrv__walker w;
-            const double *scale = m->majorant ? m->majorant->channel_scale : NULL;
-            int member[3], ch, grouped = scale && m->majorant->channel_groups > 1;
-            for (ch = 0; ch < 3; ++ch) member[ch] = !grouped || scale[ch] == scale[lead];
-            /* a group is walked from its first channel; one group, once */
-            if (grouped ? (lead > 0 && member[0]) || (lead > 1 && member[1]) || !(scale[lead] > 0) : lead > 0)
-                continue;
+            const double *scale = m->majorant->channel_scale;
+            int member[3], ch;
+            for (ch = 0; ch < 3; ++ch) member[ch] = scale[ch] == scale[lead];
+            /* a group is walked from its first channel (one group: once),
+               and not at all without extinction */
+            if ((lead > 0 && member[0]) || (lead > 1 && member[1]) || !(scale[lead] > 0)) continue;
             if (!rrv__walker_start(&w, m, 0, &scene->settings, o, d, tmax)) break;
-            if (grouped) rrv__walker_sample_channel(&w, &scene->settings, lead, 0);
+            if (m->majorant->channel_groups > 1) rrv__walker_sample_channel(&w, &scene->settings, lead, 0);
             for (;;) {
                 rrv__coeffs c;
                 double tmaxc = 0;
@@ -5783,6 +5783,19 @@ static inline int rrv__segment_hit(const rrv__context *ctx, const rrv__bender *b
                                segment < DBL_MAX ? segment + rrv__face_gap(rrv__madd(o, d, segment)) : DBL_MAX, hit);
 }
 
+/* Moves walkers[best] to its next tentative collision or face, dropping it
+   from the n walking once it has left its box. 0 if its budget ran out. */
+static int rrv__advance_walker(rrv__walker *walkers, int *n, int best, rrv__rng *rng, uint64_t *events)
+{
+    rrv__walker *w = &walkers[best];
+    rrv__walker_advance(w, rng, events);
+    if (w->t_event == DBL_MAX) {
+        if (w->cut) return 0;
+        walkers[best] = walkers[--*n];
+    }
+    return 1;
+}
+
 /* Spectral MIS where a medium's channels walk with different majorants
    (channel groups, rrv__walker): channel c's path density carries its own
    majorant transmittance exp(-k_c D), D the density bound integrated along
@@ -5855,11 +5868,7 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
         if (w->at_face) {
             /* a pausing walker's cell face: no collision, only its depth */
             rrv__reweight_channel_depths(path, w, 1, w->t_event);
-            rrv__walker_advance(w, rng, &ctx->stats.events);
-            if (w->t_event == DBL_MAX) {
-                if (w->cut) return RRV__FLIGHT_CUT;
-                walkers[best] = walkers[--n];
-            }
+            if (!rrv__advance_walker(walkers, &n, best, rng, &ctx->stats.events)) return RRV__FLIGHT_CUT;
             continue;
         }
         m = w->medium;
@@ -5904,11 +5913,7 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
             }
         }
         /* and go on: this medium's next tentative collision */
-        rrv__walker_advance(w, rng, &ctx->stats.events);
-        if (w->t_event == DBL_MAX) {
-            if (w->cut) return RRV__FLIGHT_CUT;
-            walkers[best] = walkers[--n];
-        }
+        if (!rrv__advance_walker(walkers, &n, best, rng, &ctx->stats.events)) return RRV__FLIGHT_CUT;
     }
     rrv__reweight_channel_depths(path, walkers, n, tmax);
     return RRV__FLIGHT_PASSED;
