@@ -2736,6 +2736,36 @@ static double rrv__refraction_lookup(const struct rrv__majorant_grid *mg, rrv_ve
     }
 }
 
+/* Asks the cache for the refraction grid's cell at p, which the comb's
+   next kick will read: a baked grid of a few MiB overflows the core's own
+   cache, and the kick's first load then waited for memory (a third of its
+   lookup's time on the fire). Asked when the chord is planned, the load
+   overlaps the chord's tracking and the next spacing's cell walk. The
+   cell's samples lie in four runs of two (x and x + 1), each 32 bytes,
+   that may straddle a cache line. Only a hint: without a compiler that
+   offers it, nothing happens. */
+static inline void rrv__prefetch_refraction(const struct rrv__majorant_grid *mg, rrv_vec3 p)
+{
+#if defined(__GNUC__) || defined(__clang__)
+    size_t sy, sz;
+    double t[3];
+    const float *d;
+    if (!mg->refraction.data || mg->cubic || !rrv__inside_box(p, mg->refraction.lo, mg->refraction.hi)) return;
+    d = rrv__refraction_cell(mg, p, &sy, &sz, t);
+    __builtin_prefetch(d);
+    __builtin_prefetch(d + 7);
+    __builtin_prefetch(d + sy);
+    __builtin_prefetch(d + sy + 7);
+    __builtin_prefetch(d + sz);
+    __builtin_prefetch(d + sz + 7);
+    __builtin_prefetch(d + sz + sy);
+    __builtin_prefetch(d + sz + sy + 7);
+#else
+    (void)mg;
+    (void)p;
+#endif
+}
+
 /* ---- derivatives of the refractivity gradient (for nee shoot and manifold) ----
    The solver's variational equations differentiate the very gradient the
    ray steps use, so each function below is the exact derivative of one
@@ -5414,6 +5444,7 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
         b->chord = reach - from;
         b->end = RRV__END_KICK;
         b->surface_free = b->sole_support->majorant->surface_free;
+        rrv__prefetch_refraction(b->sole_support->majorant, rrv__madd(x, *d, reach));
         b->pending = 1;
         b->chord_inside = 1;
         b->ahead.inside = 1;
