@@ -4745,42 +4745,49 @@ static void rrv__reciprocals(rrv_vec3 d, double inv[3])
     inv[2] = 1.0 / d.z;
 }
 
-/* What a ray from o along d sees of the supports. The box clip is written
-   with arrays, not per-axis selects; it divides rather than multiplying by
-   the chord's reciprocals, which would move faces by an ulp and every
-   eikonal path with them (a statistical test of nee shoot that sits near
-   its bound then failed). */
+/* One axis of rrv__look_along's box clip: the parameters where the line
+   meets the box's two planes narrow [*t0, *t1], each remembering its axis;
+   a line parallel to the planes misses unless it runs between them. It
+   divides rather than multiplying by the chord's reciprocals, which would
+   move faces by an ulp and every eikonal path with them (a statistical
+   test of nee shoot that sits near its bound then failed). Inline, a call
+   per axis: the look runs at every segment a bent ray plans, and the
+   arrays it was written with were a third of its instructions. */
+static inline void rrv__look_axis(double o, double d, double lo, double hi, int a, double *t0, double *t1,
+                                  int *axis0, int *axis1, int *missed)
+{
+    if (d == 0) {
+        *missed |= o < lo || o > hi;
+    } else {
+        double ta = (lo - o) / d, tb = (hi - o) / d;
+        if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
+        if (ta > *t0) { *t0 = ta; *axis0 = a; }
+        if (tb < *t1) { *t1 = tb; *axis1 = a; }
+    }
+}
+
+/* What a ray from o along d sees of the supports. */
 static void rrv__look_along(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, rrv__support_view *v)
 {
-    const double os[3] = {o.x, o.y, o.z}, ds[3] = {d.x, d.y, d.z};
     int i;
     v->inside = v->surface_free = v->face_unknown = 0;
     v->t_face = DBL_MAX;
     v->normal = rrv__v3(0, 0, 1);
     for (i = 0; i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i];
-        double lo_box[3], hi_box[3], t0 = -DBL_MAX, t1 = DBL_MAX, s0, s1;
+        double t0 = -DBL_MAX, t1 = DBL_MAX, s0, s1;
         rrv_vec3 n0, n1, sn0, sn1;
-        int inside, a, axis0 = 0, axis1 = 0, missed = 0;
+        int inside, axis0 = 0, axis1 = 0, missed = 0;
         if (!rrv__medium_refracts(m)) continue;
-        lo_box[0] = m->lo.x; lo_box[1] = m->lo.y; lo_box[2] = m->lo.z;
-        hi_box[0] = m->hi.x; hi_box[1] = m->hi.y; hi_box[2] = m->hi.z;
         /* A box behind the ray on one axis (o past a side, d not turning
            back to it) is missed, as the clip below would find, without its
            divisions: every ray that has just left a box looks from there. */
-        for (a = 0; a < 3; ++a)
-            missed |= (os[a] > hi_box[a] && ds[a] >= 0) || (os[a] < lo_box[a] && ds[a] <= 0);
-        if (missed) continue;
-        for (a = 0; a < 3; ++a) {
-            if (ds[a] == 0) {
-                missed |= os[a] < lo_box[a] || os[a] > hi_box[a];
-            } else {
-                double ta = (lo_box[a] - os[a]) / ds[a], tb = (hi_box[a] - os[a]) / ds[a];
-                if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
-                if (ta > t0) { t0 = ta; axis0 = a; }
-                if (tb < t1) { t1 = tb; axis1 = a; }
-            }
-        }
+        if ((o.x > m->hi.x && d.x >= 0) || (o.x < m->lo.x && d.x <= 0) || (o.y > m->hi.y && d.y >= 0) ||
+            (o.y < m->lo.y && d.y <= 0) || (o.z > m->hi.z && d.z >= 0) || (o.z < m->lo.z && d.z <= 0))
+            continue;
+        rrv__look_axis(o.x, d.x, m->lo.x, m->hi.x, 0, &t0, &t1, &axis0, &axis1, &missed);
+        rrv__look_axis(o.y, d.y, m->lo.y, m->hi.y, 1, &t0, &t1, &axis0, &axis1, &missed);
+        rrv__look_axis(o.z, d.z, m->lo.z, m->hi.z, 2, &t0, &t1, &axis0, &axis1, &missed);
         if (missed || !(t0 < t1) || !(t1 > 0)) continue;
         n0 = rrv__v3(axis0 == 0, axis0 == 1, axis0 == 2);
         n1 = rrv__v3(axis1 == 0, axis1 == 1, axis1 == 2);
