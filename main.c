@@ -2375,6 +2375,29 @@ static void print_nanovdb(const char *label, const rrv_field *field)
            g->lo.y, g->lo.z, g->hi.x, g->hi.y, g->hi.z, g->value_min, g->value_max, g->background, text);
 }
 
+/* The coefficients, and how the channels group for free flights: a user
+   whose render is slow on a strongly chromatic medium sees why. */
+static void print_extinction(const rrv_medium *medium)
+{
+    static const char names[3] = {'R', 'G', 'B'};
+    int group[3], groups = rrv_medium_channel_groups(medium, group), k, c;
+    printf("    sigma_a %g %g %g, sigma_s %g %g %g, scale %g, g %g: extinction %g %g %g a unit of density",
+           medium->sigma_a[0], medium->sigma_a[1], medium->sigma_a[2], medium->sigma_s[0], medium->sigma_s[1],
+           medium->sigma_s[2], medium->scale, medium->g, (medium->sigma_a[0] + medium->sigma_s[0]) * medium->scale,
+           (medium->sigma_a[1] + medium->sigma_s[1]) * medium->scale,
+           (medium->sigma_a[2] + medium->sigma_s[2]) * medium->scale);
+    if (groups > 1) {
+        printf(", %d channel groups (", groups);
+        for (k = 0; k < groups; ++k) {
+            if (k) printf(" | ");
+            for (c = 0; c < 3; ++c)
+                if (group[c] == k) putchar(names[c]);
+        }
+        printf(": each walks with its own majorant)");
+    }
+    putchar('\n');
+}
+
 static void print_medium(const rrv_medium *medium)
 {
     printf("  %s: box %g %g %g .. %g %g %g", medium->name, medium->lo.x, medium->lo.y,
@@ -2391,6 +2414,7 @@ static void print_medium(const rrv_medium *medium)
     if (medium->ior.kind == RRV_FIELD_GRID)
         printf(" grid %dx%dx%d", medium->ior.grid.nx, medium->ior.grid.ny, medium->ior.grid.nz);
     putchar('\n');
+    if (medium->density.kind != RRV_FIELD_NONE) print_extinction(medium);
     print_nanovdb("density", &medium->density);
     print_nanovdb("temperature", &medium->temperature);
     print_nanovdb("pressure", &medium->pressure);

@@ -356,6 +356,7 @@
      rrv_scene_add_triangles check and add an indexed triangle mesh
      rrv_scene_add_medium   check and add a medium's box and coefficients
      rrv_scene_set_field    check and set a medium's density, temperature, pressure or IOR
+     rrv_medium_channel_groups which of a medium's channels share a free-flight majorant
      rrv_render_rect        add the radiance sums of a pixel rectangle and sample range
      rrv_trace_ray          walk one ray through the refractive media
      rrv_grid_read          read and validate a gridvol file
@@ -1016,6 +1017,13 @@ RRV_DEF rrv_result rrv_scene_add_triangles(rrv_scene *scene, const rrv_shape *pr
    with rrv_scene_set_field. The name must be new (empty: "medium N"). */
 RRV_DEF rrv_result rrv_scene_add_medium(rrv_scene *scene, const rrv_medium *medium, int *index,
                                         rrv_error *err);
+/* How the medium's channels share free-flight majorants: channels whose
+   extinctions ((sigma_a + sigma_s) * scale) lie within 4x of their group's
+   largest walk with that largest, a channel further below opens a group of
+   its own, so that a thin channel does not take a dense one's null
+   collisions. Returns the number of groups (1 to 3) and each channel's
+   group in group[], 0 the densest. */
+RRV_DEF int rrv_medium_channel_groups(const rrv_medium *medium, int group[3]);
 /* Sets one field of medium `medium` (an index), replacing what it had. */
 RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_field which,
                                        const rrv_field *field, rrv_error *err);
@@ -4148,23 +4156,55 @@ static void rrv__majorant_lattice(const rrv_scene *scene, const rrv_medium *m, i
 
 /* Sorts the channels by extinction k and groups them from the densest
    down: a channel joins the group whose largest is at most SPAN times its
-   own, else opens the next (scales and count into g). */
-static void rrv__group_channels(struct rrv__majorant_grid *g, const double k[3])
+   own, else opens the next: each channel's group scale into scale, the
+   count returned. */
+static int rrv__channel_group_scales(const double k[3], double scale[3])
 {
-    int order[3] = {0, 1, 2}, i, j;
+    int order[3] = {0, 1, 2}, i, j, groups = 0;
     double top = 0;
     for (i = 0; i < 3; ++i)
         for (j = i + 1; j < 3; ++j)
             if (k[order[j]] > k[order[i]]) { int t = order[i]; order[i] = order[j]; order[j] = t; }
-    g->channel_groups = 0;
     for (i = 0; i < 3; ++i) {
         double kc = k[order[i]];
         if (i == 0 || kc * RRV__CHANNEL_GROUP_SPAN < top) {
             top = kc;
-            ++g->channel_groups;
+            ++groups;
         }
-        g->channel_scale[order[i]] = top;
+        scale[order[i]] = top;
     }
+    return groups;
+}
+
+static void rrv__group_channels(struct rrv__majorant_grid *g, const double k[3])
+{
+    g->channel_groups = rrv__channel_group_scales(k, g->channel_scale);
+}
+
+/* The extinction a unit of density gives each channel. */
+static void rrv__channel_extinction(const rrv_medium *m, double k[3])
+{
+    int c;
+    for (c = 0; c < 3; ++c) k[c] = (m->sigma_a[c] + m->sigma_s[c]) * m->scale;
+}
+
+RRV_DEF int rrv_medium_channel_groups(const rrv_medium *medium, int group[3])
+{
+    double k[3], scale[3];
+    int c, groups;
+    rrv__channel_extinction(medium, k);
+    groups = rrv__channel_group_scales(k, scale);
+    for (c = 0; c < 3; ++c) {
+        int d, above = 0;
+        /* groups are numbered from the densest: count the larger scales */
+        for (d = 0; d < 3; ++d) {
+            int e, seen = 0;
+            for (e = 0; e < d; ++e) seen |= scale[e] == scale[d];
+            if (!seen && scale[d] > scale[c]) ++above;
+        }
+        group[c] = above;
+    }
+    return groups;
 }
 
 static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, size_t *baked_bytes, rrv_error *err)
@@ -4193,10 +4233,8 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
     }
     {
         double k[3];
-        for (x = 0; x < 3; ++x) {
-            k[x] = (m->sigma_a[x] + m->sigma_s[x]) * m->scale;
-            g->sigma_t_max = rrv__maxd(g->sigma_t_max, k[x]);
-        }
+        rrv__channel_extinction(m, k);
+        for (x = 0; x < 3; ++x) g->sigma_t_max = rrv__maxd(g->sigma_t_max, k[x]);
         rrv__group_channels(g, k);
     }
     /* density bounds; gradient bounds where it refracts; Jacobian wander

@@ -535,6 +535,34 @@ static void test_read_release_pair(void)
     CHECK(err.line == 3 && fs.reads == 2 && fs.releases == 2);
 }
 
+/* The channel groups rrv_medium_channel_groups reports: channels within 4x
+   of their group's densest share it, numbered from the densest. */
+static void test_channel_groups_reported(void)
+{
+    rrv_medium m;
+    int group[3];
+    memset(&m, 0, sizeof m);
+    m.scale = 2;
+    m.sigma_a[0] = m.sigma_a[1] = m.sigma_a[2] = 1;
+    CHECK(rrv_medium_channel_groups(&m, group) == 1 && group[0] == 0 && group[1] == 0 && group[2] == 0);
+    /* 1 : 4 is one group (4x is the span), 1 : 4.01 two */
+    m.sigma_a[1] = 4;
+    CHECK(rrv_medium_channel_groups(&m, group) == 1 && group[0] == 0 && group[1] == 0 && group[2] == 0);
+    m.sigma_a[1] = 4.01;
+    CHECK(rrv_medium_channel_groups(&m, group) == 2 && group[1] == 0 && group[0] == 1 && group[2] == 1);
+    /* the fuzz input that made groups: 0.4, 6e10, 0.6 (sigma_s counts too) */
+    m.sigma_a[0] = 0.4; m.sigma_a[1] = 0; m.sigma_a[2] = 0.6;
+    m.sigma_s[1] = 6e10;
+    CHECK(rrv_medium_channel_groups(&m, group) == 2 && group[1] == 0 && group[0] == 1 && group[2] == 1);
+    /* 0.1, 0.5, 2.5: each 5x the next, three groups, blue densest */
+    m.sigma_s[1] = 0;
+    m.sigma_a[0] = 0.1; m.sigma_a[1] = 0.5; m.sigma_a[2] = 2.5;
+    CHECK(rrv_medium_channel_groups(&m, group) == 3 && group[2] == 0 && group[1] == 1 && group[0] == 2);
+    /* a channel without extinction joins no denser group */
+    m.sigma_a[0] = 0; m.sigma_a[1] = 1; m.sigma_a[2] = 1;
+    CHECK(rrv_medium_channel_groups(&m, group) == 2 && group[1] == 0 && group[2] == 0 && group[0] == 1);
+}
+
 int main(void)
 {
     RUN(test_zero_means_default);
@@ -546,5 +574,6 @@ int main(void)
     RUN(test_render_rect_errors);
     RUN(test_fields_and_meshes_are_copied);
     RUN(test_read_release_pair);
+    RUN(test_channel_groups_reported);
     return CHECK_EXIT_CODE();
 }

@@ -722,6 +722,9 @@ static void info_describes_scene(void)
     CHECKF(key_number(last_run.out, "lights") == 1, "%s", last_run.out);
     CHECKF(key_number(last_run.out, "media") == 1, "%s", last_run.out);
     CHECKF(strstr(last_run.out, "fog: box") != NULL, "%s", last_run.out);
+    /* the coefficients, and no channel groups for a grey medium */
+    CHECKF(strstr(last_run.out, "sigma_a 0.2 0.2 0.2, sigma_s 0.6 0.6 0.6, scale 1") != NULL, "%s", last_run.out);
+    CHECKF(strstr(last_run.out, "channel groups") == NULL, "%s", last_run.out);
     CHECKF(find_key(last_run.out, "framebuffer") != NULL, "%s", last_run.out);
     CHECKF(find_key(last_run.out, "bvh_nodes") != NULL, "%s", last_run.out);
     CHECKF(find_key(last_run.out, "scene_memory") != NULL, "%s", last_run.out);
