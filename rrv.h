@@ -4394,6 +4394,18 @@ typedef struct rrv__majorant_iterator {
     int done;
 } rrv__majorant_iterator;
 
+/* One axis of the iterator's box clip: the slab [lo, hi] narrows [*t0, *t1]
+   (inv: the reciprocal of the direction's component; an infinite one, of
+   a line parallel to the slab, gives infinite or NaN parameters that the
+   comparisons pass over, as the clip always did). */
+static inline void rrv__clip_axis(double o, double inv, double lo, double hi, double *t0, double *t1)
+{
+    double ta = (lo - o) * inv, tb = (hi - o) * inv;
+    if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
+    if (ta > *t0) *t0 = ta;
+    if (tb < *t1) *t1 = tb;
+}
+
 /* One axis of the iterator's set-up: the cell of o + t0 d clamped into the
    grid (clamped before the cast: a far point must not overflow the int),
    the step, the distance to the cell's next face and between faces. */
@@ -4431,26 +4443,26 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
                                         const rrv_settings *s, const rrv_vec3 *o, const rrv_vec3 *d,
                                         const double *inv_d, double tmax, int inside)
 {
-    /* arrays, not rrv__axis: walkers restart at every comb point, where
-       this set-up was most of a restart's cost (and the vectors by pointer:
-       by value they go through the stack) */
+    /* per axis, inline, straight from the vectors (by pointer: by value
+       they go through the stack): walkers restart at every comb point,
+       where this set-up was most of a restart's cost, and copying the
+       vectors into arrays first was a third of it */
     const struct rrv__majorant_grid *g = m->majorant;
-    const double os[3] = {o->x, o->y, o->z}, ds[3] = {d->x, d->y, d->z};
-    const double box_lo[3] = {m->lo.x, m->lo.y, m->lo.z}, box_hi[3] = {m->hi.x, m->hi.y, m->hi.z};
-    const double lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
-    const double inv_cell[3] = {g->inv_cell.x, g->inv_cell.y, g->inv_cell.z};
     double inv[3], t0 = 0, t1 = tmax;
-    int a;
     if (g->empty && !(with_refraction && g->grad_max)) return 0;
-    for (a = 0; a < 3; ++a) {
-        double ta, tb;
-        inv[a] = inv_d ? inv_d[a] : 1.0 / ds[a];
-        if (inside) continue;
-        ta = (box_lo[a] - os[a]) * inv[a];
-        tb = (box_hi[a] - os[a]) * inv[a];
-        if (ta > tb) { double tmp = ta; ta = tb; tb = tmp; }
-        if (ta > t0) t0 = ta;
-        if (tb < t1) t1 = tb;
+    if (inv_d) {
+        inv[0] = inv_d[0];
+        inv[1] = inv_d[1];
+        inv[2] = inv_d[2];
+    } else {
+        inv[0] = 1.0 / d->x;
+        inv[1] = 1.0 / d->y;
+        inv[2] = 1.0 / d->z;
+    }
+    if (!inside) {
+        rrv__clip_axis(o->x, inv[0], m->lo.x, m->hi.x, &t0, &t1);
+        rrv__clip_axis(o->y, inv[1], m->lo.y, m->hi.y, &t0, &t1);
+        rrv__clip_axis(o->z, inv[2], m->lo.z, m->hi.z, &t0, &t1);
     }
     if (!(t0 < t1)) return 0;
     it->grid = g;
@@ -4463,12 +4475,11 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
     it->t = t0;
     it->t_end = t1;
     it->done = 0;
-    /* a call per axis, not a loop: each axis then stays in registers */
-    rrv__iterator_axis(os[0], ds[0], inv[0], t0, lo[0], cs[0], inv_cell[0], g->n[0], &it->cell[0], &it->step[0],
+    rrv__iterator_axis(o->x, d->x, inv[0], t0, g->lo.x, g->cell.x, g->inv_cell.x, g->n[0], &it->cell[0], &it->step[0],
                        &it->t_next[0], &it->t_delta[0]);
-    rrv__iterator_axis(os[1], ds[1], inv[1], t0, lo[1], cs[1], inv_cell[1], g->n[1], &it->cell[1], &it->step[1],
+    rrv__iterator_axis(o->y, d->y, inv[1], t0, g->lo.y, g->cell.y, g->inv_cell.y, g->n[1], &it->cell[1], &it->step[1],
                        &it->t_next[1], &it->t_delta[1]);
-    rrv__iterator_axis(os[2], ds[2], inv[2], t0, lo[2], cs[2], inv_cell[2], g->n[2], &it->cell[2], &it->step[2],
+    rrv__iterator_axis(o->z, d->z, inv[2], t0, g->lo.z, g->cell.z, g->inv_cell.z, g->n[2], &it->cell[2], &it->step[2],
                        &it->t_next[2], &it->t_delta[2]);
     return 1;
 }
