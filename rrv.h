@@ -447,7 +447,8 @@
             haze, above the 1.25x target; test/bench/per_sample.py);
             cheaper looks for faces and majorant iterator set-up, the next
             kick's cell prefetched (bit-identical); rrv info and
-            rrv_medium_channel_groups show a medium's channel groups
+            rrv_medium_channel_groups show a medium's channel groups; a
+            camera frame from vectors whose squares underflow is unit
      0.9.0  channel groups: channels whose extinctions differ more than 4x
             walk with majorants of their own (a thin channel no longer
             takes a dense one's collisions: sigma_t 4, 6e10, 6 per metre
@@ -6754,11 +6755,28 @@ typedef struct rrv__camera_frame {
     double tan_half, aspect;
 } rrv__camera_frame;
 
+/* The unit vector along v, also where |v|^2 under- or overflows: the
+   camera's check accepts any distinct finite eye and look and any nonzero
+   finite up, and eye and look 1e-305 apart (a fuzzer's) made a direction
+   whose square is 0, which rrv__normalize leaves as it is: every camera
+   ray then had a length of 1e-305 and its walks ran to their caps. Such a
+   vector is scaled to a largest component of 1 first; others take the
+   plain division, bit for bit as before. */
+static rrv_vec3 rrv__unit_direction(rrv_vec3 v)
+{
+    double len = rrv__length(v), m;
+    if (len >= 1e-150 && len <= 1e150) return rrv__scale(v, 1.0 / len);
+    m = fabs(v.x) > fabs(v.y) ? fabs(v.x) : fabs(v.y);
+    if (fabs(v.z) > m) m = fabs(v.z);
+    if (!(m > 0 && m <= DBL_MAX)) return v;
+    return rrv__normalize(rrv__scale(v, 1.0 / m));
+}
+
 static void rrv__camera_setup(const rrv_camera *cam, rrv__camera_frame *f)
 {
     f->eye = cam->eye;
-    f->forward = rrv__normalize(rrv__sub(cam->look, cam->eye));
-    f->right = rrv__normalize(rrv__cross(f->forward, cam->up));
+    f->forward = rrv__unit_direction(rrv__sub(cam->look, cam->eye));
+    f->right = rrv__unit_direction(rrv__cross(f->forward, cam->up));
     f->up = rrv__cross(f->right, f->forward);
     f->tan_half = tan(0.5 * cam->fov * RRV__PI / 180.0);
     f->aspect = (double)cam->width / cam->height;

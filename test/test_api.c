@@ -563,6 +563,51 @@ static void test_channel_groups_reported(void)
     CHECK(rrv_medium_channel_groups(&m, group) == 2 && group[1] == 0 && group[2] == 0 && group[0] == 1);
 }
 
+/* Renders text's 6 x 4 image at 2 spp into out (72 floats); 0 if refused. */
+static int render_small(const char *text, float *out)
+{
+    rrv_scene *s = NULL;
+    rrv_error err;
+    int ok;
+    memset(out, 0, 72 * sizeof *out);
+    if (rrv_scene_parse(text, strlen(text), "small.rrv", NULL, NULL, &s, &err) != RRV_OK) {
+        printf("  refused: %s\n", err.message);
+        return 0;
+    }
+    ok = rrv_render_rect(s, 0, 0, 6, 4, 0, 2, out, 6, NULL, &err) == RRV_OK;
+    rrv_scene_free(s);
+    return ok;
+}
+
+/* A camera frame is directions only, so eye and look 1e-305 apart (whose
+   difference squares to 0) and an up of 1e-300 must give the image of
+   the same eye looking the same way with unit vectors. Before, the
+   frame kept the unnormalisable vectors: camera rays 1e-305 long, whose
+   walks ran to their caps (a fuzz_render finding). */
+static void test_tiny_camera_vectors(void)
+{
+    static const char body[] =
+        "render spp 2 maxdepth 4 seed 3 integrator refractive\n"
+        "environment constant L 0.2 0.3 0.4\n"
+        "quad origin -1 -1 -3 u 2 0 0 v 0 2 0 L 5 5 5\n"
+        "medium m box -1 -1 -2 1 1 1 sigma_a 0.2 0.2 0.2 sigma_s 0.5 0.5 0.5\n"
+        "density m constant 1\n"
+        "ior m shell radius 1.5 thickness 0.5 edge 0.2 amplitude 0.3\n";
+    char tiny[1024], plain[1024];
+    float a[72], b[72];
+    int i, same = 1, finite = 1;
+    snprintf(tiny, sizeof tiny, "camera eye 0 0 1e-305 look 0 0 0 up 0 1e-300 0 fov 40 resolution 6 4\n%s", body);
+    snprintf(plain, sizeof plain, "camera eye 0 0 1e-305 look 0 0 -1 up 0 1 0 fov 40 resolution 6 4\n%s", body);
+    CHECK(render_small(tiny, a));
+    CHECK(render_small(plain, b));
+    for (i = 0; i < 72; ++i) {
+        same &= a[i] == b[i];
+        finite &= isfinite(a[i]);
+    }
+    CHECK(same);
+    CHECK(finite);
+}
+
 int main(void)
 {
     RUN(test_zero_means_default);
@@ -575,5 +620,6 @@ int main(void)
     RUN(test_fields_and_meshes_are_copied);
     RUN(test_read_release_pair);
     RUN(test_channel_groups_reported);
+    RUN(test_tiny_camera_vectors);
     return CHECK_EXIT_CODE();
 }
