@@ -1314,6 +1314,15 @@ static rrv_vec3 rrv__normalize(rrv_vec3 a)
     double len = rrv__length(a);
     return len > 0 ? rrv__scale(a, 1.0 / len) : a;
 }
+/* v divided by its largest absolute component (v itself when that is 0):
+   the direction survives, and squares of the result cannot overflow. */
+static rrv_vec3 rrv__unit_max(rrv_vec3 v)
+{
+    double m = fabs(v.x);
+    if (fabs(v.y) > m) m = fabs(v.y);
+    if (fabs(v.z) > m) m = fabs(v.z);
+    return m > 0 && m <= DBL_MAX ? rrv__scale(v, 1.0 / m) : v;
+}
 static double rrv__axis(rrv_vec3 a, int axis) { return axis == 0 ? a.x : axis == 1 ? a.y : a.z; }
 static rrv_vec3 rrv__vmin(rrv_vec3 a, rrv_vec3 b) { return rrv__v3(fmin(a.x, b.x), fmin(a.y, b.y), fmin(a.z, b.z)); }
 static rrv_vec3 rrv__vmax(rrv_vec3 a, rrv_vec3 b) { return rrv__v3(fmax(a.x, b.x), fmax(a.y, b.y), fmax(a.z, b.z)); }
@@ -4163,9 +4172,9 @@ static void rrv__majorant_lattice(const rrv_scene *scene, const rrv_medium *m, i
 
 /* Sorts the channels by extinction k and groups them from the densest
    down: a channel joins the group whose largest is at most SPAN times its
-   own, else opens the next: each channel's group scale into scale, the
-   count returned. */
-static int rrv__channel_group_scales(const double k[3], double scale[3])
+   own, else opens the next: each channel's group scale into scale and its
+   group (0 the densest) into group when given, the count returned. */
+static int rrv__channel_group_scales(const double k[3], double scale[3], int group[3])
 {
     int order[3] = {0, 1, 2}, i, j, groups = 0;
     double top = 0;
@@ -4179,13 +4188,14 @@ static int rrv__channel_group_scales(const double k[3], double scale[3])
             ++groups;
         }
         scale[order[i]] = top;
+        if (group) group[order[i]] = groups - 1;
     }
     return groups;
 }
 
 static void rrv__group_channels(struct rrv__majorant_grid *g, const double k[3])
 {
-    g->channel_groups = rrv__channel_group_scales(k, g->channel_scale);
+    g->channel_groups = rrv__channel_group_scales(k, g->channel_scale, NULL);
 }
 
 /* The extinction a unit of density gives each channel. */
@@ -4198,20 +4208,8 @@ static void rrv__channel_extinction(const rrv_medium *m, double k[3])
 RRV_DEF int rrv_medium_channel_groups(const rrv_medium *medium, int group[3])
 {
     double k[3], scale[3];
-    int c, groups;
     rrv__channel_extinction(medium, k);
-    groups = rrv__channel_group_scales(k, scale);
-    for (c = 0; c < 3; ++c) {
-        int d, above = 0;
-        /* groups are numbered from the densest: count the larger scales */
-        for (d = 0; d < 3; ++d) {
-            int e, seen = 0;
-            for (e = 0; e < d; ++e) seen |= scale[e] == scale[d];
-            if (!seen && scale[d] > scale[c]) ++above;
-        }
-        group[c] = above;
-    }
-    return groups;
+    return rrv__channel_group_scales(k, scale, group);
 }
 
 static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, size_t *baked_bytes, rrv_error *err)
@@ -6764,12 +6762,8 @@ typedef struct rrv__camera_frame {
    plain division, bit for bit as before. */
 static rrv_vec3 rrv__unit_direction(rrv_vec3 v)
 {
-    double len = rrv__length(v), m;
-    if (len >= 1e-150 && len <= 1e150) return rrv__scale(v, 1.0 / len);
-    m = fabs(v.x) > fabs(v.y) ? fabs(v.x) : fabs(v.y);
-    if (fabs(v.z) > m) m = fabs(v.z);
-    if (!(m > 0 && m <= DBL_MAX)) return v;
-    return rrv__normalize(rrv__scale(v, 1.0 / m));
+    double len = rrv__length(v);
+    return len >= 1e-150 && len <= 1e150 ? rrv__scale(v, 1.0 / len) : rrv__normalize(rrv__unit_max(v));
 }
 
 static void rrv__camera_setup(const rrv_camera *cam, rrv__camera_frame *f)
@@ -13188,15 +13182,6 @@ static int rrv__vec_finite(rrv_vec3 v)
 
 static int rrv__vec_zero(rrv_vec3 v) { return v.x == 0.0 && v.y == 0.0 && v.z == 0.0; }
 
-/* v divided by its largest absolute component (v itself when that is 0):
-   the direction survives, and squares of the result cannot overflow. */
-static rrv_vec3 rrv__unit_max(rrv_vec3 v)
-{
-    double m = fabs(v.x);
-    if (fabs(v.y) > m) m = fabs(v.y);
-    if (fabs(v.z) > m) m = fabs(v.z);
-    return m > 0 && m <= DBL_MAX ? rrv__scale(v, 1.0 / m) : v;
-}
 
 static rrv_vec3 rrv__box_center(const rrv_medium *m)
 {
