@@ -36,10 +36,12 @@ import subprocess
 import sys
 import tempfile
 
+CLASSIC = ["--integrator", "classic"]
 REFRACTIVE = ["--integrator", "refractive", "--nee", "straight"]
+NO_KICKS = ["--mu-eta", "0.01"]
 SETTINGS = [
-    ("classic", ["--integrator", "classic"]),
-    ("no kicks", REFRACTIVE + ["--mu-eta", "0.01"]),
+    ("classic", CLASSIC),
+    ("no kicks", REFRACTIVE + NO_KICKS),
     ("refractive", REFRACTIVE),
 ]
 
@@ -47,9 +49,9 @@ SETTINGS = [
 # the scene: tolerance (0: the scene's), crossing plane, fixed rate)
 FIRE_PLANE = "2.5"
 CURVES = {
-    "scenes/fire.rrv": [("no kicks", ["--mu-eta", "0.01"], ["0", FIRE_PLANE, "0.01"])] +
+    "scenes/fire.rrv": [("no kicks", NO_KICKS, ["0", FIRE_PLANE, NO_KICKS[1]])] +
     [(f"tolerance {t}", ["--bend-tolerance", t], [t, FIRE_PLANE]) for t in ("0.01", "0.02", "0.05", "0.1", "0.2", "0.5")],
-    "scenes/haze.rrv": [("no kicks", ["--mu-eta", "0.01"], ["0", "-", "0.01"]), ("tolerance 0.01", [], ["0.01"])] +
+    "scenes/haze.rrv": [("no kicks", NO_KICKS, ["0", "-", NO_KICKS[1]]), ("tolerance 0.01", [], ["0.01"])] +
     [(f"mu_eta {m}", ["--mu-eta", m], ["0", "-", m]) for m in ("32", "16", "8", "4", "2")],
 }
 
@@ -75,17 +77,17 @@ def instructions(cmd):
 
 
 def landing(scene, tracking_args):
-    """Kicks a bent ray and landing error (mm) from build/measure_tracking --comb."""
+    """Kicks a bent ray and landing error, as build/measure_tracking --comb prints them."""
     res = subprocess.run(["build/measure_tracking", "--comb", scene] + tracking_args,
                          capture_output=True, text=True, check=True)
     cells = [c.strip() for c in res.stdout.strip().splitlines()[-1].strip("|").split("|")]
-    return float(cells[3]), float(cells[4].split()[0])
+    return f"{cells[3]} | {cells[4]}"
 
 
 def curve_settings(scene):
     if scene not in CURVES:
         sys.exit(f"per_sample.py: --curve has no sweep for {scene} (it has {', '.join(CURVES)})")
-    return [("classic", ["--integrator", "classic"], None)] + \
+    return [("classic", CLASSIC, None)] + \
         [(name, REFRACTIVE + flags, tracking) for name, flags, tracking in CURVES[scene]]
 
 
@@ -131,8 +133,7 @@ def main():
                 print("| setting | kicks a bent ray | landing error | CPU s | ratio | instructions | ratio |")
                 print("|---|---|---|---|---|---|---|")
                 for name, _, tracking in settings:
-                    kicks, error = landing(scene, tracking) if tracking else (0, 0)
-                    land = f"{kicks:.2f} | {error:.3f} mm" if tracking else "- | -"
+                    land = landing(scene, tracking) if tracking else "- | -"
                     ins = (f"{counts[name] / 1e6:.0f} M | {counts[name] / counts['classic']:.2f}x" if counts
                            else "- | -")
                     print(f"| {name} | {land} | {cpu[name][0]:.4f} | {cpu[name][1]:.2f}x | {ins} |")
