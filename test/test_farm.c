@@ -247,8 +247,8 @@ static void farm_scripts_render_and_resume(void)
     CHECKF(sh("\"$RRV\" farm slurm tiny.rrv -o farm.exr --tiles 2x2 --partition short --dir farm -- " SPP
               " > farm.txt", NULL, NULL) == 0, "%s", last_err);
     script = (char *)read_file(in_tmp("farm/render.sbatch"), NULL);
-    CHECKF(script && strstr(script, "#SBATCH --array=0-3\n") && strstr(script, "#SBATCH --partition=short\n") &&
-               strstr(script, "--tile \"$i\"/2x2 --resume '--spp' '13'"), "%s", script ? script : "(none)");
+    CHECKF(script && strstr(script, "#SBATCH --array=0-3\n") && strstr(script, "#SBATCH --partition=\"short\"\n") &&
+               strstr(script, "--tile \"$i\"/2x2 --resume '--spp' '13'\n"), "%s", script ? script : "(none)");
     free(script);
     script = (char *)read_file(in_tmp("farm/submit.sh"), NULL);
     CHECKF(script && strstr(script, "--dependency=afterok:\"$array\""), "%s", script ? script : "(none)");
