@@ -2149,34 +2149,43 @@ static void print_escaped(FILE *f, const char *text)
     }
 }
 
-/* What no #SBATCH value can hold: a newline ends the line, and what follows
-   would be a command to the shell; sbatch expands % in file names (%a, %j)
-   and is told nothing else by "%%" in every version; and a line holding
-   "hetjob" (or the older "packjob") anywhere starts a new component of a
-   heterogeneous job. */
-static int farm_directive_ok(const char *label, const char *value)
+/* What no #SBATCH value can hold, or NULL: a newline ends the line, and
+   what follows would be a command to the shell; sbatch expands % in file
+   names (%a, %j) and has no escape for it that every version reads; and a
+   line holding "hetjob" (or the older "packjob") anywhere starts a new
+   component of a heterogeneous job. */
+static const char *farm_directive_problem(const char *value)
 {
-    const char *p, *what = NULL;
-    if (!value) return 1;
-    for (p = value; *p && !what; ++p) {
-        if (*p == '\n') what = "a newline";
-        else if (*p == '%') what = "'%'";
-        else if (strncasecmp(p, "hetjob", 6) == 0) what = "\"hetjob\"";
-        else if (strncasecmp(p, "packjob", 7) == 0) what = "\"packjob\"";
+    const char *p;
+    for (p = value ? value : ""; *p; ++p) {
+        if (*p == '\n') return "a newline";
+        if (*p == '%') return "'%'";
+        if (strncasecmp(p, "hetjob", 6) == 0) return "\"hetjob\"";
+        if (strncasecmp(p, "packjob", 7) == 0) return "\"packjob\"";
     }
-    if (!what) return 1;
-    fprintf(stderr, "rrv: farm: %s \"", label);
-    print_escaped(stderr, value);
-    fprintf(stderr, "\" holds %s, which has no safe form in a #SBATCH line\n", what);
-    return 0;
+    return NULL;
 }
 
 /* 1 when every value of the plan has a form in the scripts; else says which
    option and which character, and returns 0. */
 static int farm_plan_ok(const farm_plan *plan)
 {
-    return farm_directive_ok(plan->dir_label, plan->dir) && farm_directive_ok("--partition", plan->partition) &&
-           farm_directive_ok("--time", plan->time_limit);
+    const char *labels[3], *values[3], *what;
+    int i;
+    labels[0] = plan->dir_label;
+    values[0] = plan->dir;
+    labels[1] = "--partition";
+    values[1] = plan->partition;
+    labels[2] = "--time";
+    values[2] = plan->time_limit;
+    for (i = 0; i < 3; ++i)
+        if ((what = farm_directive_problem(values[i])) != NULL) {
+            fprintf(stderr, "rrv: farm: %s \"", labels[i]);
+            print_escaped(stderr, values[i]);
+            fprintf(stderr, "\" holds %s, which has no safe form in a #SBATCH line\n", what);
+            return 0;
+        }
+    return 1;
 }
 
 /* dir/name as a new string. */
