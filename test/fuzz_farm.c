@@ -29,7 +29,7 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size);
 /* A word or a directive argument: bytes with lengths, since an expansion is
    kept as a NUL followed by its text (no value can hold a NUL, so a value
    can never be mistaken for an expansion). */
-typedef struct fz_word { char b[1 << 15]; size_t n; } fz_word;
+typedef struct fz_word { char *b; size_t n, cap; } fz_word;
 
 #define FZ_MAX_WORDS 96
 #define FZ_MAX_COMMANDS 16
@@ -56,9 +56,19 @@ static fz_word *fz_new(void)
 
 static void fz_put(fz_word *w, const char *b, size_t n)
 {
-    if (n > sizeof w->b - w->n) abort();
+    if (n == 0) return;
+    if (w->n + n > w->cap) {
+        w->cap = 2 * (w->n + n) + 16;
+        if (!(w->b = (char *)realloc(w->b, w->cap))) abort();
+    }
     memcpy(w->b + w->n, b, n);
     w->n += n;
+}
+
+static void fz_free(fz_word *w)
+{
+    if (w) free(w->b);
+    free(w);
 }
 
 static void fz_puts(fz_word *w, const char *s) { fz_put(w, s, strlen(s)); }
@@ -68,8 +78,8 @@ static void fz_free_script(fz_script *s)
 {
     int i, k;
     for (i = 0; i < s->ncmd; ++i)
-        for (k = 0; k < s->cmd[i].n; ++k) free(s->cmd[i].w[k]);
-    for (i = 0; i < s->ndir; ++i) free(s->dir[i]);
+        for (k = 0; k < s->cmd[i].n; ++k) fz_free(s->cmd[i].w[k]);
+    for (i = 0; i < s->ndir; ++i) fz_free(s->dir[i]);
     memset(s, 0, sizeof *s);
 }
 
@@ -154,7 +164,7 @@ static const char *fz_command(fz_script *s, const char *p, int inner, const char
         } else if (ch == '\\') {
             if (p[1] != '\n') fz_fail("a backslash not before a newline or a quote", text);
             if (w->n == 0) {
-                free(w);
+                fz_free(w);
                 w = NULL;
             }
             p += 2;
@@ -254,11 +264,14 @@ static void fz_add_text(fz_expect *e, const char *a, const char *b)
 static void fz_clear(fz_expect *e)
 {
     int i;
-    for (i = 0; i < e->n; ++i) free(e->w[i]);
+    for (i = 0; i < e->n; ++i) fz_free(e->w[i]);
     e->n = 0;
 }
 
-static int fz_same(const fz_word *a, const fz_word *b) { return a->n == b->n && memcmp(a->b, b->b, a->n) == 0; }
+static int fz_same(const fz_word *a, const fz_word *b)
+{
+    return a->n == b->n && (a->n == 0 || memcmp(a->b, b->b, a->n) == 0);
+}
 
 static void fz_match(fz_word *const *got, int ngot, fz_expect *e, const char *what, const char *text)
 {
