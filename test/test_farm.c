@@ -320,6 +320,37 @@ static int payload_ran(void)
     return system(command) == 0;
 }
 
+/* Where sbatch is installed (CI installs Slurm): the #SBATCH arguments it
+   reads from script, as it logs them at -vvv before it would contact a
+   controller; --mem with --mem-per-cpu makes it stop right there (a
+   made-up slurm.conf, no daemon). Returns 0 when sbatch is not installed. */
+static int sbatch_reads(const char *script, const char *const *expected, int count)
+{
+    const char *which[] = { "sh", "-c", "command -v sbatch", NULL };
+    char conf[PATH_SIZE + 32], env[PATH_SIZE + 48], *line, *end;
+    const char *argv[] = { "env", env, "sbatch", "-vvv", "--mem=1", "--mem-per-cpu=1", script, NULL };
+    int found = 0;
+    if (run(which, NULL) != 0) return 0;
+    snprintf(conf, sizeof conf, "%s/dummy_slurm.conf", tmp_dir);
+    CHECK(write_text(conf, "ClusterName=t\nSlurmctldHost=localhost(127.0.0.1)\nSlurmctldPort=26999\n"
+                           "NodeName=localhost CPUs=1 State=UNKNOWN\nPartitionName=p Nodes=localhost Default=YES\n",
+                     0644));
+    CHECK(realpath(conf, env + 11) != NULL);
+    memcpy(env, "SLURM_CONF=", 11);
+    run(argv, NULL);
+    for (line = last_err; (line = strstr(line, "Found in script, argument \"")) != NULL; line = end) {
+        line += strlen("Found in script, argument \"");
+        end = strchr(line, '\n');
+        if (!end) break;
+        CHECKF(found < count && end - line == (long)strlen(expected[found]) + 1 &&
+                   memcmp(line, expected[found], strlen(expected[found])) == 0 && end[-1] == '"',
+               "sbatch read argument %d of %s as %.*s", found, script, (int)(end - line), line);
+        ++found;
+    }
+    CHECKF(found == count, "sbatch read %d #SBATCH arguments of %s, not %d: %s", found, script, count, last_err);
+    return 1;
+}
+
 #define PAYLOAD "$(touch PWNED)`touch PWNED`';touch PWNED;'\";touch PWNED;\""
 
 /* rrv farm slurm with names that hold shell syntax, quotes, blanks, a
@@ -404,6 +435,22 @@ static void farm_scripts_take_hostile_names(void)
         farm[n++] = "13";
         farm[n] = NULL;
         CHECKF(run(farm, NULL) == 0, "farm %d: %s", k, last_err);
+        {
+            char render[4 * PATH_SIZE + 32], output[4 * PATH_SIZE + 64], real_dir[PATH_SIZE * 4],
+                full[6 * PATH_SIZE];
+            const char *args[6];
+            snprintf(full, sizeof full, "%s/%s", tmp_dir, dir);
+            CHECK(realpath(full, real_dir) != NULL);
+            snprintf(render, sizeof render, "%s/render.sbatch", real_dir);
+            snprintf(output, sizeof output, "--output=%s/logs/tile_%%a.log", real_dir);
+            args[0] = "--job-name=rrv-tiles";
+            args[1] = k == 0 ? "--array=0-2" : "--array=0-3";
+            args[2] = output;
+            args[3] = "--partition=p \"q\" 'r' #s \\t " PAYLOAD;
+            args[4] = "--time=1:00 " PAYLOAD;
+            if (!sbatch_reads(render, args, 5) && k == 0)
+                printf("(sbatch is not installed: not asked how it reads the #SBATCH lines)\n");
+        }
         snprintf(submit, sizeof submit, "%s/submit.sh", dir);
         {
             const char *sh_submit[] = { "sh", submit, NULL };
