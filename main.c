@@ -2154,9 +2154,10 @@ static void print_escaped(FILE *f, const char *text)
 
 /* What no #SBATCH value can hold, or NULL: a newline ends the line, and
    what follows would be a command to the shell; sbatch expands % in file
-   names (%a, %j) and has no escape for it that every version reads; and a
-   line holding "hetjob" (or the older "packjob") anywhere starts a new
-   component of a heterogeneous job. */
+   names (%a, %j, ...), so a % in the folder would send the logs elsewhere
+   (refused in --partition and --time too: one rule for every directive);
+   and a line holding "hetjob" (or the older "packjob") anywhere starts a
+   new component of a heterogeneous job. */
 static const char *farm_directive_problem(const char *value)
 {
     const char *p;

@@ -466,6 +466,7 @@ static void farm_scripts_take_hostile_names(void)
    image or the farm cannot take, options the farm sets, an output that is
    one of the scene's files, and a script target that is not a regular
    file. TMP in a message stands for the scratch folder's real path. */
+#define LONG_NAME "a-folder-name-long-enough-that-ten-thousand-part-paths-in-it-pass-one-mebibyte-of-arguments"
 static void farm_refusals_write_nothing(void)
 {
     static const struct {
@@ -516,22 +517,28 @@ static void farm_refusals_write_nothing(void)
           "tiny.pfm.farm" },
         { { "-o", "grid.exr", "--tiles", "2" }, 1,
           "rrv: refusing to write \"grid.exr\": the scene reads it (as \"grid.vol\")\n", "grid.exr.farm" },
+        { { "-o", "r19.exr", "--tiles", "100x100", "--dir", LONG_NAME }, 1,
+          "rrv: --tiles 100x100: the merge of 10000 parts in \"TMP/" LONG_NAME "\" would take more than 1048576 "
+          "bytes of arguments: fewer tiles or a shorter --dir\n", LONG_NAME },
     };
     char real[PATH_SIZE], expected[2 * PATH_SIZE], *at;
     int i, k;
     CHECK(realpath(tmp_dir, real) != NULL);
     /* tiny.pfm is a scene (the extension is only a name); grid.exr is a link
-       to the grid that grid.rrv reads. */
+       to the grid that grid.rrv reads; big.rrv is 10000 pixels wide. */
     CHECK(sh("cp tiny.rrv tiny.pfm && cp '%s/scenes/assets/tiny.vol' grid.vol && ln -sf grid.vol grid.exr && "
-             "sed 's/^density fog constant .*/density fog grid grid.vol/' tiny.rrv > grid.rrv", repo_dir, NULL) == 0);
+             "sed 's/^density fog constant .*/density fog grid grid.vol/' tiny.rrv > grid.rrv && "
+             "sed 's/resolution 31 19/resolution 10000 100/' tiny.rrv > big.rrv", repo_dir, NULL) == 0);
     for (i = 0; i < (int)(sizeof cases / sizeof cases[0]); ++i) {
         const char *argv[16];
         int n = 0;
         argv[n++] = rrv_binary;
         argv[n++] = "farm";
         argv[n++] = "slurm";
-        argv[n++] = strcmp(cases[i].args[1], "tiny.pfm") == 0 ? "tiny.pfm"
-                    : strcmp(cases[i].args[1], "grid.exr") == 0 ? "grid.rrv" : "tiny.rrv";
+        argv[n++] = strcmp(cases[i].args[1], "tiny.pfm") == 0   ? "tiny.pfm"
+                    : strcmp(cases[i].args[1], "grid.exr") == 0 ? "grid.rrv"
+                    : strcmp(cases[i].args[1], "r19.exr") == 0  ? "big.rrv"
+                                                                : "tiny.rrv";
         for (k = 0; k < 8 && cases[i].args[k]; ++k) argv[n++] = cases[i].args[k];
         argv[n] = NULL;
         expected[0] = '\0';
