@@ -80,6 +80,10 @@ fuzz: $(FUZZ_BINS)
 build-fuzz/fuzz_%: test/fuzz_%.c rrv.h test/fuzz_files.h
 	mkdir -p build-fuzz
 	$(FUZZ_CC) $(FUZZ_FLAGS) -o $@ $< -lm
+# fuzz_farm includes main.c for its script generator (without threads).
+build-fuzz/fuzz_farm: test/fuzz_farm.c main.c rrv.h
+	mkdir -p build-fuzz
+	$(FUZZ_CC) $(FUZZ_FLAGS) -DRRV_THREADS=0 -o $@ $< -lm
 
 # Runs every harness for FUZZ_SECONDS on scratch copies of its seeds and
 # prints executions and findings (saved under build-fuzz/findings).
