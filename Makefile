@@ -46,6 +46,9 @@ $(BUILD)/rrv: main.c rrv_impl.c rrv.h $(wildcard parts/*.h) | $(BUILD)
 $(BUILD)/test_%: test/test_%.c test/check.h rrv.h $(wildcard parts/*.h) $(wildcard test/*.h) | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< -lm $(TEST_LIBS_$*)
 
+# test_eta compiles main.c in (it tests the CLI's progress estimate).
+$(BUILD)/test_eta: main.c
+
 # test/exr_check.cpp reads rrv's EXR files with the OpenEXR library (tests
 # only); test_exr runs it and fails, saying what to install, when OpenEXR is
 # missing and the program could not be built.

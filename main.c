@@ -778,6 +778,8 @@ typedef struct render_job {
     float *sum;         /* the rectangle's sums, row 0 = its top row */
     int stride;
     int tiles_x, tile_count;
+    long tile_stride; /* see "honest progress" */
+    double *tile_seconds; /* the time each tile took, negative until it is done */
     int show_progress;
     double start_time;
 
@@ -812,16 +814,95 @@ static void job_unlock(render_job *job)
 
 #define PROGRESS_BAR_WIDTH 30
 
+/* ---- honest progress -------------------------------------------------------------
+   The ETA extrapolates the time per finished tile, which is only honest if the
+   finished tiles are a fair sample of the image: in row order a sky above a
+   fire finishes fast and the ETA at 20 % is a fraction of the truth. Tiles are
+   therefore handed out along a rank-1 lattice: turn k renders the tile of
+   row-major index k * stride mod count, with stride = r * tiles_x + c chosen so
+   that one turn moves about tiles_x / rho columns and tiles_y / rho^2 rows, rho
+   the plastic number (1.3247...). That is the two-dimensional analogue of the
+   golden ratio's additive sequence (Roberts' R2), so both the tiles done and the
+   tiles left are spread nearly evenly over rows and columns at every turn; a
+   single golden stride spreads the rows but, on a grid whose width divides into
+   the stride's remainder, samples some columns twice. stride is coprime to
+   count, so every tile comes once. The order changes nothing in the image:
+   each pixel's samples depend only on the pixel. */
+
+static long gcd_long(long a, long b)
+{
+    while (b) {
+        long t = a % b;
+        a = b;
+        b = t;
+    }
+    return a;
+}
+
+static long tile_stride(int tiles_x, int tiles_y)
+{
+    const double rho = 1.324717957244746;
+    long count = (long)tiles_x * tiles_y;
+    long stride = (long)(tiles_y / (rho * rho)) * tiles_x + (long)(tiles_x / rho + 0.5);
+    if (count <= 1) return 0;
+    stride %= count;
+    if (stride < 1) stride = 1;
+    while (gcd_long(stride, count) != 1) stride = stride % count + 1; /* 1 is coprime to all */
+    return stride;
+}
+
+static int tile_for_turn(long turn, long count, long stride)
+{
+    return count > 1 ? (int)(turn % count * stride % count) : 0;
+}
+
+/* Seconds left. cost[t] is the seconds tile t took, or negative while it is
+   not done. A tile left is predicted to cost the mean of the tiles done next
+   to it (or, where none is, within two tiles; else the mean of all done): a
+   flame's tiles then predict their neighbours', which a mean over the whole
+   image would spread over the sky. The predicted seconds are scaled by the
+   elapsed time over the seconds done, which holds for any number of threads.
+   Negative while nothing is done. */
+static double eta_seconds(const double *cost, int tiles_x, int count, double elapsed)
+{
+    int tiles_y = tiles_x > 0 ? count / tiles_x : 0, t, dx, dy, done = 0;
+    double done_seconds = 0, mean, left = 0;
+    for (t = 0; t < count; ++t)
+        if (cost[t] >= 0) {
+            done_seconds += cost[t];
+            ++done;
+        }
+    if (done == 0 || done_seconds <= 0) return -1;
+    mean = done_seconds / done;
+    for (t = 0; t < count; ++t) {
+        int x = t % tiles_x, y = t / tiles_x, near = 0, reach;
+        double near_seconds = 0;
+        if (cost[t] >= 0) continue;
+        for (reach = 1; reach <= 2 && !near; ++reach)
+            for (dy = -reach; dy <= reach; ++dy)
+                for (dx = -reach; dx <= reach; ++dx) {
+                    int nx = x + dx, ny = y + dy;
+                    if (nx < 0 || ny < 0 || nx >= tiles_x || ny >= tiles_y) continue;
+                    if (cost[ny * tiles_x + nx] < 0) continue;
+                    near_seconds += cost[ny * tiles_x + nx];
+                    ++near;
+                }
+        left += near ? near_seconds / near : mean;
+    }
+    return elapsed * left / done_seconds;
+}
+
 /* Called with the lock held. Redraws at most ten times a second because
    a terminal that scrolls slower than the render would slow it down. */
 static void draw_progress(render_job *job, int force)
 {
     char bar[PROGRESS_BAR_WIDTH + 1], elapsed_text[32], eta_text[32];
-    double now, elapsed, fraction;
+    double now, elapsed, fraction, left;
     int filled, i;
     if (!job->show_progress) return;
     now = seconds_now();
-    if (!force && now - job->last_progress_time < 0.1) return;
+    /* eta_seconds looks at every tile: a huge image redraws less often */
+    if (!force && now - job->last_progress_time < (job->tile_count > 65536 ? 1.0 : 0.1)) return;
     elapsed = now - job->start_time;
     fraction = job->tile_count ? (double)job->tiles_done / job->tile_count : 1;
     filled = (int)(fraction * PROGRESS_BAR_WIDTH);
@@ -829,8 +910,11 @@ static void draw_progress(render_job *job, int force)
     for (i = 0; i < PROGRESS_BAR_WIDTH; ++i) bar[i] = i < filled ? '#' : '.';
     bar[PROGRESS_BAR_WIDTH] = '\0';
     format_duration(elapsed, elapsed_text, sizeof elapsed_text);
-    if (job->tiles_done > 0)
-        format_duration(elapsed * (1 - fraction) / fraction, eta_text, sizeof eta_text);
+    left = !job->tiles_done ? -1
+           : job->tile_seconds ? eta_seconds(job->tile_seconds, job->tiles_x, job->tile_count, elapsed)
+                               : elapsed * (1 - fraction) / fraction;
+    if (left >= 0)
+        format_duration(left, eta_text, sizeof eta_text);
     else
         snprintf(eta_text, sizeof eta_text, "?");
     fprintf(stderr, "\r[%s] %5.1f%%  elapsed %s  eta %s   ", bar, 100 * fraction,
@@ -949,16 +1033,19 @@ static void *render_worker(void *arg)
     }
     for (;;) {
         int tile, tx0, ty0, tx1, ty1;
+        double started;
         rrv_result result;
         job_lock(job);
         tile = job->failure == RRV_OK ? job->next_tile++ : job->tile_count;
         job_unlock(job);
         if (tile >= job->tile_count) break;
+        tile = tile_for_turn(tile, job->tile_count, job->tile_stride);
 
         tx0 = job->x0 + (tile % job->tiles_x) * TILE_SIZE;
         ty0 = job->y0 + (tile / job->tiles_x) * TILE_SIZE;
         tx1 = tx0 + TILE_SIZE < job->x1 ? tx0 + TILE_SIZE : job->x1;
         ty1 = ty0 + TILE_SIZE < job->y1 ? ty0 + TILE_SIZE : job->y1;
+        started = job->tile_seconds ? seconds_now() : 0;
         result = sum_samples(job->scene, tx0, ty0, tx1, ty1, job->sample_begin, job->sample_end,
                              job->sum + 3 * ((size_t)(ty0 - job->y0) * job->stride + (size_t)(tx0 - job->x0)),
                              job->stride, scratch, &stats);
@@ -967,6 +1054,7 @@ static void *render_worker(void *arg)
         if (result != RRV_OK) {
             if (job->failure == RRV_OK) job->failure = result;
         } else {
+            if (job->tile_seconds) job->tile_seconds[tile] = seconds_now() - started;
             job->tiles_done++;
             draw_progress(job, 0);
         }
@@ -1697,8 +1785,13 @@ static int command_render(int argc, char **argv)
     job.stride = crop_width;
     job.tiles_x = (crop_width + TILE_SIZE - 1) / TILE_SIZE;
     job.tile_count = job.tiles_x * ((crop_height + TILE_SIZE - 1) / TILE_SIZE);
+    job.tile_stride = tile_stride(job.tiles_x, job.tile_count / job.tiles_x);
     job.failure = RRV_OK;
     job.show_progress = !opt.quiet && isatty(2);
+    if (job.show_progress) {
+        job.tile_seconds = (double *)malloc((size_t)job.tile_count * sizeof *job.tile_seconds);
+        for (x = 0; job.tile_seconds && x < job.tile_count; ++x) job.tile_seconds[x] = -1;
+    }
     thread_count = opt.threads > 0 ? opt.threads : default_thread_count();
     if (thread_count > job.tile_count) thread_count = job.tile_count;
 
@@ -1711,6 +1804,7 @@ static int command_render(int argc, char **argv)
         /* The summary line takes the bar's place. */
         fprintf(stderr, "\r%*s\r", PROGRESS_BAR_WIDTH + 48, "");
     }
+    free(job.tile_seconds);
 
     if (job.failure != RRV_OK) {
         fprintf(stderr, "rrv: %s: render failed: %s\n", opt.scene_path,
