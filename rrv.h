@@ -79,7 +79,7 @@
                  SHOOT where every refracting medium is clear (no medium
                  with extinction overlaps its box) and a quad or triangle
                  light is small from one (its side, the square root of its
-                 area, under 0.3 x its distance from the medium's box
+                 area, under 0.5 x its distance from the medium's box
                  centre), and the IOR has the Hessian shooting needs;
                  refractive (the comb, nee AIM) otherwise. Why: aimed
                  shadow rays sample the light's straight cone, at about
@@ -6936,7 +6936,7 @@ RRV_DEF double rrv_medium_face_jumps(const rrv_scene *scene, int medium, double 
    whose side (the square root of its area) over its distance from a clear
    refracting medium's box centre is below this is small (README.md,
    "Which integrator by default"). */
-#define RRV__SMALL_LIGHT 0.3
+#define RRV__SMALL_LIGHT 0.5
 
 static int rrv__boxes_overlap(const rrv_medium *a, const rrv_medium *b)
 {
