@@ -192,6 +192,19 @@ static void test_face_jumps(void)
     for (f = 0; f < 6; ++f) CHECKF(fabs(jump[f] - 0.0292) < 1e-9, "face %d jumps by %.17g", f, jump[f]);
     CHECK(jump[6] == 0); /* no profile sphere */
     rrv_scene_free(s);
+    /* a Luneburg lens meets the ambient IOR at its sphere and, outside
+       it, in its box: only rounding (~1e-8) is left there, no glass */
+    {
+        static const char lens[] = "camera eye 0 0 -3 look 0 0 0 resolution 8 6\n"
+                                   "medium lens box -0.5 -0.5 -0.5 0.5 0.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+                                   "ior lens luneburg radius 0.5\n";
+        rrv_error err;
+        CHECKF(rrv_scene_parse(lens, strlen(lens), "lens", NULL, NULL, &s, &err) == RRV_OK, "%s", err.message);
+        if (!s) return;
+        CHECKF(rrv_medium_face_jumps(s, 0, jump) == 0, "faces jump by %g %g %g %g %g %g, sphere %g", jump[0], jump[1],
+               jump[2], jump[3], jump[4], jump[5], jump[6]);
+        rrv_scene_free(s);
+    }
 }
 
 static void test_refusals_name_the_object(void)
