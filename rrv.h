@@ -109,7 +109,8 @@
    NEXT-EVENT ESTIMATION (rrv_settings.nee, scene `render nee`, CLI --nee)
      Refractive and eikonal integrators only; classic always samples lights
      with straight shadow rays, which is exact for straight rays.
-     DEFAULT     SHOOT, the most efficient curved mode measured (README.md).
+     DEFAULT     SHOOT, the most efficient curved mode measured (README.md;
+                 the default integrator is eikonal where shooting pays).
                  With the refractive integrator, which shooting cannot
                  differentiate, it aims (AIM): unbiased, about as cheap as
                  STRAIGHT, but without focusing, so caustics of small
