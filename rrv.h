@@ -1159,8 +1159,8 @@ RRV_DEF rrv_integrator rrv_scene_integrator(const rrv_scene *scene);
 /* The sharp interfaces of a prepared scene's medium: for each face of its
    box (-x, +x, -y, +y, -z, +z) and, for a Luneburg or fish-eye profile,
    its sphere (jump[6]; 0 for other media), the largest |eta just inside -
-   eta just outside| on a 65 x 65 lattice of the face (the sphere: 64 x 32
-   in longitude and latitude), where the refractivity on either side is
+   eta just outside| on a 65 x 65 lattice of the face (the sphere: 128 x
+   64 in longitude and latitude, where inside the box), where the refractivity on either side is
    that of the scene (the ambient IOR, or another medium's where boxes
    overlap). Jumps of 1e-7 or less, the float rounding of an IOR near 1
    (where Fresnel reflects < 1e-14 and curved NEE crosses the face), are
