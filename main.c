@@ -84,7 +84,8 @@ static const char render_help[] =
     "  --exposure E           scale the preview by 2^E (default 0)\n"
     "  --spp N                samples per pixel (default: the scene's)\n"
     "  --seed S               random seed, an integer >= 0 (default: the scene's)\n"
-    "  --integrator NAME      classic, refractive or eikonal (default: the scene's)\n"
+    "  --integrator NAME      classic, refractive or eikonal (default: the scene's;\n"
+    "                         without one, chosen from the scene: rrv info says)\n"
     "  --nee MODE             refractive, eikonal: light sampling, shoot\n"
     "                         (the default; eikonal: connections solved along\n"
     "                         bent rays; refractive: as aim), aim (shadow rays\n"
@@ -311,7 +312,8 @@ static int take_grid_limit(arg_cursor *args, size_t *max_grid_bytes)
     return 1;
 }
 
-static const char *const integrator_names[] = {"classic", "refractive", "eikonal"};
+/* By rrv_integrator's values: DEFAULT (0) is never named on the command line. */
+static const char *const integrator_names[] = {"default", "classic", "refractive", "eikonal"};
 
 static int take_integrator(arg_cursor *args, int allow_classic, rrv_integrator *out)
 {
@@ -319,7 +321,7 @@ static int take_integrator(arg_cursor *args, int allow_classic, rrv_integrator *
     const char *text;
     int i;
     if (!take_value(args, "--integrator", what, &text)) return 0;
-    for (i = allow_classic ? 0 : 1; i < 3; ++i) {
+    for (i = allow_classic ? RRV_INTEGRATOR_CLASSIC : RRV_INTEGRATOR_REFRACTIVE; i <= RRV_INTEGRATOR_EIKONAL; ++i) {
         if (strcmp(text, integrator_names[i]) == 0) {
             *out = (rrv_integrator)i;
             return 1;
@@ -331,7 +333,7 @@ static int take_integrator(arg_cursor *args, int allow_classic, rrv_integrator *
 
 static const char *integrator_name(rrv_integrator integrator)
 {
-    return (unsigned)integrator < 3 ? integrator_names[integrator] : "unknown";
+    return (unsigned)integrator <= RRV_INTEGRATOR_EIKONAL ? integrator_names[integrator] : "unknown";
 }
 
 static int is_flag(const char *arg) { return arg[0] == '-' && arg[1] != '\0'; }
@@ -1581,6 +1583,42 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
     return EXIT_OK;
 }
 
+static const char *const face_names[7] = {"-x", "+x", "-y", "+y", "-z", "+z", "sphere"};
+
+/* The largest IOR jump over every medium's faces, its medium and face, and
+   how many faces jump: a sharp interface (glass) the user may not have meant. */
+static double largest_face_jump(const rrv_scene *scene, int *medium, int *face, int *faces)
+{
+    double worst = 0, jump[7];
+    int i, f;
+    *medium = *face = -1;
+    *faces = 0;
+    for (i = 0; i < scene->medium_count; ++i) {
+        rrv_medium_face_jumps(scene, i, jump);
+        for (f = 0; f < 7; ++f) {
+            if (jump[f] <= 0) continue;
+            ++*faces;
+            if (jump[f] > worst) {
+                worst = jump[f];
+                *medium = i;
+                *face = f;
+            }
+        }
+    }
+    return worst;
+}
+
+static void print_face_jump_summary(const rrv_scene *scene)
+{
+    int medium, face, faces;
+    double jump = largest_face_jump(scene, &medium, &face, &faces);
+    if (!(jump > 0)) return;
+    fprintf(stderr, "sharp IOR faces: eta jumps by %.3g at the %s %s of medium \"%s\"", jump, face_names[face],
+            face == 6 ? "surface" : "face", scene->media[medium].name);
+    if (faces > 1) fprintf(stderr, " (and at %d more faces)", faces - 1);
+    fputs(": refracted and reflected there as glass; curved nee does not cross them\n", stderr);
+}
+
 static void print_render_summary(int width, int height, int spp, double seconds,
                                  const rrv_render_stats *stats)
 {
@@ -1848,6 +1886,7 @@ static int command_render(int argc, char **argv)
             fprintf(stderr, "part %s: tile %s, samples %d:%d of %d: ", opt.pfm_path, part.tile,
                     part.sample_begin, part.sample_end, part.spp);
         print_render_summary(crop_width, crop_height, opt.sample_end - opt.sample_begin, seconds, &job.stats);
+        print_face_jump_summary(scene);
     }
     free(image);
     rrv_scene_free(scene);
@@ -2741,8 +2780,11 @@ static void print_extinction(const rrv_medium *medium)
     putchar('\n');
 }
 
-static void print_medium(const rrv_medium *medium)
+static void print_medium(const rrv_scene *scene, int index)
 {
+    const rrv_medium *medium = &scene->media[index];
+    double jump[7];
+    int f, any = 0;
     printf("  %s: box %g %g %g .. %g %g %g", medium->name, medium->lo.x, medium->lo.y,
            medium->lo.z, medium->hi.x, medium->hi.y, medium->hi.z);
     print_field("density", &medium->density);
@@ -2757,6 +2799,12 @@ static void print_medium(const rrv_medium *medium)
     if (medium->ior.kind == RRV_FIELD_GRID)
         printf(" grid %dx%dx%d", medium->ior.grid.nx, medium->ior.grid.ny, medium->ior.grid.nz);
     putchar('\n');
+    if (rrv_medium_face_jumps(scene, index, jump) > 0) {
+        printf("    sharp IOR faces (eta jumps by):");
+        for (f = 0; f < 7; ++f)
+            if (jump[f] > 0) printf("%s %s %.3g", any++ ? "," : "", face_names[f], jump[f]);
+        putchar('\n');
+    }
     if (medium->density.kind != RRV_FIELD_NONE) print_extinction(medium);
     print_nanovdb("density", &medium->density);
     print_nanovdb("temperature", &medium->temperature);
@@ -2802,14 +2850,19 @@ static int command_info(int argc, char **argv)
     printf("spp: %d\n", scene->settings.spp);
     printf("max_depth: %d\n", scene->settings.max_depth);
     printf("seed: %" PRIu64 "\n", scene->settings.seed);
-    printf("integrator: %s\n", integrator_name(scene->settings.integrator));
+    if (scene->settings.integrator == RRV_INTEGRATOR_DEFAULT)
+        printf("integrator: %s (the default for this scene)\n", integrator_name(rrv_scene_integrator(scene)));
+    else
+        printf("integrator: %s\n", integrator_name(scene->settings.integrator));
+    printf("ambient ior: %.9g%s\n", scene->ambient_ior,
+           scene->settings.ambient_ior != 0 ? "" : scene->ambient_ior != 1 ? " (the gas at its ambient state)" : "");
     printf("materials: %d\n", scene->material_count);
     printf("shapes: %d (%d spheres, %d quads, %d triangles)\n", scene->shape_count,
            kind_counts[RRV_SHAPE_SPHERE], kind_counts[RRV_SHAPE_QUAD],
            kind_counts[RRV_SHAPE_TRIANGLE]);
     printf("lights: %d\n", scene->light_count);
     printf("media: %d\n", scene->medium_count);
-    for (i = 0; i < scene->medium_count; ++i) print_medium(&scene->media[i]);
+    for (i = 0; i < scene->medium_count; ++i) print_medium(scene, i);
     printf("bvh_nodes: %d\n", scene->bvh_node_count);
     format_bytes((double)scene->bytes, text, sizeof text);
     printf("scene_memory: %s\n", text);
@@ -2905,8 +2958,8 @@ static int command_trace(int argc, char **argv)
         rrv_scene_free(scene);
         return EXIT_INPUT;
     }
-    if (!has_integrator && scene->settings.integrator != RRV_INTEGRATOR_CLASSIC)
-        integrator = scene->settings.integrator;
+    if (!has_integrator && rrv_scene_integrator(scene) != RRV_INTEGRATOR_CLASSIC)
+        integrator = rrv_scene_integrator(scene);
     if (!has_seed) seed = scene->settings.seed;
 
     puts(print_path ? "walk,x,y,z,dx,dy,dz" : "x,y,z,dx,dy,dz,events");
