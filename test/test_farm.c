@@ -5,7 +5,6 @@
    scheduler would run them (without one: each array task in turn) and
    resume. Runs BUILD/rrv as a child process; argv[1] is the build folder. */
 #define _POSIX_C_SOURCE 200809L
-#define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
 
