@@ -131,7 +131,7 @@ bench-quick: $(BUILD)/rrv $(BUILD)/ref_compare $(BUILD)/measure_tracking
 	RRV_BENCH_CC='$(CC)' RRV_BENCH_FLAGS='$(CFLAGS_ALL) $(THREAD_FLAGS)' python3 test/bench/bench.py $(BUILD) --quick
 
 # measure_grin: the convergence study of the refraction schemes (tables in
-# README); measure_nanovdb: NanoVDB lookups against a dense grid;
+# test/bench/RESULTS.md); measure_nanovdb: NanoVDB lookups against a dense grid;
 # measure_tracking: collisions per second against the grid lookup alone.
 $(BUILD)/measure_%: test/measure_%.c rrv.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< -lm

@@ -110,3 +110,18 @@ check_readme_command
 if [ $ok = 1 ] && [ $count -gt 0 ]; then echo "PASS readme_outputs_are_true ($count commands)"
 else echo "FAIL readme_outputs_are_true"
 fi
+# Every ```rrv block of README.md (the recipes) is a whole scene that loads
+# and renders (one sample of a 16 x 16 corner, so only cheaply).
+rm -f "$build"/readme_scene_*
+awk '/^```rrv$/ {on = 1; n++; f = sprintf("'"$build"'/readme_scene_%d.rrv", n); printf "" > f; next}
+     /^```$/ {on = 0}
+     on {print >> f}' README.md
+ok=1; count=0
+for scene in "$build"/readme_scene_*.rrv; do
+    [ -e "$scene" ] || continue
+    count=$((count + 1))
+    "$build/rrv" render "$scene" -o "${scene%.rrv}.pfm" --spp 1 --crop 0 0 16 16 -q || { echo "  README.md: the scene of $scene does not render"; ok=0; }
+done
+if [ $ok = 1 ] && [ $count -gt 0 ]; then echo "PASS readme_scenes_render ($count scenes)"
+else echo "FAIL readme_scenes_render"
+fi
