@@ -6,12 +6,18 @@
    arguments; it prints its own PASS and FAIL lines, and the check counts
    of check.h add up across them. The tests that define something before
    the implementation (RRV_MALLOC, RRV__AIM_REACH, RRV_STATIC) cannot share
-   it and stay programs of their own.
+   it and stay programs of their own (test_nee, test_parser, test_hygiene).
    Two files that define the same static name get it renamed here for one
    of them, around its #include (the compiler reports any new clash). */
 #define _POSIX_C_SOURCE 200809L
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
+
+#define main test_bake_cap_main
+#define load bake_cap_load
+#include "test_bake_cap.c"
+#undef main
+#undef load
 
 #define main test_boundaries_main
 #include "test_boundaries.c"
@@ -54,6 +60,7 @@
 int main(int argc, char **argv)
 {
     int failed = 0;
+    failed |= test_bake_cap_main();
     failed |= test_boundaries_main(argc, argv);
     failed |= test_budget_main();
     failed |= test_grin_main(argc, argv);
