@@ -37,7 +37,14 @@ fi
 if command -v gcc >/dev/null 2>&1 && command -v clang >/dev/null 2>&1; then
     ok=1
     for c in gcc clang; do
-        $c -std=c99 -O2 -DRRV_THREADS=0 -o "$build/rrv_$c" main.c rrv_impl.c -lm 2>/dev/null || ok=0
+        # make test passes the object it built at -O2 -g and its compiler:
+        # the same code as a -O2 compile, so that compiler links it.
+        impl=rrv_impl.c
+        if [ -n "${RRV_IMPL_OBJ:-}" ] && [ -f "$RRV_IMPL_OBJ" ] &&
+           [ "$($c --version 2>/dev/null | head -1)" = "$(${RRV_IMPL_CC:-cc} --version 2>/dev/null | head -1)" ]; then
+            impl=$RRV_IMPL_OBJ
+        fi
+        $c -std=c99 -O2 -DRRV_THREADS=0 -o "$build/rrv_$c" main.c "$impl" -lm 2>/dev/null || ok=0
     done
     if [ $ok = 1 ]; then
         for scene in smoke fire; do

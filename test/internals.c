@@ -4,12 +4,14 @@
    standalone programs, which `make build/test_grin` and the like still
    build. Each test's main is renamed and called in turn with the same
    arguments; it prints its own PASS and FAIL lines, and the check counts
-   of check.h add up across them. The tests that define something before
-   the implementation (RRV_MALLOC, RRV__AIM_REACH, RRV_STATIC) cannot share
-   it and stay programs of their own (test_nee, test_parser, test_hygiene).
+   of check.h add up across them. The library is built with the counting
+   allocator of alloc_hook.h, which test_nee and test_parser need and which
+   at rest behaves as the default; test_hygiene (RRV_STATIC) stays a
+   program of its own.
    Two files that define the same static name get it renamed here for one
    of them, around its #include (the compiler reports any new clash). */
 #define _POSIX_C_SOURCE 200809L
+#include "alloc_hook.h"
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 
@@ -57,6 +59,30 @@
 #include "test_render.c"
 #undef main
 
+#define main test_nee_main
+#define method nee_method
+#define stats nee_stats
+#define stats_add nee_stats_add
+#define stats_mean nee_stats_mean
+#define stats_se nee_stats_se
+#define solver_context nee_solver_context
+#define blob_scene nee_blob_scene
+#include "test_nee.c"
+#undef main
+#undef method
+#undef stats
+#undef stats_add
+#undef stats_mean
+#undef stats_se
+#undef solver_context
+#undef blob_scene
+
+#define main test_parser_main
+#define put32 parser_put32
+#include "test_parser.c"
+#undef main
+#undef put32
+
 int main(int argc, char **argv)
 {
     int failed = 0;
@@ -67,5 +93,7 @@ int main(int argc, char **argv)
     failed |= test_hessian_main();
     failed |= test_nanovdb_main(argc, argv);
     failed |= test_render_main(argc, argv);
+    failed |= test_nee_main();
+    failed |= test_parser_main(argc, argv);
     return failed ? 1 : 0;
 }
