@@ -125,7 +125,7 @@
    (rrv_render_stats.paths_cut). The rules and their limits: NOTES at the end.
 
    READING MAP (the paper's terms and the functions that implement them;
-   `grep -n "^/\* ====" rrv.h` lists the sections)
+   `grep -n "^/\* [-=][-=][-=][-=]" rrv.h` lists the sections quoted)
      refractive delta tracking, the paper's Algorithm 1 (Snell at every null
        collision): rrv__refractive_delta_tracking, which bends through
        rrv__bend_at_null_event and rrv__refract_at_null_event (scheme POISSON)
