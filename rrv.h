@@ -1,4 +1,4 @@
-/* rrv.h 0.4.0 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.9.1 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -6,6 +6,15 @@
    ray (Fraboni, Chan, Vergne, Jeziorski, "Can You See the Heat?", SIGGRAPH
    2023 talk), next to a classic null-scattering volume path tracer
    (Miller et al. 2019) and an eikonal ray-marching reference (Ament et al. 2014).
+
+   It does: participating media in boxes (density, temperature, pressure and
+   IOR from constants, Gaussian blobs, noise, gridvol and NanoVDB grids, the
+   gas law), diffuse and checker surfaces (spheres, quads, triangle meshes),
+   quad, triangle and sphere lights, a gradient or constant sky, blackbody
+   flames, three RGB channels, tiles and sample ranges that merge bit for bit.
+   It does not: dispersion (the IOR is achromatic), glossy or specular
+   surfaces, textures, motion, GPUs. The command-line client (main.c) and
+   the user's manual are in README.md; measurements in test/bench/RESULTS.md.
 
    EXAMPLE: a Luneburg lens built in code, rendered, written as PFM. Zero
    means default in every description. test/compile_checks.sh cuts out the
@@ -90,7 +99,7 @@
                  the cost a sample, which pays where the receivers are
                  surfaces seen through clear media, and not where a
                  scattering medium makes every vertex a connection.
-                 Measured in README.md ("Which integrator by default"):
+                 Measured in test/bench/RESULTS.md ("Which integrator by default"):
                  within 1.25x of the best unbiased mode on the bench scenes.
                  An explicit `nee` other than shoot keeps the comb.
      classic     IOR 1 everywhere: delta tracking, ratio-tracked NEE with MIS,
@@ -109,246 +118,57 @@
    NEXT-EVENT ESTIMATION (rrv_settings.nee, scene `render nee`, CLI --nee)
      Refractive and eikonal integrators only; classic always samples lights
      with straight shadow rays, which is exact for straight rays.
-     DEFAULT     SHOOT, the most efficient curved mode measured (README.md;
-                 the default integrator is eikonal where shooting pays).
-                 With the refractive integrator, which shooting cannot
-                 differentiate, it aims (AIM): unbiased, about as cheap as
-                 STRAIGHT, but without focusing, so caustics of small
-                 lights stay noisy (MANIFOLD solves them there, at a high
-                 cost).
-     STRAIGHT    a straight shadow ray, ratio-tracked,
-                 combined by the power heuristic with the phase/BSDF-sampled
-                 continuation as though both sampled the same path. They do
-                 not: the continuation bends and the shadow ray does not, so
-                 wherever either crosses a refracting medium the sum is
-                 biased: a lens caustic comes out at half its radiance and
-                 white furnaces with refraction above 1 (test/test_nee.c).
-     NONE        no light sampling: lights, emitters and the sky count only
-                 where the bent path hits them, with MIS weight 1. Unbiased
-                 (furnaces give exactly 1), but noisy for small lights.
-     SHOOT       curved NEE by shooting (eikonal integrator), unbiased up
-                 to a cap on trials. The path from the last vertex to the
-                 light decides which estimators may make it: touching no
-                 refraction support (box or profile sphere), or weak (below),
-                 straight NEE and the forward path, by the power heuristic,
-                 as classic does; curved (part of it in a support, no sharp interface
-                 crossed) and ending on a quad or triangle light, the curved
-                 connection and the forward path, by the power heuristic on
-                 their solid-angle densities at the initial direction w0:
-                 p_nee = |det J_plane| / (area x light choices) (NEE's
-                 density had every solve found the root; the 1/p of the
-                 trials is an unbiased factor on top) and the vertex's own
-                 pdf of w0. The forward path computes det J_plane for itself
-                 from one shot along its own w0 with the same steps, so both
-                 sides evaluate the same function of the path, and the two
-                 weights sum to one (test/test_nee.c); any such weights keep
-                 the sum unbiased. Near a fold caustic det -> 0 and the
-                 forward path takes the path, which bounds NEE's 1/|det|
-                 (unweighted, its square is not integrable there).
-                 Everything else (across a sharp interface, to the sky, to
-                 sphere lights) only by forward paths, weight 1. The
-                 connection: a point y uniform on a light, Newton on the
-                 two angles of the initial direction so that the ray,
-                 traced with the same steps camera rays take, first crosses
-                 the light's plane from its front at y (at most 20 shots,
-                 residual < 1e-9 (1 + |y - x0|), step halved on a worse or
-                 failed shot and doubled up to 1, at most 0.5 rad, given up
-                 when three halvings in a row fail; det J = 0, a caustic,
-                 fails); the density from the Jacobi field of the same
-                 discrete steps, dw0 = dA_y / |det J_plane|
-                 (= |cos theta_y| / |det J_perp|); visibility and
-                 ratio-tracked transmittance along every chord. Seeds:
-                 Gaussians of 0.05 rad (6 in 10) and 0.3 rad (3 in 10)
-                 around the straight direction or a uniform direction, so
-                 every root has a nonzero probability p; a solve tries up to
-                 3 seeds; 1/p is estimated by repeating independent solves
-                 until the same root (within 1e-5) comes back, at most 64
-                 trials (Specular Manifold Sampling). A failed solve
-                 contributes zero. The derivative of grad eta has closed
-                 forms for the profiles and blobs; for grids (gridvol,
-                 NanoVDB, baked noise, a gas through Hauf-Grigull) it is
-                 the exact derivative of the blended gradient the rays
-                 use. With the refractive integrator SHOOT aims (AIM).
-     MANIFOLD    curved NEE by the paper's method (refractive and eikonal
-                 integrators, the same closed-form Hessians), partitioning
-                 path space by the same classes (weights: 1 for the estimator a
-                 path belongs to, 0 for the others; power heuristic only
-                 between straight NEE and forward paths outside supports).
-                 A point y uniform on a quad or triangle light; a chain of
-                 vertices on comb planes along the chord x0 -> y (spacing
-                 `step`, random offset, at most 512, wider beyond), each
-                 kicking the ray as the comb does (eta d += grad eta h,
-                 h the path it stands for); Newton on two unknowns a vertex
-                 (gauge `manifoldgauge chord`, the default: in the comb
-                 plane; `iso`: in the isosurface's tangent plane, the
-                 paper's, undefined where grad eta ~ 0) until every segment
-                 follows its kicked direction within 1e-9 rad:
-                 block-tridiagonal 2x2 Jacobian solved by block Thomas in
-                 O(n) inside a trust region (dogleg; radius halved on a
-                 step that does not lower the residual, doubled on one the
-                 linear model predicted), at most 40 evaluations; a
-                 singular pivot (a caustic) or a root that is not a
-                 physical path (a segment against its kick, a sharp
-                 interface crossed) fails. The density dw0/dA_y from the
-                 same block elimination (the generalised geometry term of
-                 Specular Manifold Sampling). Seeds: a direction from a
-                 mixture of Gaussians around the chord (0.02 rad half the
-                 time, 0.2 rad 3 in 8) and uniform (1 in 8), traced through
-                 the planes by the chain's own rule and aimed at y by
-                 shooting (at most 16 steps; a parabola where no trace
-                 reaches y's plane); the first solve and every trial draw
-                 from that one distribution. `manifoldtrials 0` (default, unbiased
-                 for the chain model): 1/p by repeating solves until the
-                 root recurs (initial directions within 1e-5), at most 64
-                 trials. `manifoldtrials M`: M solves, each distinct root
-                 counted once (biased low where a root's basin is small).
-                 `manifolddrop D`: leave out comb planes across which eta
-                 on the chord changes by less than D (faster, biased; 0, the
-                 default, keeps all). Unsupported IORs as for shoot.
-     AIM         bent shadow rays (refractive comb and eikonal integrators;
-                 the Poisson and midpoint schemes, whose rays bend at null
-                 events, leave curved connections to forward paths, counted
-                 in rrv_render_stats.solves_unsupported). The classes are
-                 SHOOT's; for a curved one, a point y uniform on a quad or
-                 triangle light gives w0 = (y - x0) / |y - x0|, and the
-                 shadow ray leaves x0 along w0 bent as camera rays are (the
-                 same comb kicks or eikonal steps), its transmittance
-                 ratio-tracked chord by chord; the light's radiance counts
-                 if the ray lands on that light's front, nothing if it meets
-                 anything else, leaves or crosses a sharp interface. w0 has
-                 the density of the straight line from x0 along w0 meeting
-                 the light, (|y - x0|^2 / |cos theta_y|) / (area x light
-                 choices), whichever face it meets: a function of w0 alone,
-                 so the power heuristic against the vertex's pdf of w0 is
-                 exact, and a forward path that reaches the light from x0
-                 along w0 takes the complementary weight wherever it lands
-                 on it. Unbiased for the integrator's own rays, no solve, no
-                 trials; as with NONE, focusing shows only as noise, so it
-                 suits weak heat haze (nearly every aimed ray lands) and not
-                 the caustics of small lights, which SHOOT solves.
-     The weak class (shoot, manifold and aim): a connection from x0 to y whose
-     straight chord touches no refraction support (or only supports with
-     zero gradient along it) is straight NEE's, with the ordinary MIS
-     weights; curved NEE skips it. A forward path that crossed no sharp
-     interface and ends at y (or leaves for the sky along d) is sorted by the
-     same function of its two ends, and, if its chord is weak but the path
-     itself turned (it left x0 at an angle to the chord larger than the
-     chord's bound on bending), it is another root of those two ends that no
-     light sample stands for. With aim it counts with weight 1; with shoot
-     and manifold it is shared by the power heuristic with one more ray a
-     vertex, drawn uniformly in the cone of a strongly refracting support
-     (one that can turn a ray by more than 0.05 rad across it: a lens) and
-     traced bent, which counts the light it lands on only for such roots
-     (rrv__cone_nee; the cone's density is a function of x0 and w0, so the
-     weights are exact). A build may set
-     RRV__WEAK_BEND to K > 0 to treat chords whose bound on bending (the
-     integral along the chord of each majorant cell's max |grad eta| over
-     the lowest eta) is at most K bend tolerances as straight too: on weak
-     heat haze that makes curved NEE cost ~1.3x straight NEE instead of
-     ~36x, but it is biased where a strong medium's gradient varies within
-     a cell (measured in README.md, "Weak connections"), so it is off.
+     DEFAULT     SHOOT (the default integrator is eikonal where shooting
+                 pays); with the refractive integrator, which shooting
+                 cannot differentiate, it aims (AIM).
+     STRAIGHT    a straight shadow ray, ratio-tracked, MIS with the bent
+                 continuation: biased wherever either crosses a refracting
+                 medium (a lens caustic at half its radiance).
+     NONE        no light sampling: unbiased (furnaces give exactly 1), noisy
+                 for small lights.
+     SHOOT       curved NEE by shooting (eikonal integrator): Newton on the
+                 initial direction until the bent ray lands on the light point,
+                 density from the Jacobi field, 1/p by repeated trials.
+     MANIFOLD    curved NEE by the paper's method (refractive and eikonal): a
+                 chain of comb vertices moved by a Newton-type solver until
+                 every segment follows its kick; slow.
+     AIM         bent shadow rays aimed at a light point (refractive comb and
+                 eikonal): unbiased, about straight NEE's cost, no focusing.
+     How each estimator works, its classes of paths and its MIS weights:
+     NOTES at the end of this file.
    Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2;
    blackbody emission is n^2 B where the IOR is n (Kirchhoff), so a fire does
    not dim by 1/n^2 on leaving a dense medium.
 
-   BOUNDARIES (design decisions)
-     Faces of refractive media (a medium's box; the sphere of a Luneburg or
-     fish-eye profile) end every straight segment. An IOR that jumps across
-     a face is a sharp interface: refracted once by Snell's law with the
-     face normal, reflected with the Fresnel probability or by total
-     internal reflection; such reflections count toward max_depth. A medium
-     whose IOR equals the ambient IOR everywhere does not refract. The
-     ambient IOR (rrv_settings.ambient_ior, scene `ambient ior`) left 0 is
-     that of the air a gas medium (ior ... gas) sits in: the same gas
-     relation at its ambient state (T_ref, P_ref, what its fields give
-     outside their boxes), 1 + iorscale (eta_ref - 1), from the first gas
-     medium listed; 1 without one. So a plume whose faces are at the
-     ambient state has no jump whatever its iorscale; a given `ambient ior`
-     is used as given. A jump that remains (a field that does not end at
-     the ambient state, glass, a second gas with another iorscale) is a
-     sharp interface: rrv_medium_face_jumps measures it per face and
-     `rrv info` and the render summary report it. Outside an
-     IOR grid's own box (inside its medium's) the IOR is the ambient one,
-     unscaled by ior_scale.
+   BOUNDARIES, IOR GRIDS, BOUNDS: the faces of refractive media are sharp
+   interfaces where the IOR jumps (Snell, Fresnel); IOR grids are baked
+   trilinear (default) or tricubic (rrv_settings.ior_interpolation); hostile
+   input is refused at load and runaway paths are cut and counted
+   (rrv_render_stats.paths_cut). Without an `ambient ior` the air around a
+   gas medium is the same gas at its ambient state, so a plume whose faces
+   are at that state has no jump; a jump that remains is reported
+   (rrv_medium_face_jumps, `rrv info`, the render summary). The rules and
+   their limits: NOTES at the end.
 
-   IOR GRIDS (rrv_settings.ior_interpolation, scene `render iorinterp`)
-     Where the refractivity r = eta - 1 comes from a grid (IOR, gas state or
-     baked noise), prepare bakes it. TRILINEAR, the default: r trilinear and
-     grad r the trilinear blend of central differences, 16 bytes a sample.
-     That pair is only C0 and its gradient is not the value's derivative, so
-     on grids the comb and RK4 lose their orders (fitted 1.3 to 2.1 and 1.3
-     to 2.0; between neighbouring comb rates anywhere from 0.03 to 5.7).
-     CUBIC: the interpolating tricubic B-spline of r (end slopes from
-     one-sided differences, so cubics are reproduced), value and gradient
-     from one C2 function, 8 bytes a sample: the comb is second order and
-     RK4 third (2.9 to 3.9 measured) on grids, and rays through grids of
-     smooth fields land 65x to 550x closer to the fields' own, for ~1.4x the
-     time a comb kick and ~1.5x an RK4 step (README.md, "On IOR grids";
-     test/measure_grin.c grids). It rings (alternating, 0.27x a voxel) next to
-     features under ~2 voxels wide, where trilinear stays more faithful:
-     hence an option, not the default. Its value is floored halfway between
-     the lowest sample and -1, so eta stays positive where it overshoots.
-
-   BOUNDS
-     No input may hang a render, overflow a pixel or exhaust memory. Refused
-     at load with file:line: message (rrv_scene_prepare checks the media once
-     they are complete and names the statement that broke a limit; line 0 for
-     scenes built in code):
-       - an IOR outside [RRV_MIN_IOR, RRV_MAX_IOR] = [0.1, 10] anywhere in a
-         medium's box, from any field kind or the gas state: beyond it rays
-         are trapped or the radiance scale (eta_camera / eta)^2 explodes, and
-         no transparent material comes near 10;
-       - a peak extinction times the medium's size (its diagonal, or its
-         distance from the origin if larger) above RRV_MAX_OPTICAL_DEPTH =
-         1e12, or a density beyond float: the mean free flight must stay
-         thousands of rounding steps of the coordinates long, or tracking
-         stalls (an extinction of 3e38 gave flights of length 0);
-       - emission (L x scale, Le x Lescale) above RRV_MAX_RADIANCE = 1e20:
-         2^24 samples of it stay 1e11 below float's range;
-       - an ambient IOR above 10, a bend tolerance below 1e-4, mu_eta above
-         1e6 /m, an eikonal step outside [1e-6, 1e6] m (scene and CLI);
-       - a majorant or baked grid above the grid limit (max_grid_bytes);
-       - more than RRV_MAX_BLOBS = 4096 blobs in one field (every lookup
-         sums them all: a grid is the tool for more).
-     Cut and counted (rrv_render_stats.paths_cut, of them cut_tracking and
-     cut_samples):
-       - a tracking walk (one medium along one straight segment) after
-         64 + 4 (peak majorant x chord) tentative collisions (the majorant
-         of the channels it walks for: a channel whose extinction is 4x
-         below the densest walks with one of its own), at most
-         RRV_MAX_SEGMENT_EVENTS = 2^22: the count is Poisson with a mean of at
-         most the second term, so a correct walk never gets there (P < 1e-30);
-       - a leg of a path (between two real vertices) after 64 + 16 times the
-         loop iterations of one straight crossing of every medium at its
-         densest rate (comb kicks, null events, or 4 / step eikonal steps),
-         at most RRV_MAX_SEGMENT_STEPS = 1e7: only trapped rays get there;
-       - a camera path (one pixel sample; of paths_cut, cut_samples) when
-         its loop iterations over all legs plus the tentative collisions it
-         and its shadow rays sampled pass 4 (max_depth + 1) (64 + 16 (1 +
-         one crossing's iterations and collisions at the peak majorant)):
-         a leg and a shadow ray a vertex, each at the leg bound with a
-         collision every iteration, which a path whose legs are within
-         their bound passes only with collisions beyond 16 crossings a
-         leg; at most RRV_MAX_SAMPLE_WORK = 2^24 (a second of one core in
-         eikonal steps): legs each within their bound, 1025 of them (an
-         eikonal step of 1e-6 m in a closed white room) were minutes a
-         sample. It is checked once a loop iteration, so a sample overruns
-         it by at most one walk and one vertex's light sampling. The
-         scenes in scenes/ stay 310x below the cap with every integrator,
-         NEE and scheme, and 7x below their own term (README.md).
-     A cut camera path keeps the light it gathered before the cut; a cut
-     shadow ray is dark. That is biased, so it is never silent: the CLI's
-     summary line prints the count. A sample above RRV_MAX_SAMPLE = 1e30 is
-     discarded as non-finite; pixel sums saturate at FLT_MAX. To keep cuts
-     rare, majorant cells follow the density voxels where a cell would hold
-     an optical depth above 64 (split into equal parts where fewer than 16
-     would cross the box, each bounded exactly; beside a grid's faces the
-     cells bound 0), and RK4 halves steps that span a feature of the IOR.
-     What is left is heavy-tailed: a path that scatters in the thin layer
-     where a grid's density rises from 0 pays null collisions to leave it,
-     about (cell size) x sqrt(2 x slope of the extinction) of them, so a
-     2^3 grid of 7e10 on one face in a 2 m box takes ~3e5 events a sample
-     at 16 cells an axis (test/test_budget.c).
+   READING MAP (the paper's terms and the functions that implement them;
+   `grep -n "^/\* [-=][-=][-=][-=]" rrv.h` lists the sections quoted)
+     refractive delta tracking, the paper's Algorithm 1 (Snell at every null
+       collision): rrv__refractive_delta_tracking, which bends through
+       rrv__bend_at_null_event and rrv__refract_at_null_event (scheme POISSON)
+     the comb (leapfrog kicks at spaced points, the default scheme):
+       rrv__comb_step, rrv__comb_kick, rrv__comb_spacing ("refraction along a
+       walk")
+     Hauf-Grigull (the IOR of a gas from T and P): rrv__refractivity and
+       rrv__gas_fused ("the refractive index"); CONVENTIONS below
+     refractive ratio tracking (the paper's NEE, nee MANIFOLD):
+       rrv__manifold_nee; its solver rrv__manifold_solve on the chain of
+       rrv__chain_* ("nee MANIFOLD")
+     curved NEE by shooting and aiming: rrv__shoot_nee, rrv__solve_shot_seeded;
+       rrv__aim_nee; rrv__cone_nee ("solver", "nee AIM")
+     the eikonal reference (Ament et al.): rrv__eikonal_step,
+       rrv__eikonal_step_controlled, rrv__eikonal_plan ("eikonal")
+     ratio tracking of shadow rays: rrv__ratio_tracking_transmittance;
+       the path tracer: rrv__trace_path; a rectangle: rrv_render_rect
 
    USAGE
      In exactly one C file:
@@ -439,24 +259,8 @@
    CONVENTIONS (the contract between scene files, the library and tests)
      Units: metres, kelvin, pascal; extinction in 1/m. Colour is linear RGB,
      three channels; the IOR is achromatic.
-     Grids ("gridvol", as defined by Mitsuba 0.6), all little endian:
-       3 bytes "VOL", 1 byte version 3, int32 encoding 1 (float32),
-       int32 xres yres zres (each >= 2), int32 channels (1 or 3),
-       float32 box xmin ymin zmin xmax ymax zmax, then float32 samples at
-       index ((z*yres + y)*xres + x)*channels + c.
-       Samples sit on corners: sample i along x is at xmin + i*(xmax-xmin)/
-       (xres-1), so the first and last lie on the box faces. Outside the box
-       a field takes its ambient value. A file is refused (with the reason)
-       for a wrong magic or version, a resolution < 2 or an overflowing
-       size, a byte count that does not match, an empty or non-finite box, a
-       NaN or infinite sample, or a negative density.
-     NanoVDB grids (.nvdb, NanoVDB 32.x as nanovdb_convert writes them,
-       little endian, uncompressed; float, fp4, fp8, fp16, fpN): value ijk
-       sits at world map * ijk + translation (the grid's own map), trilinear
-       between index points; where no data is stored, the grid's background,
-       and an IOR grid beyond one voxel past its data is the ambient IOR.
-       Every offset is checked against the grid's buffer and every value
-       must be finite; negative densities count as 0. See rrv_nanovdb.
+     Grids: gridvol (Mitsuba 0.6's format) and NanoVDB 32.x files; their
+       layout and why a file is refused: NOTES at the end of this file.
      Gas IOR (Hauf-Grigull; Gladstone-Dale for an ideal gas):
        eta - 1 = (eta_ref - 1) (P / P_ref) (T_ref / T), defaults eta_ref =
        1.000292, P_ref = 101325 Pa, T_ref = 300 K; its gradient is
@@ -465,71 +269,9 @@
      Precision: air's eta - 1 is ~3e-4 and a fire moves it by ~2e-4, about
        2000 float ulps of 1, so rays carry the refractivity r = eta - 1 in
        double, and IOR ratios are formed as 1 + (r_i - r_o) / (1 + r_o).
-     Snell at a null event: ratio m = eta_i / eta_o, normal n = grad eta / |
-       grad eta| facing the incoming ray, c = -n.d, k = 1 - m^2 (1 - c^2);
-       k < 0 reflects (d + 2 c n), else d' = m d + (m c - sqrt(k)) n, written
-       as a change of d so that m ~ 1 does not cancel.
      Radiance: L / eta^2 is invariant along a ray (Ament et al. 2014), so a
        path from an emitter at eta_e to the camera at eta_c scales by
        (eta_c / eta_e)^2; thermal emission follows Kirchhoff (above).
-
-   HISTORY
-     0.9.1  the refraction floor measured per sample (the comb without
-            kicks costs 1.40x / 1.51x classic's instructions on fire /
-            haze, above the 1.25x target; test/bench/per_sample.py);
-            cheaper looks for faces and majorant iterator set-up, the next
-            kick's cell prefetched (bit-identical); rrv info and
-            rrv_medium_channel_groups show a medium's channel groups; a
-            camera frame from vectors whose squares underflow is unit
-     0.9.0  channel groups: channels whose extinctions differ more than 4x
-            walk with majorants of their own (a thin channel no longer
-            takes a dense one's collisions: sigma_t 4, 6e10, 6 per metre
-            took 4e6-collision walks); with that, the Sobol sampler is the
-            default (lens caustic, 1 m light: shoot 7x none, from 1.6x);
-            free flights drawn as an optical depth walked through the
-            majorant cells (one random number a collision, not a cell)
-     0.8.0  one light draw a vertex shared by straight and curved NEE;
-            eikonal steps skip their support looks inside a safety ball
-            (bit-identical); shoot's coarse stage capped at 0.6 rad a
-            step; the Sobol sampler measured on every scene (up to 6x
-            less variance where light is sampled through refraction:
-            lens caustic, 1 m light, shoot 7x none with sobol), not yet
-            the default
-     0.7.0  nee shoot and manifold also draw rays toward strongly
-            refracting supports, for the roots of weak chords that
-            forward paths carried alone (the heavy tail of small-light
-            caustics); shoot's solves 1.7x-3x cheaper (steps and Jacobi
-            fields share lookups, fused profile and gas evaluations);
-            comb chords' walks and set-up cheaper (refraction 2.30x
-            classic on fire, 2.28x on haze, from 2.38x and 2.39x)
-     0.6.0  nee aim: bent shadow rays aimed at light samples, unbiased at
-            about straight NEE's cost, the refractive default (as shoot);
-            shoot's solve 3.4x cheaper on haze (fused Jacobian
-            lookup, polish memo, the root's own chords); cheaper faces of
-            refractive boxes (float rounding is no interface); a comb
-            spacing bounded by the gradient's variation, measured and
-            left off
-     0.5.0  unbiased NEE by default (shoot: curved connections solved with
-            the eikonal integrator, left to forward paths with the
-            refractive one); shoot shares paths with the
-            forward path by MIS; manifold's kick model, trust region and heap
-            scratch; exact derivatives of every IOR kind's gradient, so both
-            run in grids and gas states; exact majorants of coarse grids;
-            the comb's rate integrated cell by cell; scenes fire_caustic and
-            haze
-     0.4.0  scenes built in code (rrv_scene_create and friends: zero means
-            default, one check per object, the parser a client); nee manifold
-            (the paper's refractive ratio tracking); Sobol sampler; parallel
-            set-up (parallel_for); cheaper comb spacing; errors from
-            rrv_render_rect and the writers; deflated PNG; EXR attributes
-     0.3.0  boundaries: support faces are sharp interfaces (Snell, Fresnel,
-            total internal reflection) in every integrator; work bounds and
-            load-time limits; nee none|straight|shoot; OpenEXR in and out;
-            NanoVDB grids; cubic IOR grids; one segment planner shared by the
-            path tracer and rrv_trace_ray
-     0.2.0  refraction: IOR fields (gas state, profiles, grids), refractive
-            and eikonal integrators, rrv_trace_ray
-     0.1.0  classic null-scattering path tracer, scene format, image I/O
 */
 #ifndef RRV_H_INCLUDED
 #define RRV_H_INCLUDED
@@ -15328,6 +15070,337 @@ RRV_DEF rrv_result rrv_scene_load(const char *path, const rrv_load_options *opt,
 
 #endif /* RRV_IMPLEMENTATION_INCLUDED */
 #endif /* RRV_IMPLEMENTATION */
+
+/*
+------------------------------------------------------------------------------
+NOTES: how the estimators work, and the rules behind BOUNDARIES, IOR GRIDS
+and BOUNDS (moved here from the manual at the top, word for word)
+------------------------------------------------------------------------------
+
+   NEXT-EVENT ESTIMATION, in detail
+     DEFAULT     SHOOT, the most efficient curved mode measured (test/bench/RESULTS.md;
+                 the default integrator is eikonal where shooting pays).
+                 With the refractive integrator, which shooting cannot
+                 differentiate, it aims (AIM): unbiased, about as cheap as
+                 STRAIGHT, but without focusing, so caustics of small
+                 lights stay noisy (MANIFOLD solves them there, at a high
+                 cost).
+     STRAIGHT    a straight shadow ray, ratio-tracked,
+                 combined by the power heuristic with the phase/BSDF-sampled
+                 continuation as though both sampled the same path. They do
+                 not: the continuation bends and the shadow ray does not, so
+                 wherever either crosses a refracting medium the sum is
+                 biased: a lens caustic comes out at half its radiance and
+                 white furnaces with refraction above 1 (test/test_nee.c).
+     NONE        no light sampling: lights, emitters and the sky count only
+                 where the bent path hits them, with MIS weight 1. Unbiased
+                 (furnaces give exactly 1), but noisy for small lights.
+     SHOOT       curved NEE by shooting (eikonal integrator), unbiased up
+                 to a cap on trials. The path from the last vertex to the
+                 light decides which estimators may make it: touching no
+                 refraction support (box or profile sphere), or weak (below),
+                 straight NEE and the forward path, by the power heuristic,
+                 as classic does; curved (part of it in a support, no sharp interface
+                 crossed) and ending on a quad or triangle light, the curved
+                 connection and the forward path, by the power heuristic on
+                 their solid-angle densities at the initial direction w0:
+                 p_nee = |det J_plane| / (area x light choices) (NEE's
+                 density had every solve found the root; the 1/p of the
+                 trials is an unbiased factor on top) and the vertex's own
+                 pdf of w0. The forward path computes det J_plane for itself
+                 from one shot along its own w0 with the same steps, so both
+                 sides evaluate the same function of the path, and the two
+                 weights sum to one (test/test_nee.c); any such weights keep
+                 the sum unbiased. Near a fold caustic det -> 0 and the
+                 forward path takes the path, which bounds NEE's 1/|det|
+                 (unweighted, its square is not integrable there).
+                 Everything else (across a sharp interface, to the sky, to
+                 sphere lights) only by forward paths, weight 1. The
+                 connection: a point y uniform on a light, Newton on the
+                 two angles of the initial direction so that the ray,
+                 traced with the same steps camera rays take, first crosses
+                 the light's plane from its front at y (at most 20 shots,
+                 residual < 1e-9 (1 + |y - x0|), step halved on a worse or
+                 failed shot and doubled up to 1, at most 0.5 rad, given up
+                 when three halvings in a row fail; det J = 0, a caustic,
+                 fails); the density from the Jacobi field of the same
+                 discrete steps, dw0 = dA_y / |det J_plane|
+                 (= |cos theta_y| / |det J_perp|); visibility and
+                 ratio-tracked transmittance along every chord. Seeds:
+                 Gaussians of 0.05 rad (6 in 10) and 0.3 rad (3 in 10)
+                 around the straight direction or a uniform direction, so
+                 every root has a nonzero probability p; a solve tries up to
+                 3 seeds; 1/p is estimated by repeating independent solves
+                 until the same root (within 1e-5) comes back, at most 64
+                 trials (Specular Manifold Sampling). A failed solve
+                 contributes zero. The derivative of grad eta has closed
+                 forms for the profiles and blobs; for grids (gridvol,
+                 NanoVDB, baked noise, a gas through Hauf-Grigull) it is
+                 the exact derivative of the blended gradient the rays
+                 use. With the refractive integrator SHOOT aims (AIM).
+     MANIFOLD    curved NEE by the paper's method (refractive and eikonal
+                 integrators, the same closed-form Hessians), partitioning
+                 path space by the same classes (weights: 1 for the estimator a
+                 path belongs to, 0 for the others; power heuristic only
+                 between straight NEE and forward paths outside supports).
+                 A point y uniform on a quad or triangle light; a chain of
+                 vertices on comb planes along the chord x0 -> y (spacing
+                 `step`, random offset, at most 512, wider beyond), each
+                 kicking the ray as the comb does (eta d += grad eta h,
+                 h the path it stands for); Newton on two unknowns a vertex
+                 (gauge `manifoldgauge chord`, the default: in the comb
+                 plane; `iso`: in the isosurface's tangent plane, the
+                 paper's, undefined where grad eta ~ 0) until every segment
+                 follows its kicked direction within 1e-9 rad:
+                 block-tridiagonal 2x2 Jacobian solved by block Thomas in
+                 O(n) inside a trust region (dogleg; radius halved on a
+                 step that does not lower the residual, doubled on one the
+                 linear model predicted), at most 40 evaluations; a
+                 singular pivot (a caustic) or a root that is not a
+                 physical path (a segment against its kick, a sharp
+                 interface crossed) fails. The density dw0/dA_y from the
+                 same block elimination (the generalised geometry term of
+                 Specular Manifold Sampling). Seeds: a direction from a
+                 mixture of Gaussians around the chord (0.02 rad half the
+                 time, 0.2 rad 3 in 8) and uniform (1 in 8), traced through
+                 the planes by the chain's own rule and aimed at y by
+                 shooting (at most 16 steps; a parabola where no trace
+                 reaches y's plane); the first solve and every trial draw
+                 from that one distribution. `manifoldtrials 0` (default, unbiased
+                 for the chain model): 1/p by repeating solves until the
+                 root recurs (initial directions within 1e-5), at most 64
+                 trials. `manifoldtrials M`: M solves, each distinct root
+                 counted once (biased low where a root's basin is small).
+                 `manifolddrop D`: leave out comb planes across which eta
+                 on the chord changes by less than D (faster, biased; 0, the
+                 default, keeps all). Unsupported IORs as for shoot.
+     AIM         bent shadow rays (refractive comb and eikonal integrators;
+                 the Poisson and midpoint schemes, whose rays bend at null
+                 events, leave curved connections to forward paths, counted
+                 in rrv_render_stats.solves_unsupported). The classes are
+                 SHOOT's; for a curved one, a point y uniform on a quad or
+                 triangle light gives w0 = (y - x0) / |y - x0|, and the
+                 shadow ray leaves x0 along w0 bent as camera rays are (the
+                 same comb kicks or eikonal steps), its transmittance
+                 ratio-tracked chord by chord; the light's radiance counts
+                 if the ray lands on that light's front, nothing if it meets
+                 anything else, leaves or crosses a sharp interface. w0 has
+                 the density of the straight line from x0 along w0 meeting
+                 the light, (|y - x0|^2 / |cos theta_y|) / (area x light
+                 choices), whichever face it meets: a function of w0 alone,
+                 so the power heuristic against the vertex's pdf of w0 is
+                 exact, and a forward path that reaches the light from x0
+                 along w0 takes the complementary weight wherever it lands
+                 on it. Unbiased for the integrator's own rays, no solve, no
+                 trials; as with NONE, focusing shows only as noise, so it
+                 suits weak heat haze (nearly every aimed ray lands) and not
+                 the caustics of small lights, which SHOOT solves.
+     The weak class (shoot, manifold and aim): a connection from x0 to y whose
+     straight chord touches no refraction support (or only supports with
+     zero gradient along it) is straight NEE's, with the ordinary MIS
+     weights; curved NEE skips it. A forward path that crossed no sharp
+     interface and ends at y (or leaves for the sky along d) is sorted by the
+     same function of its two ends, and, if its chord is weak but the path
+     itself turned (it left x0 at an angle to the chord larger than the
+     chord's bound on bending), it is another root of those two ends that no
+     light sample stands for. With aim it counts with weight 1; with shoot
+     and manifold it is shared by the power heuristic with one more ray a
+     vertex, drawn uniformly in the cone of a strongly refracting support
+     (one that can turn a ray by more than 0.05 rad across it: a lens) and
+     traced bent, which counts the light it lands on only for such roots
+     (rrv__cone_nee; the cone's density is a function of x0 and w0, so the
+     weights are exact). A build may set
+     RRV__WEAK_BEND to K > 0 to treat chords whose bound on bending (the
+     integral along the chord of each majorant cell's max |grad eta| over
+     the lowest eta) is at most K bend tolerances as straight too: on weak
+     heat haze that makes curved NEE cost ~1.3x straight NEE instead of
+     ~36x, but it is biased where a strong medium's gradient varies within
+     a cell (measured in test/bench/RESULTS.md, "Weak connections"), so it is off.
+
+   BOUNDARIES (design decisions)
+     Faces of refractive media (a medium's box; the sphere of a Luneburg or
+     fish-eye profile) end every straight segment. An IOR that jumps across
+     a face is a sharp interface: refracted once by Snell's law with the
+     face normal, reflected with the Fresnel probability or by total
+     internal reflection; such reflections count toward max_depth. A medium
+     whose IOR equals the ambient IOR everywhere does not refract. The
+     ambient IOR (rrv_settings.ambient_ior, scene `ambient ior`) left 0 is
+     that of the air a gas medium (ior ... gas) sits in: the same gas
+     relation at its ambient state (T_ref, P_ref, what its fields give
+     outside their boxes), 1 + iorscale (eta_ref - 1), from the first gas
+     medium listed; 1 without one. So a plume whose faces are at the
+     ambient state has no jump whatever its iorscale; a given `ambient ior`
+     is used as given. A jump that remains (a field that does not end at
+     the ambient state, glass, a second gas with another iorscale) is a
+     sharp interface: rrv_medium_face_jumps measures it per face and
+     `rrv info` and the render summary report it. Outside an
+     IOR grid's own box (inside its medium's) the IOR is the ambient one,
+     unscaled by ior_scale.
+
+   IOR GRIDS (rrv_settings.ior_interpolation, scene `render iorinterp`)
+     Where the refractivity r = eta - 1 comes from a grid (IOR, gas state or
+     baked noise), prepare bakes it. TRILINEAR, the default: r trilinear and
+     grad r the trilinear blend of central differences, 16 bytes a sample.
+     That pair is only C0 and its gradient is not the value's derivative, so
+     on grids the comb and RK4 lose their orders (fitted 1.3 to 2.1 and 1.3
+     to 2.0; between neighbouring comb rates anywhere from 0.03 to 5.7).
+     CUBIC: the interpolating tricubic B-spline of r (end slopes from
+     one-sided differences, so cubics are reproduced), value and gradient
+     from one C2 function, 8 bytes a sample: the comb is second order and
+     RK4 third (2.9 to 3.9 measured) on grids, and rays through grids of
+     smooth fields land 65x to 550x closer to the fields' own, for ~1.4x the
+     time a comb kick and ~1.5x an RK4 step (test/bench/RESULTS.md, "On IOR grids";
+     test/measure_grin.c grids). It rings (alternating, 0.27x a voxel) next to
+     features under ~2 voxels wide, where trilinear stays more faithful:
+     hence an option, not the default. Its value is floored halfway between
+     the lowest sample and -1, so eta stays positive where it overshoots.
+
+   BOUNDS
+     No input may hang a render, overflow a pixel or exhaust memory. Refused
+     at load with file:line: message (rrv_scene_prepare checks the media once
+     they are complete and names the statement that broke a limit; line 0 for
+     scenes built in code):
+       - an IOR outside [RRV_MIN_IOR, RRV_MAX_IOR] = [0.1, 10] anywhere in a
+         medium's box, from any field kind or the gas state: beyond it rays
+         are trapped or the radiance scale (eta_camera / eta)^2 explodes, and
+         no transparent material comes near 10;
+       - a peak extinction times the medium's size (its diagonal, or its
+         distance from the origin if larger) above RRV_MAX_OPTICAL_DEPTH =
+         1e12, or a density beyond float: the mean free flight must stay
+         thousands of rounding steps of the coordinates long, or tracking
+         stalls (an extinction of 3e38 gave flights of length 0);
+       - emission (L x scale, Le x Lescale) above RRV_MAX_RADIANCE = 1e20:
+         2^24 samples of it stay 1e11 below float's range;
+       - an ambient IOR above 10, a bend tolerance below 1e-4, mu_eta above
+         1e6 /m, an eikonal step outside [1e-6, 1e6] m (scene and CLI);
+       - a majorant or baked grid above the grid limit (max_grid_bytes);
+       - more than RRV_MAX_BLOBS = 4096 blobs in one field (every lookup
+         sums them all: a grid is the tool for more).
+     Cut and counted (rrv_render_stats.paths_cut, of them cut_tracking and
+     cut_samples):
+       - a tracking walk (one medium along one straight segment) after
+         64 + 4 (peak majorant x chord) tentative collisions (the majorant
+         of the channels it walks for: a channel whose extinction is 4x
+         below the densest walks with one of its own), at most
+         RRV_MAX_SEGMENT_EVENTS = 2^22: the count is Poisson with a mean of at
+         most the second term, so a correct walk never gets there (P < 1e-30);
+       - a leg of a path (between two real vertices) after 64 + 16 times the
+         loop iterations of one straight crossing of every medium at its
+         densest rate (comb kicks, null events, or 4 / step eikonal steps),
+         at most RRV_MAX_SEGMENT_STEPS = 1e7: only trapped rays get there;
+       - a camera path (one pixel sample; of paths_cut, cut_samples) when
+         its loop iterations over all legs plus the tentative collisions it
+         and its shadow rays sampled pass 4 (max_depth + 1) (64 + 16 (1 +
+         one crossing's iterations and collisions at the peak majorant)):
+         a leg and a shadow ray a vertex, each at the leg bound with a
+         collision every iteration, which a path whose legs are within
+         their bound passes only with collisions beyond 16 crossings a
+         leg; at most RRV_MAX_SAMPLE_WORK = 2^24 (a second of one core in
+         eikonal steps): legs each within their bound, 1025 of them (an
+         eikonal step of 1e-6 m in a closed white room) were minutes a
+         sample. It is checked once a loop iteration, so a sample overruns
+         it by at most one walk and one vertex's light sampling. The
+         scenes in scenes/ stay 310x below the cap with every integrator,
+         NEE and scheme, and 7x below their own term (test/bench/RESULTS.md).
+     A cut camera path keeps the light it gathered before the cut; a cut
+     shadow ray is dark. That is biased, so it is never silent: the CLI's
+     summary line prints the count. A sample above RRV_MAX_SAMPLE = 1e30 is
+     discarded as non-finite; pixel sums saturate at FLT_MAX. To keep cuts
+     rare, majorant cells follow the density voxels where a cell would hold
+     an optical depth above 64 (split into equal parts where fewer than 16
+     would cross the box, each bounded exactly; beside a grid's faces the
+     cells bound 0), and RK4 halves steps that span a feature of the IOR.
+     What is left is heavy-tailed: a path that scatters in the thin layer
+     where a grid's density rises from 0 pays null collisions to leave it,
+     about (cell size) x sqrt(2 x slope of the extinction) of them, so a
+     2^3 grid of 7e10 on one face in a 2 m box takes ~3e5 events a sample
+     at 16 cells an axis (test/test_budget.c).
+
+
+   FILE FORMATS AND SNELL'S LAW (from CONVENTIONS above)
+     Grids ("gridvol", as defined by Mitsuba 0.6), all little endian:
+       3 bytes "VOL", 1 byte version 3, int32 encoding 1 (float32),
+       int32 xres yres zres (each >= 2), int32 channels (1 or 3),
+       float32 box xmin ymin zmin xmax ymax zmax, then float32 samples at
+       index ((z*yres + y)*xres + x)*channels + c.
+       Samples sit on corners: sample i along x is at xmin + i*(xmax-xmin)/
+       (xres-1), so the first and last lie on the box faces. Outside the box
+       a field takes its ambient value. A file is refused (with the reason)
+       for a wrong magic or version, a resolution < 2 or an overflowing
+       size, a byte count that does not match, an empty or non-finite box, a
+       NaN or infinite sample, or a negative density.
+     NanoVDB grids (.nvdb, NanoVDB 32.x as nanovdb_convert writes them,
+       little endian, uncompressed; float, fp4, fp8, fp16, fpN): value ijk
+       sits at world map * ijk + translation (the grid's own map), trilinear
+       between index points; where no data is stored, the grid's background,
+       and an IOR grid beyond one voxel past its data is the ambient IOR.
+       Every offset is checked against the grid's buffer and every value
+       must be finite; negative densities count as 0. See rrv_nanovdb.
+     Snell at a null event: ratio m = eta_i / eta_o, normal n = grad eta / |
+       grad eta| facing the incoming ray, c = -n.d, k = 1 - m^2 (1 - c^2);
+       k < 0 reflects (d + 2 c n), else d' = m d + (m c - sqrt(k)) n, written
+       as a change of d so that m ~ 1 does not cancel.
+
+------------------------------------------------------------------------------
+VERSION HISTORY
+------------------------------------------------------------------------------
+     0.9.1  the refraction floor measured per sample (the comb without
+            kicks costs 1.40x / 1.51x classic's instructions on fire /
+            haze, above the 1.25x target; test/bench/per_sample.py);
+            cheaper looks for faces and majorant iterator set-up, the next
+            kick's cell prefetched (bit-identical); rrv info and
+            rrv_medium_channel_groups show a medium's channel groups; a
+            camera frame from vectors whose squares underflow is unit
+     0.9.0  channel groups: channels whose extinctions differ more than 4x
+            walk with majorants of their own (a thin channel no longer
+            takes a dense one's collisions: sigma_t 4, 6e10, 6 per metre
+            took 4e6-collision walks); with that, the Sobol sampler is the
+            default (lens caustic, 1 m light: shoot 7x none, from 1.6x);
+            free flights drawn as an optical depth walked through the
+            majorant cells (one random number a collision, not a cell)
+     0.8.0  one light draw a vertex shared by straight and curved NEE;
+            eikonal steps skip their support looks inside a safety ball
+            (bit-identical); shoot's coarse stage capped at 0.6 rad a
+            step; the Sobol sampler measured on every scene (up to 6x
+            less variance where light is sampled through refraction:
+            lens caustic, 1 m light, shoot 7x none with sobol), not yet
+            the default
+     0.7.0  nee shoot and manifold also draw rays toward strongly
+            refracting supports, for the roots of weak chords that
+            forward paths carried alone (the heavy tail of small-light
+            caustics); shoot's solves 1.7x-3x cheaper (steps and Jacobi
+            fields share lookups, fused profile and gas evaluations);
+            comb chords' walks and set-up cheaper (refraction 2.30x
+            classic on fire, 2.28x on haze, from 2.38x and 2.39x)
+     0.6.0  nee aim: bent shadow rays aimed at light samples, unbiased at
+            about straight NEE's cost, the refractive default (as shoot);
+            shoot's solve 3.4x cheaper on haze (fused Jacobian
+            lookup, polish memo, the root's own chords); cheaper faces of
+            refractive boxes (float rounding is no interface); a comb
+            spacing bounded by the gradient's variation, measured and
+            left off
+     0.5.0  unbiased NEE by default (shoot: curved connections solved with
+            the eikonal integrator, left to forward paths with the
+            refractive one); shoot shares paths with the
+            forward path by MIS; manifold's kick model, trust region and heap
+            scratch; exact derivatives of every IOR kind's gradient, so both
+            run in grids and gas states; exact majorants of coarse grids;
+            the comb's rate integrated cell by cell; scenes fire_caustic and
+            haze
+     0.4.0  scenes built in code (rrv_scene_create and friends: zero means
+            default, one check per object, the parser a client); nee manifold
+            (the paper's refractive ratio tracking); Sobol sampler; parallel
+            set-up (parallel_for); cheaper comb spacing; errors from
+            rrv_render_rect and the writers; deflated PNG; EXR attributes
+     0.3.0  boundaries: support faces are sharp interfaces (Snell, Fresnel,
+            total internal reflection) in every integrator; work bounds and
+            load-time limits; nee none|straight|shoot; OpenEXR in and out;
+            NanoVDB grids; cubic IOR grids; one segment planner shared by the
+            path tracer and rrv_trace_ray
+     0.2.0  refraction: IOR fields (gas state, profiles, grids), refractive
+            and eikonal integrators, rrv_trace_ray
+     0.1.0  classic null-scattering path tracer, scene format, image I/O
+*/
 
 /*
 ------------------------------------------------------------------------------

@@ -4,9 +4,9 @@
    bit-identically to the same scene parsed from text, the file-read
    callback gets every buffer back through its release pair, and
    rrv_render_rect says what is wrong. Run from the repository root. */
-#define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
+#include "vec3.h"
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -53,8 +53,8 @@ static void test_zero_means_default(void)
     CHECK(rrv_scene_add_material(s, &mat, &i, &err) == RRV_OK && i == 0);
     CHECK(s->materials[0].albedo[1] == 0.8 && s->materials[0].albedo2[2] == 0.2 &&
           s->materials[0].checker_scale == 1 && strcmp(s->materials[0].name, "material 0") == 0);
-    med.lo = rrv__v3(-1, -2, -3);
-    med.hi = rrv__v3(1, 2, 5);
+    med.lo = tv3(-1, -2, -3);
+    med.hi = tv3(1, 2, 5);
     CHECK(rrv_scene_add_medium(s, &med, &i, &err) == RRV_OK && i == 0);
     CHECK(s->media[0].scale == 1 && s->media[0].sigma_a[2] == 1 && s->media[0].sigma_s[0] == 1 &&
           s->media[0].Lescale == 1 && s->media[0].eta_ref == 1.000292 && s->media[0].P_ref == 101325 &&
@@ -226,15 +226,15 @@ static void test_refusals_name_the_object(void)
     expect_message(rrv_scene_set_camera(s, &cam, &err), &err, RRV_ERROR_ARGUMENT,
                    "camera: fov must be in (0, 180), got 180");
     cam.fov = 0;
-    cam.up = rrv__v3(0, 0, 2);
+    cam.up = tv3(0, 0, 2);
     expect_message(rrv_scene_set_camera(s, &cam, &err), &err, RRV_ERROR_ARGUMENT,
                    "camera: up is parallel to the view direction");
     CHECK(s->camera.eye.z == 5); /* a refused camera changes nothing */
 
     memset(&med, 0, sizeof med);
     strcpy(med.name, "smoke");
-    med.lo = rrv__v3(1, -1, -1);
-    med.hi = rrv__v3(-1, 1, 1);
+    med.lo = tv3(1, -1, -1);
+    med.hi = tv3(-1, 1, 1);
     expect_message(rrv_scene_add_medium(s, &med, &i, &err), &err, RRV_ERROR_ARGUMENT,
                    "medium \"smoke\": box is empty along x (1 is not below -1)");
     med.lo.x = -1;
@@ -269,11 +269,11 @@ static void test_refusals_name_the_object(void)
 
     memset(&quad, 0, sizeof quad);
     quad.kind = RRV_SHAPE_QUAD;
-    quad.e1 = rrv__v3(1, 0, 0);
-    quad.e2 = rrv__v3(2, 0, 0);
+    quad.e1 = tv3(1, 0, 0);
+    quad.e2 = tv3(2, 0, 0);
     expect_message(rrv_scene_add_shape(s, &quad, &i, &err), &err, RRV_ERROR_ARGUMENT,
                    "shape 0 (quad): u and v are parallel (zero area)");
-    quad.e2 = rrv__v3(0, 1, 0);
+    quad.e2 = tv3(0, 1, 0);
     quad.material = 3;
     expect_message(rrv_scene_add_shape(s, &quad, &i, &err), &err, RRV_ERROR_ARGUMENT,
                    "shape 0 (quad): material 3 is not one of the scene's 1");
@@ -324,8 +324,8 @@ static void test_code_only_refusals(void)
     sh.L[0] = 1e30;
     expect_message(rrv_scene_add_shape(s, &sh, NULL, &err), &err, RRV_ERROR_ARGUMENT,
                    "shape 0 (sphere): L times scale must be at most 1e+20, got 1e+30");
-    med.lo = rrv__v3(-1, -1, -1);
-    med.hi = rrv__v3(1, 1, 1);
+    med.lo = tv3(-1, -1, -1);
+    med.hi = tv3(1, 1, 1);
     CHECK(rrv_scene_add_medium(s, &med, NULL, &err) == RRV_OK);
     f.kind = (rrv_field_kind)99;
     expect_message(rrv_scene_set_field(s, 0, RRV_MEDIUM_IOR, &f, &err), &err, RRV_ERROR_ARGUMENT,
@@ -334,7 +334,7 @@ static void test_code_only_refusals(void)
     f.gradient = 0.1;
     expect_message(rrv_scene_set_field(s, 0, RRV_MEDIUM_IOR, &f, &err), &err, RRV_ERROR_ARGUMENT,
                    "ior of medium \"medium 0\": slab normal must be nonzero");
-    f.normal = rrv__v3(0, 3, 4);
+    f.normal = tv3(0, 3, 4);
     CHECK(rrv_scene_set_field(s, 0, RRV_MEDIUM_IOR, &f, &err) == RRV_OK);
     CHECK(fabs(s->media[0].ior.normal.y - 0.6) < 1e-15 && fabs(s->media[0].ior.normal.z - 0.8) < 1e-15);
     f.kind = RRV_FIELD_CONSTANT;
@@ -351,14 +351,14 @@ static void test_prepare_checks_hand_edits(void)
     rrv_medium med;
     rrv_error err;
     memset(&med, 0, sizeof med);
-    med.lo = rrv__v3(-1, -1, -1);
-    med.hi = rrv__v3(1, 1, 1);
+    med.lo = tv3(-1, -1, -1);
+    med.hi = tv3(1, 1, 1);
     CHECK(rrv_scene_add_medium(s, &med, NULL, &err) == RRV_OK);
     CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
     s->camera.look = s->camera.eye;
     expect_message(rrv_scene_prepare(s, &err), &err, RRV_ERROR_ARGUMENT,
                    "camera: eye and look must be distinct finite points");
-    s->camera.look = rrv__v3(0, 0, 0);
+    s->camera.look = tv3(0, 0, 0);
     s->camera.fov = 0;
     expect_message(rrv_scene_prepare(s, &err), &err, RRV_ERROR_ARGUMENT,
                    "camera: fov must be in (0, 180), got 0");
@@ -411,7 +411,7 @@ static rrv_scene *scene_in_code(void)
     memset(&puff, 0, sizeof puff);
     memset(&density, 0, sizeof density);
     memset(&ior, 0, sizeof ior);
-    cam.eye = rrv__v3(0, 0.5, 4);
+    cam.eye = tv3(0, 0.5, 4);
     cam.fov = 35;
     cam.width = 12;
     cam.height = 9;
@@ -426,17 +426,17 @@ static rrv_scene *scene_in_code(void)
     red.albedo[0] = 0.8;
     red.albedo[1] = red.albedo[2] = 0.2;
     quad.kind = RRV_SHAPE_QUAD;
-    quad.p0 = rrv__v3(-3, -1, -3);
-    quad.e1 = rrv__v3(6, 0, 0);
-    quad.e2 = rrv__v3(0, 0, 6);
+    quad.p0 = tv3(-3, -1, -3);
+    quad.e1 = tv3(6, 0, 0);
+    quad.e2 = tv3(0, 0, 6);
     light.kind = RRV_SHAPE_SPHERE;
-    light.center = rrv__v3(0, 3, 0);
+    light.center = tv3(0, 3, 0);
     light.radius = 0.5;
     light.material = 1; /* the parser made "default" second */
     light.L[0] = light.L[1] = light.L[2] = 4;
     strcpy(puff.name, "puff");
-    puff.lo = rrv__v3(-1, -1, -1);
-    puff.hi = rrv__v3(1, 1, 1);
+    puff.lo = tv3(-1, -1, -1);
+    puff.hi = tv3(1, 1, 1);
     puff.sigma_a[0] = puff.sigma_a[1] = puff.sigma_a[2] = 0.5;
     /* in code a zero sigma_s beside a nonzero sigma_a is a zero; the file's
        unsaid sigma_s is 1 */
@@ -536,8 +536,8 @@ static void test_render_rect_errors(void)
     expect_message(rrv_render_rect(s, 0, 0, 12, 9, 2, 1, sum, 12, NULL, &err), &err, RRV_ERROR_ARGUMENT,
                    "rrv_render_rect: samples [2,1) are not a range of indices >= 0");
     memset(&extra, 0, sizeof extra);
-    extra.lo = rrv__v3(2, 2, 2);
-    extra.hi = rrv__v3(3, 3, 3);
+    extra.lo = tv3(2, 2, 2);
+    extra.hi = tv3(3, 3, 3);
     CHECK(rrv_scene_add_medium(s, &extra, NULL, &err) == RRV_OK);
     CHECK(rrv_render_rect(s, 0, 0, 12, 9, 0, 1, sum, 12, NULL, &err) == RRV_ERROR_ARGUMENT);
     CHECK(strstr(err.message, "not prepared") != NULL);
@@ -561,8 +561,8 @@ static void test_fields_and_meshes_are_copied(void)
     memset(&f, 0, sizeof f);
     memset(blobs, 0, sizeof blobs);
     memset(&proto, 0, sizeof proto);
-    med.lo = rrv__v3(-1, -1, -1);
-    med.hi = rrv__v3(1, 1, 1);
+    med.lo = tv3(-1, -1, -1);
+    med.hi = tv3(1, 1, 1);
     CHECK(rrv_scene_add_medium(s, &med, NULL, &err) == RRV_OK);
     blobs[0].radius = blobs[1].radius = 0.3;
     blobs[1].weight = 2;

@@ -10,13 +10,11 @@
    the medium. In row order the same check fails on most of them.
 
    The CLI's own functions (tile_stride, tile_for_turn, eta_seconds) are what
-   is tested, so main.c is compiled in with its main renamed. argv[1] is the
-   build folder (unused). */
+   is tested, so main.c is compiled in with its main renamed (and linked with
+   the library as the CLI is). argv[1] is the build folder (unused). */
 #define main rrv_cli_main
 #include "../main.c"
 #undef main
-#define RRV_IMPLEMENTATION
-#include "../rrv.h"
 #include "check.h"
 
 

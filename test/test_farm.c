@@ -5,7 +5,6 @@
    scheduler would run them (without one: each array task in turn) and
    resume. Runs BUILD/rrv as a child process; argv[1] is the build folder. */
 #define _XOPEN_SOURCE 700 /* POSIX 2008 with realpath */
-#define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
 

@@ -7,7 +7,6 @@
    and for a FIFO, /dev/zero and folders as inputs. */
 #define _POSIX_C_SOURCE 200809L
 #endif
-#define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
 #include "inflate.h"

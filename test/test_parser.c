@@ -15,25 +15,7 @@
 #include <float.h>
 #include <locale.h>
 
-static size_t t_largest;     /* largest single request since reset */
-static long t_alloc_count;   /* requests since reset */
-static long t_fail_at = -1;  /* request index to refuse, -1: none */
-
-static void *t_malloc(size_t n)
-{
-    if (t_fail_at >= 0 && t_alloc_count++ == t_fail_at) return NULL;
-    if (n > t_largest) t_largest = n;
-    return malloc(n);
-}
-static void *t_realloc(void *p, size_t n)
-{
-    if (t_fail_at >= 0 && t_alloc_count++ == t_fail_at) return NULL;
-    if (n > t_largest) t_largest = n;
-    return realloc(p, n);
-}
-#define RRV_MALLOC(sz) t_malloc(sz)
-#define RRV_REALLOC(p, sz) t_realloc(p, sz)
-#define RRV_FREE(p) free(p)
+#include "alloc_hook.h" /* counts allocations, refuses the Nth on request */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
