@@ -6677,7 +6677,7 @@ RRV_DEF double rrv_medium_face_jumps(const rrv_scene *scene, int medium, double 
 
 /* The default integrator's light-size threshold: a quad or triangle light
    whose side (the square root of its area) over its distance from a clear
-   refracting medium's box centre is below this is small (README.md,
+   refracting medium's box centre is below this is small (test/bench/RESULTS.md,
    "Which integrator by default"). */
 #define RRV__SMALL_LIGHT 0.5
 
