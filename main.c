@@ -246,11 +246,22 @@ static int parse_double(const char *text, double *out)
     return 1;
 }
 
-/* The next argument as the value of `flag`; `what` says what was expected. */
+/* The next argument as the value of `flag`; `what` says what was expected.
+   A value that starts with "-" and is not a number (--exposure -1 is one)
+   is taken for a forgotten value followed by an option: `--png -q` would
+   otherwise write a file called "-q". A file of such a name is "./-q". */
 static int take_value(arg_cursor *args, const char *flag, const char *what, const char **text)
 {
+    const char *next;
+    double number;
     if (args->index + 1 >= args->argc) {
         usage_error(args, "%s needs %s", flag, what);
+        return 0;
+    }
+    next = args->argv[args->index + 1];
+    if (next[0] == '-' && !parse_double(next, &number)) {
+        usage_error(args, "%s needs %s, got the option \"%s\" (for a file of that name write \"./%s\")", flag,
+                    what, next, next);
         return 0;
     }
     *text = args->argv[++args->index];
