@@ -3,6 +3,7 @@
    does not depend on the thread count or on being split into crops.
    Runs BUILD/rrv as a child process; argv[1] is the build folder. */
 #define _POSIX_C_SOURCE 200809L
+#define RRV_IMPLEMENTATION /* rrv_write_exr, for a hand-made merge part */
 #include "../rrv.h"
 #include "check.h"
 
@@ -681,6 +682,36 @@ static void fifo_inputs_are_refused(void)
     remove(scene);
 }
 
+/* A part may claim any image size: one of INT_MAX x INT_MAX pixels holding
+   a 2 x 2 tile made the hole search allocate a byte per pixel (4.6e18:
+   "out of memory", an abort under AddressSanitizer). The hole is found from
+   the rectangles alone, and the first one is named. */
+static void merge_of_a_huge_claimed_image(void)
+{
+    const char *part = tmp_path("huge_part.exr"), *out = tmp_path("huge_merged.exr");
+    float pixels[2 * 2 * 3] = {0};
+    char attribute[512], arguments[4 * PATH_SIZE];
+    rrv_exr_options exr;
+    rrv_error err;
+    memset(&exr, 0, sizeof exr);
+    exr.pixel = RRV_EXR_FLOAT;
+    exr.display_width = exr.display_height = INT_MAX;
+    exr.text_name = "rrvPart";
+    snprintf(attribute, sizeof attribute,
+             "rrv part 1\nhash 0123456789abcdef\nimage %d %d\ntile 0/1\nrect 0 0 2 2\nsamples 0 1\nspp 1\n",
+             INT_MAX, INT_MAX);
+    exr.text = attribute;
+    remove(out);
+    CHECKF(rrv_write_exr(part, pixels, 2, 2, &exr, &err) == RRV_OK, "%s", err.message);
+    snprintf(arguments, sizeof arguments, "merge '%s' '%s'", out, part);
+    CHECKF(rrv_prefixed("timeout 60", arguments) == 2 &&
+               strcmp(last_run.err, "rrv: merge: pixel 2,0 is in no part: a tile is missing (the parts cover 4 of "
+                                    "2147483647x2147483647 pixels)\n") == 0,
+           "exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(!file_exists(out));
+    remove(part);
+}
+
 /* An option whose value is missing must not take the next option as a file
    name (`--png -q` wrote a file called "-q"); "./-q" names such a file, and
    negative numbers are still values. */
@@ -927,6 +958,7 @@ int main(int argc, char **argv)
     RUN(odd_inputs_get_messages);
     RUN(fifo_inputs_are_refused);
     RUN(option_values_are_not_options);
+    RUN(merge_of_a_huge_claimed_image);
     RUN(diff_reports_known_errors);
     RUN(render_is_deterministic);
     RUN(info_describes_scene);
