@@ -411,14 +411,17 @@
 
    FILES
      Every input is untrusted and read with bounds, and only from a regular
-     file (rrv_open_read; a FIFO or a device is refused at once, not read):
+     file (rrv_open_read; a FIFO or a device is refused at once, unread):
      a scene, OBJ or NanoVDB file up to rrv_load_options.max_grid_bytes (a
      larger one refused by its size before any byte is read), a gridvol's
-     48-byte header and then exactly the samples it announces, a PFM header and then exactly the pixels
-     it announces, an OpenEXR file whole (up to 2 GiB) with every offset and
-     size checked against it. Scene numbers are decimal (no hexadecimal) and read the
-     same in any locale. The file writers replace their target through a new
-     temporary file; rrv_write_pfm says what plain C cannot promise there.
+     48-byte header and then exactly the samples it announces, a PFM
+     header and then exactly the pixels it announces (more than the file
+     holds is refused by its size), an OpenEXR file whole (up to 2 GiB)
+     with every offset and size checked against it. Scene numbers are
+     decimal (no hexadecimal) and read the same in any locale. The file
+     writers replace their target through a new temporary file and refuse
+     a target that is no regular file; rrv_write_pfm says how links are
+     treated and what plain C cannot promise there.
      Images out: rrv_write_pfm (float), rrv_write_exr (OpenEXR scanline, half
      or float, ZIP or uncompressed, a crop placed in a larger display
      window; rrv_half_from_float is its rounding), rrv_write_png (8-bit sRGB
