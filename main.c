@@ -1625,8 +1625,8 @@ static int command_render(int argc, char **argv)
             FILE *probe;
             rrv_error probe_err;
             part_info have;
-            /* not opened as a plain fopen would: a FIFO there would block (the
-               output check below refuses it) */
+            /* opened as every input is: the output check above refused a
+               FIFO there, and one put in its place since must not block */
             if (rrv_open_read(opt.pfm_path, &probe, NULL, &probe_err) == RRV_OK) {
                 fclose(probe);
                 if (load_part(opt.pfm_path, &have, NULL, "render --resume") &&

@@ -670,7 +670,7 @@ static void fifo_inputs_are_refused(void)
     CHECKF(rrv_prefixed("timeout 20", arguments) == 2 && strstr(last_run.err, want) != NULL,
            "diff FIFO: exit %d, stderr %s", last_run.code, last_run.err);
     /* --resume looks at an existing output before rendering: a FIFO there is
-       not opened, and the output check refuses it */
+       refused by the output check first */
     remove(fifo_exr);
     CHECK(mkfifo(fifo_exr, 0600) == 0);
     snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --tile 0/1 --resume -q", tiny_scene, fifo_exr);
