@@ -46,6 +46,9 @@ $(BUILD)/rrv: main.c rrv_impl.c rrv.h $(wildcard parts/*.h) | $(BUILD)
 $(BUILD)/test_%: test/test_%.c test/check.h rrv.h $(wildcard parts/*.h) $(wildcard test/*.h) | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< -lm $(TEST_LIBS_$*)
 
+# test_eta compiles main.c in (it tests the CLI's progress estimate).
+$(BUILD)/test_eta: main.c
+
 # test/exr_check.cpp reads rrv's EXR files with the OpenEXR library (tests
 # only); test_exr runs it and fails, saying what to install, when OpenEXR is
 # missing and the program could not be built.
@@ -80,6 +83,10 @@ fuzz: $(FUZZ_BINS)
 build-fuzz/fuzz_%: test/fuzz_%.c rrv.h test/fuzz_files.h
 	mkdir -p build-fuzz
 	$(FUZZ_CC) $(FUZZ_FLAGS) -o $@ $< -lm
+# fuzz_farm includes main.c for its script generator (without threads).
+build-fuzz/fuzz_farm: test/fuzz_farm.c main.c rrv.h
+	mkdir -p build-fuzz
+	$(FUZZ_CC) $(FUZZ_FLAGS) -DRRV_THREADS=0 -o $@ $< -lm
 
 # Runs every harness for FUZZ_SECONDS on scratch copies of its seeds and
 # prints executions and findings (saved under build-fuzz/findings).

@@ -72,6 +72,27 @@
    ---- end of example --------------------------------------------------------
 
    INTEGRATORS (rrv_settings.integrator)
+     default     (zero; no `integrator` key, no --integrator) chosen from
+                 the prepared scene by one rule (rrv_scene_integrator):
+                 classic where no medium's IOR differs from the ambient
+                 one (bit for bit the classic render); eikonal with nee
+                 SHOOT where every refracting medium is clear (no medium
+                 with extinction overlaps its box) and a quad or triangle
+                 light is small from one (its side, the square root of its
+                 area, under 0.5 x its distance from the medium's box
+                 centre), and the IOR has the Hessian shooting needs;
+                 refractive (the comb, nee AIM) otherwise. Why: aimed
+                 shadow rays sample the light's straight cone, at about
+                 straight NEE's cost, which is right while bending is small
+                 against the light's angular size, but a caustic of a small
+                 light lies outside that cone and only forward paths find
+                 it (noise); shooting solves the bent connection, at 4x-50x
+                 the cost a sample, which pays where the receivers are
+                 surfaces seen through clear media, and not where a
+                 scattering medium makes every vertex a connection.
+                 Measured in README.md ("Which integrator by default"):
+                 within 1.25x of the best unbiased mode on the bench scenes.
+                 An explicit `nee` other than shoot keeps the comb.
      classic     IOR 1 everywhere: delta tracking, ratio-tracked NEE with MIS,
                  spectral MIS for chromatic media (channels whose extinctions
                  differ more than 4x walk with majorants of their own). The
@@ -88,7 +109,8 @@
    NEXT-EVENT ESTIMATION (rrv_settings.nee, scene `render nee`, CLI --nee)
      Refractive and eikonal integrators only; classic always samples lights
      with straight shadow rays, which is exact for straight rays.
-     DEFAULT     SHOOT, the most efficient curved mode measured (README.md).
+     DEFAULT     SHOOT, the most efficient curved mode measured (README.md;
+                 the default integrator is eikonal where shooting pays).
                  With the refractive integrator, which shooting cannot
                  differentiate, it aims (AIM): unbiased, about as cheap as
                  STRAIGHT, but without focusing, so caustics of small
@@ -235,7 +257,17 @@
      a face is a sharp interface: refracted once by Snell's law with the
      face normal, reflected with the Fresnel probability or by total
      internal reflection; such reflections count toward max_depth. A medium
-     whose IOR equals the ambient IOR everywhere does not refract. Outside an
+     whose IOR equals the ambient IOR everywhere does not refract. The
+     ambient IOR (rrv_settings.ambient_ior, scene `ambient ior`) left 0 is
+     that of the air a gas medium (ior ... gas) sits in: the same gas
+     relation at its ambient state (T_ref, P_ref, what its fields give
+     outside their boxes), 1 + iorscale (eta_ref - 1), from the first gas
+     medium listed; 1 without one. So a plume whose faces are at the
+     ambient state has no jump whatever its iorscale; a given `ambient ior`
+     is used as given. A jump that remains (a field that does not end at
+     the ambient state, glass, a second gas with another iorscale) is a
+     sharp interface: rrv_medium_face_jumps measures it per face and
+     `rrv info` and the render summary report it. Outside an
      IOR grid's own box (inside its medium's) the IOR is the ambient one,
      unscaled by ior_scale.
 
@@ -740,7 +772,11 @@ typedef struct rrv_camera {
 } rrv_camera;
 
 typedef enum rrv_integrator {
-    RRV_INTEGRATOR_CLASSIC = 0, /* IOR 1 everywhere: the production baseline */
+    RRV_INTEGRATOR_DEFAULT = 0, /* chosen from the scene (rrv_scene_integrator):
+                                   CLASSIC where nothing refracts, else
+                                   REFRACTIVE or EIKONAL by the rule in the
+                                   manual (INTEGRATORS, "default") */
+    RRV_INTEGRATOR_CLASSIC,     /* IOR 1 everywhere: the production baseline */
     RRV_INTEGRATOR_REFRACTIVE,  /* refractive delta tracking */
     RRV_INTEGRATOR_EIKONAL      /* ray-equation marching: the accuracy reference */
 } rrv_integrator;
@@ -825,7 +861,8 @@ typedef struct rrv_settings {
     rrv_refraction_scheme refraction; /* refractive */
     double step;          /* eikonal: step length h, m */
     rrv_stepper stepper;  /* eikonal */
-    double ambient_ior;   /* IOR outside every medium, >= 1 */
+    double ambient_ior;   /* IOR outside every medium, >= 1; 0 = the gas at its
+                             ambient state (BOUNDARIES in the manual), else 1 */
     int majorant_cells;   /* majorant grid cells per axis; 0 = automatic, 1 = one
                              global majorant (for comparisons). Used by prepare. */
     rrv_ior_interpolation ior_interpolation; /* grid refractivity; used by prepare */
@@ -896,6 +933,10 @@ typedef struct rrv_scene {
     int *lights; int light_count;          /* indices of emissive shapes */
     struct rrv__bvh_node *bvh; int bvh_node_count;
     int *bvh_prims;                        /* shape indices in leaf order */
+    double ambient_ior;                    /* the IOR outside every medium:
+                                              settings.ambient_ior, or for 0
+                                              the first gas medium's at its
+                                              ambient state (1 without one) */
     int prepared;                          /* 1 after rrv_scene_prepare succeeded, 0 again
                                               after an edit through the calls */
     size_t bytes;                          /* heap bytes the scene holds */
@@ -1003,7 +1044,9 @@ RRV_DEF const char *rrv_nanovdb_type_name(rrv_nanovdb_type type);
    Defaults a zero asks for:
      camera    up (0,1,0), fov 40, 320 x 240 (eye and look have none)
      settings  spp 16, max_depth 32, bend_tolerance 0.01, step 0.01,
-               ambient_ior 1; the enums' zero members are the defaults
+               ambient_ior from the gas, else 1 (BOUNDARIES); the enums'
+               zero members are the defaults (integrator: chosen from
+               the scene, INTEGRATORS)
      material  albedo 0.5 (diffuse) or 0.8 and albedo2 0.2 (checker),
                checker_scale 1
      medium    sigma_a and sigma_s 1 (when all six are zero), scale 1,
@@ -1143,6 +1186,26 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
                                    int sample_begin, int sample_end,
                                    float *sum, int stride, rrv_render_stats *stats,
                                    rrv_error *err);
+
+/* The integrator rrv_render_rect uses for a prepared scene: its settings'
+   one, or for RRV_INTEGRATOR_DEFAULT the manual's rule (INTEGRATORS,
+   "default"): CLASSIC where no medium's IOR differs from the ambient one,
+   EIKONAL (curved NEE solved by shooting) where every refracting medium is
+   clear and a quad or triangle light is small as seen from one, REFRACTIVE
+   otherwise. */
+RRV_DEF rrv_integrator rrv_scene_integrator(const rrv_scene *scene);
+
+/* The sharp interfaces of a prepared scene's medium: for each face of its
+   box (-x, +x, -y, +y, -z, +z) and, for a Luneburg or fish-eye profile,
+   its sphere (jump[6]; 0 for other media), the largest |eta just inside -
+   eta just outside| on a 65 x 65 lattice of the face (the sphere: 128 x
+   64 in longitude and latitude, where inside the box), where the refractivity on either side is
+   that of the scene (the ambient IOR, or another medium's where boxes
+   overlap). Jumps of 1e-7 or less, the float rounding of an IOR near 1
+   (where Fresnel reflects < 1e-14 and curved NEE crosses the face), are
+   0. Returns the largest of the seven, 0 for a medium that does not
+   refract or an index out of range. */
+RRV_DEF double rrv_medium_face_jumps(const rrv_scene *scene, int medium, double jump[7]);
 
 /* One walk of a ray through the refractive media only (absorption and
    scattering ignored), as `rrv trace` prints it. The visit callback, if not
@@ -2645,6 +2708,35 @@ static int rrv__medium_refracts(const rrv_medium *m)
     return m->ior_from_gas || m->ior.kind != RRV_FIELD_NONE;
 }
 
+/* The IOR outside every medium: the scene's `ambient ior`, or where none
+   was given the one rrv_scene_prepare derived (rrv__resolve_ambient). */
+static double rrv__ambient_ior(const rrv_scene *scene)
+{
+    if (scene->settings.ambient_ior != 0.0) return scene->settings.ambient_ior;
+    return scene->ambient_ior > 0.0 ? scene->ambient_ior : 1.0;
+}
+
+/* No `ambient ior`: the air around a gas medium is the same gas at its
+   ambient state (T_ref, P_ref, where its fields end), so a plume whose
+   faces are at that state has no IOR jump whatever its iorscale. The
+   first gas medium listed sets it; another gas whose ambient state
+   differs keeps a jump at its faces, which rrv_medium_face_jumps reports.
+   Without a gas medium the ambient IOR is 1 (vacuum or unscaled air
+   whose refractivity is left out, as classic does). */
+static double rrv__resolve_ambient(const rrv_scene *scene)
+{
+    int i;
+    if (scene->settings.ambient_ior != 0.0) return scene->settings.ambient_ior;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        double eta;
+        if (!m->ior_from_gas) continue;
+        eta = 1.0 + (m->eta_ref - 1.0) * m->ior_scale;
+        return eta >= 1.0 && eta <= RRV_MAX_IOR ? eta : 1.0;
+    }
+    return 1.0;
+}
+
 /* An IOR that is the ambient one everywhere in the box (a constant equal to
    it) bends nothing and has no interface: such a medium renders exactly as
    classic does, paying nothing for its IOR. */
@@ -2659,7 +2751,7 @@ static int rrv__ior_is_ambient(const rrv_scene *scene, const rrv_medium *m)
     } else {
         return 0;
     }
-    return r == scene->settings.ambient_ior - 1.0;
+    return r == rrv__ambient_ior(scene) - 1.0;
 }
 
 /* The field to evaluate: the baked copy when there is one. */
@@ -3398,7 +3490,7 @@ static double rrv__refractivity_gradient_hessian(const rrv_medium *m, rrv_vec3 p
    medium whose box holds p, the ambient one elsewhere. */
 static double rrv__scene_refractivity(const rrv_scene *scene, rrv_vec3 p, rrv_vec3 *grad)
 {
-    double ambient_r = scene->settings.ambient_ior - 1.0;
+    double ambient_r = rrv__ambient_ior(scene) - 1.0;
     int i;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
@@ -3955,7 +4047,7 @@ static rrv_result rrv__bake_cubic(const rrv_scene *scene, rrv_medium *m, const r
                                   rrv_error *err)
 {
     struct rrv__majorant_grid *g = m->majorant;
-    double ambient_r = scene->settings.ambient_ior - 1.0, rmin = DBL_MAX, *c, *scratch;
+    double ambient_r = rrv__ambient_ior(scene) - 1.0, rmin = DBL_MAX, *c, *scratch;
     int n[3], P[3], x, y, z, longest;
     size_t count, sx, sy, sz;
     n[0] = lattice->nx; n[1] = lattice->ny; n[2] = lattice->nz;
@@ -4046,7 +4138,7 @@ static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, si
     rrv_grid nanovdb_lattice;
     const rrv_field *candidates[2];
     struct rrv__majorant_grid *g = m->majorant;
-    double ambient_r = scene->settings.ambient_ior - 1.0;
+    double ambient_r = rrv__ambient_ior(scene) - 1.0;
     size_t count, i;
     int k, x, y, z, n[3];
     float *data;
@@ -4326,7 +4418,7 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
         rrv__majorant_bake job;
         job.m = m;
         job.g = g;
-        job.ambient_r = scene->settings.ambient_ior - 1.0;
+        job.ambient_r = rrv__ambient_ior(scene) - 1.0;
         rrv__parallel_for(scene, g->n[2], rrv__majorant_slice, &job);
     }
     for (c = 0; c < cells; ++c) {
@@ -5444,7 +5536,7 @@ static inline double rrv__kick_lookup(const rrv_scene *scene, rrv_vec3 p, const 
     const struct rrv__majorant_grid *mg = medium ? medium->majorant : NULL;
     return mg && mg->refraction.data && !mg->cubic && rrv__inside_box(p, mg->refraction.lo, mg->refraction.hi)
                ? rrv__refraction_lookup(mg, p, grad)
-           : medium ? rrv__refractivity_gradient(medium, p, scene->settings.ambient_ior - 1.0, grad)
+           : medium ? rrv__refractivity_gradient(medium, p, rrv__ambient_ior(scene) - 1.0, grad)
                     : rrv__scene_refractivity(scene, p, grad);
 }
 
@@ -6777,6 +6869,7 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
        code get the same refusals here (scene file section: the checks). */
     res = rrv__scene_check(scene, err);
     if (res != RRV_OK) return res;
+    scene->ambient_ior = rrv__resolve_ambient(scene);
     for (i = 0; i < scene->medium_count; ++i) {
         res = rrv__check_medium(scene, &scene->media[i], err);
         if (res != RRV_OK) return res;
@@ -6852,11 +6945,133 @@ static rrv_vec3 rrv__camera_ray(const rrv__camera_frame *f, const rrv_camera *ca
     return rrv__normalize(rrv__add(f->forward, rrv__add(rrv__scale(f->right, sx), rrv__scale(f->up, sy))));
 }
 
+static int rrv__jump_counts(double jump);
+
+/* The jump of the scene's refractivity across a surface at `at`, a few
+   rounding gaps to either side along its normal; 0 where it is one curved
+   connections cross (RRV__SOLVE_JUMP: below it Fresnel reflects < 1e-14,
+   the rounding of an IOR near 1 in float). */
+static double rrv__jump_at(const rrv_scene *scene, rrv_vec3 at, rrv_vec3 normal)
+{
+    double gap = 4.0 * rrv__face_gap(at);
+    double r_in = rrv__scene_refractivity(scene, rrv__madd(at, normal, -gap), NULL);
+    double r_out = rrv__scene_refractivity(scene, rrv__madd(at, normal, gap), NULL);
+    return rrv__is_jump(r_in, r_out) && rrv__jump_counts(fabs(r_in - r_out)) ? fabs(r_in - r_out) : 0.0;
+}
+
+#define RRV__JUMP_LATTICE 65
+
+RRV_DEF double rrv_medium_face_jumps(const rrv_scene *scene, int medium, double jump[7])
+{
+    const rrv_medium *m;
+    double worst = 0;
+    int f, i, j;
+    for (f = 0; f < 7; ++f) jump[f] = 0;
+    if (!scene || medium < 0 || medium >= scene->medium_count) return 0;
+    m = &scene->media[medium];
+    if (!rrv__medium_refracts(m)) return 0;
+    for (f = 0; f < 6; ++f) {
+        int a = f / 2, u = (a + 1) % 3, v = (a + 2) % 3;
+        double lo[3], hi[3], n[3] = {0, 0, 0};
+        lo[0] = m->lo.x; lo[1] = m->lo.y; lo[2] = m->lo.z;
+        hi[0] = m->hi.x; hi[1] = m->hi.y; hi[2] = m->hi.z;
+        n[a] = f & 1 ? 1.0 : -1.0;
+        for (i = 0; i < RRV__JUMP_LATTICE; ++i)
+            for (j = 0; j < RRV__JUMP_LATTICE; ++j) {
+                double x[3];
+                x[a] = f & 1 ? hi[a] : lo[a];
+                /* cell centres: an edge belongs to two faces and to neither's normal */
+                x[u] = lo[u] + (hi[u] - lo[u]) * (i + 0.5) / RRV__JUMP_LATTICE;
+                x[v] = lo[v] + (hi[v] - lo[v]) * (j + 0.5) / RRV__JUMP_LATTICE;
+                jump[f] = rrv__maxd(jump[f], rrv__jump_at(scene, rrv__v3(x[0], x[1], x[2]), rrv__v3(n[0], n[1], n[2])));
+            }
+    }
+    if (rrv__has_sphere_support(m)) {
+        const rrv_field *s = &m->ior;
+        for (i = 0; i < 2 * (RRV__JUMP_LATTICE - 1); ++i)
+            for (j = 0; j < RRV__JUMP_LATTICE - 1; ++j) {
+                double phi = 2.0 * RRV__PI * (i + 0.5) / (2.0 * (RRV__JUMP_LATTICE - 1));
+                double theta = RRV__PI * (j + 0.5) / (RRV__JUMP_LATTICE - 1);
+                rrv_vec3 n = rrv__v3(sin(theta) * cos(phi), cos(theta), sin(theta) * sin(phi));
+                rrv_vec3 at = rrv__madd(s->center, n, s->radius);
+                if (!rrv__inside_box(at, m->lo, m->hi)) continue;
+                jump[6] = rrv__maxd(jump[6], rrv__jump_at(scene, at, n));
+            }
+    }
+    for (f = 0; f < 7; ++f) worst = rrv__maxd(worst, jump[f]);
+    return worst;
+}
+
+/* The default integrator's light-size threshold: a quad or triangle light
+   whose side (the square root of its area) over its distance from a clear
+   refracting medium's box centre is below this is small (README.md,
+   "Which integrator by default"). */
+#define RRV__SMALL_LIGHT 0.5
+
+static int rrv__boxes_overlap(const rrv_medium *a, const rrv_medium *b)
+{
+    return a->lo.x <= b->hi.x && b->lo.x <= a->hi.x && a->lo.y <= b->hi.y && b->lo.y <= a->hi.y &&
+           a->lo.z <= b->hi.z && b->lo.z <= a->hi.z;
+}
+
+/* Shooting pays where its solves are few and the light it finds is
+   focused: every refracting medium clear (no medium with extinction
+   overlaps its box, so the only vertices that connect through it lie on
+   surfaces, and the caustic they see is sharp) and some area light small
+   from one of them (aimed shadow rays sample the straight cone of the
+   light, which misses the bent rays' preimage once the light's angular
+   size falls to the order of the bending). Elsewhere the comb with aimed
+   shadow rays is the cheaper unbiased estimator (README.md measures
+   both). */
+static rrv_integrator rrv__default_integrator(const rrv_scene *scene)
+{
+    int i, j, k, refracts = 0, clear = 1, small = 0;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        rrv_vec3 c;
+        if (!rrv__medium_refracts(m)) continue;
+        refracts = 1;
+        for (j = 0; j < scene->medium_count; ++j)
+            if (scene->media[j].majorant && !scene->media[j].majorant->empty && rrv__boxes_overlap(m, &scene->media[j]))
+                clear = 0;
+        c = rrv__scale(rrv__add(m->lo, m->hi), 0.5);
+        for (k = 0; k < scene->light_count; ++k) {
+            const rrv_shape *l = &scene->shapes[scene->lights[k]];
+            double area, d;
+            rrv_vec3 at;
+            if (l->kind == RRV_SHAPE_QUAD) {
+                area = rrv__length(rrv__cross(l->e1, l->e2));
+                at = rrv__add(l->p0, rrv__scale(rrv__add(l->e1, l->e2), 0.5));
+            } else if (l->kind == RRV_SHAPE_TRIANGLE) {
+                area = 0.5 * rrv__length(rrv__cross(l->e1, l->e2));
+                at = rrv__add(l->p0, rrv__scale(rrv__add(l->e1, l->e2), 1.0 / 3.0));
+            } else {
+                continue; /* curved nee does not connect to spheres */
+            }
+            d = rrv__length(rrv__sub(at, c));
+            if (sqrt(area) < RRV__SMALL_LIGHT * d) small = 1;
+        }
+    }
+    if (!refracts) return RRV_INTEGRATOR_CLASSIC;
+    if (clear && small && (scene->settings.nee == RRV_NEE_DEFAULT || scene->settings.nee == RRV_NEE_SHOOT) &&
+        rrv__solver_supports_scene(scene))
+        return RRV_INTEGRATOR_EIKONAL;
+    return RRV_INTEGRATOR_REFRACTIVE;
+}
+
+RRV_DEF rrv_integrator rrv_scene_integrator(const rrv_scene *scene)
+{
+    if (!scene) return RRV_INTEGRATOR_DEFAULT;
+    if (scene->settings.integrator != RRV_INTEGRATOR_DEFAULT) return scene->settings.integrator;
+    return rrv__default_integrator(scene);
+}
+
 RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
                                    int sample_begin, int sample_end,
                                    float *sum, int stride, rrv_render_stats *stats,
                                    rrv_error *err)
 {
+    rrv_integrator integrator;
     rrv__context ctx;
     rrv__camera_frame frame;
     double r_camera;
@@ -6881,14 +7096,15 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     memset(&ctx, 0, sizeof ctx);
     ctx.scene = scene;
     sobol = scene->settings.sampler != RRV_SAMPLER_PCG;
-    if (scene->settings.integrator == RRV_INTEGRATOR_REFRACTIVE) {
+    integrator = rrv_scene_integrator(scene);
+    if (integrator == RRV_INTEGRATOR_REFRACTIVE) {
         ctx.comb = rrv__resolve_scheme(scene->settings.refraction) == RRV_REFRACTION_COMB;
         ctx.refract_nulls = !ctx.comb;
     }
-    ctx.eikonal = scene->settings.integrator == RRV_INTEGRATOR_EIKONAL;
+    ctx.eikonal = integrator == RRV_INTEGRATOR_EIKONAL;
     ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
-    ctx.step_bound = rrv__step_bound(scene, scene->settings.integrator);
-    ctx.sample_bound = rrv__sample_bound(scene, scene->settings.integrator);
+    ctx.step_bound = rrv__step_bound(scene, integrator);
+    ctx.sample_bound = rrv__sample_bound(scene, integrator);
     /* shoot by default, also where it cannot solve (the refractive
        integrator), where it aims: manifold solves there, but at 100x-1000x
        straight NEE's cost on a scene like scenes/fire.rrv (README.md), while
@@ -6908,7 +7124,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
        Poisson and midpoint schemes refract at null events): there the
        connections stay with forward paths. */
     ctx.aim = ctx.partition && !ctx.refract_nulls && (nee == RRV_NEE_AIM || (nee == RRV_NEE_SHOOT && !ctx.shoot));
-    ctx.eta_floor = scene->settings.ambient_ior;
+    ctx.eta_floor = rrv__ambient_ior(scene);
     if (ctx.partition) {
         for (i = 0; i < scene->medium_count; ++i) {
             const rrv_medium *m = &scene->media[i];
@@ -6934,7 +7150,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.eta_camera2 = (1.0 + r_camera) * (1.0 + r_camera);
     /* Blackbody radiance B is taken as the ambient air's, so a classic
        render and a refractive one of a fire in air agree exactly. */
-    ctx.thermal_scale = ctx.bends ? ctx.eta_camera2 / (scene->settings.ambient_ior * scene->settings.ambient_ior) : 1.0;
+    ctx.thermal_scale = ctx.bends ? ctx.eta_camera2 / (rrv__ambient_ior(scene) * rrv__ambient_ior(scene)) : 1.0;
     for (y = y0; y < y1; ++y) {
         for (x = x0; x < x1; ++x) {
             double acc[3] = {0, 0, 0};
@@ -7006,6 +7222,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
     if (!(rrv__length(direction) > 0) || rrv__length(direction) > DBL_MAX)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "the ray direction must be finite and nonzero");
     d = rrv__normalize(direction);
+    if (integrator == RRV_INTEGRATOR_DEFAULT) integrator = rrv_scene_integrator(scene);
     bound = (uint64_t)rrv__step_bound(scene, integrator == RRV_INTEGRATOR_EIKONAL ? integrator
                                                                              : RRV_INTEGRATOR_REFRACTIVE);
     rrv__rng_seed(&rng, seed, walk, 0x7261797472616365ULL);
@@ -7145,7 +7362,7 @@ static int rrv__solver_supports_scene(const rrv_scene *scene)
    grad_i / d x_j; not symmetric in grids, see the media section). */
 static void rrv__scene_hessian(const rrv_scene *scene, rrv_vec3 p, double H[9])
 {
-    double ambient_r = scene->settings.ambient_ior - 1.0;
+    double ambient_r = rrv__ambient_ior(scene) - 1.0;
     int i, k;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
@@ -7161,7 +7378,7 @@ static void rrv__scene_hessian(const rrv_scene *scene, rrv_vec3 p, double H[9])
    (rrv__scene_hessian's) at p, the medium found once. */
 static double rrv__eta_gradient_hessian(const rrv_scene *scene, rrv_vec3 p, rrv_vec3 *grad, double H[9])
 {
-    double ambient_r = scene->settings.ambient_ior - 1.0;
+    double ambient_r = rrv__ambient_ior(scene) - 1.0;
     int i, k;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
@@ -13018,7 +13235,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"spp", RRV__SF_INT, 1, 0, 1.0, (double)RRV_MAX_SPP, NULL},
     {"maxdepth", RRV__SF_INT, 1, 0, 1.0, 1024.0, NULL},
     {"seed", RRV__SF_U64, 1, 0, RRV__SF_NN, NULL},
-    {"integrator", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "classic|refractive|eikonal"},
+    {"integrator", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|classic|refractive|eikonal"},
     /* bounded so one event or step cannot be absurdly small (BOUNDS) */
     {"bendtolerance", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_UNIT, NULL}, /* and >= 1e-4 */
     {"mueta", RRV__SF_NUM, 1, 0, 0.0, 1e6, NULL},
@@ -13036,7 +13253,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
 static const rrv_integrator rrv__sf_integrators[] = {
-    RRV_INTEGRATOR_CLASSIC, RRV_INTEGRATOR_REFRACTIVE, RRV_INTEGRATOR_EIKONAL};
+    RRV_INTEGRATOR_DEFAULT, RRV_INTEGRATOR_CLASSIC, RRV_INTEGRATOR_REFRACTIVE, RRV_INTEGRATOR_EIKONAL};
 static const rrv_stepper rrv__sf_steppers[] = {RRV_STEPPER_DEFAULT, RRV_STEPPER_LEAPFROG,
                                                RRV_STEPPER_RK4};
 static const rrv_refraction_scheme rrv__sf_schemes[] = {
@@ -13516,7 +13733,6 @@ static void rrv__settings_def(rrv_settings *s)
     if (s->max_depth == 0) s->max_depth = 32;
     if (s->bend_tolerance == 0.0) s->bend_tolerance = 0.01;
     if (s->step == 0.0) s->step = 0.01;
-    if (s->ambient_ior == 0.0) s->ambient_ior = 1.0;
 }
 
 static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
@@ -13554,7 +13770,8 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
     RRV__CK(rrv__ck_key(ck, &k[14], s->manifold_drop));
     if (s->max_bake_samples < 0)
         return rrv__ck_fail(ck, RRV_OK, "max_bake_samples must be >= 0, got %d", s->max_bake_samples);
-    RRV__CK(rrv__ck_key(ambient, &rrv__sf_ambient_keys[0], s->ambient_ior));
+    if (s->ambient_ior != 0.0) /* 0: from the gas (rrv__resolve_ambient) */
+        RRV__CK(rrv__ck_key(ambient, &rrv__sf_ambient_keys[0], s->ambient_ior));
     if (s->ambient_ior > RRV_MAX_IOR)
         return rrv__ck_fail(ambient, RRV_OK, "ior must be at most %g, got %g", RRV_MAX_IOR,
                             s->ambient_ior);

@@ -47,7 +47,8 @@ static void test_zero_means_default(void)
     CHECK(s->camera.fov == 40 && s->camera.up.y == 1 && s->camera.width == 8);
     CHECK(rrv_scene_set_settings(s, &set, &err) == RRV_OK);
     CHECK(s->settings.spp == 16 && s->settings.max_depth == 32 && s->settings.bend_tolerance == 0.01 &&
-          s->settings.step == 0.01 && s->settings.ambient_ior == 1);
+          s->settings.step == 0.01 && s->settings.ambient_ior == 0 &&
+          s->settings.integrator == RRV_INTEGRATOR_DEFAULT);
     mat.kind = RRV_MATERIAL_CHECKER;
     CHECK(rrv_scene_add_material(s, &mat, &i, &err) == RRV_OK && i == 0);
     CHECK(s->materials[0].albedo[1] == 0.8 && s->materials[0].albedo2[2] == 0.2 &&
@@ -68,7 +69,142 @@ static void test_zero_means_default(void)
         CHECK(f->noise.radius == 1); /* half the smallest side */
     }
     CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+    /* no gas medium: the ambient IOR is 1 */
+    CHECK(s->ambient_ior == 1);
     rrv_scene_free(s);
+}
+
+/* A clear plume of hot air (blobs that have fallen to ~1e-30 K at the
+   faces) under a 0.2 m light 2.5 m away, iorscale 100, no `ambient ior`:
+   the scene the default integrator and the face-jump report are tested on.
+   `extra` is appended (a light, a smoke, an ambient or render line). */
+static rrv_scene *plume_scene(const char *extra, int with_ior)
+{
+    char text[2048];
+    rrv_scene *s = NULL;
+    rrv_error err;
+    snprintf(text, sizeof text,
+             "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
+             "render spp 2 maxdepth 2 seed 3 %s\n"
+             "material white diffuse\n"
+             "quad origin -2 0 -2 u 0 0 4 v 4 0 0 material white\n"
+             "quad origin -0.1 3.5 -0.1 u 0.2 0 0 v 0 0 0.2 L 50 50 50\n"
+             "medium plume box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+             "temperature plume blob center 0 1 0 radius 0.06 weight 600 base 300\n"
+             "%s\n%s\n",
+             strncmp(extra, "render:", 7) == 0 ? extra + 7 : "", with_ior ? "ior plume gas iorscale 100" : "",
+             strncmp(extra, "render:", 7) == 0 ? "" : extra);
+    CHECKF(rrv_scene_parse(text, strlen(text), "plume", NULL, NULL, &s, &err) == RRV_OK, "%s", err.message);
+    return s;
+}
+
+static int same_render(rrv_scene *a, rrv_scene *b)
+{
+    float ia[8 * 6 * 3], ib[8 * 6 * 3];
+    memset(ia, 0, sizeof ia);
+    memset(ib, 0, sizeof ib);
+    CHECK(rrv_render_rect(a, 0, 0, 8, 6, 0, 2, ia, 8, NULL, NULL) == RRV_OK);
+    CHECK(rrv_render_rect(b, 0, 0, 8, 6, 0, 2, ib, 8, NULL, NULL) == RRV_OK);
+    return memcmp(ia, ib, sizeof ia) == 0;
+}
+
+/* No integrator key: classic where nothing refracts (the same render bit
+   for bit), eikonal where a clear refracting medium sees a small light,
+   the comb otherwise (a large light, a smoke in the plume's box, an
+   explicit nee other than shoot). */
+static void test_default_integrator(void)
+{
+    struct {
+        const char *extra;
+        int ior;
+        rrv_integrator expect;
+    } cases[] = {
+        {"", 0, RRV_INTEGRATOR_CLASSIC},
+        {"", 1, RRV_INTEGRATOR_EIKONAL},
+        {"render:nee shoot", 1, RRV_INTEGRATOR_EIKONAL},
+        {"render:nee aim", 1, RRV_INTEGRATOR_REFRACTIVE},
+        /* a 4 m light at 2.5 m (1.6 rad) besides the small one: one small light is enough */
+        {"quad origin -2 3.5 -2 u 4 0 0 v 0 0 4 L 1 1 1", 1, RRV_INTEGRATOR_EIKONAL},
+        /* the 4 m light alone: not small */
+        {"", 3, RRV_INTEGRATOR_REFRACTIVE},
+        {"medium smoke box -1 0 -1 1 2 1\ndensity smoke constant 0.1", 1, RRV_INTEGRATOR_REFRACTIVE},
+        /* a smoke that does not touch the plume's box keeps it clear */
+        {"medium smoke box 2 0 -1 3 2 1\ndensity smoke constant 0.1", 1, RRV_INTEGRATOR_EIKONAL},
+        /* the IOR of a bare gas box equals the ambient one it sets: inert */
+        {"", 2, RRV_INTEGRATOR_CLASSIC},
+    };
+    int k;
+    for (k = 0; k < (int)(sizeof cases / sizeof cases[0]); ++k) {
+        rrv_scene *s, *t;
+        rrv_integrator got;
+        rrv_error err;
+        if (cases[k].ior >= 2) {
+            const char *text = cases[k].ior == 2
+                ? "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
+                  "quad origin -0.1 3.5 -0.1 u 0.2 0 0 v 0 0 0.2 L 50 50 50\n"
+                  "medium plume box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+                  "ior plume gas iorscale 100\n"
+                : "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
+                  "quad origin -2 3.5 -2 u 4 0 0 v 0 0 4 L 1 1 1\n"
+                  "medium plume box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+                  "temperature plume blob center 0 1 0 radius 0.06 weight 600 base 300\n"
+                  "ior plume gas iorscale 100\n";
+            CHECKF(rrv_scene_parse(text, strlen(text), "bare", NULL, NULL, &s, &err) == RRV_OK, "%s", err.message);
+        } else {
+            s = plume_scene(cases[k].extra, cases[k].ior);
+        }
+        if (!s) continue;
+        got = rrv_scene_integrator(s);
+        CHECKF(got == cases[k].expect, "case %d (%s): integrator %d, expected %d", k, cases[k].extra, (int)got,
+               (int)cases[k].expect);
+        /* the render is the chosen integrator's, draw for draw */
+        t = cases[k].ior >= 2 ? NULL : plume_scene(cases[k].extra, cases[k].ior);
+        if (t) {
+            t->settings.integrator = cases[k].expect;
+            CHECKF(same_render(s, t), "case %d: the default render differs from integrator %d", k,
+                   (int)cases[k].expect);
+            rrv_scene_free(t);
+        }
+        rrv_scene_free(s);
+    }
+}
+
+/* No silent glass: with no `ambient ior` the ambient IOR is the gas's at
+   its ambient state (1 + 100 x 2.92e-4), so the plume's faces, at 300 K,
+   have no jump; `ambient ior 1` makes every face a jump of 0.0292. */
+static void test_face_jumps(void)
+{
+    double jump[7];
+    rrv_scene *s = plume_scene("", 1);
+    int f;
+    if (!s) return;
+    CHECKF(fabs(s->ambient_ior - 1.0292) < 1e-12 && s->settings.ambient_ior == 0, "ambient %.17g",
+           s->ambient_ior);
+    CHECK(rrv_medium_face_jumps(s, 0, jump) == 0);
+    for (f = 0; f < 7; ++f) CHECKF(jump[f] == 0, "face %d jumps by %g", f, jump[f]);
+    CHECK(rrv_medium_face_jumps(s, 1, jump) == 0 && rrv_medium_face_jumps(s, -1, jump) == 0);
+    CHECK(rrv_medium_face_jumps(NULL, 0, jump) == 0);
+    rrv_scene_free(s);
+    s = plume_scene("ambient ior 1", 1);
+    if (!s) return;
+    CHECK(s->ambient_ior == 1);
+    CHECKF(fabs(rrv_medium_face_jumps(s, 0, jump) - 0.0292) < 1e-9, "largest jump %.17g", jump[0]);
+    for (f = 0; f < 6; ++f) CHECKF(fabs(jump[f] - 0.0292) < 1e-9, "face %d jumps by %.17g", f, jump[f]);
+    CHECK(jump[6] == 0); /* no profile sphere */
+    rrv_scene_free(s);
+    /* a Luneburg lens meets the ambient IOR at its sphere and, outside
+       it, in its box: only rounding (~1e-8) is left there, no glass */
+    {
+        static const char lens[] = "camera eye 0 0 -3 look 0 0 0 resolution 8 6\n"
+                                   "medium lens box -0.5 -0.5 -0.5 0.5 0.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+                                   "ior lens luneburg radius 0.5\n";
+        rrv_error err;
+        CHECKF(rrv_scene_parse(lens, strlen(lens), "lens", NULL, NULL, &s, &err) == RRV_OK, "%s", err.message);
+        if (!s) return;
+        CHECKF(rrv_medium_face_jumps(s, 0, jump) == 0, "faces jump by %g %g %g %g %g %g, sphere %g", jump[0], jump[1],
+               jump[2], jump[3], jump[4], jump[5], jump[6]);
+        rrv_scene_free(s);
+    }
 }
 
 static void test_refusals_name_the_object(void)
@@ -655,6 +791,8 @@ static void test_tiny_camera_vectors(void)
 int main(void)
 {
     RUN(test_zero_means_default);
+    RUN(test_default_integrator);
+    RUN(test_face_jumps);
     RUN(test_refusals_name_the_object);
     RUN(test_code_only_refusals);
     RUN(test_prepare_checks_hand_edits);

@@ -876,6 +876,42 @@ static void info_describes_scene(void)
     CHECKF(find_key(last_run.out, "scene_memory") != NULL, "%s", last_run.out);
 }
 
+/* No silent glass: a plume of hot air (iorscale 100) whose faces sit at
+   300 K has no IOR jump without an `ambient ior` line (the ambient is the
+   same gas at 300 K), and `rrv info` and the render summary say nothing;
+   `ambient ior 1` makes every face glass, and both say so. */
+static void face_jumps_are_reported(void)
+{
+    static const char plume[] =
+        "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
+        "render spp 1 maxdepth 1\n"
+        "quad origin -0.1 3.5 -0.1 u 0.2 0 0 v 0 0 0.2 L 50 50 50\n"
+        "medium plume box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+        "temperature plume blob center 0 1 0 radius 0.06 weight 600 base 300\n"
+        "ior plume gas iorscale 100\n";
+    static const char summary[] =
+        "sharp IOR faces: eta jumps by 0.0292 at the -x face of medium \"plume\" (and at 5 more faces): "
+        "refracted and reflected there as glass; curved nee does not cross them\n";
+    char text[1024], arguments[3 * PATH_SIZE];
+    const char *scene = tmp_path("plume.rrv"), *out = tmp_path("plume.pfm"), *line;
+    int glass;
+    for (glass = 0; glass < 2; ++glass) {
+        snprintf(text, sizeof text, "%s%s", plume, glass ? "ambient ior 1\n" : "");
+        CHECK(write_text(scene, text));
+        snprintf(arguments, sizeof arguments, "info '%s'", scene);
+        CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+        CHECKF((strstr(last_run.out, "ambient ior: 1.0292 (the gas at its ambient state)\n") != NULL) == !glass,
+               "%s", last_run.out);
+        CHECKF((strstr(last_run.out, "    sharp IOR faces (eta jumps by): -x 0.0292, +x 0.0292, -y 0.0292, "
+                                     "+y 0.0292, -z 0.0292, +z 0.0292\n") != NULL) == glass,
+               "%s", last_run.out);
+        snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --threads 1", scene, out);
+        CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+        line = strstr(last_run.err, "sharp IOR");
+        CHECKF(glass ? line && strcmp(line, summary) == 0 : !line, "%s", last_run.err);
+    }
+}
+
 /* rrv_trace_ray may still be unimplemented: then the tool must fail cleanly. */
 static void trace_prints_csv(void)
 {
@@ -962,6 +998,7 @@ int main(int argc, char **argv)
     RUN(diff_reports_known_errors);
     RUN(render_is_deterministic);
     RUN(info_describes_scene);
+    RUN(face_jumps_are_reported);
     RUN(trace_prints_csv);
     return CHECK_EXIT_CODE();
 }

@@ -365,10 +365,11 @@ static void test_defaults_and_values(void)
     CHECK(s->camera.fov == 40 && s->camera.width == 320 && s->camera.height == 240);
     CHECK(s->camera.up.y == 1 && s->camera.eye.z == 3);
     CHECK(s->settings.spp == 16 && s->settings.max_depth == 32 && s->settings.seed == 0);
-    CHECK(s->settings.integrator == RRV_INTEGRATOR_CLASSIC && s->settings.stepper == RRV_STEPPER_DEFAULT);
+    CHECK(s->settings.integrator == RRV_INTEGRATOR_DEFAULT && s->settings.stepper == RRV_STEPPER_DEFAULT);
     CHECK(s->settings.refraction == RRV_REFRACTION_DEFAULT && s->settings.majorant_cells == 0);
     CHECK(s->settings.bend_tolerance == 0.01 && s->settings.mu_eta == 0 && s->settings.step == 0.01);
-    CHECK(s->settings.ambient_ior == 1);
+    /* no `ambient`: the air around gas b, at its ambient state, iorscale 1 */
+    CHECK(s->settings.ambient_ior == 0 && s->ambient_ior == 1.0 + (1.000292 - 1.0));
     CHECK(s->shape_count == 2 && s->material_count == 2);
     CHECK(strcmp(s->materials[s->shapes[0].material].name, "default") == 0);
     CHECK(s->materials[0].albedo[1] == 0.5);
