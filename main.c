@@ -248,11 +248,22 @@ static int parse_double(const char *text, double *out)
     return 1;
 }
 
-/* The next argument as the value of `flag`; `what` says what was expected. */
+/* The next argument as the value of `flag`; `what` says what was expected.
+   A value that starts with "-" and is not a number (--exposure -1 is one)
+   is taken for a forgotten value followed by an option: `--png -q` would
+   otherwise write a file called "-q". A file of such a name is "./-q". */
 static int take_value(arg_cursor *args, const char *flag, const char *what, const char **text)
 {
+    const char *next;
+    double number;
     if (args->index + 1 >= args->argc) {
         usage_error(args, "%s needs %s", flag, what);
+        return 0;
+    }
+    next = args->argv[args->index + 1];
+    if (next[0] == '-' && !parse_double(next, &number)) {
+        usage_error(args, "%s needs %s, got the option \"%s\" (for a file of that name write \"./%s\")", flag,
+                    what, next, next);
         return 0;
     }
     *text = args->argv[++args->index];
@@ -1314,10 +1325,11 @@ static int scene_hash(const input_list *inputs, const rrv_scene *scene, char out
     int i;
     hs.h = 0xcbf29ce484222325ULL;
     for (i = 0; i < inputs->count; ++i) {
-        FILE *f = fopen(inputs->paths[i], "rb");
+        FILE *f;
         size_t n;
         uint64_t total = 0;
-        if (!f) return 0;
+        rrv_error err;
+        if (rrv_open_read(inputs->paths[i], &f, NULL, &err) != RRV_OK) return 0;
         while ((n = fread(buf, 1, sizeof buf, f)) > 0) {
             hash_bytes(&hs, buf, n);
             total += n;
@@ -1341,40 +1353,44 @@ static int scene_hash(const input_list *inputs, const rrv_scene *scene, char out
     return 1;
 }
 
-/* Reads a whole file; NULL with errno set on failure. */
-static unsigned char *slurp(const char *path, size_t *size)
+/* An OpenEXR part is at most what rrv_read_exr reads: 2 GiB. */
+#define PART_FILE_MAX ((uint64_t)1 << 31)
+
+/* Reads a part file whole: opened as the library opens every input (a
+   regular file only, never blocking on a FIFO), refused by its size before
+   anything is allocated, its first 8 bytes alone when they are no OpenEXR
+   magic (the reader then says so), and never more than the size it had
+   when opened. NULL with the reason in why. */
+static unsigned char *slurp(const char *path, size_t *size, char *why, size_t why_size)
 {
-    FILE *f = fopen(path, "rb");
-    unsigned char *data = NULL;
-    size_t have = 0, cap = 0, n;
-    struct stat st;
-    if (!f) return NULL;
-    if (fstat(fileno(f), &st) == 0 && S_ISDIR(st.st_mode)) {
-        fclose(f);
-        errno = EISDIR;
+    static const unsigned char magic[4] = {0x76, 0x2f, 0x31, 0x01};
+    unsigned char *data;
+    uint64_t bytes;
+    size_t have;
+    rrv_error err;
+    FILE *f;
+    if (rrv_open_read(path, &f, &bytes, &err) != RRV_OK) {
+        snprintf(why, why_size, "%s", err.message);
         return NULL;
     }
-    for (;;) {
-        if (have == cap) {
-            size_t grown = cap ? 2 * cap : 65536;
-            unsigned char *bigger = (unsigned char *)realloc(data, grown);
-            if (!bigger || grown > ((size_t)1 << 31)) {
-                free(bigger ? bigger : data);
-                fclose(f);
-                errno = ENOMEM;
-                return NULL;
-            }
-            data = bigger;
-            cap = grown;
-        }
-        n = fread(data + have, 1, cap - have, f);
-        have += n;
-        if (n == 0) break;
+    if (bytes == UINT64_MAX || bytes > PART_FILE_MAX) {
+        fclose(f);
+        snprintf(why, why_size, bytes == UINT64_MAX ? "cannot tell its size" : "larger than %" PRIu64 " bytes",
+                 PART_FILE_MAX);
+        return NULL;
     }
+    data = (unsigned char *)malloc(bytes > 8 ? (size_t)bytes : 8);
+    if (!data) {
+        fclose(f);
+        snprintf(why, why_size, "out of memory for %" PRIu64 " bytes", bytes);
+        return NULL;
+    }
+    have = fread(data, 1, bytes < 8 ? (size_t)bytes : 8, f);
+    if (have == 8 && memcmp(data, magic, 4) == 0) have += fread(data + 8, 1, (size_t)bytes - 8, f);
     if (ferror(f)) {
+        snprintf(why, why_size, "%s", strerror(errno));
         free(data);
         fclose(f);
-        errno = EIO;
         return NULL;
     }
     fclose(f);
@@ -1387,7 +1403,8 @@ static unsigned char *slurp(const char *path, size_t *size)
 static int load_part(const char *path, part_info *part, float **sums, const char *command)
 {
     size_t size = 0, value_size;
-    unsigned char *data = slurp(path, &size);
+    char why[sizeof ((rrv_error *)0)->message];
+    unsigned char *data = slurp(path, &size, why, sizeof why);
     const char *type;
     const void *value;
     float *rgb = NULL;
@@ -1396,7 +1413,7 @@ static int load_part(const char *path, part_info *part, float **sums, const char
     rrv_error err;
     if (sums) *sums = NULL;
     if (!data) {
-        fprintf(stderr, "rrv: %s: \"%s\": cannot read: %s\n", command, path, strerror(errno));
+        fprintf(stderr, "rrv: %s: \"%s\": cannot read: %s\n", command, path, why);
         return 0;
     }
     memset(&err, 0, sizeof err);
@@ -1760,9 +1777,12 @@ static int command_render(int argc, char **argv)
         if (opt.resume) {
             /* A part already complete for this very scene and block is kept,
                so a re-submitted array only renders what is missing. */
-            FILE *probe = fopen(opt.pfm_path, "rb");
+            FILE *probe;
+            rrv_error probe_err;
             part_info have;
-            if (probe) {
+            /* opened as every input is: the output check above refused a
+               FIFO there, and one put in its place since must not block */
+            if (rrv_open_read(opt.pfm_path, &probe, NULL, &probe_err) == RRV_OK) {
                 fclose(probe);
                 if (load_part(opt.pfm_path, &have, NULL, "render --resume") &&
                     memcmp(&have, &part, sizeof part) == 0) {
@@ -1926,6 +1946,60 @@ static int rects_intersect(const int a[4], const int b[4])
     return a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3];
 }
 
+static int compare_ints(const void *pa, const void *pb)
+{
+    int a = *(const int *)pa, b = *(const int *)pb;
+    return (a > b) - (a < b);
+}
+
+/* The first pixel, row by row, that none of the (non-overlapping) parts
+   covers, found from the rectangles alone: a part may claim an image of
+   INT_MAX x INT_MAX, and a map of its pixels would be that many bytes.
+   The first hole's row is 0 or a rectangle's bottom edge (the row above it
+   is all covered, by a rectangle that ends there), so only those rows are
+   swept, each over the rectangles that meet it sorted by their left edge:
+   O(n^2 log n) for n parts. 0 when every pixel is covered or out of memory
+   (*x, *y are -1 then). */
+static int find_hole(merge_part *const *parts, int count, int width, int height, int *x, int *y)
+{
+    int *rows = (int *)malloc((size_t)(count + 1) * sizeof *rows);
+    int *lefts = (int *)malloc((size_t)(count > 0 ? count : 1) * 2 * sizeof *lefts);
+    int row_count = 0, i, r, found = 0;
+    *x = *y = -1;
+    if (!rows || !lefts) {
+        free(rows);
+        free(lefts);
+        return 0;
+    }
+    rows[row_count++] = 0;
+    for (i = 0; i < count; ++i)
+        if (parts[i]->info.rect[3] < height) rows[row_count++] = parts[i]->info.rect[3];
+    qsort(rows, (size_t)row_count, sizeof *rows, compare_ints);
+    for (r = 0; r < row_count && !found; ++r) {
+        int n = 0, reach = 0, k;
+        if (r > 0 && rows[r] == rows[r - 1]) continue;
+        for (i = 0; i < count; ++i) {
+            const int *rect = parts[i]->info.rect;
+            if (rect[1] <= rows[r] && rows[r] < rect[3]) {
+                lefts[2 * n] = rect[0];
+                lefts[2 * n + 1] = rect[2];
+                ++n;
+            }
+        }
+        qsort(lefts, (size_t)n, 2 * sizeof *lefts, compare_ints); /* by the left edge */
+        for (k = 0; k < n && lefts[2 * k] <= reach; ++k)
+            if (lefts[2 * k + 1] > reach) reach = lefts[2 * k + 1];
+        if (reach < width) {
+            *x = reach;
+            *y = rows[r];
+            found = 1;
+        }
+    }
+    free(rows);
+    free(lefts);
+    return found;
+}
+
 /* The tree sum of samples [a, b) of the parts of one tile (all with the
    same rectangle) into out; tmp is a scratch buffer per level. */
 static void merge_block(merge_part *const *tile, int count, int a, int b, float *out, float **tmp,
@@ -1986,7 +2060,6 @@ static int command_merge(int argc, char **argv)
     char **paths;
     merge_part *parts = NULL, **order = NULL;
     float *image = NULL, *tile_sum = NULL, *tmp[32];
-    unsigned char *covered = NULL;
     int path_count = 0, status = 0, quiet = 0, i, j, code = EXIT_INPUT, format, levels = 0;
     rrv_exr_options exr;
     pending_output output;
@@ -2129,20 +2202,17 @@ static int command_merge(int argc, char **argv)
     }
     if (area != (long long)width * height) {
         /* Tiles do not overlap, so less area means a hole: find a pixel in it. */
-        int x = 0, y = 0, found = 0;
-        covered = (unsigned char *)calloc((size_t)width * (size_t)height, 1);
-        if (!covered) {
+        int x, y;
+        if (!find_hole(order, path_count, width, height, &x, &y)) {
             fprintf(stderr, "rrv: out of memory\n");
             goto done;
         }
-        for (i = 0; i < path_count; ++i)
-            for (y = order[i]->info.rect[1]; y < order[i]->info.rect[3]; ++y)
-                memset(covered + (size_t)y * width + order[i]->info.rect[0], 1,
-                       (size_t)(order[i]->info.rect[2] - order[i]->info.rect[0]));
-        for (y = 0; y < height && !found; ++y)
-            for (x = 0; x < width && !found; ++x) found = !covered[(size_t)y * width + x];
         fprintf(stderr, "rrv: merge: pixel %d,%d is in no part: a tile is missing (the parts cover %lld of %dx%d "
-                "pixels)\n", x - 1, y - 1, area, width, height);
+                "pixels)\n", x, y, area, width, height);
+        goto done;
+    }
+    if ((uint64_t)width * (uint64_t)height > SIZE_MAX / (3 * sizeof *image)) {
+        fprintf(stderr, "rrv: out of memory for a %dx%d image\n", width, height);
         goto done;
     }
 
@@ -2189,7 +2259,6 @@ done:
     free(order);
     free(image);
     free(tile_sum);
-    free(covered);
     free(paths);
     return code;
 }

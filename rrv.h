@@ -229,6 +229,7 @@
      rrv_read_pfm_memory    the same from memory
      rrv_read_exr           read a scanline RGB OpenEXR file
      rrv_read_exr_memory    the same from memory
+     rrv_open_read          open a file for reading as every reader does (regular files only)
      rrv_exr_find_attribute an OpenEXR header attribute by name (rrv's part metadata)
      rrv_half_from_float    the IEEE half nearest a float (finite values clamped)
      rrv_crc32, rrv_adler32 the checksums the PNG and EXR writers use
@@ -241,14 +242,38 @@
      RRV_STATIC       make every public function static to the including file
      RRV_NO_STDIO     no FILE* I/O: load through rrv_load_options.read_file and
                       write through the callback writers
+     RRV_NO_POSIX     plain C files only. By default, where __unix__ or
+                      __APPLE__ is defined, the implementation uses POSIX's
+                      open, fstat and fcntl (and stat beside the writers'
+                      rename): every reader opens without blocking and
+                      refuses what is not a regular file (a FIFO, a device,
+                      a folder: rrv_open_read), the writers refuse such a
+                      target and create their temporary file exclusively.
+                      With RRV_NO_POSIX, or elsewhere, they use fopen alone:
+                      a FIFO given as input blocks until a writer opens it,
+                      an endless device is read up to the size limit, and
+                      a device node at a writer's target is replaced.
+                      The POSIX calls come from <fcntl.h>, <sys/stat.h> and
+                      <unistd.h>, which glibc declares under -std=c99 too,
+                      except fdopen: rrv.h declares that one itself (in C),
+                      so the header works after any includes of the user's.
+                      A libc that hides more under strict C wants
+                      _POSIX_C_SOURCE 200809L before its first header, as
+                      rrv_impl.c defines it.
 
    FILES
-     Every input is untrusted and read with bounds: a scene or OBJ file up to
-     rrv_load_options.max_grid_bytes, a PFM header and then exactly the pixels
-     it announces, an OpenEXR file whole (up to 2 GiB) with every offset and
-     size checked against it. Scene numbers are decimal (no hexadecimal) and read the
-     same in any locale. The file writers replace their target through a new
-     temporary file; rrv_write_pfm says what plain C cannot promise there.
+     Every input is untrusted and read with bounds, and only from a regular
+     file (rrv_open_read; a FIFO or a device is refused at once, unread):
+     a scene, OBJ or NanoVDB file up to rrv_load_options.max_grid_bytes (a
+     larger one refused by its size before any byte is read), a gridvol's
+     48-byte header and then exactly the samples it announces, a PFM
+     header and then exactly the pixels it announces (more than the file
+     holds is refused by its size), an OpenEXR file whole (up to 2 GiB)
+     with every offset and size checked against it. Scene numbers are
+     decimal (no hexadecimal) and read the same in any locale. The file
+     writers replace their target through a new temporary file and refuse
+     a target that is no regular file; rrv_write_pfm says how links are
+     treated and what plain C cannot promise there.
      Images out: rrv_write_pfm (float), rrv_write_exr (OpenEXR scanline, half
      or float, ZIP or uncompressed, a crop placed in a larger display
      window; rrv_half_from_float is its rounding), rrv_write_png (8-bit sRGB
@@ -278,6 +303,9 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#ifndef RRV_NO_STDIO
+#include <stdio.h> /* FILE, for rrv_open_read */
+#endif
 
 #define RRV_VERSION_MAJOR 0
 #define RRV_VERSION_MINOR 9
@@ -618,6 +646,10 @@ typedef struct rrv_medium {
        temperature, pressure and ior statements, so that the limit checks of
        rrv_scene_prepare name the line that broke one; 0 = built in code. */
     int line[5];
+    /* The grid or NanoVDB file each of those field statements read, as the
+       scene wrote it (clipped to 127 bytes), or "": those checks name it
+       beside the scene line. */
+    char source[5][128];
     /* Built by rrv_scene_prepare; NULL before. */
     struct rrv__majorant_grid *majorant;
 } rrv_medium;
@@ -647,6 +679,8 @@ typedef struct rrv_scene {
                                               settings.ambient_ior, or for 0
                                               the first gas medium's at its
                                               ambient state (1 without one) */
+    int prepared;                          /* 1 after rrv_scene_prepare succeeded, 0 again
+                                              after an edit through the calls */
     size_t bytes;                          /* heap bytes the scene holds */
     size_t grid_bytes;                     /* of which grid samples */
     size_t max_grid_bytes;                 /* the largest grid rrv_scene_prepare may
@@ -884,7 +918,12 @@ typedef struct rrv_render_stats {
    Thread-safe for distinct pixels: the scene is only read (give each
    thread its own err, or NULL). With nee manifold each call allocates
    its solver's scratch (~250 KB, RRV_MALLOC) and frees it on return;
-   RRV_ERROR_MEMORY, with nothing added, when that fails. */
+   RRV_ERROR_MEMORY, with nothing added, when that fails. Refused with
+   RRV_ERROR_ARGUMENT, nothing added: a scene that was never prepared (or
+   edited since: rrv_scene_prepare), a rectangle outside the image, and
+   sample indices outside [0, RRV_MAX_SPP) -- the bound of a scene's spp,
+   where a float sum stops counting (2^24 + 1 rounds to 2^24). */
+#define RRV_MAX_SPP 16777216
 RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
                                    int sample_begin, int sample_end,
                                    float *sum, int stride, rrv_render_stats *stats,
@@ -991,12 +1030,21 @@ RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char
 /* File forms. Writers write a new temporary file "<path>.<random>.tmp" next
    to path and rename it over path only when everything was written, so a
    failure never leaves half an image and never touches an existing file of
-   another name. Plain C cannot create a file exclusively before C11 nor tell
-   a device or a folder from a file, so with C99 two writers can in rare
-   cases pick the same temporary name, and an existing device node at path
-   is replaced: a client that needs more (rrv's CLI) uses its platform's
-   mkstemp, stat and rename around rrv_write_pfm_to. The reader reads the
-   header first and then exactly the pixel data it announces. */
+   another name. An existing path that is not a regular file (a device
+   node, a FIFO, a socket, a folder) is refused with RRV_ERROR_IO and
+   "cannot write: it is a FIFO, not a regular file" (or the kind it is),
+   and nothing is written. A symbolic link is judged by what it points to:
+   one to a device is refused; one to a regular file, or a dangling one, is
+   replaced by the image (rename replaces the link itself; the file it
+   pointed to is left as it was). The check and the rename are two steps,
+   so a path swapped between them is not caught. All of this needs POSIX
+   (CONFIGURATION: RRV_NO_POSIX); plain C cannot tell a device from a file
+   nor create a file exclusively before C11, so there an existing device
+   node at path is replaced and two writers can in rare cases pick the same
+   temporary name: a client that needs more uses its platform's calls
+   around rrv_write_pfm_to. The readers open only regular files, never
+   blocking on a FIFO (rrv_open_read), and read the header first and then
+   exactly the pixel data it announces. */
 RRV_DEF rrv_result rrv_write_pfm(const char *path, const float *rgb, int width, int height,
                                  rrv_error *err);
 RRV_DEF rrv_result rrv_write_png(const char *path, const float *rgb, int width, int height,
@@ -1007,6 +1055,16 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
                                 rrv_error *err);
 RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *height,
                                 rrv_exr_options *info, rrv_error *err);
+#ifndef RRV_NO_STDIO
+/* Opens path for reading ("rb") as every file reader of rrv does: only a
+   regular file, and without blocking on the way (opening a FIFO with no
+   writer, or a terminal, would wait forever). Anything else is refused with
+   RRV_ERROR_IO and err naming path, line 0, with "not a regular file" (or
+   "is a directory", "no such file", "permission denied"). *size gets the
+   file's size in bytes, or UINT64_MAX where it cannot be told. Without
+   POSIX (CONFIGURATION) it is plain fopen: a FIFO there still blocks. */
+RRV_DEF rrv_result rrv_open_read(const char *path, FILE **file, uint64_t *size, rrv_error *err);
+#endif
 
 /* Checksums the PNG writer uses, exposed for tests and tools. Start with 0 (crc)
    and 1 (adler). */
@@ -6491,6 +6549,7 @@ static void rrv__scene_release_prepared(rrv_scene *scene)
     scene->bvh_prims = NULL;
     scene->lights = NULL;
     scene->bvh_node_count = scene->light_count = 0;
+    scene->prepared = 0;
 }
 
 /* The limits of BOUNDS for one medium, with the scene line of the statement
@@ -6509,6 +6568,11 @@ static rrv_result rrv__check_medium(const rrv_scene *scene, const rrv_medium *m,
                          RRV_MAX_RADIANCE);
     if (!rrv__medium_extinction_ok(m, &a)) {
         at = m->line[1] > m->line[0] ? 1 : 0;
+        if (m->source[at][0])
+            return rrv__fail(err, m->line[at] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[at],
+                             "%s: grid \"%s\" gives medium \"%s\" an extinction of %g /m, over its %g m an "
+                             "optical depth above the %g rrv accepts",
+                             stmt[at], m->source[at], m->name, a, rrv__medium_size(m), RRV_MAX_OPTICAL_DEPTH);
         return rrv__fail(err, m->line[at] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[at],
                          "%s: medium \"%s\" reaches an extinction of %g /m, over its %g m an optical depth "
                          "above the %g rrv accepts",
@@ -6520,6 +6584,10 @@ static rrv_result rrv__check_medium(const rrv_scene *scene, const rrv_medium *m,
             if (m->line[2] > m->line[at]) at = 2;
             if (m->line[3] > m->line[at]) at = 3;
         }
+        if (m->source[at][0])
+            return rrv__fail(err, m->line[at] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[at],
+                             "%s: grid \"%s\" gives medium \"%s\" an IOR from %g to %g; it must stay within "
+                             "[%g, %g]", stmt[at], m->source[at], m->name, a, b, RRV_MIN_IOR, RRV_MAX_IOR);
         return rrv__fail(err, m->line[at] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[at],
                          "%s: medium \"%s\" gets an IOR from %g to %g; it must stay within [%g, %g]", stmt[at],
                          m->name, a, b, RRV_MIN_IOR, RRV_MAX_IOR);
@@ -6580,6 +6648,7 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
         }
         if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
     }
+    scene->prepared = 1;
     return RRV_OK;
 }
 
@@ -6759,11 +6828,11 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     if (stride < x1 - x0)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
                          "rrv_render_rect: stride %d is below the rectangle's width %d", stride, x1 - x0);
-    if (sample_begin < 0 || sample_begin > sample_end)
+    if (sample_begin < 0 || sample_begin > sample_end || sample_end > RRV_MAX_SPP)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
-                         "rrv_render_rect: samples [%d,%d) are not a range of indices >= 0", sample_begin,
-                         sample_end);
-    if ((scene->shape_count && !scene->bvh) || (scene->medium_count && !scene->media[0].majorant))
+                         "rrv_render_rect: samples [%d,%d) are not a range of indices in [0, %d)", sample_begin,
+                         sample_end, RRV_MAX_SPP);
+    if (!scene->prepared)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
                          "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
     memset(&ctx, 0, sizeof ctx);
@@ -11077,6 +11146,20 @@ RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char
 #ifndef RRV_NO_STDIO
 #include <errno.h>
 #include <time.h>
+#if (defined(__unix__) || defined(__APPLE__)) && !defined(RRV_NO_POSIX)
+#define RRV__POSIX 1
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#ifndef __cplusplus
+/* POSIX's own prototype: glibc's <stdio.h> declares it only when a feature
+   macro came before its first include, which the user's includes may have
+   settled already (CONFIGURATION). C++ compilers define _GNU_SOURCE. */
+FILE *fdopen(int fd, const char *mode);
+#endif
+#else
+#define RRV__POSIX 0
+#endif
 
 static int rrv__fwrite_callback(void *user, const void *data, size_t size)
 {
@@ -11099,6 +11182,87 @@ static const char *rrv__io_reason(int errnum)
 #endif
     (void)errnum;
     return "";
+}
+
+#if RRV__POSIX
+static const char *rrv__file_kind(mode_t mode)
+{
+    if (S_ISDIR(mode)) return "a directory";
+    if (S_ISCHR(mode)) return "a character device";
+    if (S_ISBLK(mode)) return "a block device";
+    if (S_ISFIFO(mode)) return "a FIFO";
+#ifdef S_ISSOCK
+    if (S_ISSOCK(mode)) return "a socket";
+#endif
+    return "not a regular file";
+}
+#endif
+
+/* The one way every reader opens a file. O_NONBLOCK makes the open itself
+   return at once for a FIFO without a writer (and O_NOCTTY keeps a terminal
+   from becoming ours); fstat on the descriptor then judges the very file
+   that was opened, not a name that may have been swapped since. A regular
+   file never blocks, so the flag is cleared again before stdio reads. *why
+   is "" or the reason in words; *size the size or UINT64_MAX. */
+static FILE *rrv__open_read(const char *path, uint64_t *size, const char **why)
+{
+#if RRV__POSIX
+    struct stat st;
+    int fd, flags = O_RDONLY | O_NONBLOCK | O_NOCTTY;
+    FILE *f;
+#ifdef O_CLOEXEC
+    flags |= O_CLOEXEC; /* a client's child processes need not inherit it */
+#endif
+    *size = UINT64_MAX;
+    *why = "";
+    errno = 0;
+    fd = open(path, flags);
+    if (fd < 0) {
+        *why = rrv__io_reason(errno);
+        return NULL;
+    }
+    if (fstat(fd, &st) != 0) {
+        *why = rrv__io_reason(errno);
+        close(fd);
+        return NULL;
+    }
+    if (!S_ISREG(st.st_mode)) {
+        /* a folder keeps the words fopen's EISDIR gave before */
+        *why = S_ISDIR(st.st_mode) ? "is a directory" : "not a regular file";
+        close(fd);
+        errno = 0;
+        return NULL;
+    }
+    flags = fcntl(fd, F_GETFL);
+    if (flags == -1 || fcntl(fd, F_SETFL, flags & ~O_NONBLOCK) == -1 || !(f = fdopen(fd, "rb"))) {
+        *why = rrv__io_reason(errno);
+        close(fd);
+        return NULL;
+    }
+    if (st.st_size >= 0) *size = (uint64_t)st.st_size;
+    return f;
+#else
+    FILE *f;
+    *size = UINT64_MAX;
+    errno = 0;
+    f = fopen(path, "rb");
+    *why = f ? "" : rrv__io_reason(errno);
+    return f;
+#endif
+}
+
+RRV_DEF rrv_result rrv_open_read(const char *path, FILE **file, uint64_t *size, rrv_error *err)
+{
+    const char *why = "";
+    uint64_t bytes;
+    if (file) *file = NULL;
+    if (size) *size = UINT64_MAX;
+    if (!path || !file) return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_open_read: NULL argument");
+    *file = rrv__open_read(path, &bytes, &why);
+    if (!*file) return rrv__fail(err, RRV_ERROR_IO, path, 0, "%s", why[0] ? why : "cannot open");
+    if (size) *size = bytes;
+    rrv__clear_error(err);
+    return RRV_OK;
 }
 
 /* Stops a stream read early: sees the whole buffer after each piece. */
@@ -11161,8 +11325,8 @@ static rrv_result rrv__read_stream(FILE *f, size_t first, size_t piece, size_t l
 /* Opens a new temporary file next to path. The name carries a value mixed
    from the clock, the address of the stack and the attempt, so two writers
    to one path (or a leftover file) rarely meet; a name that exists is
-   skipped, and C11's exclusive "x" mode closes the remaining race where it
-   is available. */
+   skipped. POSIX's O_EXCL, or else C11's exclusive "x" mode, closes the
+   remaining race where it is available. */
 static FILE *rrv__open_temp(const char *path, char *temp_path, size_t cap)
 {
     int attempt;
@@ -11171,6 +11335,23 @@ static FILE *rrv__open_temp(const char *path, char *temp_path, size_t cap)
                                   ((uint64_t)(uintptr_t)&attempt << 7) ^ (uint64_t)attempt);
         FILE *f;
         snprintf(temp_path, cap, "%s.%08lx.tmp", path, (unsigned long)(mix & 0xffffffffu));
+#if RRV__POSIX
+        {
+            /* O_EXCL creates the name or fails, also where a link or a FIFO
+               stands at it; 0666 less the umask is what fopen would give */
+            int fd = open(temp_path, O_WRONLY | O_CREAT | O_EXCL | O_NOCTTY, 0666);
+            if (fd < 0) {
+                if (errno == EEXIST) continue;
+                return NULL;
+            }
+            f = fdopen(fd, "wb");
+            if (!f) {
+                close(fd);
+                remove(temp_path);
+            }
+            return f;
+        }
+#else
         f = fopen(temp_path, "rb");
         if (f) { /* taken: never write over a file we did not create */
             fclose(f);
@@ -11186,6 +11367,7 @@ static FILE *rrv__open_temp(const char *path, char *temp_path, size_t cap)
         if (errno == EEXIST) continue;
 #endif
         return NULL;
+#endif
     }
     return NULL;
 }
@@ -11211,6 +11393,16 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
     if (format == RRV__IMAGE_PNG && !isfinite(exposure))
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "exposure must be finite");
 
+#if RRV__POSIX
+    {
+        /* stat follows a link: what matters is what rename would replace
+           for the reader of path, and a link to a device reads the device */
+        struct stat st;
+        if (stat(path, &st) == 0 && !S_ISREG(st.st_mode))
+            return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot write: it is %s, not a regular file",
+                             rrv__file_kind(st.st_mode));
+    }
+#endif
     cap = strlen(path) + 16; /* ".%08lx.tmp" and the NUL */
     temp_path = (char *)RRV_MALLOC(cap);
     if (!temp_path) return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory");
@@ -11305,6 +11497,8 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
     unsigned char header[RRV__PFM_HEADER_MAX], *data = NULL;
     size_t header_size, have = 0;
     rrv__pfm_header h;
+    uint64_t file_size;
+    const char *why;
     FILE *file;
     rrv_result result;
     int errnum;
@@ -11314,12 +11508,8 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
     if (height) *height = 0;
     if (!path || !rgb || !width || !height)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_read_pfm: NULL argument");
-    errno = 0;
-    file = fopen(path, "rb");
-    if (!file) {
-        const char *why = rrv__io_reason(errno);
-        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open%s%s", why[0] ? ": " : "", why);
-    }
+    file = rrv__open_read(path, &file_size, &why);
+    if (!file) return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open%s%s", why[0] ? ": " : "", why);
 
     /* The header first, then exactly the pixel data it announces: a stream
        without end (a device, a pipe) is read no further than that. */
@@ -11339,8 +11529,13 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
         return result;
     }
 
-    /* The buffer grows with what arrives, so a header announcing more than
-       the file holds costs at most twice what the file holds. */
+    /* A header announcing more than the file holds is refused by the
+       file's size; where that is unknown the buffer grows with what
+       arrives, so it costs at most twice what the file holds. */
+    if (file_size != UINT64_MAX && header_size <= file_size && h.data_bytes > file_size - header_size) {
+        fclose(file);
+        return rrv__pfm_truncated(err, path, &h, (size_t)(file_size - header_size));
+    }
     result = rrv__read_stream(file, (size_t)1 << 20, SIZE_MAX, h.data_bytes, 0, NULL, &data, &have,
                               &errnum);
     fclose(file);
@@ -11376,6 +11571,8 @@ RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *
 {
     unsigned char *data = NULL;
     size_t have = 0;
+    uint64_t file_size;
+    const char *why;
     FILE *file;
     rrv_result result;
     int errnum;
@@ -11384,14 +11581,15 @@ RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *
     if (height) *height = 0;
     if (!path || !rgb || !width || !height)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_read_exr: NULL argument");
-    errno = 0;
-    file = fopen(path, "rb");
-    if (!file) {
-        const char *why = rrv__io_reason(errno);
-        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open%s%s", why[0] ? ": " : "", why);
-    }
+    file = rrv__open_read(path, &file_size, &why);
+    if (!file) return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open%s%s", why[0] ? ": " : "", why);
     /* The first read is 8 bytes, so a stream that is no EXR (a device, a
-       pipe) is refused without reading on. */
+       pipe, where plain C cannot refuse them) is refused without reading on. */
+    if (file_size != UINT64_MAX && file_size > RRV__EXR_FILE_MAX) {
+        fclose(file);
+        return rrv__fail(err, RRV_ERROR_LIMIT, path, 0, "OpenEXR file larger than %llu bytes",
+                         (unsigned long long)RRV__EXR_FILE_MAX);
+    }
     result = rrv__read_stream(file, 8, SIZE_MAX, RRV__EXR_FILE_MAX, 1, rrv__exr_stop, &data, &have,
                               &errnum);
     fclose(file);
@@ -12059,22 +12257,37 @@ static int rrv__sf_text_stop(const unsigned char *data, size_t have, size_t got)
     return memchr(data + have - got, '\0', got) != NULL;
 }
 
-/* A whole file, at most max_bytes of it (rrv__read_stream). */
+/* A binary file (NanoVDB, the only one read whole) stops after its first
+   piece unless it starts as one: where plain C cannot refuse a device,
+   /dev/zero is not read up to the limit either. */
+static int rrv__sf_binary_stop(const unsigned char *data, size_t have, size_t got)
+{
+    (void)got;
+    return have >= 7 && memcmp(data, "NanoVDB", 7) != 0;
+}
+
+/* A whole file, at most max_bytes of it (rrv__read_stream): one larger by
+   its size is refused before a byte is read, and a file of known size is
+   read into one buffer of that size (plus the byte that finds growth). */
 static rrv_result rrv__sf_stdio_read(const char *path, size_t max_bytes, int text, void **data,
                                      size_t *size, const char **why)
 {
     enum { PIECE = 64 * 1024 };
     unsigned char *buf;
+    size_t first = 2 * (size_t)PIECE;
+    uint64_t file_size;
     rrv_result r;
     int errnum;
-    FILE *f;
-    errno = 0;
-    f = fopen(path, "rb");
-    if (!f) {
-        *why = rrv__io_reason(errno);
-        return RRV_ERROR_IO;
+    FILE *f = rrv__open_read(path, &file_size, why);
+    if (!f) return RRV_ERROR_IO;
+    if (file_size != UINT64_MAX) {
+        if (file_size > max_bytes) {
+            fclose(f);
+            return RRV_ERROR_LIMIT;
+        }
+        first = (size_t)file_size + 1;
     }
-    r = rrv__read_stream(f, 2 * (size_t)PIECE, PIECE, max_bytes, 1, text ? rrv__sf_text_stop : NULL,
+    r = rrv__read_stream(f, first, PIECE, max_bytes, 1, text ? rrv__sf_text_stop : rrv__sf_binary_stop,
                          &buf, size, &errnum);
     fclose(f);
     if (r == RRV_ERROR_IO) *why = rrv__io_reason(errnum);
@@ -12403,12 +12616,9 @@ static rrv_result rrv__sf_grid_read_stdio(const char *path, const char *name, si
     rrv_result r;
     FILE *f;
     int sized;
-    errno = 0;
-    f = fopen(path, "rb");
-    if (!f) {
-        *why = rrv__io_reason(errno);
-        return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
-    }
+    uint64_t file_size;
+    f = rrv__open_read(path, &file_size, why);
+    if (!f) return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
     /* The header is read before the size is asked for: a folder opens and
        may claim any size, and only a read says what it is. */
     errno = 0;
@@ -12418,7 +12628,8 @@ static rrv_result rrv__sf_grid_read_stdio(const char *path, const char *name, si
         fclose(f);
         return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
     }
-    sized = rrv__sf_stdio_size(f, &total) && fseek(f, (long)got, SEEK_SET) == 0;
+    total = file_size;
+    sized = file_size != UINT64_MAX || (rrv__sf_stdio_size(f, &total) && fseek(f, (long)got, SEEK_SET) == 0);
     if (!sized) {
         fclose(f);
         return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file: cannot tell its size");
@@ -12763,7 +12974,7 @@ static const rrv__sf_key rrv__sf_camera_keys[] = {
     {"resolution", RRV__SF_INT, 2, 0, 1.0, 16384.0, NULL},
 };
 static const rrv__sf_key rrv__sf_render_keys[] = {
-    {"spp", RRV__SF_INT, 1, 0, 1.0, 16777216.0, NULL},
+    {"spp", RRV__SF_INT, 1, 0, 1.0, (double)RRV_MAX_SPP, NULL},
     {"maxdepth", RRV__SF_INT, 1, 0, 1.0, 1024.0, NULL},
     {"seed", RRV__SF_U64, 1, 0, RRV__SF_NN, NULL},
     {"integrator", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|classic|refractive|eikonal"},
@@ -14013,6 +14224,7 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
     rrv__sf_field_free(rrv__medium_field_of(m, which));
     *rrv__medium_field_of(m, which) = f;
     m->line[1 + which] = 0;
+    m->source[1 + which][0] = '\0';
     rrv__api_edited(scene);
     return RRV_OK;
 }
@@ -14679,6 +14891,15 @@ static rrv_result rrv__sf_field_gas(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv
     return RRV_OK;
 }
 
+/* The medium's limit checks name the file a field came from. */
+static void rrv__sf_keep_source(rrv_medium *m, rrv_medium_field which, const char *written)
+{
+    size_t n = strlen(written);
+    if (n >= sizeof m->source[0]) n = sizeof m->source[0] - 1;
+    memcpy(m->source[1 + which], written, n);
+    m->source[1 + which][n] = '\0';
+}
+
 static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f)
 {
     char written[RRV__SF_PATH_MAX], full[RRV__SF_PATH_MAX];
@@ -14705,6 +14926,7 @@ static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const rrv__sf_fs *fs, rr
     if (fs->which != RRV_MEDIUM_DENSITY && f->grid.channels != 1)
         return rrv__sf_perr(p, RRV_ERROR_FORMAT, "grid \"%s\": %s grids need 1 channel, found %d",
                             written, stmt, f->grid.channels);
+    rrv__sf_keep_source(fs->m, fs->which, written);
     return RRV_OK;
 }
 
@@ -14739,6 +14961,7 @@ static rrv_result rrv__sf_field_nanovdb(rrv__sf_parser *p, const rrv__sf_fs *fs,
     if (r != RRV_OK) return rrv__sf_perr(p, r, "NanoVDB file \"%s\": %s", written, e.message);
     f->kind = RRV_FIELD_NANOVDB;
     p->scene->grid_bytes += f->nanovdb.size;
+    rrv__sf_keep_source(fs->m, fs->which, written);
     return RRV_OK;
 }
 
@@ -14890,7 +15113,11 @@ static rrv_result rrv__sf_st_field(rrv__sf_parser *p)
         else
             rrv__sf_field_free(&fresh);
     }
-    if (r == RRV_OK) fs.m->line[1 + which] = p->line;
+    if (r == RRV_OK) {
+        fs.m->line[1 + which] = p->line;
+        /* the grid kinds wrote their file's name; every other kind clears it */
+        if (kind != RRV__SF_K_GRID && kind != RRV__SF_K_NANOVDB) fs.m->source[1 + which][0] = '\0';
+    }
     return r;
 }
 

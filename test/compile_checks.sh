@@ -32,6 +32,20 @@ if out=$(${CC:-cc} -std=c99 -Wall -Wextra -pedantic -Werror -I. -c "$build/nostd
 then echo "PASS header_compiles_without_stdio"
 else printf '%s\n' "$out" | head -20; echo "FAIL header_compiles_without_stdio"
 fi
+# The implementation after the user's own system headers under strict C99
+# (glibc then declares no fdopen: rrv.h must declare it itself), and the
+# plain-C file I/O of RRV_NO_POSIX, with both compilers.
+printf '#include <stdio.h>\n#include <stdlib.h>\n#include <string.h>\n#define RRV_IMPLEMENTATION\n#include "rrv.h"\n' > "$build/after_includes_check.c"
+ok=1
+for c in ${CC:-cc} gcc clang; do
+    command -v "$c" >/dev/null 2>&1 || continue
+    for flags in "" "-DRRV_NO_POSIX"; do
+        if ! out=$("$c" -std=c99 -Wall -Wextra -pedantic -Werror $flags -I. -c "$build/after_includes_check.c" -o "$build/after_includes_check.o" 2>&1)
+        then printf '%s\n' "$out" | head -10; echo "  $c $flags"; ok=0
+        fi
+    done
+done
+if [ $ok = 1 ]; then echo "PASS header_compiles_after_user_includes"; else echo "FAIL header_compiles_after_user_includes"; fi
 # gcc and clang once drew random numbers in different orders (two draws as
 # arguments of one call): both builds must render the same bytes.
 if command -v gcc >/dev/null 2>&1 && command -v clang >/dev/null 2>&1; then

@@ -534,7 +534,16 @@ static void test_render_rect_errors(void)
     expect_message(rrv_render_rect(s, 0, 0, 12, 9, 0, 1, sum, 11, NULL, &err), &err, RRV_ERROR_ARGUMENT,
                    "rrv_render_rect: stride 11 is below the rectangle's width 12");
     expect_message(rrv_render_rect(s, 0, 0, 12, 9, 2, 1, sum, 12, NULL, &err), &err, RRV_ERROR_ARGUMENT,
-                   "rrv_render_rect: samples [2,1) are not a range of indices >= 0");
+                   "rrv_render_rect: samples [2,1) are not a range of indices in [0, 16777216)");
+    /* the bound the header states: indices below RRV_MAX_SPP, the spp bound */
+    expect_message(rrv_render_rect(s, 0, 0, 12, 9, RRV_MAX_SPP, RRV_MAX_SPP + 1, sum, 12, NULL, &err), &err,
+                   RRV_ERROR_ARGUMENT,
+                   "rrv_render_rect: samples [16777216,16777217) are not a range of indices in [0, 16777216)");
+    expect_message(rrv_render_rect(s, 0, 0, 12, 9, INT_MAX - 1, INT_MAX, sum, 12, NULL, &err), &err,
+                   RRV_ERROR_ARGUMENT,
+                   "rrv_render_rect: samples [2147483646,2147483647) are not a range of indices in [0, 16777216)");
+    memset(sum, 0, sizeof sum);
+    CHECK(rrv_render_rect(s, 0, 0, 1, 1, RRV_MAX_SPP - 1, RRV_MAX_SPP, sum, 1, NULL, &err) == RRV_OK);
     memset(&extra, 0, sizeof extra);
     extra.lo = tv3(2, 2, 2);
     extra.hi = tv3(3, 3, 3);
@@ -542,6 +551,41 @@ static void test_render_rect_errors(void)
     CHECK(rrv_render_rect(s, 0, 0, 12, 9, 0, 1, sum, 12, NULL, &err) == RRV_ERROR_ARGUMENT);
     CHECK(strstr(err.message, "not prepared") != NULL);
     CHECK(rrv_render_rect(s, 0, 0, 12, 9, 0, 1, sum, 12, NULL, NULL) == RRV_ERROR_ARGUMENT);
+    rrv_scene_free(s);
+}
+
+/* A scene made in code and never prepared is refused, whatever it holds
+   (one with neither shapes nor media rendered its sky and returned RRV_OK),
+   and so is one edited after rrv_scene_prepare; preparing makes it render. */
+static void test_unprepared_scene_is_refused(void)
+{
+    rrv_scene *s = NULL;
+    rrv_environment sky;
+    rrv_settings settings;
+    rrv_camera cam;
+    float sum[3 * 4] = {0};
+    rrv_error err;
+    int i;
+    memset(&sky, 0, sizeof sky);
+    sky.kind = RRV_ENV_CONSTANT;
+    sky.L[0] = sky.L[1] = sky.L[2] = 1;
+    memset(&cam, 0, sizeof cam);
+    cam.eye.z = 4;
+    cam.width = cam.height = 2;
+    CHECK(rrv_scene_create(&s, &err) == RRV_OK);
+    if (!s) return;
+    CHECK(rrv_scene_set_camera(s, &cam, &err) == RRV_OK);
+    CHECK(rrv_scene_set_environment(s, &sky, &err) == RRV_OK);
+    expect_message(rrv_render_rect(s, 0, 0, 2, 2, 0, 1, sum, 2, NULL, &err), &err, RRV_ERROR_ARGUMENT,
+                   "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
+    for (i = 0; i < 12; ++i) CHECK(sum[i] == 0);
+    CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+    CHECKF(rrv_render_rect(s, 0, 0, 2, 2, 0, 1, sum, 2, NULL, &err) == RRV_OK, "%s", err.message);
+    CHECKF(sum[0] > 0.5f, "the sky gave %g", sum[0]);
+    settings = s->settings;
+    CHECK(rrv_scene_set_settings(s, &settings, &err) == RRV_OK);
+    expect_message(rrv_render_rect(s, 0, 0, 2, 2, 0, 1, sum, 2, NULL, &err), &err, RRV_ERROR_ARGUMENT,
+                   "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
     rrv_scene_free(s);
 }
 
@@ -755,6 +799,7 @@ int main(void)
     RUN(test_code_and_file_agree);
     RUN(test_prepare_twice);
     RUN(test_render_rect_errors);
+    RUN(test_unprepared_scene_is_refused);
     RUN(test_fields_and_meshes_are_copied);
     RUN(test_read_release_pair);
     RUN(test_channel_groups_reported);

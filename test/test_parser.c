@@ -655,6 +655,17 @@ static void test_locale_independence(void)
     rrv_scene_free(s);
 }
 
+/* A file holding `text`, then (if size is larger) a hole up to size bytes. */
+static int write_sparse(const char *path, const char *text, long size)
+{
+    FILE *f = fopen(path, "wb");
+    int ok;
+    if (!f) return 0;
+    ok = fputs(text, f) >= 0;
+    if (ok && size > (long)strlen(text)) ok = fseek(f, size - 1, SEEK_SET) == 0 && fputc(0, f) == 0;
+    return fclose(f) == 0 && ok;
+}
+
 /* Paths, inputs and odd files: "C:" is a drive only on Windows, every file
    read is reported through on_input, and a folder or an endless device as
    the scene gets a message after a bounded read. */
@@ -739,13 +750,44 @@ static void test_paths_and_inputs(void)
            "%s: %s", rrv_result_string(r), err.message);
     CHECKF(t_largest <= ((size_t)1 << 20), "largest allocation %lu", (unsigned long)t_largest);
 #ifndef _WIN32
-    /* an endless device stops at its first piece, whose NUL is refused */
+    /* an endless device is not a regular file: refused before a byte is read */
     t_largest = 0;
     r = rrv_scene_load("/dev/zero", NULL, &s, &err);
-    CHECKF(r == RRV_ERROR_PARSE && err.line == 1 &&
-               strcmp(err.message, "NUL byte in column 1: not a text file") == 0,
+    CHECKF(r == RRV_ERROR_IO && err.line == 0 &&
+               strcmp(err.message, "cannot read scene file: not a regular file") == 0,
            "%s: %s", rrv_result_string(r), err.message);
     CHECKF(t_largest <= ((size_t)1 << 20), "largest allocation %lu", (unsigned long)t_largest);
+
+    /* files over the limit are refused by their size, before a byte is
+       read: a 128 MiB NanoVDB file (sparse, so it costs no disk) and a
+       scene as large, under a limit of 64 MiB, each allocate nothing near
+       it (they were read up to the limit first) */
+    {
+        char nvdb[600], scene[600];
+        rrv_load_options opt;
+        snprintf(nvdb, sizeof nvdb, "%s/t_big.nvdb", t_build_dir);
+        snprintf(scene, sizeof scene, "%s/t_big.rrv", t_build_dir);
+        memset(&opt, 0, sizeof opt);
+        opt.max_grid_bytes = (size_t)64 << 20;
+        CHECK(write_sparse(nvdb, "NanoVDB0", (long)128 << 20));
+        CHECK(write_sparse(scene, "camera eye 0 0 5 look 0 0 0\nmedium m box -1 -1 -1 1 1 1\n"
+                                  "density m nanovdb t_big.nvdb\n", 0));
+        t_largest = 0;
+        r = rrv_scene_load(scene, &opt, &s, &err);
+        CHECKF(r == RRV_ERROR_LIMIT && err.line == 3 &&
+                   strcmp(err.message, "NanoVDB file \"t_big.nvdb\": the file is larger than the limit of 67108864 "
+                                       "bytes (raise it with --max-grid-mb N)") == 0,
+               "%s: %d: %s", rrv_result_string(r), err.line, err.message);
+        CHECKF(t_largest <= ((size_t)1 << 20), "largest allocation %lu", (unsigned long)t_largest);
+        CHECK(write_sparse(scene, "camera eye 0 0 5 look 0 0 0\n", (long)128 << 20));
+        t_largest = 0;
+        r = rrv_scene_load(scene, &opt, &s, &err);
+        CHECKF(r == RRV_ERROR_LIMIT && strcmp(err.message, "scene file is larger than the limit of 67108864 bytes") == 0,
+               "%s: %s", rrv_result_string(r), err.message);
+        CHECKF(t_largest <= ((size_t)1 << 20), "largest allocation %lu", (unsigned long)t_largest);
+        remove(nvdb);
+        remove(scene);
+    }
 #endif
     CHECK(s == NULL);
 }
