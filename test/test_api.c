@@ -7,6 +7,7 @@
 #include "../rrv.h"
 #include "check.h"
 #include "vec3.h"
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
