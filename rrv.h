@@ -4476,32 +4476,54 @@ static void rrv__medium_Le(const rrv_medium *m, rrv_vec3 p, double given_scale, 
    Built by rrv_scene_prepare beside the majorant grids, from the same field
    bounds: each emissive medium's box cut into at most RRV__EMIT_CELLS cells
    along its longest side (proportionally fewer along the others), each cell
-   weighted by a bound of the power it can emit, max sigma_a x density bound
-   x Lescale x (max Le + the blackbody's largest channel at the cell's
-   temperature bound), one distribution over the cells of every emissive
-   medium. Next-event estimation picks a cell from it and a point uniformly
-   in the cell: density pmf(cell) / volume(cell). The weights steer samples
-   only: any weights leave the estimate unbiased, since a cell the grid
-   gives no weight is left to the paths alone (their MIS weight there is 1,
-   rrv__emission_forward_weight), and the forward paths and the samples read
-   the density through the one lookup, rrv__emission_pdf. */
+   weighted by the power it emits, sigma_a Le averaged over the channels
+   and over the centres of the cell's 2 x 2 x 2 octants (the blackbody from
+   a table of temperatures), but never below a thousandth of a bound of it
+   (max sigma_a x density bound x Lescale x (max Le + the blackbody's
+   largest channel at any temperature up to the cell's bound)), so that a
+   feature between the octants' centres keeps some weight; one distribution
+   over the cells of every emissive medium, normalised (pmf). Blocks of up
+   to RRV__EMIT_BLOCK^3 cells are clusters, with the sum W_c of their
+   cells' pmf, a centre and a radius. From a vertex x a cluster is picked
+   in proportion to W_c G_c(x), G_c = 1 / max(|x - centre|^2, radius^2)
+   (light falls off as 1 / r^2, and a flame a metre across seen from a
+   metre away spans a factor of 9 in it), a cell of it by its pmf and a
+   point uniformly in that cell: density
+       p_nee(y) = G_c(x) pmf(cell) / (S(x) volume(cell)),  S = sum_c W_c G_c.
+   The weights steer samples only: any weights leave the estimate unbiased,
+   since a cell the grid gives no weight is left to the paths alone (their
+   MIS weight there is 1, rrv__emission_forward_weight), and the forward
+   paths and the samples read the density through the one lookup,
+   rrv__emission_pdf, with the S of their vertex. */
 #define RRV__EMIT_CELLS 32
+#define RRV__EMIT_BLOCK 8
 #define RRV__EMIT_TABLE 256 /* temperatures in the blackbody envelope */
 
 typedef struct rrv__emitter_grid {
     int medium;           /* in scene->media */
-    int n[3];
+    int n[3], nc[3];      /* cells and clusters per axis */
     rrv_vec3 lo, cell, inv_cell;
     double inv_volume;    /* 1 / a cell's volume */
-    size_t first;         /* its first cell in the scene's distribution */
+    size_t first;         /* its first cell in the scene's pmf */
+    int first_cluster;
 } rrv__emitter_grid;
 
+typedef struct rrv__emit_cluster {
+    rrv_vec3 centre;
+    double radius2;       /* half its diagonal, squared */
+    double weight;        /* W_c: the sum of its cells' pmf */
+    size_t begin, end;    /* its cells in order[] */
+} rrv__emit_cluster;
+
 struct rrv__emitters {
-    int count;
+    int count, clusters;
     rrv__emitter_grid *grid;
     int *of_medium;       /* a medium's grid, -1 where it does not emit */
+    rrv__emit_cluster *cluster;
     size_t cells;
-    double *cdf;          /* cells + 1 entries from 0 to 1: cell i has cdf[i + 1] - cdf[i] */
+    double *pmf;          /* per cell, in the grids' order (x fastest) */
+    double *cdf;          /* cells + 1: pmf summed in order[]'s order, cluster by cluster */
+    size_t *order;        /* cell indices, cluster by cluster */
     size_t bytes;         /* counted in scene->bytes once built */
 };
 
@@ -4510,7 +4532,10 @@ static void rrv__emitters_free(struct rrv__emitters *e)
     if (!e) return;
     RRV_FREE(e->grid);
     RRV_FREE(e->of_medium);
+    RRV_FREE(e->cluster);
+    RRV_FREE(e->pmf);
     RRV_FREE(e->cdf);
+    RRV_FREE(e->order);
     RRV_FREE(e);
 }
 
@@ -4537,7 +4562,7 @@ static double rrv__temperature_bound(const rrv_medium *m, rrv_vec3 lo, rrv_vec3 
 static rrv_result rrv__build_emitters(rrv_scene *scene, rrv_error *err)
 {
     struct rrv__emitters *e;
-    double envelope[RRV__EMIT_TABLE], T_top = 0, total = 0;
+    double envelope[RRV__EMIT_TABLE], table[RRV__EMIT_TABLE][3], T_top = 0, total = 0;
     size_t cells = 0, at;
     int i, a, k;
     for (i = 0; i < scene->medium_count; ++i)
@@ -4570,11 +4595,18 @@ static rrv_result rrv__build_emitters(rrv_scene *scene, rrv_error *err)
         g->inv_volume = 1.0 / (c[0] * c[1] * c[2]);
         g->first = cells;
         cells += (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
+        g->first_cluster = e->clusters;
+        for (a = 0; a < 3; ++a) g->nc[a] = (g->n[a] + RRV__EMIT_BLOCK - 1) / RRV__EMIT_BLOCK;
+        e->clusters += g->nc[0] * g->nc[1] * g->nc[2];
         if (m->blackbody_emission) T_top = rrv__maxd(T_top, rrv__temperature_bound(m, m->lo, m->hi));
     }
     e->cells = cells;
     e->cdf = (double *)RRV_MALLOC((cells + 1) * sizeof *e->cdf);
-    if (!e->cdf) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
+    e->pmf = (double *)RRV_MALLOC(cells * sizeof *e->pmf);
+    e->order = (size_t *)RRV_MALLOC(cells * sizeof *e->order);
+    e->cluster = (rrv__emit_cluster *)RRV_MALLOC((size_t)e->clusters * sizeof *e->cluster);
+    if (!e->cdf || !e->pmf || !e->order || !e->cluster)
+        return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
     /* e->bytes stays 0 until the grid is complete and counted */
     /* the largest channel of B at any temperature up to table entry k
        (B is not monotonic in T once its peak moves into the visible) */
@@ -4582,9 +4614,9 @@ static rrv_result rrv__build_emitters(rrv_scene *scene, rrv_error *err)
         double rgb[3];
         rrv__blackbody_rgb(T_top * k / (RRV__EMIT_TABLE - 1), rgb);
         envelope[k] = rrv__maxd(rrv__max3(rgb), k ? envelope[k - 1] : 0.0);
+        for (a = 0; a < 3; ++a) table[k][a] = rgb[a];
     }
     at = 0;
-    e->cdf[0] = 0;
     for (i = 0; i < e->count; ++i) {
         const rrv__emitter_grid *g = &e->grid[i];
         const rrv_medium *m = &scene->media[g->medium];
@@ -4603,9 +4635,31 @@ static rrv_result rrv__build_emitters(rrv_scene *scene, rrv_error *err)
                         L += envelope[entry];
                     }
                     w *= L;
+                    if (w > 0) {
+                        double sum = 0;
+                        int o;
+                        for (o = 0; o < 8; ++o) {
+                            rrv_vec3 p = rrv__v3(lo.x + g->cell.x * (o & 1 ? 0.75 : 0.25),
+                                                 lo.y + g->cell.y * (o & 2 ? 0.75 : 0.25),
+                                                 lo.z + g->cell.z * (o & 4 ? 0.75 : 0.25));
+                            rrv__coeffs cf;
+                            double Le[3] = {0, 0, 0};
+                            if (m->blackbody_emission && T_top > 0) {
+                                double f = rrv__clamp(rrv__temperature(m, p) / T_top * (RRV__EMIT_TABLE - 1), 0.0,
+                                                      RRV__EMIT_TABLE - 1.0);
+                                int t0 = (int)f < RRV__EMIT_TABLE - 1 ? (int)f : RRV__EMIT_TABLE - 2;
+                                for (a = 0; a < 3; ++a)
+                                    Le[a] = table[t0][a] + (f - t0) * (table[t0 + 1][a] - table[t0][a]);
+                            }
+                            rrv__medium_coeffs(m, p, &cf);
+                            for (a = 0; a < 3; ++a) sum += cf.sigma_a[a] * (Le[a] + m->Le[a]) * m->Lescale;
+                        }
+                        w = rrv__maxd(sum / 24.0, 1e-3 * w);
+                    }
                     /* the bound's own rounding must not make weight of nothing */
-                    total += w > 0 && w < DBL_MAX ? w : 0.0;
-                    e->cdf[++at] = total;
+                    w = w > 0 && w < DBL_MAX ? w : 0.0;
+                    total += w;
+                    e->pmf[at++] = w;
                 }
     }
     if (!(total > 0)) {
@@ -4614,23 +4668,73 @@ static rrv_result rrv__build_emitters(rrv_scene *scene, rrv_error *err)
         scene->emitters = NULL;
         return RRV_OK;
     }
-    for (at = 1; at <= cells; ++at) e->cdf[at] /= total;
-    e->cdf[cells] = 1.0;
+    for (at = 0; at < cells; ++at) e->pmf[at] /= total;
+    /* the clusters, their cells listed block by block */
+    at = 0;
+    e->cdf[0] = 0;
+    for (i = 0; i < e->count; ++i) {
+        const rrv__emitter_grid *g = &e->grid[i];
+        int cx, cy, cz, x, y, z;
+        for (cz = 0; cz < g->nc[2]; ++cz)
+            for (cy = 0; cy < g->nc[1]; ++cy)
+                for (cx = 0; cx < g->nc[0]; ++cx) {
+                    rrv__emit_cluster *c = &e->cluster[g->first_cluster + (cz * g->nc[1] + cy) * g->nc[0] + cx];
+                    int b0[3], b1[3];
+                    rrv_vec3 clo, chi;
+                    b0[0] = cx * RRV__EMIT_BLOCK; b0[1] = cy * RRV__EMIT_BLOCK; b0[2] = cz * RRV__EMIT_BLOCK;
+                    for (a = 0; a < 3; ++a) b1[a] = b0[a] + RRV__EMIT_BLOCK < g->n[a] ? b0[a] + RRV__EMIT_BLOCK : g->n[a];
+                    clo = rrv__v3(g->lo.x + b0[0] * g->cell.x, g->lo.y + b0[1] * g->cell.y, g->lo.z + b0[2] * g->cell.z);
+                    chi = rrv__v3(g->lo.x + b1[0] * g->cell.x, g->lo.y + b1[1] * g->cell.y, g->lo.z + b1[2] * g->cell.z);
+                    c->centre = rrv__scale(rrv__add(clo, chi), 0.5);
+                    c->radius2 = 0.25 * rrv__dot(rrv__sub(chi, clo), rrv__sub(chi, clo));
+                    c->begin = at;
+                    c->weight = 0;
+                    for (z = b0[2]; z < b1[2]; ++z)
+                        for (y = b0[1]; y < b1[1]; ++y)
+                            for (x = b0[0]; x < b1[0]; ++x) {
+                                size_t cell = g->first + ((size_t)z * (size_t)g->n[1] + (size_t)y) * (size_t)g->n[0] + (size_t)x;
+                                e->order[at] = cell;
+                                e->cdf[at + 1] = e->cdf[at] + e->pmf[cell];
+                                c->weight += e->pmf[cell];
+                                ++at;
+                            }
+                    c->end = at;
+                }
+    }
     e->bytes = sizeof *e + (size_t)scene->medium_count * (sizeof *e->grid + sizeof *e->of_medium) +
-               (cells + 1) * sizeof *e->cdf;
+               (size_t)e->clusters * sizeof *e->cluster + (cells + 1) * sizeof *e->cdf +
+               cells * (sizeof *e->pmf + sizeof *e->order);
     scene->bytes += e->bytes;
     return RRV_OK;
 }
 
-/* The density, per unit volume, with which next-event estimation picks y in
-   medium mi (rrv__emitter_sample); 0 where it never does. */
-static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, rrv_vec3 y)
+/* G_c(x) of the comment above. */
+static double rrv__emit_cluster_g(const rrv__emit_cluster *c, rrv_vec3 x)
+{
+    rrv_vec3 d = rrv__sub(c->centre, x);
+    return 1.0 / rrv__maxd(rrv__dot(d, d), c->radius2);
+}
+
+/* S(x): what normalises the clusters' W_c G_c(x). */
+static double rrv__emission_norm(const struct rrv__emitters *e, rrv_vec3 x)
+{
+    double S = 0;
+    int c;
+    for (c = 0; c < e->clusters; ++c)
+        if (e->cluster[c].weight > 0) S += e->cluster[c].weight * rrv__emit_cluster_g(&e->cluster[c], x);
+    return S;
+}
+
+/* The density, per unit volume, with which next-event estimation from x
+   (S = rrv__emission_norm(e, x)) picks y in medium mi (rrv__emitter_sample);
+   0 where it never does. */
+static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, rrv_vec3 x, double S, rrv_vec3 y)
 {
     const rrv__emitter_grid *g;
     size_t cell;
-    int idx[3], a;
+    int idx[3], a, cluster;
     double u[3];
-    if (!e || e->of_medium[mi] < 0) return 0.0;
+    if (!e || e->of_medium[mi] < 0 || !(S > 0)) return 0.0;
     g = &e->grid[e->of_medium[mi]];
     u[0] = (y.x - g->lo.x) * g->inv_cell.x;
     u[1] = (y.y - g->lo.y) * g->inv_cell.y;
@@ -4641,31 +4745,46 @@ static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, rrv_vec3 
         if (idx[a] > g->n[a] - 1) idx[a] = g->n[a] - 1;
     }
     cell = g->first + ((size_t)idx[2] * (size_t)g->n[1] + (size_t)idx[1]) * (size_t)g->n[0] + (size_t)idx[0];
-    return (e->cdf[cell + 1] - e->cdf[cell]) * g->inv_volume;
+    cluster = g->first_cluster + ((idx[2] / RRV__EMIT_BLOCK) * g->nc[1] + idx[1] / RRV__EMIT_BLOCK) * g->nc[0] +
+              idx[0] / RRV__EMIT_BLOCK;
+    return rrv__emit_cluster_g(&e->cluster[cluster], x) * e->pmf[cell] / S * g->inv_volume;
 }
 
-/* A point of an emissive medium from four uniform numbers: a cell by its
-   weight, a point uniform in it. Returns the medium's index. */
-static int rrv__emitter_sample(const struct rrv__emitters *e, const double u[4], rrv_vec3 *y)
+/* A point of an emissive medium seen from x from five uniform numbers: a
+   cluster by W_c G_c(x), a cell of it by its pmf, a point uniform in the
+   cell. Returns the medium's index, or -1 if nothing was picked. */
+static int rrv__emitter_sample(const struct rrv__emitters *e, rrv_vec3 x, double S, const double u[5], rrv_vec3 *y)
 {
-    size_t lo = 0, hi = e->cells, cell, rest;
     const rrv__emitter_grid *g;
+    const rrv__emit_cluster *c = NULL;
+    size_t lo, hi, cell, rest;
+    double target = u[0] * S, sum = 0, v;
     int i;
-    /* the last cell with cdf[cell] <= u0 < cdf[cell + 1] */
+    for (i = 0; i < e->clusters; ++i) {
+        if (!(e->cluster[i].weight > 0)) continue;
+        c = &e->cluster[i];
+        sum += c->weight * rrv__emit_cluster_g(c, x);
+        if (target < sum) break;
+    }
+    if (!c) return -1;
+    /* the last cell of the cluster with cdf[k] <= v < cdf[k + 1] */
+    v = e->cdf[c->begin] + u[1] * (e->cdf[c->end] - e->cdf[c->begin]);
+    lo = c->begin;
+    hi = c->end;
     while (hi - lo > 1) {
         size_t mid = lo + (hi - lo) / 2;
-        if (e->cdf[mid] <= u[0]) lo = mid;
+        if (e->cdf[mid] <= v) lo = mid;
         else hi = mid;
     }
-    cell = lo;
+    cell = e->order[lo];
     for (i = e->count - 1; i > 0 && e->grid[i].first > cell; --i) {}
     g = &e->grid[i];
     rest = cell - g->first;
-    y->x = g->lo.x + ((double)(rest % (size_t)g->n[0]) + u[1]) * g->cell.x;
+    y->x = g->lo.x + ((double)(rest % (size_t)g->n[0]) + u[2]) * g->cell.x;
     rest /= (size_t)g->n[0];
-    y->y = g->lo.y + ((double)(rest % (size_t)g->n[1]) + u[2]) * g->cell.y;
+    y->y = g->lo.y + ((double)(rest % (size_t)g->n[1]) + u[3]) * g->cell.y;
     rest /= (size_t)g->n[1];
-    y->z = g->lo.z + ((double)rest + u[3]) * g->cell.z;
+    y->z = g->lo.z + ((double)rest + u[4]) * g->cell.z;
     return g->medium;
 }
 
@@ -6015,6 +6134,7 @@ typedef struct rrv__emit_from {
     rrv_vec3 n;              /* surface: facing the path's side */
     rrv_vec3 d_in;           /* medium: the arriving direction */
     double g;
+    double S;                /* rrv__emission_norm at x */
     rrv_vec3 w0;             /* the direction sampled there */
 } rrv__emit_from;
 
@@ -6244,7 +6364,7 @@ static int rrv__emission_densities(const rrv__context *ctx, const rrv__emit_from
     w = rrv__scale(w, 1.0 / *r);
     *pdf_dir = rrv__emission_dir_pdf(from, w);
     if (!(*pdf_dir > 0)) return 0;
-    *p_nee = rrv__emission_pdf(ctx->scene->emitters, mi, y);
+    *p_nee = rrv__emission_pdf(ctx->scene->emitters, mi, from->x, from->S, y);
     if (!(*p_nee > 0)) return 0;
     if (ctx->bends && rrv__chord_meets_refraction(ctx->scene, from->x, y)) return 0;
     s = (c->sigma_a[0] + c->sigma_s[0] + c->sigma_a[1] + c->sigma_s[1] + c->sigma_a[2] + c->sigma_s[2]) / 3.0;
@@ -6801,6 +6921,19 @@ static void rrv__sample_direct_light(rrv__context *ctx, rrv__path *path, rrv_vec
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * tint[c] * T[c] * ls.L[c] * k;
 }
 
+/* Records the vertex the path restarts from for the weights of both sides. */
+static void rrv__emission_from_vertex(const rrv__context *ctx, rrv__emit_from *from, rrv_vec3 x,
+                                      const rrv__vertex_bsdf *v)
+{
+    from->on = 1;
+    from->surface = v->surface;
+    from->x = x;
+    from->n = v->n;
+    from->d_in = v->d_in;
+    from->g = v->g;
+    from->S = rrv__emission_norm(ctx->scene->emitters, x);
+}
+
 /* Next-event estimation toward emissive media (section comment above
    rrv__chord_meets_refraction) from the vertex x. It also records the
    vertex, so that the emission the path then collects takes the
@@ -6815,20 +6948,17 @@ static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, co
     rrv__coeffs c;
     const rrv_medium *m;
     rrv_vec3 y;
-    double u[4], p_nee, p_fwd, pdf_dir, r, T[3], Le[3], k, given = 1.0;
+    double u[5], p_nee, p_fwd, pdf_dir, r, T[3], Le[3], k, given = 1.0;
     int mi, ch;
-    from->on = 1;
-    from->surface = v->surface;
-    from->x = x;
-    from->n = v->n;
-    from->d_in = v->d_in;
-    from->g = v->g;
+    rrv__emission_from_vertex(ctx, from, x, v);
     /* one a statement: the order of evaluation of arguments is unspecified */
     u[0] = rrv__uniform(rng);
     u[1] = rrv__uniform(rng);
     u[2] = rrv__uniform(rng);
     u[3] = rrv__uniform(rng);
-    mi = rrv__emitter_sample(scene->emitters, u, &y);
+    u[4] = rrv__uniform(rng);
+    mi = rrv__emitter_sample(scene->emitters, x, from->S, u, &y);
+    if (mi < 0) return;
     m = &scene->media[mi];
     rrv__medium_coeffs(m, y, &c);
     if (!(rrv__max3(c.sigma_a) > 0)) return;
