@@ -57,8 +57,8 @@ static void context_for(const rrv_scene *s, rrv__context *ctx, int bends)
    each side computing its own: the sample's weight from the density it
    drew with, the forward path's from its lookup of the same point. The
    density is one: over uniform points of the box E[p(y)] volume = 1. And
-   the sampler draws by it: each cluster as often as its share W_c G_c / S
-   (within 4 standard errors of the binomial count). */
+   the sampler draws by it: each cluster of cells as often as the density
+   the lookup gives it (within 4 standard errors of the binomial count). */
 static void weights_sum_to_one(void)
 {
     rrv_scene *s = load(campfire, "classic", "", "");
@@ -76,6 +76,7 @@ static void weights_sum_to_one(void)
     for (vertex = 0; vertex < 2; ++vertex) {
         double sum = 0, sum2 = 0, mean, se, box;
         int hits[64] = {0}, c;
+        double share[64];
         rrv__vertex_bsdf v;
         rrv__path path;
         rrv_vec3 x, lo = s->media[0].lo, ext = rrv__sub(s->media[0].hi, s->media[0].lo);
@@ -118,8 +119,22 @@ static void weights_sum_to_one(void)
             if (!(fabs(w_nee + w_fwd - 1.0) <= 1e-12) && bad++ < 3)
                 CHECKF(0, "at %g %g %g: w_nee %.17g + w_fwd %.17g", y.x, y.y, y.z, w_nee, w_fwd);
         }
+        {
+            /* each cluster's probability from the lookup, which is constant in a cell */
+            const rrv__emitter_grid *g = &e->grid[0];
+            int ix, iy, iz;
+            for (c = 0; c < 64; ++c) share[c] = 0;
+            for (iz = 0; iz < g->n[2]; ++iz)
+                for (iy = 0; iy < g->n[1]; ++iy)
+                    for (ix = 0; ix < g->n[0]; ++ix) {
+                        rrv_vec3 y = rrv__v3(lo.x + (ix + 0.5) * g->cell.x, lo.y + (iy + 0.5) * g->cell.y,
+                                             lo.z + (iz + 0.5) * g->cell.z);
+                        share[((iz / RRV__EMIT_BLOCK) * g->nc[1] + iy / RRV__EMIT_BLOCK) * g->nc[0] + ix / RRV__EMIT_BLOCK] +=
+                            rrv__emission_pdf(e, 0, x, path.emit.S, y) / g->inv_volume;
+                    }
+        }
         for (c = 0; c < 64; ++c) {
-            double P = e->cluster[c].weight * rrv__emit_cluster_g(&e->cluster[c], x) / path.emit.S;
+            double P = share[c];
             double sd = sqrt(n * P * (1 - P));
             CHECKF(fabs(hits[c] - n * P) <= 4 * sd + 1e-9, "vertex %d cluster %d: %d draws, expected %g +- %g",
                    vertex, c, hits[c], n * P, sd);
