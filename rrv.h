@@ -229,6 +229,34 @@
    blackbody emission is n^2 B where the IOR is n (Kirchhoff), so a fire does
    not dim by 1/n^2 on leaving a dense medium.
 
+   EMISSIVE MEDIA AS LIGHTS (rrv_settings.emission_nee, scene `render
+   emissionnee on|off`; on by default)
+     Media that emit (Le, or a blackbody temperature) are sampled as lights
+     at every real vertex, as the area lights are: a point y of an emissive
+     medium is drawn from an emission grid prepare builds beside the
+     majorants (at most 32 cells along a medium's longest side, each
+     weighted by its sigma_a Le at the centres of its octants, floored at
+     a thousandth of a bound of it; blocks of 8^3 cells picked by their
+     weight over max(r^2, radius^2) from the vertex), joined to the vertex
+     by a straight shadow ray with ratio-tracked transmittance, and weighed
+     by the power heuristic against the emission the path collects at its
+     tentative collisions: p_nee(y) per unit volume against p(w) sigma_t(y)
+     / r^2, the vertex's density of the direction times the medium's
+     extinction in the majorant's place, over the Jacobian r^2 (the
+     derivation above rrv__chord_meets_refraction). The two weights are
+     functions of the vertex and y alone and sum to one
+     (test/test_emission.c). Unbiased: against forward-only renders in
+     blocks and against a slab's closed-form irradiance, within 4 standard
+     errors. Kirchhoff's law is as for the paths (a blackbody seen from air
+     does not dim by 1/n^2). Where the air refracts, connections are made
+     only where the forward path is classic: a chord from the vertex that
+     meets no box of a refracting medium, against a path that has not
+     turned since the vertex; everything else (an emitter inside or behind
+     hot air, as in scenes/pyro.rrv, whose fire refracts) is the forward
+     paths' alone, with weight 1. The curved connections (nee shoot, aim)
+     are not made to emissive media yet. Measured on test/bench/campfire.rrv
+     (README.md, "Fire as a light").
+
    BOUNDARIES (design decisions)
      Faces of refractive media (a medium's box; the sphere of a Luneburg or
      fish-eye profile) end every straight segment. An IOR that jumps across
@@ -426,6 +454,11 @@
        and an IOR grid beyond one voxel past its data is the ambient IOR.
        Every offset is checked against the grid's buffer and every value
        must be finite; negative densities count as 0. See rrv_nanovdb.
+       That is OpenVDB's placement (and pbrt-v4's for nanovdb media);
+       Blender's Cycles renders its own Mantaflow caches with value ijk at
+       map * (ijk + 0.5) + translation, half a voxel further along every
+       axis: rrv_nanovdb_cell_centered (scene: `nanovdb FILE cellcentered
+       on`) takes that placement, to match a Blender render.
      Gas IOR (Hauf-Grigull; Gladstone-Dale for an ideal gas):
        eta - 1 = (eta_ref - 1) (P / P_ref) (T_ref / T), defaults eta_ref =
        1.000292, P_ref = 101325 Pa, T_ref = 300 K; its gradient is
@@ -4487,7 +4520,8 @@ static void rrv__medium_Le(const rrv_medium *m, rrv_vec3 p, double given_scale, 
    cells' pmf, a centre and a radius. From a vertex x a cluster is picked
    in proportion to W_c G_c(x), G_c = 1 / max(|x - centre|^2, radius^2)
    (light falls off as 1 / r^2, and a flame a metre across seen from a
-   metre away spans a factor of 9 in it), a cell of it by its pmf and a
+   metre away spans a factor of 9 in it; at a surface times a bound of the
+   cosine), a cell of it by its pmf and a
    point uniformly in that cell: density
        p_nee(y) = G_c(x) pmf(cell) / (S(x) volume(cell)),  S = sum_c W_c G_c.
    The weights steer samples only: any weights leave the estimate unbiased,
@@ -4708,33 +4742,56 @@ static rrv_result rrv__build_emitters(rrv_scene *scene, rrv_error *err)
     return RRV_OK;
 }
 
-/* G_c(x) of the comment above. */
-static double rrv__emit_cluster_g(const rrv__emit_cluster *c, rrv_vec3 x)
+/* The last real vertex, for the MIS weight of the emission the path
+   collects after it (rrv__emission_forward_weight): on once that vertex
+   sampled emissive media (rrv__emission_nee). */
+typedef struct rrv__emit_from {
+    int on, surface;
+    rrv_vec3 x;              /* where the path restarted */
+    rrv_vec3 n;              /* surface: facing the path's side */
+    rrv_vec3 d_in;           /* medium: the arriving direction */
+    double g;
+    double S;                /* rrv__emission_norm at x */
+    rrv_vec3 w0;             /* the direction sampled there */
+} rrv__emit_from;
+
+/* G_c(x) of the comment above; at a surface vertex also the cosine toward
+   the cluster's bounding sphere, (n.d + radius) / |d| clamped to [0, 1]: no
+   point of a cluster it makes 0 lies in front of the surface, where alone
+   the vertex's cosine lobe (and so its integrand) is nonzero. */
+static double rrv__emit_cluster_g(const rrv__emit_cluster *c, const rrv__emit_from *from)
 {
-    rrv_vec3 d = rrv__sub(c->centre, x);
-    return 1.0 / rrv__maxd(rrv__dot(d, d), c->radius2);
+    rrv_vec3 d = rrv__sub(c->centre, from->x);
+    double d2 = rrv__dot(d, d), g = 1.0 / rrv__maxd(d2, c->radius2);
+    if (from->surface && d2 > c->radius2) g *= rrv__clamp((rrv__dot(from->n, d) + sqrt(c->radius2)) / sqrt(d2), 0.0, 1.0);
+    return g;
 }
 
-/* S(x): what normalises the clusters' W_c G_c(x). */
-static double rrv__emission_norm(const struct rrv__emitters *e, rrv_vec3 x)
+/* S(x): what normalises the clusters' W_c G_c(x). With q, also each
+   W_c G_c into it (the first RRV__EMIT_KEEP clusters), for the sampler. */
+#define RRV__EMIT_KEEP 64
+static double rrv__emission_norm(const struct rrv__emitters *e, const rrv__emit_from *from, double *q)
 {
     double S = 0;
     int c;
-    for (c = 0; c < e->clusters; ++c)
-        if (e->cluster[c].weight > 0) S += e->cluster[c].weight * rrv__emit_cluster_g(&e->cluster[c], x);
+    for (c = 0; c < e->clusters; ++c) {
+        double qc = e->cluster[c].weight > 0 ? e->cluster[c].weight * rrv__emit_cluster_g(&e->cluster[c], from) : 0.0;
+        if (q && c < RRV__EMIT_KEEP) q[c] = qc;
+        S += qc;
+    }
     return S;
 }
 
 /* The density, per unit volume, with which next-event estimation from x
    (S = rrv__emission_norm(e, x)) picks y in medium mi (rrv__emitter_sample);
    0 where it never does. */
-static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, rrv_vec3 x, double S, rrv_vec3 y)
+static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, const rrv__emit_from *from, rrv_vec3 y)
 {
     const rrv__emitter_grid *g;
     size_t cell;
     int idx[3], a, cluster;
     double u[3];
-    if (!e || e->of_medium[mi] < 0 || !(S > 0)) return 0.0;
+    if (!e || e->of_medium[mi] < 0 || !(from->S > 0)) return 0.0;
     g = &e->grid[e->of_medium[mi]];
     u[0] = (y.x - g->lo.x) * g->inv_cell.x;
     u[1] = (y.y - g->lo.y) * g->inv_cell.y;
@@ -4747,23 +4804,24 @@ static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, rrv_vec3 
     cell = g->first + ((size_t)idx[2] * (size_t)g->n[1] + (size_t)idx[1]) * (size_t)g->n[0] + (size_t)idx[0];
     cluster = g->first_cluster + ((idx[2] / RRV__EMIT_BLOCK) * g->nc[1] + idx[1] / RRV__EMIT_BLOCK) * g->nc[0] +
               idx[0] / RRV__EMIT_BLOCK;
-    return rrv__emit_cluster_g(&e->cluster[cluster], x) * e->pmf[cell] / S * g->inv_volume;
+    return rrv__emit_cluster_g(&e->cluster[cluster], from) * e->pmf[cell] / from->S * g->inv_volume;
 }
 
 /* A point of an emissive medium seen from x from five uniform numbers: a
    cluster by W_c G_c(x), a cell of it by its pmf, a point uniform in the
    cell. Returns the medium's index, or -1 if nothing was picked. */
-static int rrv__emitter_sample(const struct rrv__emitters *e, rrv_vec3 x, double S, const double u[5], rrv_vec3 *y)
+static int rrv__emitter_sample(const struct rrv__emitters *e, const rrv__emit_from *from, const double *q,
+                               const double u[5], rrv_vec3 *y)
 {
     const rrv__emitter_grid *g;
     const rrv__emit_cluster *c = NULL;
     size_t lo, hi, cell, rest;
-    double target = u[0] * S, sum = 0, v;
+    double target = u[0] * from->S, sum = 0, v;
     int i;
     for (i = 0; i < e->clusters; ++i) {
         if (!(e->cluster[i].weight > 0)) continue;
         c = &e->cluster[i];
-        sum += c->weight * rrv__emit_cluster_g(c, x);
+        sum += q && i < RRV__EMIT_KEEP ? q[i] : c->weight * rrv__emit_cluster_g(c, from);
         if (target < sum) break;
     }
     if (!c) return -1;
@@ -6125,19 +6183,6 @@ typedef struct rrv__context {
    the hero, over the hero's own. A contribution is beta / mean(ratio), the
    balance heuristic over the three channels, so chromatic extinction does
    not compound weights the way channel-averaged probabilities would. */
-/* The last real vertex, for the MIS weight of the emission the path
-   collects after it (rrv__emission_forward_weight): on once that vertex
-   sampled emissive media (rrv__emission_nee). */
-typedef struct rrv__emit_from {
-    int on, surface;
-    rrv_vec3 x;              /* where the path restarted */
-    rrv_vec3 n;              /* surface: facing the path's side */
-    rrv_vec3 d_in;           /* medium: the arriving direction */
-    double g;
-    double S;                /* rrv__emission_norm at x */
-    rrv_vec3 w0;             /* the direction sampled there */
-} rrv__emit_from;
-
 typedef struct rrv__path {
     double beta[3], L[3];
     double ratio[3];
@@ -6364,7 +6409,7 @@ static int rrv__emission_densities(const rrv__context *ctx, const rrv__emit_from
     w = rrv__scale(w, 1.0 / *r);
     *pdf_dir = rrv__emission_dir_pdf(from, w);
     if (!(*pdf_dir > 0)) return 0;
-    *p_nee = rrv__emission_pdf(ctx->scene->emitters, mi, from->x, from->S, y);
+    *p_nee = rrv__emission_pdf(ctx->scene->emitters, mi, from, y);
     if (!(*p_nee > 0)) return 0;
     if (ctx->bends && rrv__chord_meets_refraction(ctx->scene, from->x, y)) return 0;
     s = (c->sigma_a[0] + c->sigma_s[0] + c->sigma_a[1] + c->sigma_s[1] + c->sigma_a[2] + c->sigma_s[2]) / 3.0;
@@ -6923,7 +6968,7 @@ static void rrv__sample_direct_light(rrv__context *ctx, rrv__path *path, rrv_vec
 
 /* Records the vertex the path restarts from for the weights of both sides. */
 static void rrv__emission_from_vertex(const rrv__context *ctx, rrv__emit_from *from, rrv_vec3 x,
-                                      const rrv__vertex_bsdf *v)
+                                      const rrv__vertex_bsdf *v, double *q)
 {
     from->on = 1;
     from->surface = v->surface;
@@ -6931,7 +6976,7 @@ static void rrv__emission_from_vertex(const rrv__context *ctx, rrv__emit_from *f
     from->n = v->n;
     from->d_in = v->d_in;
     from->g = v->g;
-    from->S = rrv__emission_norm(ctx->scene->emitters, x);
+    from->S = rrv__emission_norm(ctx->scene->emitters, from, q);
 }
 
 /* Next-event estimation toward emissive media (section comment above
@@ -6948,16 +6993,16 @@ static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, co
     rrv__coeffs c;
     const rrv_medium *m;
     rrv_vec3 y;
-    double u[5], p_nee, p_fwd, pdf_dir, r, T[3], Le[3], k, given = 1.0;
+    double u[5], q[RRV__EMIT_KEEP], p_nee, p_fwd, pdf_dir, r, T[3], Le[3], k, given = 1.0;
     int mi, ch;
-    rrv__emission_from_vertex(ctx, from, x, v);
+    rrv__emission_from_vertex(ctx, from, x, v, q);
     /* one a statement: the order of evaluation of arguments is unspecified */
     u[0] = rrv__uniform(rng);
     u[1] = rrv__uniform(rng);
     u[2] = rrv__uniform(rng);
     u[3] = rrv__uniform(rng);
     u[4] = rrv__uniform(rng);
-    mi = rrv__emitter_sample(scene->emitters, x, from->S, u, &y);
+    mi = rrv__emitter_sample(scene->emitters, from, q, u, &y);
     if (mi < 0) return;
     m = &scene->media[mi];
     rrv__medium_coeffs(m, y, &c);

@@ -76,7 +76,7 @@ static void weights_sum_to_one(void)
     for (vertex = 0; vertex < 2; ++vertex) {
         double sum = 0, sum2 = 0, mean, se, box;
         int hits[64] = {0}, c;
-        double share[64];
+        double share[64], q[RRV__EMIT_KEEP];
         rrv__vertex_bsdf v;
         rrv__path path;
         rrv_vec3 x, lo = s->media[0].lo, ext = rrv__sub(s->media[0].hi, s->media[0].lo);
@@ -94,7 +94,7 @@ static void weights_sum_to_one(void)
             v.d_in = rrv__normalize(rrv__v3(0.2, 1, -0.1));
             x = rrv__v3(0.05, 0.35, 0.02);
         }
-        rrv__emission_from_vertex(&ctx, &path.emit, x, &v);
+        rrv__emission_from_vertex(&ctx, &path.emit, x, &v, vertex ? NULL : q);
         for (i = 0; i < n; ++i) {
             double u[5], p_nee, p_fwd, pdf_dir, r, w_nee, w_fwd;
             rrv__coeffs cf;
@@ -102,7 +102,7 @@ static void weights_sum_to_one(void)
             int mi, k, idx[3];
             const rrv__emitter_grid *g = &e->grid[0];
             for (k = 0; k < 5; ++k) u[k] = rrv__uniform(&rng);
-            mi = rrv__emitter_sample(e, x, path.emit.S, u, &y);
+            mi = rrv__emitter_sample(e, &path.emit, vertex ? NULL : q, u, &y);
             if (mi < 0) { CHECK(mi >= 0); break; }
             /* its cluster, from the cell it lies in */
             for (k = 0; k < 3; ++k) {
@@ -130,7 +130,7 @@ static void weights_sum_to_one(void)
                         rrv_vec3 y = rrv__v3(lo.x + (ix + 0.5) * g->cell.x, lo.y + (iy + 0.5) * g->cell.y,
                                              lo.z + (iz + 0.5) * g->cell.z);
                         share[((iz / RRV__EMIT_BLOCK) * g->nc[1] + iy / RRV__EMIT_BLOCK) * g->nc[0] + ix / RRV__EMIT_BLOCK] +=
-                            rrv__emission_pdf(e, 0, x, path.emit.S, y) / g->inv_volume;
+                            rrv__emission_pdf(e, 0, &path.emit, y) / g->inv_volume;
                     }
         }
         for (c = 0; c < 64; ++c) {
@@ -143,7 +143,7 @@ static void weights_sum_to_one(void)
         for (i = 0; i < n; ++i) {
             rrv_vec3 y = rrv__v3(lo.x + ext.x * rrv__uniform(&rng), lo.y + ext.y * rrv__uniform(&rng),
                                  lo.z + ext.z * rrv__uniform(&rng));
-            double p = rrv__emission_pdf(e, 0, x, path.emit.S, y) * box;
+            double p = rrv__emission_pdf(e, 0, &path.emit, y) * box;
             sum += p;
             sum2 += p * p;
         }
