@@ -153,6 +153,27 @@ static void weights_sum_to_one(void)
     }
     CHECK(bad == 0);
     CHECK(count > 100000);
+    {
+        /* a vertex scattering inside the emitter's box samples nothing and
+           leaves the path's next emission at weight 1, not at the weight of
+           the vertex before it */
+        rrv__vertex_bsdf v;
+        rrv__path path;
+        rrv__coeffs cf;
+        rrv_vec3 y = rrv__v3(0.0, 0.2, 0.0);
+        memset(&v, 0, sizeof v);
+        memset(&path, 0, sizeof path);
+        v.surface = 1;
+        v.n = rrv__v3(0, 1, 0);
+        rrv__emission_from_vertex(&ctx, &path.emit, rrv__v3(0.9, 1e-6, -0.4), &v, NULL);
+        rrv__medium_coeffs(&s->media[0], y, &cf);
+        CHECK(rrv__emission_forward_weight(&ctx, &path, &s->media[0], y, &cf) < 1.0);
+        v.surface = 0;
+        v.d_in = rrv__v3(0, 1, 0);
+        rrv__emission_nee(&ctx, &path, rrv__v3(0.05, 0.35, 0.02), &v, &rng);
+        CHECK(path.emit.on == 0);
+        CHECK(rrv__emission_forward_weight(&ctx, &path, &s->media[0], y, &cf) == 1.0);
+    }
     rrv_scene_free(s);
 }
 
