@@ -230,7 +230,9 @@
    not dim by 1/n^2 on leaving a dense medium.
 
    EMISSIVE MEDIA AS LIGHTS (rrv_settings.emission_nee, scene `render
-   emissionnee on|off`; on by default)
+   emissionnee on|off`; by default on where emissive media are the only
+   lights, i.e. the scene has no light shapes and no sky: there it pays,
+   beside other lights it measured a loss)
      Media that emit (Le, or a blackbody temperature) are sampled as lights
      at every real vertex, as the area lights are: a point y of an emissive
      medium is drawn from an emission grid prepare builds beside the
@@ -238,7 +240,9 @@
      weighted by its sigma_a Le at the centres of its octants, floored at
      a thousandth of a bound of it; blocks of 8^3 cells picked by their
      weight over max(r^2, radius^2) from the vertex), joined to the vertex
-     by a straight shadow ray with ratio-tracked transmittance, and weighed
+     by a straight shadow ray with ratio-tracked transmittance (not from
+     vertices scattering inside an emitter's box, where the path's own
+     collisions, which follow the transmittance, do better), and weighed
      by the power heuristic against the emission the path collects at its
      tentative collisions: p_nee(y) per unit volume against p(w) sigma_t(y)
      / r^2, the vertex's density of the direction times the medium's
@@ -815,7 +819,8 @@ typedef enum rrv_manifold_gauge {
    toward their emission, MIS with the emission paths collect; manual,
    EMISSIVE MEDIA AS LIGHTS). */
 typedef enum rrv_emission_nee {
-    RRV_EMISSION_NEE_DEFAULT = 0, /* ON */
+    RRV_EMISSION_NEE_DEFAULT = 0, /* ON where emissive media are the only
+                                     lights (no light shapes, no sky), else OFF */
     RRV_EMISSION_NEE_ON,
     RRV_EMISSION_NEE_OFF          /* emission only where paths collect it */
 } rrv_emission_nee;
@@ -7507,7 +7512,15 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
        aiming stays unbiased at about straight's cost */
     nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : RRV_NEE_SHOOT;
     ctx.sample_lights = !ctx.bends || nee != RRV_NEE_NONE;
-    ctx.emission = ctx.sample_lights && scene->emitters && scene->settings.emission_nee != RRV_EMISSION_NEE_OFF;
+    /* By default only where emissive media are the only lights: there it
+       pays (test/bench/campfire.rrv: 9.1x the efficiency at maxdepth 1,
+       3.7x at 2), while beside an area light and a sky (scenes/fire.rrv) the
+       extra shadow ray a vertex cost more than the variance it saved
+       (0.46x classic, 0.70x refractive; README.md, "Fire as a light"). */
+    ctx.emission = ctx.sample_lights && scene->emitters &&
+                   (scene->settings.emission_nee == RRV_EMISSION_NEE_ON ||
+                    (scene->settings.emission_nee == RRV_EMISSION_NEE_DEFAULT && scene->light_count == 0 &&
+                     scene->environment.kind == RRV_ENV_NONE));
     if (ctx.emission && ctx.bends) {
         /* straight connections only reach emitters outside refracting media
            (rrv__chord_meets_refraction): none if every emitter refracts */
