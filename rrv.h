@@ -7004,7 +7004,7 @@ static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, co
        emission around it in proportion to the transmittance, which the
        samples (drawn by emission and distance only) do not: measured on
        test/bench/campfire.rrv at maxdepth 2, samples from such vertices
-       raised the error 1.75x. Leaving them to the path (weight 1 after
+       raised the error 1.7x. Leaving them to the path (weight 1 after
        such a vertex) is a choice per vertex, so the sum stays unbiased. */
     from->on = 0;
     if (!v->surface)
