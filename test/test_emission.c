@@ -1,0 +1,375 @@
+/* Emissive media as lights (render emissionnee) and the NanoVDB cell-centred
+   placement (nanovdb ... cellcentered on). Stochastic checks use fixed
+   seeds and a bound of 4 standard errors. Run from the repository root. */
+#define RRV_IMPLEMENTATION
+#include "../rrv.h"
+#include "check.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* A flame (scenes/fire.rrv's soot, fewer tongues) beside a diffuse wall and
+   floor, no other light: test/bench/campfire.rrv, small. */
+static const char *const campfire =
+    "camera eye 1.2 1.1 -4.2 look 0.2 0.55 0.6 up 0 1 0 fov 45 resolution 24 18\n"
+    "render spp 1 maxdepth 2 seed 1 integrator %s %s\n"
+    "material wall diffuse albedo 0.7 0.7 0.68\n"
+    "material ground diffuse albedo 0.5 0.48 0.45\n"
+    "quad origin -5 0 1.2 u 10 0 0 v 0 5 0 material wall\n"
+    "quad origin -5 0 -6 u 0 0 7.2 v 10 0 0 material ground\n"
+    "medium flame box -0.6 0 -0.6 0.6 1.3 0.6 sigma_a 4 4 4 sigma_s 0.2 0.2 0.2 Lescale 14\n"
+    "density flame blob center 0 0.1 0 radius 0.17 weight 1.5\n"
+    "density flame blob center 0.1 0.28 0.04 radius 0.12 weight 1.3\n"
+    "density flame blob center -0.11 0.27 -0.03 radius 0.12 weight 1.3\n"
+    "density flame blob center 0 0.42 0 radius 0.11 weight 1.3\n"
+    "density flame blob center 0.04 0.78 0 radius 0.055 weight 1\n"
+    "temperature flame blob center 0 0.4 0 radius 0.75 weight 2500 base 0 blackbody on\n"
+    "%s";
+
+static rrv_scene *load(const char *fmt, const char *a, const char *b, const char *c)
+{
+    char text[4096];
+    rrv_scene *s = NULL;
+    rrv_error e;
+    snprintf(text, sizeof text, fmt, a, b, c);
+    if (rrv_scene_parse(text, strlen(text), "emission.rrv", ".", NULL, &s, &e) != RRV_OK) {
+        CHECKF(0, "%s:%d: %s", e.file, e.line, e.message);
+        return NULL;
+    }
+    return s;
+}
+
+/* A context as rrv_render_rect sets one up for these scenes. */
+static void context_for(const rrv_scene *s, rrv__context *ctx, int bends)
+{
+    memset(ctx, 0, sizeof *ctx);
+    ctx->scene = s;
+    ctx->bends = bends;
+    ctx->sample_lights = 1;
+    ctx->emission = 1;
+    ctx->eta_camera2 = 1;
+    ctx->thermal_scale = 1;
+}
+
+/* At sampled points the two MIS weights of every connection sum to one,
+   each side computing its own: the sample's weight from the density it
+   drew with, the forward path's from its lookup of the same point. The
+   density is one: over uniform points of the box E[p(y)] volume = 1. And
+   the sampler draws by it: each cluster of cells as often as the density
+   the lookup gives it (within 4 standard errors of the binomial count). */
+static void weights_sum_to_one(void)
+{
+    rrv_scene *s = load(campfire, "classic", "", "");
+    const struct rrv__emitters *e;
+    rrv__context ctx;
+    rrv__rng rng;
+    int i, bad = 0, vertex, count = 0;
+    if (!s) return;
+    CHECK(s->emitters != NULL);
+    if (!s->emitters) { rrv_scene_free(s); return; }
+    e = s->emitters;
+    CHECK(e->count == 1 && e->clusters == 64 && e->clusters <= 64);
+    context_for(s, &ctx, 0);
+    rrv__rng_seed(&rng, 11, 12, 13);
+    for (vertex = 0; vertex < 2; ++vertex) {
+        double sum = 0, sum2 = 0, mean, se, box;
+        int hits[64] = {0}, c;
+        double share[64], q[RRV__EMIT_KEEP];
+        rrv__vertex_bsdf v;
+        rrv__path path;
+        rrv_vec3 x, lo = s->media[0].lo, ext = rrv__sub(s->media[0].hi, s->media[0].lo);
+        const int n = 200000;
+        memset(&v, 0, sizeof v);
+        memset(&path, 0, sizeof path);
+        if (vertex == 0) {
+            /* on the floor beside the flame */
+            v.surface = 1;
+            v.n = rrv__v3(0, 1, 0);
+            x = rrv__v3(0.9, 1e-6, -0.4);
+        } else {
+            /* scattering inside it */
+            v.g = 0.3;
+            v.d_in = rrv__normalize(rrv__v3(0.2, 1, -0.1));
+            x = rrv__v3(0.05, 0.35, 0.02);
+        }
+        rrv__emission_from_vertex(&ctx, &path.emit, x, &v, vertex ? NULL : q);
+        for (i = 0; i < n; ++i) {
+            double u[5], p_nee, p_fwd, pdf_dir, r, w_nee, w_fwd;
+            rrv__coeffs cf;
+            rrv_vec3 y;
+            int mi, k, idx[3];
+            const rrv__emitter_grid *g = &e->grid[0];
+            for (k = 0; k < 5; ++k) u[k] = rrv__uniform(&rng);
+            mi = rrv__emitter_sample(e, &path.emit, vertex ? NULL : q, u, &y);
+            if (mi < 0) { CHECK(mi >= 0); break; }
+            /* its cluster, from the cell it lies in */
+            for (k = 0; k < 3; ++k) {
+                idx[k] = (int)((rrv__axis(y, k) - rrv__axis(lo, k)) / rrv__axis(g->cell, k));
+                if (idx[k] > g->n[k] - 1) idx[k] = g->n[k] - 1;
+                idx[k] /= RRV__EMIT_BLOCK;
+            }
+            ++hits[(idx[2] * g->nc[1] + idx[1]) * g->nc[0] + idx[0]];
+            rrv__medium_coeffs(&s->media[mi], y, &cf);
+            if (!rrv__emission_densities(&ctx, &path.emit, mi, y, &cf, &p_nee, &p_fwd, &pdf_dir, &r)) continue;
+            ++count;
+            w_nee = rrv__emission_mis(p_nee, p_fwd);
+            w_fwd = rrv__emission_forward_weight(&ctx, &path, &s->media[mi], y, &cf);
+            if (!(fabs(w_nee + w_fwd - 1.0) <= 1e-12) && bad++ < 3)
+                CHECKF(0, "at %g %g %g: w_nee %.17g + w_fwd %.17g", y.x, y.y, y.z, w_nee, w_fwd);
+        }
+        {
+            /* each cluster's probability from the lookup, which is constant in a cell */
+            const rrv__emitter_grid *g = &e->grid[0];
+            int ix, iy, iz;
+            for (c = 0; c < 64; ++c) share[c] = 0;
+            for (iz = 0; iz < g->n[2]; ++iz)
+                for (iy = 0; iy < g->n[1]; ++iy)
+                    for (ix = 0; ix < g->n[0]; ++ix) {
+                        rrv_vec3 y = rrv__v3(lo.x + (ix + 0.5) * g->cell.x, lo.y + (iy + 0.5) * g->cell.y,
+                                             lo.z + (iz + 0.5) * g->cell.z);
+                        share[((iz / RRV__EMIT_BLOCK) * g->nc[1] + iy / RRV__EMIT_BLOCK) * g->nc[0] + ix / RRV__EMIT_BLOCK] +=
+                            rrv__emission_pdf(e, 0, &path.emit, y) / g->inv_volume;
+                    }
+        }
+        for (c = 0; c < 64; ++c) {
+            double P = share[c];
+            double sd = sqrt(n * P * (1 - P));
+            CHECKF(fabs(hits[c] - n * P) <= 4 * sd + 1e-9, "vertex %d cluster %d: %d draws, expected %g +- %g",
+                   vertex, c, hits[c], n * P, sd);
+        }
+        box = ext.x * ext.y * ext.z;
+        for (i = 0; i < n; ++i) {
+            rrv_vec3 y = rrv__v3(lo.x + ext.x * rrv__uniform(&rng), lo.y + ext.y * rrv__uniform(&rng),
+                                 lo.z + ext.z * rrv__uniform(&rng));
+            double p = rrv__emission_pdf(e, 0, &path.emit, y) * box;
+            sum += p;
+            sum2 += p * p;
+        }
+        mean = sum / n;
+        se = sqrt((sum2 / n - mean * mean) / n);
+        CHECKF(fabs(mean - 1.0) <= 4 * se, "vertex %d: the density integrates to %g +- %g", vertex, mean, se);
+    }
+    CHECK(bad == 0);
+    CHECK(count > 100000);
+    {
+        /* a vertex scattering inside the emitter's box samples nothing and
+           leaves the path's next emission at weight 1, not at the weight of
+           the vertex before it */
+        rrv__vertex_bsdf v;
+        rrv__path path;
+        rrv__coeffs cf;
+        rrv_vec3 y = rrv__v3(0.0, 0.2, 0.0);
+        memset(&v, 0, sizeof v);
+        memset(&path, 0, sizeof path);
+        v.surface = 1;
+        v.n = rrv__v3(0, 1, 0);
+        rrv__emission_from_vertex(&ctx, &path.emit, rrv__v3(0.9, 1e-6, -0.4), &v, NULL);
+        rrv__medium_coeffs(&s->media[0], y, &cf);
+        CHECK(rrv__emission_forward_weight(&ctx, &path, &s->media[0], y, &cf) < 1.0);
+        v.surface = 0;
+        v.d_in = rrv__v3(0, 1, 0);
+        rrv__emission_nee(&ctx, &path, rrv__v3(0.05, 0.35, 0.02), &v, &rng);
+        CHECK(path.emit.on == 0);
+        CHECK(rrv__emission_forward_weight(&ctx, &path, &s->media[0], y, &cf) == 1.0);
+    }
+    rrv_scene_free(s);
+}
+
+/* Block means of an image rendered in `batches` independent sample ranges:
+   the mean and standard error of each block's mean radiance. */
+#define BW 2
+#define BH 2
+static void block_stats(rrv_scene *s, int batches, int spp, double mean[BW * BH], double se[BW * BH])
+{
+    int w = s->camera.width, h = s->camera.height, b, i, k;
+    float *img = (float *)malloc(sizeof(float) * 3 * (size_t)w * (size_t)h);
+    double sum[BW * BH] = {0}, sum2[BW * BH] = {0};
+    for (b = 0; b < batches; ++b) {
+        double block[BW * BH] = {0};
+        memset(img, 0, sizeof(float) * 3 * (size_t)w * (size_t)h);
+        CHECK(rrv_render_rect(s, 0, 0, w, h, b * spp, (b + 1) * spp, img, w, NULL, NULL) == RRV_OK);
+        for (i = 0; i < w * h; ++i) {
+            int bx = (i % w) * BW / w, by = (i / w) * BH / h;
+            block[by * BW + bx] += (img[3 * i] + img[3 * i + 1] + img[3 * i + 2]) / spp;
+        }
+        for (k = 0; k < BW * BH; ++k) {
+            sum[k] += block[k];
+            sum2[k] += block[k] * block[k];
+        }
+    }
+    for (k = 0; k < BW * BH; ++k) {
+        mean[k] = sum[k] / batches;
+        se[k] = sqrt(fmax(sum2[k] / batches - mean[k] * mean[k], 0.0) / (batches - 1));
+    }
+    free(img);
+}
+
+/* The flame lights the wall and floor: with emission NEE the same blocks as
+   the forward paths alone, within 4 standard errors of their difference,
+   on the classic integrator and on the refractive one with a refracting box
+   of hot air over the flame (straight connections only outside it). */
+static void nee_matches_forward_in_blocks(void)
+{
+    static const char *const haze =
+        "medium haze box -1.3 0.9 -1.0 1.3 3.4 1.0 sigma_a 0 0 0 sigma_s 0 0 0\n"
+        "temperature haze noise octaves 2 frequency 2.5 seed 5 falloff plume center 0 1.5 0 radius 0.9 "
+        "amplitude 600 base 0 temperatureoffset -300 blackbody off\n"
+        "ior haze gas iorscale 300\n"
+        "ambient ior 1.0876\n";
+    int variant, k;
+    for (variant = 0; variant < 2; ++variant) {
+        const char *integrator = variant ? "refractive" : "classic", *extra = variant ? haze : "";
+        rrv_scene *on = load(campfire, integrator, "", extra);
+        rrv_scene *off = load(campfire, integrator, "emissionnee off", extra);
+        double m_on[BW * BH], s_on[BW * BH], m_off[BW * BH], s_off[BW * BH], worst = 0, rel = 0;
+        if (!on || !off) { rrv_scene_free(on); rrv_scene_free(off); return; }
+        block_stats(on, 16, 16, m_on, s_on);
+        block_stats(off, 16, 128, m_off, s_off);
+        for (k = 0; k < BW * BH; ++k) {
+            double z = (m_on[k] - m_off[k]) / sqrt(s_on[k] * s_on[k] + s_off[k] * s_off[k]);
+            CHECKF(fabs(z) <= 4.0, "%s block %d: %g +- %g with emission NEE, %g +- %g without (z = %.2f)", integrator,
+                   k, m_on[k], s_on[k], m_off[k], s_off[k], z);
+            worst = fmax(worst, fabs(z));
+            rel = fmax(rel, s_off[k] / m_off[k]);
+        }
+        /* resolving power: a bias of a tenth would show */
+        CHECKF(rel < 0.025, "%s: the forward blocks' relative error %g is too large to see a bias", integrator, rel);
+        printf("  %s: worst |z| %.2f, forward blocks within %.1f%%\n", integrator, worst, 100 * rel);
+        rrv_scene_free(on);
+        rrv_scene_free(off);
+    }
+}
+
+/* A uniformly emitting, purely absorbing slab of optical depth tau above a
+   white diffuse floor (a box 200 m wide, 1 m thick, 1 m up: its edges are
+   89.4 degrees from the zenith, which costs cos^2 = 1e-4 of the
+   irradiance). The floor's radiance is E / pi = Le (1 - 2 E_3(tau)), E_3
+   the exponential integral, 2 E_3(tau) = 2 int_0^1 mu exp(-tau / mu) d mu,
+   which the test integrates by Simpson's rule. With emission NEE and
+   without: within 4 standard errors. */
+static void slab_irradiance_closed_form(void)
+{
+    static const char *const slab =
+        "camera eye 0 0.5 -1 look 0 0 0 up 0 1 0 fov 0.01 resolution 1 1\n"
+        "render spp 1 maxdepth 1 seed 5 integrator classic %s\n"
+        "material white diffuse albedo 1 1 1\n"
+        "quad origin -300 0 -300 u 0 0 600 v 600 0 0 material white\n"
+        "medium slab box -100 1 -100 100 2 100 sigma_a %s sigma_s 0 0 0 Le 1 1 1 Lescale 1\n"
+        "density slab constant 1\n%s";
+    const double tau = 0.7;
+    double e3 = 0, expect, h = 1.0 / 20000;
+    int i, variant;
+    char sa[64];
+    for (i = 0; i <= 20000; ++i) {
+        double mu = i * h, f = mu > 0 ? mu * exp(-tau / mu) : 0.0;
+        e3 += f * (i == 0 || i == 20000 ? 1 : i % 2 ? 4 : 2);
+    }
+    e3 *= h / 3;
+    expect = 1.0 - 2.0 * e3;
+    snprintf(sa, sizeof sa, "%g %g %g", tau, tau, tau);
+    for (variant = 0; variant < 2; ++variant) {
+        rrv_scene *s = load(slab, variant ? "emissionnee off" : "", sa, "");
+        const int batches = 32, spp = 4096;
+        double sum = 0, sum2 = 0, mean, se;
+        int b;
+        if (!s) return;
+        for (b = 0; b < batches; ++b) {
+            float px[3] = {0, 0, 0};
+            double v;
+            CHECK(rrv_render_rect(s, 0, 0, 1, 1, b * spp, (b + 1) * spp, px, 1, NULL, NULL) == RRV_OK);
+            v = (px[0] + px[1] + px[2]) / (3.0 * spp);
+            sum += v;
+            sum2 += v * v;
+        }
+        mean = sum / batches;
+        se = sqrt(fmax(sum2 / batches - mean * mean, 0.0) / (batches - 1));
+        CHECKF(fabs(mean - expect) <= 4 * se, "%s: %.6f +- %.6f, closed form %.6f", variant ? "forward" : "nee", mean,
+               se, expect);
+        CHECKF(se < 0.01 * expect, "%s: standard error %g too large to test", variant ? "forward" : "nee", se);
+        printf("  %s: %.5f +- %.5f (closed form %.5f)\n", variant ? "forward only" : "emission nee", mean, se, expect);
+        rrv_scene_free(s);
+    }
+}
+
+/* `cellcentered on` is the same grid shifted by half a voxel: every lookup
+   at p equals the plain grid's at p - map * 0.5 (to rounding), the map and
+   data untouched; without the key, or with `off`, nothing moves. */
+static void cell_centered_is_half_voxel_shift(void)
+{
+    static const char *const fmt =
+        "camera eye 0.5 -3 1 look 0.5 0.5 1 up 0 0 1 resolution 8 8\n"
+        "medium fire box 0 0 0 1 1 2 sigma_a 1 1 1 sigma_s 1 1 1\n"
+        "density fire nanovdb scenes/assets/pyro.nvdb %s%s%s\n";
+    rrv_scene *plain = load(fmt, "", "", ""), *off = load(fmt, "cellcentered off", "", "");
+    rrv_scene *centred = load(fmt, "cellcentered on", "", "");
+    const rrv_nanovdb *a, *b;
+    rrv__rng rng;
+    double o[3];
+    int i, j, bad = 0, inside = 0;
+    if (!plain || !off || !centred) goto done;
+    a = &plain->media[0].density.nanovdb;
+    b = &centred->media[0].density.nanovdb;
+    CHECK(memcmp(&off->media[0].density.nanovdb.translation, a->translation, sizeof a->translation) == 0);
+    CHECK(off->media[0].density.nanovdb.lo.x == a->lo.x && off->media[0].density.nanovdb.hi.z == a->hi.z);
+    for (j = 0; j < 3; ++j) {
+        o[j] = 0.5 * (a->map[3 * j] + a->map[3 * j + 1] + a->map[3 * j + 2]);
+        CHECK(b->translation[j] == a->translation[j] + o[j]);
+    }
+    CHECK(memcmp(a->map, b->map, sizeof a->map) == 0);
+    CHECK(fabs(b->lo.x - (a->lo.x + o[0])) <= 1e-12 && fabs(b->hi.z - (a->hi.z + o[2])) <= 1e-12);
+    rrv__rng_seed(&rng, 1, 2, 3);
+    for (i = 0; i < 100000; ++i) {
+        rrv_vec3 p = rrv__v3(-0.1 + 1.2 * rrv__uniform(&rng), -0.1 + 1.2 * rrv__uniform(&rng),
+                             -0.1 + 2.2 * rrv__uniform(&rng));
+        rrv_vec3 q = rrv__v3(p.x - o[0], p.y - o[1], p.z - o[2]);
+        double vb = rrv_nanovdb_sample(b, p), va = rrv_nanovdb_sample(a, q);
+        /* the scene's own lookup (density through the field) too */
+        double fb = rrv__field_eval(&centred->media[0].density, p, 0, 0.0);
+        if (va > 0) ++inside;
+        if (!(fabs(va - vb) <= 1e-12 * (1 + fabs(va))) && bad++ < 3)
+            CHECKF(0, "at %g %g %g: cell-centred %.17g, shifted %.17g", p.x, p.y, p.z, vb, va);
+        if (rrv__inside_box(p, centred->media[0].lo, centred->media[0].hi) &&
+            !(fabs(fb - vb) <= 1e-12 * (1 + fabs(vb))) && bad++ < 3)
+            CHECKF(0, "field at %g %g %g: %.17g, grid %.17g", p.x, p.y, p.z, fb, vb);
+    }
+    CHECK(bad == 0);
+    CHECK(inside > 1000);
+done:
+    rrv_scene_free(plain);
+    rrv_scene_free(off);
+    rrv_scene_free(centred);
+}
+
+/* The scene keys and their refusals. */
+static void keys_and_messages(void)
+{
+    static const char *const fmt = "camera eye 0 0 -3 look 0 0 0\nrender %s\n%s%s";
+    rrv_scene *s = load(fmt, "emissionnee off", "", "");
+    char text[512];
+    rrv_error e;
+    if (s) CHECK(s->settings.emission_nee == RRV_EMISSION_NEE_OFF);
+    rrv_scene_free(s);
+    s = load(fmt, "emissionnee on", "", "");
+    if (s) CHECK(s->settings.emission_nee == RRV_EMISSION_NEE_ON);
+    rrv_scene_free(s);
+    s = NULL;
+    snprintf(text, sizeof text, fmt, "emissionnee maybe", "", "");
+    CHECK(rrv_scene_parse(text, strlen(text), "k.rrv", ".", NULL, &s, &e) == RRV_ERROR_PARSE);
+    CHECKF(strstr(e.message, "emissionnee") != NULL, "%s", e.message);
+    snprintf(text, sizeof text, fmt, "", "medium m box 0 0 0 1 1 1\n",
+             "density m nanovdb scenes/assets/pyro.nvdb cellcentered yes\n");
+    CHECK(rrv_scene_parse(text, strlen(text), "k.rrv", ".", NULL, &s, &e) == RRV_ERROR_PARSE);
+    CHECKF(e.line == 4 && strstr(e.message, "cellcentered") != NULL, "%d: %s", e.line, e.message);
+}
+
+int main(void)
+{
+    RUN(weights_sum_to_one);
+    RUN(nee_matches_forward_in_blocks);
+    RUN(slab_irradiance_closed_form);
+    RUN(cell_centered_is_half_voxel_shift);
+    RUN(keys_and_messages);
+    return CHECK_EXIT_CODE();
+}
