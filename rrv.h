@@ -4528,8 +4528,10 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
    the samples a box touches, which stops tightening at a voxel; blobs and
    constants have no steep ramps inside a cell worth the bounds.
    The threshold: every crossing of the scenes in scenes/ holds at most
-   10.8 (a cell's diagonal at its bound, plume and haze), of the tests
-   16.4 (the hostile grids of test_budget aside), and of one global
+   10.8 (a cell's diagonal at its bound, plume and haze), of the tests'
+   media 16.4 (aside from test_budget's hostile grids, and test_render's
+   constant densities of 6e10 and forced bound of 1e30, which never
+   split), and of one global
    majorant (--majorant-cells 1, the benchmark's comparison) 173: at 1000
    all of them walk as before, bit for bit, and a crossing under it costs
    at most ~1000 null collisions. */
