@@ -4531,10 +4531,9 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
    10.8 (a cell's diagonal at its bound, plume and haze), of the tests'
    media 16.4 (aside from test_budget's hostile grids, and test_render's
    constant densities of 6e10 and forced bound of 1e30, which never
-   split), and of one global
-   majorant (--majorant-cells 1, the benchmark's comparison) 173: at 1000
-   all of them walk as before, bit for bit, and a crossing under it costs
-   at most ~1000 null collisions. */
+   split), and of one global majorant (--majorant-cells 1, the benchmark's
+   comparison) 173: at 1000 all of them walk as before, bit for bit, and a
+   crossing under it costs at most ~1000 null collisions. */
 #ifndef RRV__SPLIT_DEPTH
 #define RRV__SPLIT_DEPTH 1000.0
 #endif
