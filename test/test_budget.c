@@ -266,6 +266,119 @@ static void test_tracking_through_a_coarse_grid_is_unbiased(void)
     rrv_scene_free(s);
 }
 
+/* A 2^3 grid over [-1, 1]^3 ramping along x from 0 on the face x = -1 to
+   `peak` on x = 1: the density at x is peak (x + 1) / 2 on every line. */
+static rrv_medium *ramp_medium(rrv_scene *s, double peak, const double sigma_a[3], const double sigma_s[3])
+{
+    rrv_medium *m = tb_medium(s, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 0.5, 0.5);
+    float *v = set_grid(m, 2, 2, 2, m->lo, m->hi);
+    int i;
+    for (i = 0; i < 8; ++i) v[i] = i & 1 ? (float)peak : 0.0f;
+    for (i = 0; i < 3; ++i) {
+        m->sigma_a[i] = sigma_a[i];
+        m->sigma_s[i] = sigma_s[i];
+    }
+    return m;
+}
+
+static void test_tracking_through_a_steep_ramp_is_unbiased(void)
+{
+    /* The render fuzzer's ramp, 0 to 7e10 across a 2 m voxel, under cells
+       of 1/16 of it: a crossing of the first cell holds an optical depth of
+       up to 5e8 at its bound, far over RRV__SPLIT_DEPTH, so these walks go
+       in pieces with bounds of their own. Along a line the density is
+       linear in t, so the optical depth has a closed form: a ray entering
+       the thin face at x = -1 with direction component dx has
+       tau(s) = k peak dx s^2 / 4 after s metres; a ray parallel to the face
+       at x0 has k peak (x0 + 1) / 2 per metre. Three rays: in through the
+       thin face, out through it (the density falling along the ray), and
+       parallel to it 1.4e-11 m inside (a box of no width across x); each
+       with grey extinction, and with three channel groups (k 1, 0.1, 0.01:
+       ratio tracking walks each group, delta tracking pauses at every
+       piece to reweight). Ratio and delta tracking must match exp(-tau)
+       per channel within 4 standard errors (50000 walks, fixed seeds),
+       and take few tentative collisions (with the cell's bound as the
+       majorant, ~1e5 a walk on the first ray). */
+    static const double grey_a[3] = {0.2, 0.2, 0.2}, grey_s[3] = {0.8, 0.8, 0.8};
+    static const double chroma_a[3] = {0.2, 0.02, 0.002}, chroma_s[3] = {0.8, 0.08, 0.008};
+    const double peak = (double)(float)7e10, dx = 0.6;
+    int spectrum, k;
+    for (spectrum = 0; spectrum < 2; ++spectrum) {
+        rrv_scene *s = tb_scene(4, 4);
+        rrv_error err;
+        rrv_medium *m = ramp_medium(s, peak, spectrum ? chroma_a : grey_a, spectrum ? chroma_s : grey_s);
+        rrv__context ctx;
+        CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+        CHECKF(m->majorant->channel_groups == (spectrum ? 3 : 1), "%d channel groups", m->majorant->channel_groups);
+        memset(&ctx, 0, sizeof ctx);
+        ctx.scene = s;
+        ctx.eta_camera2 = 1;
+        for (k = 0; k < 3; ++k) {
+            /* s0: the length inside the medium that gives the first channel tau 1.5 */
+            double s0 = sqrt(4.0 * 1.5 / (peak * dx)), x0 = -1 + 1.4e-11, tau0, tmax, steps;
+            rrv_vec3 o, d;
+            rrv__rng rng;
+            tally ratio[3], delta[3];
+            int i, ch, n = 50000;
+            uint64_t events0 = ctx.stats.events;
+            if (k == 0) { /* in through the thin face from 0.5 m outside */
+                d = rrv__v3(dx, 0.8, 0);
+                o = rrv__madd(rrv__v3(-1, 0.1, 0.2), d, -0.5 / dx);
+                tmax = 0.5 / dx + s0;
+                tau0 = peak * dx * s0 * s0 / 4;
+            } else if (k == 1) { /* out through it, from s0 inside */
+                d = rrv__v3(-dx, -0.8, 0);
+                o = rrv__madd(rrv__v3(-1, 0.1, 0.2), d, -s0);
+                tmax = s0 + 0.5;
+                tau0 = peak * dx * s0 * s0 / 4;
+            } else { /* parallel to it, across the box */
+                d = rrv__v3(0, 1, 0);
+                o = rrv__v3(x0, -1.5, 0.3);
+                tmax = 3;
+                tau0 = peak * (x0 + 1) / 2 * 2;
+            }
+            memset(ratio, 0, sizeof ratio);
+            memset(delta, 0, sizeof delta);
+            rrv__rng_seed(&rng, 23, (uint64_t)(3 * spectrum + k), 0);
+            for (i = 0; i < n; ++i) {
+                double T[3];
+                rrv__path path;
+                rrv__flight flight;
+                int outcome;
+                rrv__ratio_tracking_transmittance(&ctx, o, d, tmax, &rng, T);
+                rrv__path_start(&path, &rng);
+                outcome = rrv__refractive_delta_tracking(&ctx, &path, o, d, tmax, &rng, &flight);
+                for (ch = 0; ch < 3; ++ch) {
+                    tally_add(&ratio[ch], T[ch]);
+                    tally_add(&delta[ch], outcome == RRV__FLIGHT_PASSED ? path.beta[ch] * rrv__path_mis(&path) : 0.0);
+                }
+            }
+            steps = (double)(ctx.stats.events - events0) / (2.0 * n);
+            for (ch = 0; ch < 3; ++ch) {
+                double kc = m->sigma_a[ch] + m->sigma_s[ch], expected = exp(-tau0 * kc);
+                printf("  %s ray %d channel %d: exp(-tau) %.4f, ratio tracking %.4f +- %.4f, delta tracking %.4f +- "
+                       "%.4f\n", spectrum ? "chromatic" : "grey", k, ch, expected, tally_mean(&ratio[ch]),
+                       tally_se(&ratio[ch]), tally_mean(&delta[ch]), tally_se(&delta[ch]));
+                CHECKF(fabs(tally_mean(&ratio[ch]) - expected) < 4 * tally_se(&ratio[ch]) + 1e-12,
+                       "%s ray %d channel %d: ratio tracking %g +- %g, exp(-tau) %g", spectrum ? "chromatic" : "grey",
+                       k, ch, tally_mean(&ratio[ch]), tally_se(&ratio[ch]), expected);
+                CHECKF(fabs(tally_mean(&delta[ch]) - expected) < 4 * tally_se(&delta[ch]) + 1e-12,
+                       "%s ray %d channel %d: delta tracking %g +- %g, exp(-tau) %g", spectrum ? "chromatic" : "grey",
+                       k, ch, tally_mean(&delta[ch]), tally_se(&delta[ch]), expected);
+            }
+            /* tau 1.5 is a few collisions a walk at a rate that follows the
+               density; the parallel ray pays the bound's floor, 1e-9 of the
+               voxel's samples (rrv__grid_bound's margin for rounding: 70 a
+               metre here, 140 across the box) */
+            printf("  %s ray %d: %.2f tentative collisions a walk\n", spectrum ? "chromatic" : "grey", k, steps);
+            CHECKF(steps < (k < 2 ? 10 : 10 + 2e-9 * peak * 2), "%s ray %d: %g tentative collisions a walk",
+                   spectrum ? "chromatic" : "grey", k, steps);
+        }
+        CHECKF(ctx.stats.paths_cut == 0, "%lu walks cut", (unsigned long)ctx.stats.paths_cut);
+        rrv_scene_free(s);
+    }
+}
+
 static void test_hostile_coarse_grids_take_bounded_work(void)
 {
     /* The shapes the render fuzzer found: a 2^3 grid in a 2 m box, 7e10 on
@@ -274,10 +387,13 @@ static void test_hostile_coarse_grids_take_bounded_work(void)
        accepts), seen from its empty side and lit by a sphere behind it,
        8 bounces, 4x4 pixels of 4 samples. With every cell bounded by the
        samples' max these took 4e6 to 1.1e7 events a sample, with walks cut;
-       with cells on parts of the voxel, measured 1.3e5 (corner), 1.8e5 (edge)
-       and 2.8e5 (face). The check allows 5 times the largest and no cut
-       walk: the count is heavy-tailed (a path that scatters in the thin
-       layer where the density rises from 0 pays for leaving it). */
+       with cells on parts of the voxel, 1.3e5 (corner), 1.8e5 (edge) and
+       2.8e5 (face: the render fuzzer's input, test/fuzz_regressions/
+       render-render-gridvol-2cubed-face-7e10.bin), a path that scattered in
+       the thin layer where the density rises from 0 paying the cell's
+       bound for leaving it. With crossings split into pieces that follow
+       the density (rrv__majorant_piece), measured 28, 25 and 28. The check
+       allows 1000 a sample and no cut walk. */
     static const int hot[3][8] = {{1, 0, 0, 0, 0, 0, 0, 0}, {1, 1, 0, 0, 0, 0, 0, 0}, {1, 1, 1, 1, 0, 0, 0, 0}};
     static const char *names[3] = {"corner", "edge", "face"};
     int shape;
@@ -301,7 +417,7 @@ static void test_hostile_coarse_grids_take_bounded_work(void)
         memset(&st, 0, sizeof st);
         CHECK(rrv_render_rect(s, 0, 0, 4, 4, 0, 4, img, 4, &st, NULL) == RRV_OK);
         printf("  %s: %.0f events a sample\n", names[shape], (double)st.events / (double)st.samples);
-        CHECKF(st.events < 5 * 280000 * st.samples && st.paths_cut == 0, "%s: %lu events in %lu samples, %lu cut",
+        CHECKF(st.events < 1000 * st.samples && st.paths_cut == 0, "%s: %lu events in %lu samples, %lu cut",
                names[shape], (unsigned long)st.events, (unsigned long)st.samples, (unsigned long)st.paths_cut);
         rrv_scene_free(s);
     }
@@ -424,6 +540,7 @@ int main(void)
     RUN(test_majorant_of_a_coarse_grid_is_tight);
     RUN(test_finer_cells_never_cost_a_refusal);
     RUN(test_tracking_through_a_coarse_grid_is_unbiased);
+    RUN(test_tracking_through_a_steep_ramp_is_unbiased);
     RUN(test_hostile_coarse_grids_take_bounded_work);
     RUN(test_a_sample_of_long_legs_is_cut_at_its_work_bound);
     RUN(test_a_deep_path_between_surfaces_alone_is_not_cut);
