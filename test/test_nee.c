@@ -792,6 +792,9 @@ static void chain_copy(rrv__chain *dst, const rrv__chain *src)
     CHAIN_FIELD(b2) CHAIN_FIELD(r) CHAIN_FIELD(A) CHAIN_FIELD(B) CHAIN_FIELD(C)
     CHAIN_FIELD(snell) CHAIN_FIELD(nrm)
     dst->xs = keep.xs; dst->sb1 = keep.sb1; dst->sb2 = keep.sb2; dst->du = keep.du; dst->Cp = keep.Cp;
+    dst->r_alt = keep.r_alt; dst->A_alt = keep.A_alt; dst->B_alt = keep.B_alt; dst->C_alt = keep.C_alt;
+    dst->nd = keep.nd; dst->n1 = keep.n1; dst->n2 = keep.n2; dst->l1 = keep.l1; dst->l2 = keep.l2;
+    dst->dinv = keep.dinv; dst->scl = keep.scl; dst->grad = keep.grad; dst->step = keep.step;
 #undef CHAIN_FIELD
 }
 
