@@ -160,15 +160,22 @@
                  (gauge `manifoldgauge chord`, the default: in the comb
                  plane; `iso`: in the isosurface's tangent plane, the
                  paper's, undefined where grad eta ~ 0) until every segment
-                 follows its kicked direction within 1e-9 rad:
-                 block-tridiagonal 2x2 Jacobian solved by block Thomas in
-                 O(n) inside a trust region (dogleg; radius halved on a
-                 step that does not lower the residual, doubled on one the
-                 linear model predicted), at most 40 evaluations; a
-                 singular pivot (a caustic) or a root that is not a
+                 follows its kicked direction within 1e-9 rad. The
+                 paper's solver, Levenberg-Marquardt (Levenberg 1944,
+                 Marquardt 1963): steps from (J^T J + lambda S) delta =
+                 -J^T r, S Marquardt's diagonal scaling (the largest
+                 diagonal of J^T J so far), lambda by Nielsen's rule
+                 (taken step: lambda *= max(1/3, 1 - (2 rho - 1)^3); refused:
+                 lambda *= nu, nu *= 2), a step taken when it lowers |r|
+                 (rho, actual over predicted reduction, > 0); J is block
+                 tridiagonal with 2x2 blocks, so J^T J is block
+                 pentadiagonal and is factored by a block LDL^T in O(n); a
+                 refused step re-factors with the new lambda and evaluates
+                 nothing again; at most 40 evaluations. A root that is not a
                  physical path (a segment against its kick, a sharp
-                 interface crossed) fails. The density dw0/dA_y from the
-                 same block elimination (the generalised geometry term of
+                 interface crossed) or where J is singular (a caustic)
+                 fails. The density dw0/dA_y from block Thomas
+                 elimination of J (the generalised geometry term of
                  Specular Manifold Sampling). Seeds: a direction from a
                  mixture of Gaussians around the chord (0.02 rad half the
                  time, 0.2 rad 3 in 8) and uniform (1 in 8), traced through
@@ -177,8 +184,10 @@
                  reaches y's plane); the first solve and every trial draw
                  from that one distribution. `manifoldtrials 0` (default, unbiased
                  for the chain model): 1/p by repeating solves until the
-                 root recurs (initial directions within 1e-5), at most 64
-                 trials. `manifoldtrials M`: M solves, each distinct root
+                 root recurs (initial directions within 1e-5), beyond 64
+                 trials by Russian roulette (trial i made with probability
+                 (64/i)^2, counted as its inverse): E = 1/p exactly, at
+                 most 129 trials expected whatever p. `manifoldtrials M`: M solves, each distinct root
                  counted once (biased low where a root's basin is small).
                  `manifolddrop D`: leave out comb planes across which eta
                  on the chord changes by less than D (faster, biased; 0, the
@@ -8358,10 +8367,11 @@ static void rrv__cone_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const
    undefined and ISO drops those planes; and its levels are the chord's,
    which a curved path through a lens's centre region need not reach, so
    ISO finds few roots there (measured in README.md).
-   The Jacobian is block tridiagonal with 2x2 blocks and is solved by block
-   Thomas elimination in O(n), inside a trust region (rrv__manifold_solve);
-   a pivot block that is singular (a caustic: the chain cannot follow y)
-   fails the solve. The same elimination with the derivative of the last
+   The Jacobian is block tridiagonal with 2x2 blocks; the chain is solved
+   by Levenberg-Marquardt, whose normal equations are block pentadiagonal
+   and factored in O(n) (rrv__manifold_solve). At the root, block Thomas
+   elimination of J (a singular pivot block: a caustic, the chain cannot
+   follow y, fails the solve) with the derivative of the last
    residual with respect to y gives dx_1/dy and so the density of the
    connection, dw0/dA_y = |det (dw0/dy)|. A solve starts from a chain
    traced from a random direction and aimed at y by shooting
