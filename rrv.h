@@ -174,9 +174,12 @@
                  nothing again; at most 40 evaluations. A root that is not a
                  physical path (a segment against its kick, a sharp
                  interface crossed) or where J is singular (a caustic)
-                 fails. The density dw0/dA_y from block Thomas
-                 elimination of J (the generalised geometry term of
-                 Specular Manifold Sampling). Seeds: a direction from a
+                 fails. `manifoldsolver dogleg` solves by the earlier
+                 trust-region Gauss-Newton instead (Newton's step by
+                 block Thomas inside the radius, Powell's dogleg outside;
+                 faster on the lens caustic, README.md). The density
+                 dw0/dA_y from block Thomas elimination of J (the
+                 generalised geometry term of Specular Manifold Sampling). Seeds: a direction from a
                  mixture of Gaussians around the chord (0.02 rad half the
                  time, 0.2 rad 3 in 8) and uniform (1 in 8), traced through
                  the planes by the chain's own rule and aimed at y by
@@ -786,6 +789,13 @@ typedef enum rrv_manifold_gauge {
                               paper's; undefined where grad eta ~ 0) */
 } rrv_manifold_gauge;
 
+/* nee MANIFOLD: how the chain is solved. */
+typedef enum rrv_manifold_solver {
+    RRV_MANIFOLD_SOLVER_DEFAULT = 0, /* LM */
+    RRV_MANIFOLD_SOLVER_LM,          /* Levenberg-Marquardt (the paper's) */
+    RRV_MANIFOLD_SOLVER_DOGLEG       /* trust-region Gauss-Newton, Powell's dogleg */
+} rrv_manifold_solver;
+
 /* Where a pixel's samples take their random numbers. */
 typedef enum rrv_sampler {
     RRV_SAMPLER_DEFAULT = 0, /* Sobol (README.md, "Samplers": never more than a few
@@ -819,6 +829,7 @@ typedef struct rrv_settings {
     double manifold_drop; /* nee manifold: leave out comb planes across which eta
                              along the chord changes by less than this (0: none; biased) */
     rrv_sampler sampler;
+    rrv_manifold_solver manifold_solver; /* nee manifold */
 } rrv_settings;
 
 struct rrv__majorant_grid;
@@ -9416,7 +9427,6 @@ failed:
     return 0;
 }
 
-#ifdef RRV__MANIFOLD_DOGLEG
 /* Trust-region Gauss-Newton (Powell's dogleg) on the chain from its seeded
    positions, all in O(n): the Newton step J du = -r by block Thomas where
    it lies inside the trust radius, else the dogleg path from the Cauchy
@@ -9433,7 +9443,6 @@ failed:
    physical path, or the Jacobian is singular there. */
 static int rrv__manifold_dogleg(const rrv_scene *scene, rrv__chain *ch, rrv__mroot *root)
 {
-    rrv_vec3 *xs = ch->xs, *sb1 = ch->sb1, *sb2 = ch->sb2;
     double (*du)[4] = ch->du, (*gn)[2] = ch->step, (*sd)[2] = ch->grad, (*jv)[2] = ch->scl;
     int it = 1, k, n = ch->n;
     double L = rrv__length(rrv__sub(ch->x[n + 1], ch->x[0])), scale = sqrt(n > 0 ? (double)n : 1.0);
@@ -9441,7 +9450,7 @@ static int rrv__manifold_dogleg(const rrv_scene *scene, rrv__chain *ch, rrv__mro
     root->iterations = 1;
     if (!(norm < DBL_MAX)) return 0;
     for (;;) {
-        double lgn = 0, lp, pred = 0, f2 = norm * norm, trial, rho;
+        double lgn = 0, lp, pred = 0, f2 = norm * norm, trial, rho, tl, E[4];
         if (largest < RRV__MANIFOLD_TOL) {
             root->iterations = it;
 #ifdef RRV__LM_TRACE
@@ -9507,27 +9516,28 @@ static int rrv__manifold_dogleg(const rrv_scene *scene, rrv__chain *ch, rrv__mro
             pred += a0 * a0 + a1 * a1;
         }
         pred = f2 - pred;
-        memcpy(xs, ch->x, sizeof(rrv_vec3) * (size_t)(n + 2));
-        memcpy(sb1, ch->b1, sizeof(rrv_vec3) * (size_t)(n + 2));
-        memcpy(sb2, ch->b2, sizeof(rrv_vec3) * (size_t)(n + 2));
-        rrv__chain_move(scene, ch, xs, sb1, sb2, sd);
-        trial = rrv__chain_eval(scene, ch, 1, &largest);
+        /* the trial into the other half of the double buffer, as for LM */
+        memcpy(E, ch->E, sizeof E);
+        rrv__chain_swap(ch);
+        ch->x[0] = ch->xs[0];
+        ch->x[n + 1] = ch->xs[n + 1];
+        rrv__chain_move(scene, ch, ch->xs, ch->sb1, ch->sb2, sd);
+        trial = rrv__chain_eval(scene, ch, 1, &tl);
         ++it;
         rho = trial < norm && pred > 0 ? (f2 - trial * trial) / pred : -1.0;
         if (trial < norm && rho > 1e-4) {
             norm = trial;
+            largest = tl;
             if (rho > 0.75 && lp > 0.99 * radius) radius = fmin(2.0 * radius, L * scale);
             else if (rho < 0.25) radius *= 0.5;
             continue;
         }
-        /* undo the step */
-        radius = 0.5 * lp;
-        memcpy(ch->x, xs, sizeof(rrv_vec3) * (size_t)(n + 2));
+        /* undo the step: the values kept where it started */
+        rrv__chain_swap(ch);
+        memcpy(ch->E, E, sizeof E);
         ch->failed = 0;
+        radius = 0.5 * lp;
         if (!(radius > 1e-12 * L) || it >= RRV__MANIFOLD_ITERATIONS) break;
-        norm = rrv__chain_eval(scene, ch, 1, &largest);
-        ++it;
-        if (!(norm < DBL_MAX)) break;
     }
     root->iterations = it;
 #ifdef RRV__LM_TRACE
@@ -9536,8 +9546,6 @@ static int rrv__manifold_dogleg(const rrv_scene *scene, rrv__chain *ch, rrv__mro
     return 0;
 }
 
-#define rrv__manifold_solve rrv__manifold_dogleg
-#endif
 
 /* The contribution of one root's path: visibility and ratio-tracked
    transmittance along its chords, the vertex's BSDF or phase function
@@ -9613,7 +9621,8 @@ static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, r
     rrv_vec3 w = rrv__chain_seed_direction(ch, rng);
     int found, aimed;
     if (!rrv__chain_aim(ctx->scene, ch, w, &aimed)) rrv__chain_seed(ctx->scene, ch, w);
-    found = rrv__manifold_solve(ctx->scene, ch, root);
+    found = ctx->scene->settings.manifold_solver == RRV_MANIFOLD_SOLVER_DOGLEG ? rrv__manifold_dogleg(ctx->scene, ch, root)
+                                                                              : rrv__manifold_solve(ctx->scene, ch, root);
     root->iterations += aimed;
     ++ctx->stats.solves;
     ctx->stats.solve_iterations += (uint64_t)root->iterations;
@@ -13194,6 +13203,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"manifoldtrials", RRV__SF_INT, 1, 0, 0.0, 1024.0, NULL},
     {"manifolddrop", RRV__SF_NUM, 1, 0, 0.0, 1.0, NULL},
     {"sampler", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "pcg|sobol"},
+    {"manifoldsolver", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "lm|dogleg"},
 };
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
@@ -13712,6 +13722,9 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
     if ((unsigned)s->manifold_gauge > (unsigned)RRV_GAUGE_ISO)
         return rrv__ck_fail(ck, RRV_OK, "manifold_gauge %d is not one of rrv_manifold_gauge",
                             (int)s->manifold_gauge);
+    if ((unsigned)s->manifold_solver > (unsigned)RRV_MANIFOLD_SOLVER_DOGLEG)
+        return rrv__ck_fail(ck, RRV_OK, "manifold_solver %d is not one of rrv_manifold_solver",
+                            (int)s->manifold_solver);
     RRV__CK(rrv__ck_key(ck, &k[13], (double)s->manifold_trials));
     RRV__CK(rrv__ck_key(ck, &k[14], s->manifold_drop));
     if (s->max_bake_samples < 0)
@@ -14663,6 +14676,7 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[13].given) s->manifold_trials = (int)sl[13].v[0];
     if (sl[14].given) s->manifold_drop = sl[14].v[0];
     if (sl[15].given) s->sampler = sl[15].choice == 0 ? RRV_SAMPLER_PCG : RRV_SAMPLER_SOBOL;
+    if (sl[16].given) s->manifold_solver = sl[16].choice ? RRV_MANIFOLD_SOLVER_DOGLEG : RRV_MANIFOLD_SOLVER_LM;
     rrv__sf_ck(p, &ck, "render");
     rrv__sf_ck(p, &ambient, "ambient");
     return rrv__settings_check(&ck, &ambient, s);

@@ -522,6 +522,10 @@ static void test_lens_caustic_manifold(void)
         CHECKF(iso < 0.5, "manifold iso: the caustic's peak block at %.2f of none's", iso);
     }
     caustic_manifold_case(s, a, &eikonal, RRV_GAUGE_CHORD, 4, 4, 44, "manifold chord M=4", 0);
+    /* the dogleg, the named alternative to Levenberg-Marquardt */
+    s->settings.manifold_solver = RRV_MANIFOLD_SOLVER_DOGLEG;
+    caustic_manifold_case(s, a, &eikonal, RRV_GAUGE_CHORD, 0, 8, 45, "manifold chord, dogleg", 1);
+    s->settings.manifold_solver = RRV_MANIFOLD_SOLVER_DEFAULT;
     rrv_scene_free(s);
 }
 
@@ -565,7 +569,8 @@ static void test_nee_key(void)
     static const char *const texts[] = {"camera eye 0 0 -1 look 0 0 0\nrender nee none\n",
                                         "camera eye 0 0 -1 look 0 0 0\nrender nee straight\n",
                                         "camera eye 0 0 -1 look 0 0 0\nrender spp 1\n",
-                                        "camera eye 0 0 -1 look 0 0 0\nrender nee manifold manifoldgauge iso manifoldtrials 4 manifolddrop 0.001\n",
+                                        "camera eye 0 0 -1 look 0 0 0\nrender nee manifold manifoldgauge iso manifoldtrials 4 manifolddrop 0.001 "
+                                        "manifoldsolver dogleg\n",
                                         "camera eye 0 0 -1 look 0 0 0\nrender nee aim\n"};
     static const rrv_nee expected[] = {RRV_NEE_NONE, RRV_NEE_STRAIGHT, RRV_NEE_DEFAULT, RRV_NEE_MANIFOLD, RRV_NEE_AIM};
     int i;
@@ -577,7 +582,8 @@ static void test_nee_key(void)
         if (r == RRV_OK) CHECKF(s->settings.nee == expected[i], "%s: nee %d", texts[i], (int)s->settings.nee);
         if (r == RRV_OK && i == 3)
             CHECK(s->settings.manifold_gauge == RRV_GAUGE_ISO && s->settings.manifold_trials == 4 &&
-                  s->settings.manifold_drop == 0.001);
+                  s->settings.manifold_drop == 0.001 && s->settings.manifold_solver == RRV_MANIFOLD_SOLVER_DOGLEG);
+        if (r == RRV_OK && i != 3) CHECK(s->settings.manifold_solver == RRV_MANIFOLD_SOLVER_DEFAULT);
         rrv_scene_free(s);
     }
 }

@@ -52,6 +52,7 @@ MODES = [
     ("shoot pcg", "shoot", "sampler pcg"),
     ("aim", "aim", ""),
     ("manifold chord", "manifold", "manifoldgauge chord"),
+    ("manifold chord dogleg", "manifold", "manifoldgauge chord manifoldsolver dogleg"),
     ("manifold iso", "manifold", "manifoldgauge iso"),
     ("manifold chord M=1", "manifold", "manifoldgauge chord manifoldtrials 1"),
     ("manifold chord M=4", "manifold", "manifoldgauge chord manifoldtrials 4"),
