@@ -569,8 +569,8 @@ static void test_nee_key(void)
     static const char *const texts[] = {"camera eye 0 0 -1 look 0 0 0\nrender nee none\n",
                                         "camera eye 0 0 -1 look 0 0 0\nrender nee straight\n",
                                         "camera eye 0 0 -1 look 0 0 0\nrender spp 1\n",
-                                        "camera eye 0 0 -1 look 0 0 0\nrender nee manifold manifoldgauge iso manifoldtrials 4 manifolddrop 0.001 "
-                                        "manifoldsolver dogleg\n",
+                                        ("camera eye 0 0 -1 look 0 0 0\nrender nee manifold manifoldgauge iso manifoldtrials 4 manifolddrop 0.001 "
+                                         "manifoldsolver dogleg\n"),
                                         "camera eye 0 0 -1 look 0 0 0\nrender nee aim\n"};
     static const rrv_nee expected[] = {RRV_NEE_NONE, RRV_NEE_STRAIGHT, RRV_NEE_DEFAULT, RRV_NEE_MANIFOLD, RRV_NEE_AIM};
     int i;
