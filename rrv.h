@@ -9453,9 +9453,6 @@ static int rrv__manifold_dogleg(const rrv_scene *scene, rrv__chain *ch, rrv__mro
         double lgn = 0, lp, pred = 0, f2 = norm * norm, trial, rho, tl, E[4];
         if (largest < RRV__MANIFOLD_TOL) {
             root->iterations = it;
-#ifdef RRV__LM_TRACE
-            fprintf(stderr, "---- ok %d\n", it);
-#endif
             return rrv__chain_physical(scene, ch) && rrv__chain_density(ch, root);
         }
         if (it >= RRV__MANIFOLD_ITERATIONS) break;
@@ -9540,9 +9537,6 @@ static int rrv__manifold_dogleg(const rrv_scene *scene, rrv__chain *ch, rrv__mro
         if (!(radius > 1e-12 * L) || it >= RRV__MANIFOLD_ITERATIONS) break;
     }
     root->iterations = it;
-#ifdef RRV__LM_TRACE
-    fprintf(stderr, "---- cap %d\n", it);
-#endif
     return 0;
 }
 
