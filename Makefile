@@ -33,6 +33,8 @@ endif
 CFLAGS_ALL = $(WARN) $(OPT) $(SANFLAGS) $(CFLAGS)
 TEST_SRCS  := $(wildcard test/test_*.c)
 TEST_BINS  := $(patsubst test/%.c,$(BUILD)/%,$(TEST_SRCS))
+# test_lm runs a solve on a thread with a small stack
+TEST_LIBS_lm := -pthread
 
 .PHONY: all test fuzz fuzz-run bench bench-quick refs clean
 all: rrv

@@ -130,8 +130,10 @@
                  initial direction until the bent ray lands on the light point,
                  density from the Jacobi field, 1/p by repeated trials.
      MANIFOLD    curved NEE by the paper's method (refractive and eikonal): a
-                 chain of comb vertices moved by a Newton-type solver until
-                 every segment follows its kick; slow.
+                 chain of comb vertices moved by the paper's solver,
+                 Levenberg-Marquardt (`manifoldsolver dogleg`: a trust-region
+                 Gauss-Newton), until every segment follows its kick; 1/p
+                 exact by Russian roulette past 64 trials; slow.
      AIM         bent shadow rays aimed at a light point (refractive comb and
                  eikonal): unbiased, about straight NEE's cost, no focusing.
      How each estimator works, its classes of paths and its MIS weights:
@@ -605,6 +607,13 @@ typedef enum rrv_emission_nee {
     RRV_EMISSION_NEE_OFF          /* emission only where paths collect it */
 } rrv_emission_nee;
 
+/* nee MANIFOLD: how the chain is solved. */
+typedef enum rrv_manifold_solver {
+    RRV_MANIFOLD_SOLVER_DEFAULT = 0, /* LM */
+    RRV_MANIFOLD_SOLVER_LM,          /* Levenberg-Marquardt (the paper's) */
+    RRV_MANIFOLD_SOLVER_DOGLEG       /* trust-region Gauss-Newton, Powell's dogleg */
+} rrv_manifold_solver;
+
 /* Where a pixel's samples take their random numbers. */
 typedef enum rrv_sampler {
     RRV_SAMPLER_DEFAULT = 0, /* Sobol (README.md, "Samplers": never more than a few
@@ -640,6 +649,7 @@ typedef struct rrv_settings {
                              along the chord changes by less than this (0: none; biased) */
     rrv_sampler sampler;
     rrv_emission_nee emission_nee;
+    rrv_manifold_solver manifold_solver; /* nee manifold */
 } rrv_settings;
 
 struct rrv__majorant_grid;
@@ -7894,7 +7904,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
 
 /* Shots a solve may take: of the solves that converged within 40, 99 % took 15 or fewer. */
 #define RRV__SOLVE_ITERATIONS 20
-#define RRV__SOLVE_TRIALS 64          /* cap on the trials that estimate 1/p */
+#define RRV__SOLVE_TRIALS 64          /* shoot: cap on the trials that estimate 1/p; manifold: trials before roulette */
 #define RRV__SOLVE_RESTARTS 3         /* seeds a solve may try */
 /* eikonal: a solve first converges with steps at most this much longer
    (rrv__solve_coarse_step), each turning a ray by at most about
@@ -9250,10 +9260,11 @@ static void rrv__cone_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const
    undefined and ISO drops those planes; and its levels are the chord's,
    which a curved path through a lens's centre region need not reach, so
    ISO finds few roots there (measured in README.md).
-   The Jacobian is block tridiagonal with 2x2 blocks and is solved by block
-   Thomas elimination in O(n), inside a trust region (rrv__manifold_solve);
-   a pivot block that is singular (a caustic: the chain cannot follow y)
-   fails the solve. The same elimination with the derivative of the last
+   The Jacobian is block tridiagonal with 2x2 blocks; the chain is solved
+   by Levenberg-Marquardt, whose normal equations are block pentadiagonal
+   and factored in O(n) (rrv__manifold_solve). At the root, block Thomas
+   elimination of J (a singular pivot block: a caustic, the chain cannot
+   follow y, fails the solve) with the derivative of the last
    residual with respect to y gives dx_1/dy and so the density of the
    connection, dw0/dA_y = |det (dw0/dy)|. A solve starts from a chain
    traced from a random direction and aimed at y by shooting
@@ -9289,11 +9300,19 @@ typedef struct rrv__chain {
     double E[4];                          /* d r_n / d(y in the light's frame) */
     int *snell;                           /* ISO: vertex k has an isosurface normal nrm[k] */
     rrv_vec3 *nrm;
-    /* the solver's workspace: positions and bases a step starts from, the
-       step, Thomas's eliminated upper blocks */
+    /* the solver's workspace. A trial step is evaluated into the second
+       half of the double-buffered state (xs, sb1, sb2, r_alt .. C_alt:
+       positions, bases, residuals, Jacobian), which is swapped in when the
+       step is taken and left when it is not, so a rejected step costs no
+       evaluation of the chain it came from. */
     rrv_vec3 *xs, *sb1, *sb2;
-    double (*du)[4], (*Cp)[4];
-    double (*gn)[2], (*sd)[2], (*jv)[2]; /* Newton step, gradient, products with J */
+    double (*r_alt)[2], (*A_alt)[4], (*B_alt)[4], (*C_alt)[4];
+    double (*du)[4], (*Cp)[4];            /* rrv__chain_density's right-hand sides, Thomas's upper blocks */
+    /* Levenberg-Marquardt: J^T J by blocks (diagonal, first and second
+       below it), its LDL^T factors, Marquardt's scaling, J^T r, the step */
+    double (*nd)[4], (*n1)[4], (*n2)[4];
+    double (*l1)[4], (*l2)[4], (*dinv)[4];
+    double (*scl)[2], (*grad)[2], (*step)[2];
 } rrv__chain;
 
 /* A chain for up to cap inner vertices in one RRV_MALLOC block (a render
@@ -9301,7 +9320,7 @@ typedef struct rrv__chain {
    stack); NULL when out of memory. */
 static rrv__chain *rrv__chain_new(int cap)
 {
-    size_t slots = (size_t)cap + 2, doubles = 33, vectors = 9;
+    size_t slots = (size_t)cap + 2, doubles = 71, vectors = 9;
     size_t bytes = sizeof(rrv__chain) + slots * (doubles * sizeof(double) + vectors * sizeof(rrv_vec3) + sizeof(int));
     rrv__chain *ch = cap >= 0 ? (rrv__chain *)RRV_MALLOC(bytes) : NULL;
     double *d;
@@ -9320,11 +9339,21 @@ static rrv__chain *rrv__chain_new(int cap)
     ch->A = (double (*)[4])d; d += 4 * slots;
     ch->B = (double (*)[4])d; d += 4 * slots;
     ch->C = (double (*)[4])d; d += 4 * slots;
+    ch->r_alt = (double (*)[2])d; d += 2 * slots;
+    ch->A_alt = (double (*)[4])d; d += 4 * slots;
+    ch->B_alt = (double (*)[4])d; d += 4 * slots;
+    ch->C_alt = (double (*)[4])d; d += 4 * slots;
     ch->du = (double (*)[4])d; d += 4 * slots;
     ch->Cp = (double (*)[4])d; d += 4 * slots;
-    ch->gn = (double (*)[2])d; d += 2 * slots;
-    ch->sd = (double (*)[2])d; d += 2 * slots;
-    ch->jv = (double (*)[2])d; d += 2 * slots;
+    ch->nd = (double (*)[4])d; d += 4 * slots;
+    ch->n1 = (double (*)[4])d; d += 4 * slots;
+    ch->n2 = (double (*)[4])d; d += 4 * slots;
+    ch->l1 = (double (*)[4])d; d += 4 * slots;
+    ch->l2 = (double (*)[4])d; d += 4 * slots;
+    ch->dinv = (double (*)[4])d; d += 4 * slots;
+    ch->scl = (double (*)[2])d; d += 2 * slots;
+    ch->grad = (double (*)[2])d; d += 2 * slots;
+    ch->step = (double (*)[2])d; d += 2 * slots;
     v = (rrv_vec3 *)(void *)d;
     ch->x = v; v += slots;
     ch->g = v; v += slots;
@@ -9684,15 +9713,15 @@ static double rrv__chain_eval(const rrv_scene *scene, rrv__chain *ch, int jac, d
 }
 
 
-/* Moves every vertex by s times its step du (gauge coordinates in the
-   bases b1, b2 of the positions xs it steps from). */
+/* Moves every vertex by its step du (gauge coordinates in the bases b1,
+   b2 of the positions xs it steps from). */
 static void rrv__chain_move(const rrv_scene *scene, rrv__chain *ch, const rrv_vec3 *xs, const rrv_vec3 *b1,
-                            const rrv_vec3 *b2, double (*du)[4], double s)
+                            const rrv_vec3 *b2, double (*du)[2])
 {
     int k;
     ch->failed = 0;
     for (k = 1; k <= ch->n; ++k) {
-        ch->x[k] = rrv__madd(rrv__madd(xs[k], b1[k], s * du[k][0]), b2[k], s * du[k][2]);
+        ch->x[k] = rrv__madd(rrv__madd(xs[k], b1[k], du[k][0]), b2[k], du[k][1]);
         if (ch->iso && !rrv__project_iso(scene, &ch->x[k], ch->level[k])) ch->failed = 1;
     }
 }
@@ -10000,6 +10029,286 @@ static int rrv__chain_density(rrv__chain *ch, rrv__mroot *root)
     return root->density < DBL_MAX && root->density > 0;
 }
 
+/* 2x2 blocks: out (+)= P^T Q. */
+static void rrv__m2_tmul_add(const double P[4], const double Q[4], double out[4])
+{
+    out[0] += P[0] * Q[0] + P[2] * Q[2];
+    out[1] += P[0] * Q[1] + P[2] * Q[3];
+    out[2] += P[1] * Q[0] + P[3] * Q[2];
+    out[3] += P[1] * Q[1] + P[3] * Q[3];
+}
+
+/* The normal equations of the chain's least squares, N = J^T J and
+   grad = J^T r, by blocks: nd[k] = N_kk, n1[k] = N_k,k-1, n2[k] = N_k,k-2.
+   Row k of J has blocks in columns k-1, k, k+1 (A_k, B_k, C_k), so two
+   columns share a row only when at most two apart: N is block
+   pentadiagonal, and columns two apart share only the row between them. */
+static void rrv__chain_normal(rrv__chain *ch)
+{
+    int k, n = ch->n;
+    for (k = 1; k <= n; ++k) {
+        double *d = ch->nd[k], *g = ch->grad[k];
+        const double *r = ch->r[k];
+        memset(d, 0, 4 * sizeof *d);
+        rrv__m2_tmul_add(ch->B[k], ch->B[k], d);
+        g[0] = ch->B[k][0] * r[0] + ch->B[k][2] * r[1];
+        g[1] = ch->B[k][1] * r[0] + ch->B[k][3] * r[1];
+        if (k > 1) {
+            const double *rp = ch->r[k - 1];
+            rrv__m2_tmul_add(ch->C[k - 1], ch->C[k - 1], d);
+            g[0] += ch->C[k - 1][0] * rp[0] + ch->C[k - 1][2] * rp[1];
+            g[1] += ch->C[k - 1][1] * rp[0] + ch->C[k - 1][3] * rp[1];
+            memset(ch->n1[k], 0, 4 * sizeof(double));
+            rrv__m2_tmul_add(ch->C[k - 1], ch->B[k - 1], ch->n1[k]);
+            rrv__m2_tmul_add(ch->B[k], ch->A[k], ch->n1[k]);
+        }
+        if (k > 2) {
+            memset(ch->n2[k], 0, 4 * sizeof(double));
+            rrv__m2_tmul_add(ch->C[k - 1], ch->A[k - 1], ch->n2[k]);
+        }
+        if (k < n) {
+            const double *rn = ch->r[k + 1];
+            rrv__m2_tmul_add(ch->A[k + 1], ch->A[k + 1], d);
+            g[0] += ch->A[k + 1][0] * rn[0] + ch->A[k + 1][2] * rn[1];
+            g[1] += ch->A[k + 1][1] * rn[0] + ch->A[k + 1][3] * rn[1];
+        }
+    }
+}
+
+/* Block LDL^T of the symmetric block-pentadiagonal M = N + lambda
+   diag(scl) (blocks k = 1..n as rrv__chain_normal lays them out):
+   L unit lower with blocks l1[k] = L_k,k-1 and l2[k] = L_k,k-2, D block
+   diagonal, kept inverted in dinv. A band Cholesky keeps its band, so
+   this is O(n) with no fill beyond two blocks: writing G_kj = L_kj D_j,
+   M_k,k-2 = G_k,k-2 and M_k,k-1 = G_k,k-2 L_k-1,k-2^T + G_k,k-1, and
+   D_k is what the two earlier columns leave of M_kk. The 2x2 D blocks
+   take the place of Cholesky's square roots. Returns 0 when a D block is
+   not positive definite (to rounding: then lambda must grow). */
+static int rrv__band_factor(int n, double (*nd)[4], double (*n1)[4], double (*n2)[4], double (*scl)[2],
+                            double lambda, double (*l1)[4], double (*l2)[4], double (*dinv)[4])
+{
+    int k, j;
+    for (k = 1; k <= n; ++k) {
+        double D[4], G1[4] = {0, 0, 0, 0}, G2[4] = {0, 0, 0, 0}, T[4];
+        memcpy(D, nd[k], sizeof D);
+        D[0] += lambda * scl[k][0];
+        D[3] += lambda * scl[k][1];
+        if (k > 2) {
+            memcpy(G2, n2[k], sizeof G2);
+            rrv__m2_mul(G2, dinv[k - 2], l2[k]);
+        }
+        if (k > 1) {
+            memcpy(G1, n1[k], sizeof G1);
+            if (k > 2) {
+                /* G1 -= G2 l1[k-1]^T */
+                const double *P = l1[k - 1];
+                G1[0] -= G2[0] * P[0] + G2[1] * P[1];
+                G1[1] -= G2[0] * P[2] + G2[1] * P[3];
+                G1[2] -= G2[2] * P[0] + G2[3] * P[1];
+                G1[3] -= G2[2] * P[2] + G2[3] * P[3];
+            }
+            rrv__m2_mul(G1, dinv[k - 1], l1[k]);
+        }
+        /* D -= G2 l2^T + G1 l1^T */
+        for (j = 0; j < 2; ++j) {
+            const double *G = j ? G2 : G1, *P = j ? l2[k] : l1[k];
+            if (k <= 1 + j) continue;
+            D[0] -= G[0] * P[0] + G[1] * P[1];
+            D[1] -= G[0] * P[2] + G[1] * P[3];
+            D[2] -= G[2] * P[0] + G[3] * P[1];
+            D[3] -= G[2] * P[2] + G[3] * P[3];
+        }
+        /* symmetric to rounding; its average keeps dinv so */
+        D[1] = D[2] = 0.5 * (D[1] + D[2]);
+        if (!(D[0] > 0) || !(D[3] > 0) || !(D[0] * D[3] - D[1] * D[2] > 1e-14 * D[0] * D[3])) return 0;
+        if (!rrv__m2_inverse(D, T)) return 0;
+        memcpy(dinv[k], T, sizeof T);
+    }
+    return 1;
+}
+
+/* Solves L D L^T x = b in place (b[1..n]) with rrv__band_factor's factors:
+   forward through L, the D blocks, back through L^T. */
+static void rrv__band_solve(int n, double (*l1)[4], double (*l2)[4], double (*dinv)[4], double (*b)[2])
+{
+    int k;
+    for (k = 2; k <= n; ++k) {
+        b[k][0] -= l1[k][0] * b[k - 1][0] + l1[k][1] * b[k - 1][1];
+        b[k][1] -= l1[k][2] * b[k - 1][0] + l1[k][3] * b[k - 1][1];
+        if (k > 2) {
+            b[k][0] -= l2[k][0] * b[k - 2][0] + l2[k][1] * b[k - 2][1];
+            b[k][1] -= l2[k][2] * b[k - 2][0] + l2[k][3] * b[k - 2][1];
+        }
+    }
+    for (k = 1; k <= n; ++k) {
+        double a0 = b[k][0], a1 = b[k][1];
+        b[k][0] = dinv[k][0] * a0 + dinv[k][1] * a1;
+        b[k][1] = dinv[k][2] * a0 + dinv[k][3] * a1;
+    }
+    for (k = n - 1; k >= 1; --k) {
+        b[k][0] -= l1[k + 1][0] * b[k + 1][0] + l1[k + 1][2] * b[k + 1][1];
+        b[k][1] -= l1[k + 1][1] * b[k + 1][0] + l1[k + 1][3] * b[k + 1][1];
+        if (k + 2 <= n) {
+            b[k][0] -= l2[k + 2][0] * b[k + 2][0] + l2[k + 2][2] * b[k + 2][1];
+            b[k][1] -= l2[k + 2][1] * b[k + 2][0] + l2[k + 2][3] * b[k + 2][1];
+        }
+    }
+}
+
+/* Swaps the chain's state (positions, bases, residuals, Jacobian) with
+   the second half of its double buffer. */
+static void rrv__chain_swap(rrv__chain *ch)
+{
+    rrv_vec3 *v;
+    double (*p2)[2], (*p4)[4];
+    v = ch->x; ch->x = ch->xs; ch->xs = v;
+    v = ch->b1; ch->b1 = ch->sb1; ch->sb1 = v;
+    v = ch->b2; ch->b2 = ch->sb2; ch->sb2 = v;
+    p2 = ch->r; ch->r = ch->r_alt; ch->r_alt = p2;
+    p4 = ch->A; ch->A = ch->A_alt; ch->A_alt = p4;
+    p4 = ch->B; ch->B = ch->B_alt; ch->B_alt = p4;
+    p4 = ch->C; ch->C = ch->C_alt; ch->C_alt = p4;
+}
+
+/* Levenberg-Marquardt's first damping, relative to Marquardt's scaling.
+   The seeds are aimed, so the first step should be Gauss-Newton's; and
+   the chain's slow modes (a long chain bending as a whole, a root near a
+   caustic) have eigenvalues of J^T J ~1e-9 of its diagonal or less, so
+   any damping above that slows them to linear convergence that |r| does
+   not show: on the lens caustic 1e-9 took 5 evaluations where 1e-15 takes
+   3 (medians), and a straight 200-vertex chain stopped with its first
+   direction 6e-8 off at 1e-12, 6e-11 at 1e-15. */
+#define RRV__LM_LAMBDA 1e-15
+#define RRV__LM_LAMBDA_MAX 1e12 /* damping beyond which the chain is stuck */
+
+/* Levenberg-Marquardt on the chain from its seeded positions (the paper's
+   solver): minimises |r|^2 over the vertices' gauge coordinates by steps
+   delta with (J^T J + lambda S) delta = -J^T r. S is Marquardt's scaling,
+   the largest diagonal of J^T J seen so far (Moré), so the damping means
+   the same for every vertex whatever its Jacobian's size, and a direction
+   that was once stiff stays damped as such. lambda -> 0 gives the
+   Gauss-Newton (here Newton: J is square) step and its quadratic
+   convergence; lambda large a short step along the scaled gradient, which
+   lowers |r|^2 for any chain. A step is taken when it lowers |r|, judged
+   by rho, the actual reduction of |r|^2 over the linear model's,
+   |r|^2 - |r + J delta|^2 = delta . (lambda S delta - J^T r); lambda
+   follows Nielsen's rule (1999): on a step taken lambda *= max(1/3,
+   1 - (2 rho - 1)^3), nu = 2 (a model that predicted well, rho ~ 1, cuts
+   lambda threefold; a poor one, rho ~ 0, keeps it), on one refused
+   lambda *= nu, nu *= 2, so repeated refusals grow it geometrically
+   faster. J^T J is block pentadiagonal (rrv__chain_normal), factored in
+   O(n) (rrv__band_factor); a refused step only re-factors it with the new
+   lambda, the chain's values where it stands (kept by the double buffer,
+   rrv__chain_swap) are not evaluated again. Two guards beside Nielsen's
+   rule, both on the linear algebra alone: from a tiny lambda a refusal's
+   doubling leaves the step as long as before, so after a refusal lambda
+   grows fourfold (factor and solve, no evaluation) until the step is at
+   most half the refused one's length; and because forming J^T J squares
+   J's condition number, each step is refined once by the corrected
+   semi-normal equations (Björck): the residual of the normal equations
+   taken from J itself, -J^T (r + J delta) - lambda S delta, solved with
+   the same factors and added. At most RRV__MANIFOLD_ITERATIONS
+   evaluations of the chain, each counted. Returns 1 with the root's
+   initial direction and density, 0 when it did not converge to
+   RRV__MANIFOLD_TOL, the root is not a physical path, or the Jacobian is
+   singular there (rrv__chain_density). */
+static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroot *root)
+{
+    int it = 1, k, n = ch->n;
+    double largest, norm = rrv__chain_eval(scene, ch, 1, &largest), lambda = RRV__LM_LAMBDA, nu = 2.0, refused = 0;
+    root->iterations = 1;
+    if (!(norm < DBL_MAX)) return 0;
+    for (k = 1; k <= n; ++k) ch->scl[k][0] = ch->scl[k][1] = 0;
+    for (;;) {
+        double f2 = norm * norm, top = 0;
+        if (largest < RRV__MANIFOLD_TOL) {
+            root->iterations = it;
+            return rrv__chain_physical(scene, ch) && rrv__chain_density(ch, root);
+        }
+        if (it >= RRV__MANIFOLD_ITERATIONS) break;
+        rrv__chain_normal(ch);
+        for (k = 1; k <= n; ++k) {
+            ch->scl[k][0] = fmax(ch->scl[k][0], ch->nd[k][0]);
+            ch->scl[k][1] = fmax(ch->scl[k][1], ch->nd[k][3]);
+            top = fmax(top, fmax(ch->scl[k][0], ch->scl[k][1]));
+        }
+        if (!(top > 0) || !(top < DBL_MAX)) break;
+        /* a column of J that is ~0 still gets a damping */
+        for (k = 1; k <= n; ++k) {
+            ch->scl[k][0] = fmax(ch->scl[k][0], 1e-12 * top);
+            ch->scl[k][1] = fmax(ch->scl[k][1], 1e-12 * top);
+        }
+        for (;;) { /* steps from here until one is taken */
+            double pred = 0, trial, tl, E[4], len;
+            if (!rrv__band_factor(n, ch->nd, ch->n1, ch->n2, ch->scl, lambda, ch->l1, ch->l2, ch->dinv)) {
+                lambda *= nu;
+                nu *= 2.0;
+                if (!(lambda < RRV__LM_LAMBDA_MAX)) goto failed;
+                continue;
+            }
+            for (k = 1; k <= n; ++k) {
+                ch->step[k][0] = -ch->grad[k][0];
+                ch->step[k][1] = -ch->grad[k][1];
+            }
+            rrv__band_solve(n, ch->l1, ch->l2, ch->dinv, ch->step);
+            {
+                /* e = r + J delta and t in scratch that is free until the trial */
+                double (*e)[2] = ch->r_alt, (*t)[2] = (double (*)[2])(void *)ch->du;
+                rrv__chain_apply(ch, ch->step, e, 0);
+                for (k = 1; k <= n; ++k) { e[k][0] += ch->r[k][0]; e[k][1] += ch->r[k][1]; }
+                rrv__chain_apply(ch, e, t, 1);
+                for (k = 1; k <= n; ++k) {
+                    t[k][0] = -(t[k][0] + lambda * ch->scl[k][0] * ch->step[k][0]);
+                    t[k][1] = -(t[k][1] + lambda * ch->scl[k][1] * ch->step[k][1]);
+                }
+                rrv__band_solve(n, ch->l1, ch->l2, ch->dinv, t);
+                for (k = 1; k <= n; ++k) { ch->step[k][0] += t[k][0]; ch->step[k][1] += t[k][1]; }
+            }
+            len = 0;
+            for (k = 1; k <= n; ++k) {
+                double s0 = ch->step[k][0], s1 = ch->step[k][1];
+                pred += s0 * (lambda * ch->scl[k][0] * s0 - ch->grad[k][0]) +
+                        s1 * (lambda * ch->scl[k][1] * s1 - ch->grad[k][1]);
+                len += s0 * s0 + s1 * s1;
+            }
+            if (refused > 0 && len > 0.25 * refused) { /* |step|^2 against a quarter of the refused one's */
+                lambda *= 4.0;
+                if (!(lambda < RRV__LM_LAMBDA_MAX)) goto failed;
+                continue;
+            }
+            if (!(pred > 0) || !(pred < DBL_MAX)) goto failed; /* no step left that the model trusts */
+            memcpy(E, ch->E, sizeof E);
+            rrv__chain_swap(ch);
+            ch->x[0] = ch->xs[0];
+            ch->x[n + 1] = ch->xs[n + 1];
+            rrv__chain_move(scene, ch, ch->xs, ch->sb1, ch->sb2, ch->step);
+            trial = rrv__chain_eval(scene, ch, 1, &tl);
+            ++it;
+            if (trial < norm) {
+                double rho = (f2 - trial * trial) / pred, t = 2.0 * rho - 1.0;
+                lambda *= fmax(1.0 / 3.0, 1.0 - t * t * t);
+                nu = 2.0;
+                norm = trial;
+                largest = tl;
+                refused = 0;
+                break;
+            }
+            /* refused: back to the values kept */
+            rrv__chain_swap(ch);
+            memcpy(ch->E, E, sizeof E);
+            ch->failed = 0;
+            lambda *= nu;
+            nu *= 2.0;
+            refused = len;
+            if (it >= RRV__MANIFOLD_ITERATIONS) goto failed;
+            if (!(lambda < RRV__LM_LAMBDA_MAX)) goto failed;
+        }
+    }
+failed:
+    root->iterations = it;
+    return 0;
+}
+
 /* Trust-region Gauss-Newton (Powell's dogleg) on the chain from its seeded
    positions, all in O(n): the Newton step J du = -r by block Thomas where
    it lies inside the trust radius, else the dogleg path from the Cauchy
@@ -10014,17 +10323,16 @@ static int rrv__chain_density(rrv__chain *ch, rrv__mroot *root)
    counted. Returns 1 with the root's initial direction and density, 0
    when it did not converge to RRV__MANIFOLD_TOL, the root is not a
    physical path, or the Jacobian is singular there. */
-static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroot *root)
+static int rrv__manifold_dogleg(const rrv_scene *scene, rrv__chain *ch, rrv__mroot *root)
 {
-    rrv_vec3 *xs = ch->xs, *sb1 = ch->sb1, *sb2 = ch->sb2;
-    double (*du)[4] = ch->du, (*gn)[2] = ch->gn, (*sd)[2] = ch->sd, (*jv)[2] = ch->jv;
+    double (*du)[4] = ch->du, (*gn)[2] = ch->step, (*sd)[2] = ch->grad, (*jv)[2] = ch->scl;
     int it = 1, k, n = ch->n;
     double L = rrv__length(rrv__sub(ch->x[n + 1], ch->x[0])), scale = sqrt(n > 0 ? (double)n : 1.0);
     double radius = 0.25 * L * scale, largest, norm = rrv__chain_eval(scene, ch, 1, &largest);
     root->iterations = 1;
     if (!(norm < DBL_MAX)) return 0;
     for (;;) {
-        double lgn = 0, lp, pred = 0, f2 = norm * norm, trial, rho;
+        double lgn = 0, lp, pred = 0, f2 = norm * norm, trial, rho, tl, E[4];
         if (largest < RRV__MANIFOLD_TOL) {
             root->iterations = it;
             return rrv__chain_physical(scene, ch) && rrv__chain_density(ch, root);
@@ -10087,31 +10395,33 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
             pred += a0 * a0 + a1 * a1;
         }
         pred = f2 - pred;
-        memcpy(xs, ch->x, sizeof(rrv_vec3) * (size_t)(n + 2));
-        memcpy(sb1, ch->b1, sizeof(rrv_vec3) * (size_t)(n + 2));
-        memcpy(sb2, ch->b2, sizeof(rrv_vec3) * (size_t)(n + 2));
-        rrv__chain_move(scene, ch, xs, sb1, sb2, du, 1.0);
-        trial = rrv__chain_eval(scene, ch, 1, &largest);
+        /* the trial into the other half of the double buffer, as for LM */
+        memcpy(E, ch->E, sizeof E);
+        rrv__chain_swap(ch);
+        ch->x[0] = ch->xs[0];
+        ch->x[n + 1] = ch->xs[n + 1];
+        rrv__chain_move(scene, ch, ch->xs, ch->sb1, ch->sb2, sd);
+        trial = rrv__chain_eval(scene, ch, 1, &tl);
         ++it;
         rho = trial < norm && pred > 0 ? (f2 - trial * trial) / pred : -1.0;
         if (trial < norm && rho > 1e-4) {
             norm = trial;
+            largest = tl;
             if (rho > 0.75 && lp > 0.99 * radius) radius = fmin(2.0 * radius, L * scale);
             else if (rho < 0.25) radius *= 0.5;
             continue;
         }
-        /* undo the step */
-        radius = 0.5 * lp;
-        memcpy(ch->x, xs, sizeof(rrv_vec3) * (size_t)(n + 2));
+        /* undo the step: the values kept where it started */
+        rrv__chain_swap(ch);
+        memcpy(ch->E, E, sizeof E);
         ch->failed = 0;
+        radius = 0.5 * lp;
         if (!(radius > 1e-12 * L) || it >= RRV__MANIFOLD_ITERATIONS) break;
-        norm = rrv__chain_eval(scene, ch, 1, &largest);
-        ++it;
-        if (!(norm < DBL_MAX)) break;
     }
     root->iterations = it;
     return 0;
 }
+
 
 /* The contribution of one root's path: visibility and ratio-tracked
    transmittance along its chords, the vertex's BSDF or phase function
@@ -10187,7 +10497,8 @@ static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, r
     rrv_vec3 w = rrv__chain_seed_direction(ch, rng);
     int found, aimed;
     if (!rrv__chain_aim(ctx->scene, ch, w, &aimed)) rrv__chain_seed(ctx->scene, ch, w);
-    found = rrv__manifold_solve(ctx->scene, ch, root);
+    found = ctx->scene->settings.manifold_solver == RRV_MANIFOLD_SOLVER_DOGLEG ? rrv__manifold_dogleg(ctx->scene, ch, root)
+                                                                              : rrv__manifold_solve(ctx->scene, ch, root);
     root->iterations += aimed;
     ++ctx->stats.solves;
     ctx->stats.solve_iterations += (uint64_t)root->iterations;
@@ -10198,11 +10509,64 @@ static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, r
     return found;
 }
 
+/* An unbiased estimate of 1/p from independent Bernoulli(p) trials
+   (trial(user, rng) != 0 a success), with bounded expected work.
+   Counting the trials up to the first success, N, is the plain estimate:
+   N = sum_i [N >= i], and P(N >= i) = (1 - p)^(i-1) sums to 1/p; but
+   its work is 1/p too, unbounded as p -> 0, and stopping at a cap M
+   estimates (1 - (1 - p)^M) / p instead, low by the factor 1 - (1 -
+   p)^M (a root with p = 1/200 counted at 27 % under M = 64). Here the
+   trials beyond `start` continue by Russian roulette: trial i > start is
+   made only if the walk survives to it, with probability S_i = (start /
+   i)^2 (a survival draw with probability ((i - 1) / i)^2 before each),
+   independent of the trials, and a trial made adds 1 / S_i. Then
+   E[estimate] = sum_i P(N >= i) S_i / S_i = sum_i (1 - p)^(i-1) = 1/p
+   exactly, for every p > 0. The expected number of trials is at most
+   start + sum_(i > start) S_i < 2 start + 1 whatever p, and because
+   S_i falls only polynomially the variance, sum_i (1 - p)^(i-1) / S_i
+   and the cross terms, is finite for every p > 0 (a geometric roulette,
+   S_i = q^(i - start), would leave it infinite for 1 - p >= q). Up to
+   `start` trials it is the plain count and draws nothing else. */
+typedef int (*rrv__trial_func)(void *user, rrv__rng *rng);
+static double rrv__inverse_probability(rrv__rng *rng, int start, rrv__trial_func trial, void *user, long *trials)
+{
+    double estimate = 0;
+    long i;
+    for (i = 1;; ++i) {
+        double survive = 1.0;
+        if (i > start) {
+            double q = (double)(i - 1) / (double)i;
+            if (!(rrv__uniform(rng) < q * q)) { --i; break; }
+            survive = (double)start / (double)i;
+            survive *= survive;
+        }
+        estimate += 1.0 / survive;
+        if (trial(user, rng)) break;
+    }
+    *trials = i;
+    return estimate;
+}
+
+/* One trial of the 1/p estimate: a fresh solve that comes back to the
+   root w0. */
+typedef struct rrv__manifold_recurrence {
+    rrv__context *ctx;
+    rrv_vec3 w0;
+} rrv__manifold_recurrence;
+static int rrv__manifold_recurs(void *user, rrv__rng *rng)
+{
+    rrv__manifold_recurrence *t = (rrv__manifold_recurrence *)user;
+    rrv__mroot again;
+    return rrv__manifold_try(t->ctx, t->ctx->chain, rng, &again) &&
+           rrv__length(rrv__sub(again.w0, t->w0)) < RRV__SOLVE_SAME_ROOT;
+}
+
 /* Curved NEE from x0 by the manifold walk. The light point y and the
    chain's comb offset are drawn once; conditioned on them the estimate is
    unbiased for the chain model: unbiased mode (manifold_trials 0) repeats
    independent solves until the first root comes back (directions within
-   RRV__SOLVE_SAME_ROOT, at most RRV__SOLVE_TRIALS), E[trials] = 1/p; the
+   RRV__SOLVE_SAME_ROOT), beyond RRV__SOLVE_TRIALS of them by Russian
+   roulette (rrv__inverse_probability: E = 1/p exactly); the
    fixed-trial mode sums each distinct root found in M solves once (biased
    low where a root's basin is small, Zeltner et al.'s biased SMS). The
    partition of path space is shoot's (manual, NEXT-EVENT ESTIMATION). */
@@ -10212,11 +10576,11 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
     const rrv_scene *scene = ctx->scene;
     const rrv_settings *st = &scene->settings;
     rrv__chain *ch = ctx->chain;
-    rrv__mroot root, again;
+    rrv__mroot root;
     rrv_vec3 y, ny, roots[RRV__MANIFOLD_ROOTS];
     double pdf_area, carried[3], k;
     const rrv_shape *s = rrv__pick_area_light(scene, draw, &y, &ny, &pdf_area);
-    int c, count, nroots = 0, trial;
+    int c, nroots = 0, trial;
     double to_y;
     if (!s || !ch) return;
     to_y = rrv__length(rrv__sub(y, x0));
@@ -10225,14 +10589,16 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
                      ch);
     if (st->manifold_trials <= 0) {
         if (!rrv__manifold_try(ctx, ch, rng, &root)) return;
+        rrv__manifold_recurrence again;
+        double inverse_p;
+        long count;
         if (!rrv__chain_carry(ctx, ch, v, rng, carried)) return;
-        for (count = 1; count < RRV__SOLVE_TRIALS; ++count)
-            if (rrv__manifold_try(ctx, ch, rng, &again) &&
-                rrv__length(rrv__sub(again.w0, root.w0)) < RRV__SOLVE_SAME_ROOT)
-                break;
+        again.ctx = ctx;
+        again.w0 = root.w0;
+        inverse_p = rrv__inverse_probability(rng, RRV__SOLVE_TRIALS, rrv__manifold_recurs, &again, &count);
         ctx->stats.solve_trials += (uint64_t)count;
         ++ctx->stats.solve_connections;
-        k = root.density / pdf_area * count * rrv__eta_scale(ctx, y) * rrv__path_mis(path);
+        k = root.density / pdf_area * inverse_p * rrv__eta_scale(ctx, y) * rrv__path_mis(path);
         for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * carried[c] * s->L[c] * k;
         return;
     }
@@ -13869,6 +14235,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"manifolddrop", RRV__SF_NUM, 1, 0, 0.0, 1.0, NULL},
     {"sampler", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "pcg|sobol"},
     {"emissionnee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "on|off"},
+    {"manifoldsolver", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "lm|dogleg"},
 };
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
@@ -14389,6 +14756,9 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
     if ((unsigned)s->manifold_gauge > (unsigned)RRV_GAUGE_ISO)
         return rrv__ck_fail(ck, RRV_OK, "manifold_gauge %d is not one of rrv_manifold_gauge",
                             (int)s->manifold_gauge);
+    if ((unsigned)s->manifold_solver > (unsigned)RRV_MANIFOLD_SOLVER_DOGLEG)
+        return rrv__ck_fail(ck, RRV_OK, "manifold_solver %d is not one of rrv_manifold_solver",
+                            (int)s->manifold_solver);
     RRV__CK(rrv__ck_key(ck, &k[13], (double)s->manifold_trials));
     RRV__CK(rrv__ck_key(ck, &k[14], s->manifold_drop));
     if (s->max_bake_samples < 0)
@@ -15343,6 +15713,7 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[14].given) s->manifold_drop = sl[14].v[0];
     if (sl[15].given) s->sampler = sl[15].choice == 0 ? RRV_SAMPLER_PCG : RRV_SAMPLER_SOBOL;
     if (sl[16].given) s->emission_nee = sl[16].choice == 0 ? RRV_EMISSION_NEE_ON : RRV_EMISSION_NEE_OFF;
+    if (sl[17].given) s->manifold_solver = sl[17].choice ? RRV_MANIFOLD_SOLVER_DOGLEG : RRV_MANIFOLD_SOLVER_LM;
     rrv__sf_ck(p, &ck, "render");
     rrv__sf_ck(p, &ambient, "ambient");
     return rrv__settings_check(&ck, &ambient, s);
@@ -16262,16 +16633,26 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  (gauge `manifoldgauge chord`, the default: in the comb
                  plane; `iso`: in the isosurface's tangent plane, the
                  paper's, undefined where grad eta ~ 0) until every segment
-                 follows its kicked direction within 1e-9 rad:
-                 block-tridiagonal 2x2 Jacobian solved by block Thomas in
-                 O(n) inside a trust region (dogleg; radius halved on a
-                 step that does not lower the residual, doubled on one the
-                 linear model predicted), at most 40 evaluations; a
-                 singular pivot (a caustic) or a root that is not a
+                 follows its kicked direction within 1e-9 rad. The
+                 paper's solver, Levenberg-Marquardt (Levenberg 1944,
+                 Marquardt 1963): steps from (J^T J + lambda S) delta =
+                 -J^T r, S Marquardt's diagonal scaling (the largest
+                 diagonal of J^T J so far), lambda by Nielsen's rule
+                 (taken step: lambda *= max(1/3, 1 - (2 rho - 1)^3); refused:
+                 lambda *= nu, nu *= 2), a step taken when it lowers |r|
+                 (rho, actual over predicted reduction, > 0); J is block
+                 tridiagonal with 2x2 blocks, so J^T J is block
+                 pentadiagonal and is factored by a block LDL^T in O(n); a
+                 refused step re-factors with the new lambda and evaluates
+                 nothing again; at most 40 evaluations. A root that is not a
                  physical path (a segment against its kick, a sharp
-                 interface crossed) fails. The density dw0/dA_y from the
-                 same block elimination (the generalised geometry term of
-                 Specular Manifold Sampling). Seeds: a direction from a
+                 interface crossed) or where J is singular (a caustic)
+                 fails. `manifoldsolver dogleg` solves by the earlier
+                 trust-region Gauss-Newton instead (Newton's step by
+                 block Thomas inside the radius, Powell's dogleg outside;
+                 faster on the lens caustic, test/bench/RESULTS.md). The density
+                 dw0/dA_y from block Thomas elimination of J (the
+                 generalised geometry term of Specular Manifold Sampling). Seeds: a direction from a
                  mixture of Gaussians around the chord (0.02 rad half the
                  time, 0.2 rad 3 in 8) and uniform (1 in 8), traced through
                  the planes by the chain's own rule and aimed at y by
@@ -16279,8 +16660,10 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  reaches y's plane); the first solve and every trial draw
                  from that one distribution. `manifoldtrials 0` (default, unbiased
                  for the chain model): 1/p by repeating solves until the
-                 root recurs (initial directions within 1e-5), at most 64
-                 trials. `manifoldtrials M`: M solves, each distinct root
+                 root recurs (initial directions within 1e-5), beyond 64
+                 trials by Russian roulette (trial i made with probability
+                 (64/i)^2, counted as its inverse): E = 1/p exactly, at
+                 most 129 trials expected whatever p. `manifoldtrials M`: M solves, each distinct root
                  counted once (biased low where a root's basin is small).
                  `manifolddrop D`: leave out comb planes across which eta
                  on the chord changes by less than D (faster, biased; 0, the

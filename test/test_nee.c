@@ -502,6 +502,10 @@ static void test_lens_caustic_manifold(void)
         CHECKF(iso < 0.5, "manifold iso: the caustic's peak block at %.2f of none's", iso);
     }
     caustic_manifold_case(s, a, &eikonal, RRV_GAUGE_CHORD, 4, 4, 44, "manifold chord M=4", 0);
+    /* the dogleg, the named alternative to Levenberg-Marquardt */
+    s->settings.manifold_solver = RRV_MANIFOLD_SOLVER_DOGLEG;
+    caustic_manifold_case(s, a, &eikonal, RRV_GAUGE_CHORD, 0, 8, 45, "manifold chord, dogleg", 1);
+    s->settings.manifold_solver = RRV_MANIFOLD_SOLVER_DEFAULT;
     rrv_scene_free(s);
 }
 
@@ -545,7 +549,8 @@ static void test_nee_key(void)
     static const char *const texts[] = {"camera eye 0 0 -1 look 0 0 0\nrender nee none\n",
                                         "camera eye 0 0 -1 look 0 0 0\nrender nee straight\n",
                                         "camera eye 0 0 -1 look 0 0 0\nrender spp 1\n",
-                                        "camera eye 0 0 -1 look 0 0 0\nrender nee manifold manifoldgauge iso manifoldtrials 4 manifolddrop 0.001\n",
+                                        ("camera eye 0 0 -1 look 0 0 0\nrender nee manifold manifoldgauge iso manifoldtrials 4 manifolddrop 0.001 "
+                                         "manifoldsolver dogleg\n"),
                                         "camera eye 0 0 -1 look 0 0 0\nrender nee aim\n"};
     static const rrv_nee expected[] = {RRV_NEE_NONE, RRV_NEE_STRAIGHT, RRV_NEE_DEFAULT, RRV_NEE_MANIFOLD, RRV_NEE_AIM};
     int i;
@@ -557,7 +562,8 @@ static void test_nee_key(void)
         if (r == RRV_OK) CHECKF(s->settings.nee == expected[i], "%s: nee %d", texts[i], (int)s->settings.nee);
         if (r == RRV_OK && i == 3)
             CHECK(s->settings.manifold_gauge == RRV_GAUGE_ISO && s->settings.manifold_trials == 4 &&
-                  s->settings.manifold_drop == 0.001);
+                  s->settings.manifold_drop == 0.001 && s->settings.manifold_solver == RRV_MANIFOLD_SOLVER_DOGLEG);
+        if (r == RRV_OK && i != 3) CHECK(s->settings.manifold_solver == RRV_MANIFOLD_SOLVER_DEFAULT);
         rrv_scene_free(s);
     }
 }
@@ -772,6 +778,9 @@ static void chain_copy(rrv__chain *dst, const rrv__chain *src)
     CHAIN_FIELD(b2) CHAIN_FIELD(r) CHAIN_FIELD(A) CHAIN_FIELD(B) CHAIN_FIELD(C)
     CHAIN_FIELD(snell) CHAIN_FIELD(nrm)
     dst->xs = keep.xs; dst->sb1 = keep.sb1; dst->sb2 = keep.sb2; dst->du = keep.du; dst->Cp = keep.Cp;
+    dst->r_alt = keep.r_alt; dst->A_alt = keep.A_alt; dst->B_alt = keep.B_alt; dst->C_alt = keep.C_alt;
+    dst->nd = keep.nd; dst->n1 = keep.n1; dst->n2 = keep.n2; dst->l1 = keep.l1; dst->l2 = keep.l2;
+    dst->dinv = keep.dinv; dst->scl = keep.scl; dst->grad = keep.grad; dst->step = keep.step;
 #undef CHAIN_FIELD
 }
 

@@ -9,15 +9,18 @@ sys CPU time of the render process (the machine may be shared, so wall
 time is printed beside it but not used).
 
     python3 test/bench/nee_bench.py [--seconds 20] [--ref-spp 4096] [--light 0.25]
-        [--modes none,straight,shoot,aim] [--old PATH] [--ref-nee shoot]
+        [--modes none,straight,shoot,aim] [--old PATH] [--old-modes shoot] [--ref-nee shoot]
+        [--scene fire_caustic] [--crop 48 40 112 88]
 
 --light S replaces the scene's 1 m square light by an S m square one with
 the same centre and power (radiance scaled by 1 / S^2): the smaller the
 light, the sharper the caustic. Modes "none pcg" and "shoot pcg" are
 those with the PCG sampler instead of the default Sobol one (the
 reference keeps the default). --modes runs only the named modes; --old
-also renders `shoot` with another build (row "shoot, old build"), to
-compare versions on one reference. --ref-nee renders the reference with
+also renders `shoot` (or the modes of --old-modes) with another build
+(rows "..., old build"), to compare versions on one reference. --scene
+takes another scene of scenes/ (its light is kept unless --light is
+given, which only the lens caustic supports), --crop another crop. --ref-nee renders the reference with
 another unbiased mode: with a small light `none` converges too slowly to
 serve (its RMSE is printed), and `shoot` is checked against `none` by
 test/test_nee.c.
@@ -49,6 +52,7 @@ MODES = [
     ("shoot pcg", "shoot", "sampler pcg"),
     ("aim", "aim", ""),
     ("manifold chord", "manifold", "manifoldgauge chord"),
+    ("manifold chord dogleg", "manifold", "manifoldgauge chord manifoldsolver dogleg"),
     ("manifold iso", "manifold", "manifoldgauge iso"),
     ("manifold chord M=1", "manifold", "manifoldgauge chord manifoldtrials 1"),
     ("manifold chord M=4", "manifold", "manifoldgauge chord manifoldtrials 4"),
@@ -110,7 +114,14 @@ def main():
     ap.add_argument("--modes", default="", help="comma-separated mode names to run (default: all)")
     ap.add_argument("--ref-nee", default="none", help="the unbiased mode that renders the reference")
     ap.add_argument("--old", default="", help="another rrv binary whose shoot is measured too")
+    ap.add_argument("--old-modes", default="shoot", help="comma-separated modes the --old binary renders")
+    ap.add_argument("--scene", default="lens_caustic", help="a scene of scenes/ (without .rrv)")
+    ap.add_argument("--crop", nargs=4, default=None, help="x0 y0 x1 y1 of the crop rendered")
     args = ap.parse_args()
+    global SCENE, CROP
+    SCENE = os.path.join(ROOT, "scenes", args.scene + ".rrv")
+    if args.crop:
+        CROP = list(args.crop)
     wanted = [m for m in args.modes.split(",") if m]
     for m in wanted:
         if m not in [name for name, _, _ in MODES]:
@@ -132,7 +143,10 @@ def main():
     print("|---|---|---|---|---|---|---|")
     runs = [(name, nee, extra, RRV) for name, nee, extra in MODES if not wanted or name in wanted]
     if args.old:
-        runs.append(("shoot, old build", "shoot", "", args.old))
+        for m in args.old_modes.split(","):
+            for name, nee, extra in MODES:
+                if name == m:
+                    runs.append((name + ", old build", nee, extra, args.old))
     for name, nee, extra, rrv in runs:
         scene = scene_with(extra, work, args.light)
         out = os.path.join(work, "probe.pfm")
