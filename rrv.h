@@ -1084,6 +1084,10 @@ typedef struct rrv_render_stats {
     uint64_t cone_counted;      /* of which one landed on a light as such a path */
     uint64_t cut_samples;       /* of paths_cut, camera paths cut at the bound on a
                                    whole sample's work (see BOUNDS) */
+    uint64_t trapped_paths;     /* of paths_cut, camera paths and bent shadow rays
+                                   ended as trapped: a run through the refraction
+                                   supports between two vertices beyond twice their
+                                   straight length (see BOUNDS) */
 } rrv_render_stats;
 
 /* Renders pixels [x0,x1) x [y0,y1) of the image (row 0 at the top) for
@@ -4983,6 +4987,10 @@ typedef struct rrv__bender {
     double h;          /* END_STEP: the arc length the step integrated */
     int surface_free;  /* the segment lies where no surface reaches */
     int reflected;     /* the last face crossed reflected the ray */
+    double run;        /* length of the segments ended by a kick or a step since the
+                          last real vertex or reflection at a face: the ray's way
+                          through the supports, which the trap bound holds
+                          (rrv__trap_length) */
     int combing;       /* comb: a comb is running (its first half kick is done) */
     double chord;      /* comb: length of the chord behind the next point */
     int entering;      /* comb: the spacing to the next point ends where cells with a
@@ -5033,6 +5041,7 @@ static void rrv__bender_restart(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     b->pending = 0;
     b->combing = 0;
     b->reflected = 0;
+    b->run = 0;
     b->face_known = 0;
     b->face_jump = 0;
     b->behind_split = 0;
@@ -5192,6 +5201,7 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
             nd = rrv__normalize(rrv__madd(d, n, -2.0 * rrv__dot(n, d)));
             b->r = r_before;
             b->reflected = 1;
+            b->run = 0; /* a specular vertex, which the path's depth counts */
             b->face_known = 0;
         }
     }
@@ -5606,6 +5616,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
 static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 *o, rrv_vec3 *d, rrv__rng *rng)
 {
     *o = rrv__madd(*o, *d, b->segment);
+    if (b->end == RRV__END_KICK || b->end == RRV__END_STEP) b->run += b->segment;
     switch (b->end) {
     case RRV__END_STEP:
         *d = b->next_d;
@@ -5694,6 +5705,7 @@ typedef struct rrv__context {
     double thermal_scale;    /* blackbody radiance at the camera over that in
                                 ambient air: (eta_camera / eta_ambient)^2 */
     long step_bound;         /* rrv__step_bound: loop iterations between real vertices */
+    double trap_length;      /* rrv__trap_length: a ray's run through the supports */
     uint64_t sample_bound;   /* rrv__sample_bound: loop iterations and collisions of a camera path */
     struct rrv__chain *chain; /* nee manifold's scratch (rrv__chain_new), NULL otherwise */
     rrv_render_stats stats;
@@ -6244,6 +6256,43 @@ static long rrv__step_bound(const rrv_scene *scene, rrv_integrator integrator)
     return bound < (double)RRV_MAX_SEGMENT_STEPS ? (long)bound : RRV_MAX_SEGMENT_STEPS;
 }
 
+/* The trap bound, in straight crossings of every refracting medium: see
+   rrv__trap_length. A measurement build may set another. */
+#ifndef RRV__TRAP_CROSSINGS
+#define RRV__TRAP_CROSSINGS 2.83
+#endif
+
+/* The longest run a ray may make through the refraction supports between
+   two vertices (real ones and reflections at faces), bent segment by bent
+   segment (rrv__bender.run): RRV__TRAP_CROSSINGS times the sum of the
+   refracting media's box diagonals, the longest a straight line can run
+   inside them all (it crosses each box once). Past it the ray is taken to
+   be trapped -- circling in a waveguide or an orbit (a shell's layer of
+   high IOR around a camera or a scattering point inside it, Maxwell's
+   fish-eye from a point inside the lens) -- and ended, counted
+   (rrv_render_stats.trapped_paths). The step bound (rrv__step_bound)
+   counts loop iterations, which a thin feature's fine comb makes dense:
+   in a 1 mm shell of IOR 3 a kick every 2.5 um, so that bound let a
+   trapped ray run ~21 m, 5.5 diagonals, and in a thicker one hundreds.
+   Why twice is safe: a ray that leaves bends on arcs, and an arc across a
+   convex region that turns by up to a half circle is at most pi/2 times
+   its chord; what runs further without a vertex is circling. Measured:
+   the longest run of any ray in the scenes of scenes/ (every integrator)
+   is far below it (README.md). Where it is wrong it is biased as the step
+   bound is: the light a ray would have gathered after the bound is lost,
+   the light of a ray that stays in an orbit for good (lossless: none) or
+   that leaves a waveguide after more than twice the scene's supports. */
+static double rrv__trap_length(const rrv_scene *scene)
+{
+    double sum = 0;
+    int i;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        if (rrv__medium_refracts(m)) sum += rrv__length(rrv__sub(m->hi, m->lo));
+    }
+    return RRV__TRAP_CROSSINGS * sum;
+}
+
 /* The most work of one camera path (a pixel sample): its loop iterations
    over all legs plus every tentative collision it and its shadow rays
    sample. Each leg is bounded, but max_depth of them at their bound is no
@@ -6546,6 +6595,11 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             ++ctx->stats.paths_cut;
             break;
         }
+        if (cp.path.bender.run > ctx->trap_length) {
+            ++ctx->stats.paths_cut;
+            ++ctx->stats.trapped_paths;
+            break;
+        }
         if (++cp.work + ctx->stats.events > cp.work_end) {
             ++ctx->stats.paths_cut;
             ++ctx->stats.cut_samples;
@@ -6591,6 +6645,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                here: delta tracking and the ray cast would find nothing. */
             while (ctx->comb && cp.path.bender.pending && cp.path.bender.end == RRV__END_KICK &&
                    cp.path.bender.surface_free && cp.steps < ctx->step_bound &&
+                   cp.path.bender.run <= ctx->trap_length &&
                    !cp.path.bender.support_in_extinction && cp.work + ctx->stats.events < cp.work_end &&
                    !rrv__chord_meets_extinction(scene, cp.o, cp.d, cp.path.bender.segment)) {
                 ++cp.steps;
@@ -6607,6 +6662,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
         if (outcome == RRV__FLIGHT_BENT) {
             /* a null event refracted (Poisson, midpoint): a new segment */
             cp.touched = 1;
+            cp.path.bender.run += flight.t;
             cp.o = rrv__madd(cp.o, cp.d, flight.t);
             cp.d = flight.direction;
             continue;
@@ -6819,6 +6875,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.eikonal = scene->settings.integrator == RRV_INTEGRATOR_EIKONAL;
     ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
     ctx.step_bound = rrv__step_bound(scene, scene->settings.integrator);
+    ctx.trap_length = rrv__trap_length(scene);
     ctx.sample_bound = rrv__sample_bound(scene, scene->settings.integrator);
     /* shoot by default, also where it cannot solve (the refractive
        integrator), where it aims: manifold solves there, but at 100x-1000x
@@ -6919,6 +6976,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
         stats->cone_shots += ctx.stats.cone_shots;
         stats->cone_counted += ctx.stats.cone_counted;
         stats->cut_samples += ctx.stats.cut_samples;
+        stats->trapped_paths += ctx.stats.trapped_paths;
     }
     rrv__chain_delete(ctx.chain);
     return RRV_OK;
@@ -8119,6 +8177,11 @@ static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *
         int has_hit, c, end;
         if (++steps > ctx->step_bound) {
             ++ctx->stats.paths_cut;
+            return -1;
+        }
+        if (b.run > ctx->trap_length) {
+            ++ctx->stats.paths_cut;
+            ++ctx->stats.trapped_paths;
             return -1;
         }
         if (!b.pending) rrv__plan_segment(&b, scene, o, d, rng);
