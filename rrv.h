@@ -6584,6 +6584,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
     cp.work = 0;
     cp.work_end = ctx->stats.events + ctx->sample_bound;
     rrv__path_start(&cp.path, rng);
+    cp.path.bender.run = 0; /* the trap bound's test reads it without a bender too */
     if (ctx->bends) rrv__bender_start(&cp.path.bender, scene, ctx->eikonal, o);
     ++ctx->stats.paths;
     for (;;) {
