@@ -40,11 +40,39 @@ all: rrv
 rrv: $(BUILD)/rrv
 	cp $(BUILD)/rrv rrv
 
-$(BUILD)/rrv: main.c rrv_impl.c rrv.h $(wildcard parts/*.h) | $(BUILD)
-	$(CC) $(CFLAGS_ALL) $(THREAD_FLAGS) -o $@ main.c rrv_impl.c -lm
+# The implementation is compiled once per build folder (build/, build-san/)
+# into $(BUILD)/rrv_impl.o: the CLI and every test that uses only the public
+# API link against it. A test that needs the internals (rrv__ functions,
+# or a #define such as RRV_MALLOC or RRV_STATIC before the implementation)
+# says so with its own `#define RRV_IMPLEMENTATION` and is compiled whole.
+IMPL_OBJ   := $(BUILD)/rrv_impl.o
+OWN_IMPL   := $(patsubst test/%.c,$(BUILD)/%,$(shell grep -l '^\#define RRV_IMPLEMENTATION' $(TEST_SRCS)))
+LINKED     := $(filter-out $(OWN_IMPL),$(TEST_BINS))
+TEST_HDRS  := test/check.h rrv.h $(wildcard parts/*.h) $(wildcard test/*.h)
 
-$(BUILD)/test_%: test/test_%.c test/check.h rrv.h $(wildcard parts/*.h) $(wildcard test/*.h) | $(BUILD)
+$(IMPL_OBJ): rrv_impl.c rrv.h $(wildcard parts/*.h) | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -c -o $@ rrv_impl.c
+
+$(BUILD)/rrv: main.c $(IMPL_OBJ) | $(BUILD)
+	$(CC) $(CFLAGS_ALL) $(THREAD_FLAGS) -o $@ main.c $(IMPL_OBJ) -lm
+
+$(LINKED): $(BUILD)/test_%: test/test_%.c $(TEST_HDRS) $(IMPL_OBJ) | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -o $@ $< $(IMPL_OBJ) -lm $(TEST_LIBS_$*)
+
+$(OWN_IMPL): $(BUILD)/test_%: test/test_%.c $(TEST_HDRS) | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< -lm $(TEST_LIBS_$*)
+
+# test/internals.c compiles the internal tests it includes as one program
+# (one compile of the implementation for all of them); make test runs it
+# in their place.
+UNITY_SRCS := $(patsubst %,test/%,$(shell sed -n 's/^\#include "\(test_[a-z_0-9]*\.c\)"$$/\1/p' test/internals.c))
+UNITY_BINS := $(patsubst test/%.c,$(BUILD)/%,$(UNITY_SRCS))
+RUN_BINS   := $(filter-out $(UNITY_BINS),$(TEST_BINS)) $(BUILD)/internals
+$(BUILD)/internals: test/internals.c $(UNITY_SRCS) $(TEST_HDRS) | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -o $@ $< -lm
+
+# test_eta compiles main.c in (it tests the CLI's progress estimate).
+$(BUILD)/test_eta: main.c
 
 # test/exr_check.cpp reads rrv's EXR files with the OpenEXR library (tests
 # only); test_exr runs it and fails, saying what to install, when OpenEXR is
@@ -63,11 +91,21 @@ $(BUILD):
 	mkdir -p $(BUILD)
 
 # The measurement programs are built (not run) by make test, so they cannot
-# rot unnoticed between benchmark runs.
-MEASURE_BINS := $(patsubst test/%.c,$(BUILD)/%,$(wildcard test/measure_*.c))
+# rot unnoticed between benchmark runs: unoptimised, into $(BUILD)/O0/
+# (compiled and linked, warnings shown, at a fifth of the cost), while
+# make bench uses the optimised $(BUILD)/measure_* it builds itself.
+MEASURE_CHECKS := $(patsubst test/%.c,$(BUILD)/O0/%,$(wildcard test/measure_*.c))
+$(BUILD)/O0/measure_%: test/measure_%.c rrv.h | $(BUILD)/O0
+	$(CC) $(WARN) -O0 $(SANFLAGS) $(CFLAGS) -o $@ $< -lm
+$(BUILD)/O0: | $(BUILD)
+	mkdir -p $@
 
-test: $(BUILD)/rrv $(TEST_BINS) $(EXR_CHECK) $(MEASURE_BINS)
-	sh test/run_tests.sh $(BUILD) $(TEST_BINS) test/compile_checks.sh
+# test/compile_checks.sh builds rrv with gcc and with clang at -O2 to
+# compare their renders; the compiler that built $(IMPL_OBJ) at the default
+# -O2 -g (which generates the same code as -O2) reuses it.
+REUSE_IMPL := $(if $(SANFLAGS)$(CFLAGS)$(filter-out -O2 -g,$(OPT)),,RRV_IMPL_OBJ='$(IMPL_OBJ)' RRV_IMPL_CC='$(CC)')
+test: $(BUILD)/rrv $(RUN_BINS) $(EXR_CHECK) $(MEASURE_CHECKS)
+	$(REUSE_IMPL) sh test/run_tests.sh $(BUILD) $(RUN_BINS) test/compile_checks.sh
 
 # Every test/fuzz_*.c is a harness. UBSan findings abort (no recovery), so
 # libFuzzer saves the input instead of printing and going on; clang also
@@ -80,6 +118,10 @@ fuzz: $(FUZZ_BINS)
 build-fuzz/fuzz_%: test/fuzz_%.c rrv.h test/fuzz_files.h
 	mkdir -p build-fuzz
 	$(FUZZ_CC) $(FUZZ_FLAGS) -o $@ $< -lm
+# fuzz_farm includes main.c for its script generator (without threads).
+build-fuzz/fuzz_farm: test/fuzz_farm.c main.c rrv.h
+	mkdir -p build-fuzz
+	$(FUZZ_CC) $(FUZZ_FLAGS) -DRRV_THREADS=0 -o $@ $< -lm
 
 # Runs every harness for FUZZ_SECONDS on scratch copies of its seeds and
 # prints executions and findings (saved under build-fuzz/findings).
@@ -100,7 +142,7 @@ bench-quick: $(BUILD)/rrv $(BUILD)/ref_compare $(BUILD)/measure_tracking
 	RRV_BENCH_CC='$(CC)' RRV_BENCH_FLAGS='$(CFLAGS_ALL) $(THREAD_FLAGS)' python3 test/bench/bench.py $(BUILD) --quick
 
 # measure_grin: the convergence study of the refraction schemes (tables in
-# README); measure_nanovdb: NanoVDB lookups against a dense grid;
+# test/bench/RESULTS.md); measure_nanovdb: NanoVDB lookups against a dense grid;
 # measure_tracking: collisions per second against the grid lookup alone.
 $(BUILD)/measure_%: test/measure_%.c rrv.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< -lm

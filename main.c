@@ -18,6 +18,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <time.h>
 #include <signal.h>
 #include <sys/stat.h>
@@ -83,7 +84,8 @@ static const char render_help[] =
     "  --exposure E           scale the preview by 2^E (default 0)\n"
     "  --spp N                samples per pixel (default: the scene's)\n"
     "  --seed S               random seed, an integer >= 0 (default: the scene's)\n"
-    "  --integrator NAME      classic, refractive or eikonal (default: the scene's)\n"
+    "  --integrator NAME      classic, refractive or eikonal (default: the scene's;\n"
+    "                         without one, chosen from the scene: rrv info says)\n"
     "  --nee MODE             refractive, eikonal: light sampling, shoot\n"
     "                         (the default; eikonal: connections solved along\n"
     "                         bent rays; refractive: as aim), aim (shadow rays\n"
@@ -246,11 +248,22 @@ static int parse_double(const char *text, double *out)
     return 1;
 }
 
-/* The next argument as the value of `flag`; `what` says what was expected. */
+/* The next argument as the value of `flag`; `what` says what was expected.
+   A value that starts with "-" and is not a number (--exposure -1 is one)
+   is taken for a forgotten value followed by an option: `--png -q` would
+   otherwise write a file called "-q". A file of such a name is "./-q". */
 static int take_value(arg_cursor *args, const char *flag, const char *what, const char **text)
 {
+    const char *next;
+    double number;
     if (args->index + 1 >= args->argc) {
         usage_error(args, "%s needs %s", flag, what);
+        return 0;
+    }
+    next = args->argv[args->index + 1];
+    if (next[0] == '-' && !parse_double(next, &number)) {
+        usage_error(args, "%s needs %s, got the option \"%s\" (for a file of that name write \"./%s\")", flag,
+                    what, next, next);
         return 0;
     }
     *text = args->argv[++args->index];
@@ -310,7 +323,8 @@ static int take_grid_limit(arg_cursor *args, size_t *max_grid_bytes)
     return 1;
 }
 
-static const char *const integrator_names[] = {"classic", "refractive", "eikonal"};
+/* By rrv_integrator's values: DEFAULT (0) is never named on the command line. */
+static const char *const integrator_names[] = {"default", "classic", "refractive", "eikonal"};
 
 static int take_integrator(arg_cursor *args, int allow_classic, rrv_integrator *out)
 {
@@ -318,7 +332,7 @@ static int take_integrator(arg_cursor *args, int allow_classic, rrv_integrator *
     const char *text;
     int i;
     if (!take_value(args, "--integrator", what, &text)) return 0;
-    for (i = allow_classic ? 0 : 1; i < 3; ++i) {
+    for (i = allow_classic ? RRV_INTEGRATOR_CLASSIC : RRV_INTEGRATOR_REFRACTIVE; i <= RRV_INTEGRATOR_EIKONAL; ++i) {
         if (strcmp(text, integrator_names[i]) == 0) {
             *out = (rrv_integrator)i;
             return 1;
@@ -330,7 +344,7 @@ static int take_integrator(arg_cursor *args, int allow_classic, rrv_integrator *
 
 static const char *integrator_name(rrv_integrator integrator)
 {
-    return (unsigned)integrator < 3 ? integrator_names[integrator] : "unknown";
+    return (unsigned)integrator <= RRV_INTEGRATOR_EIKONAL ? integrator_names[integrator] : "unknown";
 }
 
 static int is_flag(const char *arg) { return arg[0] == '-' && arg[1] != '\0'; }
@@ -412,6 +426,7 @@ static const char *file_kind_name(mode_t mode)
     if (S_ISBLK(mode)) return "a block device";
     if (S_ISFIFO(mode)) return "a FIFO";
     if (S_ISSOCK(mode)) return "a socket";
+    if (S_ISLNK(mode)) return "a symbolic link";
     return "not a regular file";
 }
 
@@ -427,6 +442,21 @@ static int check_output_target(const char *path)
     fprintf(stderr, "rrv: refusing to write \"%s\": it is %s, not a regular file\n", path,
             file_kind_name(st.st_mode));
     return 0;
+}
+
+/* A script is refused even behind a link that points at a regular file:
+   the farm folder may be shared, and a link planted there says someone
+   meant the user to write elsewhere (the rename would replace the link, not
+   follow it, but the user should know). */
+static int check_script_target(const char *path)
+{
+    struct stat st;
+    if (lstat(path, &st) == 0 && S_ISLNK(st.st_mode)) {
+        fprintf(stderr, "rrv: refusing to write \"%s\": it is %s, not a regular file\n", path,
+                file_kind_name(st.st_mode));
+        return 0;
+    }
+    return check_output_target(path);
 }
 
 static int check_output(const char *path)
@@ -538,12 +568,13 @@ static int check_output_not_input(const char *output, const input_list *inputs)
     return 1;
 }
 
-enum { OUTPUT_PFM, OUTPUT_PNG, OUTPUT_EXR };
+enum { OUTPUT_PFM, OUTPUT_PNG, OUTPUT_EXR, OUTPUT_SCRIPT };
 
 typedef struct pending_output {
     const char *path;
     int format;                 /* OUTPUT_* */
     const rrv_exr_options *exr; /* for OUTPUT_EXR */
+    const char *script;         /* for OUTPUT_SCRIPT: the text, written executable */
     char temp[4096 + 32]; /* "" when no temporary file exists; room for a folder and ".rrv.XXXXXX" */
 } pending_output;
 
@@ -589,16 +620,19 @@ static int write_temp(pending_output *out, const float *image, int width, int he
         return 0;
     }
     /* mkstemp makes the file private (0600); an image gets the usual
-       permissions, as if it had been created with fopen. */
+       permissions, as if it had been created with fopen (a script those of
+       chmod +x). */
     mask = umask(0);
     umask(mask);
-    if (fchmod(fd, 0666 & ~mask) != 0 || !(file = fdopen(fd, "wb"))) {
+    if (fchmod(fd, (out->format == OUTPUT_SCRIPT ? 0777 : 0666) & ~mask) != 0 || !(file = fdopen(fd, "wb"))) {
         fprintf(stderr, "rrv: cannot write \"%s\": %s\n", out->path, strerror(errno));
         close(fd);
         remove_temp(out);
         return 0;
     }
-    if (out->format == OUTPUT_PNG)
+    if (out->format == OUTPUT_SCRIPT)
+        result = fwrite_callback(file, out->script, strlen(out->script)) == 0 ? RRV_OK : RRV_ERROR_IO;
+    else if (out->format == OUTPUT_PNG)
         result = rrv_write_png_to(fwrite_callback, file, image, width, height, exposure, NULL);
     else if (out->format == OUTPUT_EXR)
         result = rrv_write_exr_to(fwrite_callback, file, image, width, height, out->exr, NULL);
@@ -636,7 +670,9 @@ static int write_outputs(pending_output *outputs, int count, const float *image,
     sigprocmask(SIG_BLOCK, &hold, &previous);
     for (i = 0; i < count && ok; ++i) ok = write_temp(&outputs[i], image, width, height, exposure);
     /* Checked again: a device may have appeared at the path since the start. */
-    for (i = 0; i < count && ok; ++i) ok = check_output_target(outputs[i].path);
+    for (i = 0; i < count && ok; ++i)
+        ok = outputs[i].format == OUTPUT_SCRIPT ? check_script_target(outputs[i].path)
+                                                : check_output_target(outputs[i].path);
     for (i = 0; i < count && ok; ++i) {
         if (rename(outputs[i].temp, outputs[i].path) != 0) {
             fprintf(stderr, "rrv: cannot write \"%s\": cannot rename the temporary file: %s\n",
@@ -755,6 +791,8 @@ typedef struct render_job {
     float *sum;         /* the rectangle's sums, row 0 = its top row */
     int stride;
     int tiles_x, tile_count;
+    long tile_stride; /* see "honest progress" */
+    double *tile_seconds; /* the time each tile took, negative until it is done */
     int show_progress;
     double start_time;
 
@@ -789,16 +827,95 @@ static void job_unlock(render_job *job)
 
 #define PROGRESS_BAR_WIDTH 30
 
+/* ---- honest progress -------------------------------------------------------------
+   The ETA extrapolates the time per finished tile, which is only honest if the
+   finished tiles are a fair sample of the image: in row order a sky above a
+   fire finishes fast and the ETA at 20 % is a fraction of the truth. Tiles are
+   therefore handed out along a rank-1 lattice: turn k renders the tile of
+   row-major index k * stride mod count, with stride = r * tiles_x + c chosen so
+   that one turn moves about tiles_x / rho columns and tiles_y / rho^2 rows, rho
+   the plastic number (1.3247...). That is the two-dimensional analogue of the
+   golden ratio's additive sequence (Roberts' R2), so both the tiles done and the
+   tiles left are spread nearly evenly over rows and columns at every turn; a
+   single golden stride spreads the rows but, on a grid whose width divides into
+   the stride's remainder, samples some columns twice. stride is coprime to
+   count, so every tile comes once. The order changes nothing in the image:
+   each pixel's samples depend only on the pixel. */
+
+static long gcd_long(long a, long b)
+{
+    while (b) {
+        long t = a % b;
+        a = b;
+        b = t;
+    }
+    return a;
+}
+
+static long tile_stride(int tiles_x, int tiles_y)
+{
+    const double rho = 1.324717957244746;
+    long count = (long)tiles_x * tiles_y;
+    long stride = (long)(tiles_y / (rho * rho)) * tiles_x + (long)(tiles_x / rho + 0.5);
+    if (count <= 1) return 0;
+    stride %= count;
+    if (stride < 1) stride = 1;
+    while (gcd_long(stride, count) != 1) stride = stride % count + 1; /* 1 is coprime to all */
+    return stride;
+}
+
+static int tile_for_turn(long turn, long count, long stride)
+{
+    return count > 1 ? (int)(turn % count * stride % count) : 0;
+}
+
+/* Seconds left. cost[t] is the seconds tile t took, or negative while it is
+   not done. A tile left is predicted to cost the mean of the tiles done next
+   to it (or, where none is, within two tiles; else the mean of all done): a
+   flame's tiles then predict their neighbours', which a mean over the whole
+   image would spread over the sky. The predicted seconds are scaled by the
+   elapsed time over the seconds done, which holds for any number of threads.
+   Negative while nothing is done. */
+static double eta_seconds(const double *cost, int tiles_x, int count, double elapsed)
+{
+    int tiles_y = tiles_x > 0 ? count / tiles_x : 0, t, dx, dy, done = 0;
+    double done_seconds = 0, mean, left = 0;
+    for (t = 0; t < count; ++t)
+        if (cost[t] >= 0) {
+            done_seconds += cost[t];
+            ++done;
+        }
+    if (done == 0 || done_seconds <= 0) return -1;
+    mean = done_seconds / done;
+    for (t = 0; t < count; ++t) {
+        int x = t % tiles_x, y = t / tiles_x, near = 0, reach;
+        double near_seconds = 0;
+        if (cost[t] >= 0) continue;
+        for (reach = 1; reach <= 2 && !near; ++reach)
+            for (dy = -reach; dy <= reach; ++dy)
+                for (dx = -reach; dx <= reach; ++dx) {
+                    int nx = x + dx, ny = y + dy;
+                    if (nx < 0 || ny < 0 || nx >= tiles_x || ny >= tiles_y) continue;
+                    if (cost[ny * tiles_x + nx] < 0) continue;
+                    near_seconds += cost[ny * tiles_x + nx];
+                    ++near;
+                }
+        left += near ? near_seconds / near : mean;
+    }
+    return elapsed * left / done_seconds;
+}
+
 /* Called with the lock held. Redraws at most ten times a second because
    a terminal that scrolls slower than the render would slow it down. */
 static void draw_progress(render_job *job, int force)
 {
     char bar[PROGRESS_BAR_WIDTH + 1], elapsed_text[32], eta_text[32];
-    double now, elapsed, fraction;
+    double now, elapsed, fraction, left;
     int filled, i;
     if (!job->show_progress) return;
     now = seconds_now();
-    if (!force && now - job->last_progress_time < 0.1) return;
+    /* eta_seconds looks at every tile: a huge image redraws less often */
+    if (!force && now - job->last_progress_time < (job->tile_count > 65536 ? 1.0 : 0.1)) return;
     elapsed = now - job->start_time;
     fraction = job->tile_count ? (double)job->tiles_done / job->tile_count : 1;
     filled = (int)(fraction * PROGRESS_BAR_WIDTH);
@@ -806,8 +923,11 @@ static void draw_progress(render_job *job, int force)
     for (i = 0; i < PROGRESS_BAR_WIDTH; ++i) bar[i] = i < filled ? '#' : '.';
     bar[PROGRESS_BAR_WIDTH] = '\0';
     format_duration(elapsed, elapsed_text, sizeof elapsed_text);
-    if (job->tiles_done > 0)
-        format_duration(elapsed * (1 - fraction) / fraction, eta_text, sizeof eta_text);
+    left = !job->tiles_done ? -1
+           : job->tile_seconds ? eta_seconds(job->tile_seconds, job->tiles_x, job->tile_count, elapsed)
+                               : elapsed * (1 - fraction) / fraction;
+    if (left >= 0)
+        format_duration(left, eta_text, sizeof eta_text);
     else
         snprintf(eta_text, sizeof eta_text, "?");
     fprintf(stderr, "\r[%s] %5.1f%%  elapsed %s  eta %s   ", bar, 100 * fraction,
@@ -927,16 +1047,19 @@ static void *render_worker(void *arg)
     }
     for (;;) {
         int tile, tx0, ty0, tx1, ty1;
+        double started;
         rrv_result result;
         job_lock(job);
         tile = job->failure == RRV_OK ? job->next_tile++ : job->tile_count;
         job_unlock(job);
         if (tile >= job->tile_count) break;
+        tile = tile_for_turn(tile, job->tile_count, job->tile_stride);
 
         tx0 = job->x0 + (tile % job->tiles_x) * TILE_SIZE;
         ty0 = job->y0 + (tile / job->tiles_x) * TILE_SIZE;
         tx1 = tx0 + TILE_SIZE < job->x1 ? tx0 + TILE_SIZE : job->x1;
         ty1 = ty0 + TILE_SIZE < job->y1 ? ty0 + TILE_SIZE : job->y1;
+        started = job->tile_seconds ? seconds_now() : 0;
         result = sum_samples(job->scene, tx0, ty0, tx1, ty1, job->sample_begin, job->sample_end,
                              job->sum + 3 * ((size_t)(ty0 - job->y0) * job->stride + (size_t)(tx0 - job->x0)),
                              job->stride, scratch, &stats);
@@ -945,6 +1068,7 @@ static void *render_worker(void *arg)
         if (result != RRV_OK) {
             if (job->failure == RRV_OK) job->failure = result;
         } else {
+            if (job->tile_seconds) job->tile_seconds[tile] = seconds_now() - started;
             job->tiles_done++;
             draw_progress(job, 0);
         }
@@ -1132,7 +1256,8 @@ static int parse_part(const char *value, size_t size, part_info *part)
    R grid, row by row from the top left). */
 static int parse_tile(const char *text, int *index, int *columns, int *rows)
 {
-    long i, a, b = 0;
+    long i, a, b = 1;
+    int grid = 0;
     char *end;
     if (!isdigit((unsigned char)text[0])) return 0;
     errno = 0;
@@ -1142,11 +1267,16 @@ static int parse_tile(const char *text, int *index, int *columns, int *rows)
     if (*end == 'x') {
         if (!isdigit((unsigned char)end[1])) return 0;
         b = strtol(end + 1, &end, 10);
+        grid = 1;
     }
-    if (*end || errno || a < 1 || a > 65536 || b < 0 || b > 65536 || (b == 0 ? a : a * b) <= i) return 0;
+    /* Each count at most 65536, so their product fits a long long; "1x0"
+       is no grid (it was once read as one band). */
+    if (*end || errno || a < 1 || a > 65536 || b < 1 || b > 65536 || (long long)a * b <= i ||
+        i > INT_MAX)
+        return 0;
     *index = (int)i;
-    *columns = b ? (int)a : 1;
-    *rows = b ? (int)b : (int)a;
+    *columns = grid ? (int)a : 1;
+    *rows = grid ? (int)b : (int)a;
     return 1;
 }
 
@@ -1196,10 +1326,11 @@ static int scene_hash(const input_list *inputs, const rrv_scene *scene, char out
     int i;
     hs.h = 0xcbf29ce484222325ULL;
     for (i = 0; i < inputs->count; ++i) {
-        FILE *f = fopen(inputs->paths[i], "rb");
+        FILE *f;
         size_t n;
         uint64_t total = 0;
-        if (!f) return 0;
+        rrv_error err;
+        if (rrv_open_read(inputs->paths[i], &f, NULL, &err) != RRV_OK) return 0;
         while ((n = fread(buf, 1, sizeof buf, f)) > 0) {
             hash_bytes(&hs, buf, n);
             total += n;
@@ -1223,40 +1354,44 @@ static int scene_hash(const input_list *inputs, const rrv_scene *scene, char out
     return 1;
 }
 
-/* Reads a whole file; NULL with errno set on failure. */
-static unsigned char *slurp(const char *path, size_t *size)
+/* An OpenEXR part is at most what rrv_read_exr reads: 2 GiB. */
+#define PART_FILE_MAX ((uint64_t)1 << 31)
+
+/* Reads a part file whole: opened as the library opens every input (a
+   regular file only, never blocking on a FIFO), refused by its size before
+   anything is allocated, its first 8 bytes alone when they are no OpenEXR
+   magic (the reader then says so), and never more than the size it had
+   when opened. NULL with the reason in why. */
+static unsigned char *slurp(const char *path, size_t *size, char *why, size_t why_size)
 {
-    FILE *f = fopen(path, "rb");
-    unsigned char *data = NULL;
-    size_t have = 0, cap = 0, n;
-    struct stat st;
-    if (!f) return NULL;
-    if (fstat(fileno(f), &st) == 0 && S_ISDIR(st.st_mode)) {
-        fclose(f);
-        errno = EISDIR;
+    static const unsigned char magic[4] = {0x76, 0x2f, 0x31, 0x01};
+    unsigned char *data;
+    uint64_t bytes;
+    size_t have;
+    rrv_error err;
+    FILE *f;
+    if (rrv_open_read(path, &f, &bytes, &err) != RRV_OK) {
+        snprintf(why, why_size, "%s", err.message);
         return NULL;
     }
-    for (;;) {
-        if (have == cap) {
-            size_t grown = cap ? 2 * cap : 65536;
-            unsigned char *bigger = (unsigned char *)realloc(data, grown);
-            if (!bigger || grown > ((size_t)1 << 31)) {
-                free(bigger ? bigger : data);
-                fclose(f);
-                errno = ENOMEM;
-                return NULL;
-            }
-            data = bigger;
-            cap = grown;
-        }
-        n = fread(data + have, 1, cap - have, f);
-        have += n;
-        if (n == 0) break;
+    if (bytes == UINT64_MAX || bytes > PART_FILE_MAX) {
+        fclose(f);
+        snprintf(why, why_size, bytes == UINT64_MAX ? "cannot tell its size" : "larger than %" PRIu64 " bytes",
+                 PART_FILE_MAX);
+        return NULL;
     }
+    data = (unsigned char *)malloc(bytes > 8 ? (size_t)bytes : 8);
+    if (!data) {
+        fclose(f);
+        snprintf(why, why_size, "out of memory for %" PRIu64 " bytes", bytes);
+        return NULL;
+    }
+    have = fread(data, 1, bytes < 8 ? (size_t)bytes : 8, f);
+    if (have == 8 && memcmp(data, magic, 4) == 0) have += fread(data + 8, 1, (size_t)bytes - 8, f);
     if (ferror(f)) {
+        snprintf(why, why_size, "%s", strerror(errno));
         free(data);
         fclose(f);
-        errno = EIO;
         return NULL;
     }
     fclose(f);
@@ -1269,7 +1404,8 @@ static unsigned char *slurp(const char *path, size_t *size)
 static int load_part(const char *path, part_info *part, float **sums, const char *command)
 {
     size_t size = 0, value_size;
-    unsigned char *data = slurp(path, &size);
+    char why[sizeof ((rrv_error *)0)->message];
+    unsigned char *data = slurp(path, &size, why, sizeof why);
     const char *type;
     const void *value;
     float *rgb = NULL;
@@ -1278,7 +1414,7 @@ static int load_part(const char *path, part_info *part, float **sums, const char
     rrv_error err;
     if (sums) *sums = NULL;
     if (!data) {
-        fprintf(stderr, "rrv: %s: \"%s\": cannot read: %s\n", command, path, strerror(errno));
+        fprintf(stderr, "rrv: %s: \"%s\": cannot read: %s\n", command, path, why);
         return 0;
     }
     memset(&err, 0, sizeof err);
@@ -1465,6 +1601,42 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
     return EXIT_OK;
 }
 
+static const char *const face_names[7] = {"-x", "+x", "-y", "+y", "-z", "+z", "sphere"};
+
+/* The largest IOR jump over every medium's faces, its medium and face, and
+   how many faces jump: a sharp interface (glass) the user may not have meant. */
+static double largest_face_jump(const rrv_scene *scene, int *medium, int *face, int *faces)
+{
+    double worst = 0, jump[7];
+    int i, f;
+    *medium = *face = -1;
+    *faces = 0;
+    for (i = 0; i < scene->medium_count; ++i) {
+        rrv_medium_face_jumps(scene, i, jump);
+        for (f = 0; f < 7; ++f) {
+            if (jump[f] <= 0) continue;
+            ++*faces;
+            if (jump[f] > worst) {
+                worst = jump[f];
+                *medium = i;
+                *face = f;
+            }
+        }
+    }
+    return worst;
+}
+
+static void print_face_jump_summary(const rrv_scene *scene)
+{
+    int medium, face, faces;
+    double jump = largest_face_jump(scene, &medium, &face, &faces);
+    if (!(jump > 0)) return;
+    fprintf(stderr, "sharp IOR faces: eta jumps by %.3g at the %s %s of medium \"%s\"", jump, face_names[face],
+            face == 6 ? "surface" : "face", scene->media[medium].name);
+    if (faces > 1) fprintf(stderr, " (and at %d more faces)", faces - 1);
+    fputs(": refracted and reflected there as glass; curved nee does not cross them\n", stderr);
+}
+
 static void print_render_summary(int width, int height, int spp, double seconds,
                                  const rrv_render_stats *stats)
 {
@@ -1607,9 +1779,12 @@ static int command_render(int argc, char **argv)
         if (opt.resume) {
             /* A part already complete for this very scene and block is kept,
                so a re-submitted array only renders what is missing. */
-            FILE *probe = fopen(opt.pfm_path, "rb");
+            FILE *probe;
+            rrv_error probe_err;
             part_info have;
-            if (probe) {
+            /* opened as every input is: the output check above refused a
+               FIFO there, and one put in its place since must not block */
+            if (rrv_open_read(opt.pfm_path, &probe, NULL, &probe_err) == RRV_OK) {
                 fclose(probe);
                 if (load_part(opt.pfm_path, &have, NULL, "render --resume") &&
                     memcmp(&have, &part, sizeof part) == 0) {
@@ -1670,8 +1845,13 @@ static int command_render(int argc, char **argv)
     job.stride = crop_width;
     job.tiles_x = (crop_width + TILE_SIZE - 1) / TILE_SIZE;
     job.tile_count = job.tiles_x * ((crop_height + TILE_SIZE - 1) / TILE_SIZE);
+    job.tile_stride = tile_stride(job.tiles_x, job.tile_count / job.tiles_x);
     job.failure = RRV_OK;
     job.show_progress = !opt.quiet && isatty(2);
+    if (job.show_progress) {
+        job.tile_seconds = (double *)malloc((size_t)job.tile_count * sizeof *job.tile_seconds);
+        for (x = 0; job.tile_seconds && x < job.tile_count; ++x) job.tile_seconds[x] = -1;
+    }
     thread_count = opt.threads > 0 ? opt.threads : default_thread_count();
     if (thread_count > job.tile_count) thread_count = job.tile_count;
 
@@ -1684,6 +1864,7 @@ static int command_render(int argc, char **argv)
         /* The summary line takes the bar's place. */
         fprintf(stderr, "\r%*s\r", PROGRESS_BAR_WIDTH + 48, "");
     }
+    free(job.tile_seconds);
 
     if (job.failure != RRV_OK) {
         fprintf(stderr, "rrv: %s: render failed: %s\n", opt.scene_path,
@@ -1727,6 +1908,7 @@ static int command_render(int argc, char **argv)
             fprintf(stderr, "part %s: tile %s, samples %d:%d of %d: ", opt.pfm_path, part.tile,
                     part.sample_begin, part.sample_end, part.spp);
         print_render_summary(crop_width, crop_height, opt.sample_end - opt.sample_begin, seconds, &job.stats);
+        print_face_jump_summary(scene);
     }
     free(image);
     rrv_scene_free(scene);
@@ -1764,6 +1946,60 @@ typedef struct merge_part {
 static int rects_intersect(const int a[4], const int b[4])
 {
     return a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3];
+}
+
+static int compare_ints(const void *pa, const void *pb)
+{
+    int a = *(const int *)pa, b = *(const int *)pb;
+    return (a > b) - (a < b);
+}
+
+/* The first pixel, row by row, that none of the (non-overlapping) parts
+   covers, found from the rectangles alone: a part may claim an image of
+   INT_MAX x INT_MAX, and a map of its pixels would be that many bytes.
+   The first hole's row is 0 or a rectangle's bottom edge (the row above it
+   is all covered, by a rectangle that ends there), so only those rows are
+   swept, each over the rectangles that meet it sorted by their left edge:
+   O(n^2 log n) for n parts. 0 when every pixel is covered or out of memory
+   (*x, *y are -1 then). */
+static int find_hole(merge_part *const *parts, int count, int width, int height, int *x, int *y)
+{
+    int *rows = (int *)malloc((size_t)(count + 1) * sizeof *rows);
+    int *lefts = (int *)malloc((size_t)(count > 0 ? count : 1) * 2 * sizeof *lefts);
+    int row_count = 0, i, r, found = 0;
+    *x = *y = -1;
+    if (!rows || !lefts) {
+        free(rows);
+        free(lefts);
+        return 0;
+    }
+    rows[row_count++] = 0;
+    for (i = 0; i < count; ++i)
+        if (parts[i]->info.rect[3] < height) rows[row_count++] = parts[i]->info.rect[3];
+    qsort(rows, (size_t)row_count, sizeof *rows, compare_ints);
+    for (r = 0; r < row_count && !found; ++r) {
+        int n = 0, reach = 0, k;
+        if (r > 0 && rows[r] == rows[r - 1]) continue;
+        for (i = 0; i < count; ++i) {
+            const int *rect = parts[i]->info.rect;
+            if (rect[1] <= rows[r] && rows[r] < rect[3]) {
+                lefts[2 * n] = rect[0];
+                lefts[2 * n + 1] = rect[2];
+                ++n;
+            }
+        }
+        qsort(lefts, (size_t)n, 2 * sizeof *lefts, compare_ints); /* by the left edge */
+        for (k = 0; k < n && lefts[2 * k] <= reach; ++k)
+            if (lefts[2 * k + 1] > reach) reach = lefts[2 * k + 1];
+        if (reach < width) {
+            *x = reach;
+            *y = rows[r];
+            found = 1;
+        }
+    }
+    free(rows);
+    free(lefts);
+    return found;
 }
 
 /* The tree sum of samples [a, b) of the parts of one tile (all with the
@@ -1826,7 +2062,6 @@ static int command_merge(int argc, char **argv)
     char **paths;
     merge_part *parts = NULL, **order = NULL;
     float *image = NULL, *tile_sum = NULL, *tmp[32];
-    unsigned char *covered = NULL;
     int path_count = 0, status = 0, quiet = 0, i, j, code = EXIT_INPUT, format, levels = 0;
     rrv_exr_options exr;
     pending_output output;
@@ -1969,20 +2204,17 @@ static int command_merge(int argc, char **argv)
     }
     if (area != (long long)width * height) {
         /* Tiles do not overlap, so less area means a hole: find a pixel in it. */
-        int x = 0, y = 0, found = 0;
-        covered = (unsigned char *)calloc((size_t)width * (size_t)height, 1);
-        if (!covered) {
+        int x, y;
+        if (!find_hole(order, path_count, width, height, &x, &y)) {
             fprintf(stderr, "rrv: out of memory\n");
             goto done;
         }
-        for (i = 0; i < path_count; ++i)
-            for (y = order[i]->info.rect[1]; y < order[i]->info.rect[3]; ++y)
-                memset(covered + (size_t)y * width + order[i]->info.rect[0], 1,
-                       (size_t)(order[i]->info.rect[2] - order[i]->info.rect[0]));
-        for (y = 0; y < height && !found; ++y)
-            for (x = 0; x < width && !found; ++x) found = !covered[(size_t)y * width + x];
         fprintf(stderr, "rrv: merge: pixel %d,%d is in no part: a tile is missing (the parts cover %lld of %dx%d "
-                "pixels)\n", x - 1, y - 1, area, width, height);
+                "pixels)\n", x, y, area, width, height);
+        goto done;
+    }
+    if ((uint64_t)width * (uint64_t)height > SIZE_MAX / (3 * sizeof *image)) {
+        fprintf(stderr, "rrv: out of memory for a %dx%d image\n", width, height);
         goto done;
     }
 
@@ -2029,7 +2261,6 @@ done:
     free(order);
     free(image);
     free(tile_sum);
-    free(covered);
     free(paths);
     return code;
 }
@@ -2048,6 +2279,9 @@ static const char farm_help[] =
     "                     the array; run it again to resume after a failure\n"
     "Paths in the scripts are absolute; the scene, rrv and DIR must be on a\n"
     "file system every node sees. Options after -- go to every rrv render.\n"
+    "The scene is loaded first: at most as many tile columns and rows as the\n"
+    "image has, at most 10000 tiles, and OUT must not be one of its files.\n"
+    "DIR, P and T must not hold a newline, % or hetjob (no #SBATCH form).\n"
     "\n"
     "options:\n"
     "  -o, --output OUT      the merged image (required; .exr or .pfm)\n"
@@ -2058,7 +2292,32 @@ static const char farm_help[] =
     "  --time T              sbatch --time limit of each task, e.g. 2:00:00\n"
     "  --rrv PATH            the rrv the nodes run (default: this one)\n";
 
-/* Appends text to a shell script quoted with single quotes. */
+/* The most tiles a farm has: one array task and one merge argument each.
+   Slurm's default MaxArraySize takes 1001 tasks; a cluster may set more or
+   fewer, and sbatch says so when it refuses the array. */
+#define FARM_MAX_TILES 10000
+/* The merge's arguments (every part's path) stay under 1 MiB: Linux gives
+   execve a quarter of the stack, 2 MiB with the usual 8 MiB. */
+#define FARM_MAX_MERGE_ARGS (1L << 20)
+
+/* What rrv farm writes into its scripts, every path absolute. */
+typedef struct farm_plan {
+    const char *dir, *rrv, *scene, *output;
+    const char *dir_label;              /* how messages name dir's option */
+    const char *partition, *time_limit; /* NULL: not asked for */
+    int cpus;                           /* 0: not asked for */
+    int columns, rows;                  /* 1 x N: N bands of rows */
+    char **extra;                       /* the render options after -- */
+    int extra_count;
+} farm_plan;
+
+enum { FARM_RENDER, FARM_MERGE, FARM_SUBMIT, FARM_SCRIPTS };
+static const char *const farm_script_name[FARM_SCRIPTS] = { "render.sbatch", "merge.sbatch", "submit.sh" };
+
+/* The one quoting of values in the scripts' shell commands: single quotes,
+   inside which the shell expands nothing and a newline is just a byte; a '
+   becomes '\'' (close, an escaped quote, open). Every byte but NUL, which
+   no argument can hold, survives it. */
 static void put_quoted(FILE *f, const char *text)
 {
     fputc('\'', f);
@@ -2067,6 +2326,166 @@ static void put_quoted(FILE *f, const char *text)
         else fputc(*text, f);
     }
     fputc('\'', f);
+}
+
+/* An #SBATCH line is a comment to the shell but is read by sbatch, which
+   splits it at blanks, ends it at an unquoted #, takes '...' and "..." as
+   groups and a backslash as "the next byte as it is". So a value goes in
+   double quotes with " and \ escaped; farm_directive_ok refused first what
+   no quoting carries. */
+static void put_directive(FILE *f, const char *option, const char *value)
+{
+    fprintf(f, "#SBATCH --%s=\"", option);
+    for (; *value; ++value) {
+        if (*value == '"' || *value == '\\') fputc('\\', f);
+        fputc(*value, f);
+    }
+    fputs("\"\n", f);
+}
+
+/* A value in a message, with the bytes a terminal would not show (or would
+   act on) escaped. */
+static void print_escaped(FILE *f, const char *text)
+{
+    for (; *text; ++text) {
+        unsigned char c = (unsigned char)*text;
+        if (c == '\n') fputs("\\n", f);
+        else if (c == '"' || c == '\\') fprintf(f, "\\%c", c);
+        else if (c < 0x20 || c == 0x7f) fprintf(f, "\\x%02x", c);
+        else fputc(c, f);
+    }
+}
+
+/* What no #SBATCH value can hold, or NULL: a newline ends the line, and
+   what follows would be a command to the shell; sbatch expands % in file
+   names (%a, %j, ...), so a % in the folder would send the logs elsewhere
+   (refused in --partition and --time too: one rule for every directive);
+   and a line holding "hetjob" (or the older "packjob") anywhere starts a
+   new component of a heterogeneous job. */
+static const char *farm_directive_problem(const char *value)
+{
+    const char *p;
+    for (p = value ? value : ""; *p; ++p) {
+        if (*p == '\n') return "a newline";
+        if (*p == '%') return "'%'";
+        if (strncasecmp(p, "hetjob", 6) == 0) return "\"hetjob\"";
+        if (strncasecmp(p, "packjob", 7) == 0) return "\"packjob\"";
+    }
+    return NULL;
+}
+
+/* 1 when every value of the plan has a form in the scripts; else says which
+   option and which character, and returns 0. */
+static int farm_plan_ok(const farm_plan *plan)
+{
+    const char *labels[3], *values[3], *what;
+    int i;
+    labels[0] = plan->dir_label;
+    values[0] = plan->dir;
+    labels[1] = "--partition";
+    values[1] = plan->partition;
+    labels[2] = "--time";
+    values[2] = plan->time_limit;
+    for (i = 0; i < 3; ++i)
+        if ((what = farm_directive_problem(values[i])) != NULL) {
+            fprintf(stderr, "rrv: farm: %s \"", labels[i]);
+            print_escaped(stderr, values[i]);
+            fprintf(stderr, "\" holds %s, which has no safe form in a #SBATCH line\n", what);
+            return 0;
+        }
+    return 1;
+}
+
+/* dir/name as a new string. */
+static char *join_path(const char *dir, const char *name)
+{
+    char *out = (char *)malloc(strlen(dir) + strlen(name) + 2);
+    if (out) sprintf(out, "%s/%s", dir, name);
+    return out;
+}
+
+static int put_quoted_path(FILE *f, const char *dir, const char *name)
+{
+    char *path = join_path(dir, name);
+    if (path) put_quoted(f, path);
+    free(path);
+    return path != NULL;
+}
+
+static int put_directive_path(FILE *f, const char *option, const char *dir, const char *name)
+{
+    char *path = join_path(dir, name);
+    if (path) put_directive(f, option, path);
+    free(path);
+    return path != NULL;
+}
+
+/* The text of one of the plan's scripts (FARM_*), or NULL when out of
+   memory. Every value reaches the shell through put_quoted and sbatch
+   through put_directive; farm_plan_ok must have accepted the plan. */
+static char *farm_script(const farm_plan *plan, int which)
+{
+    char *text = NULL, name[64], tiles[32];
+    size_t size = 0;
+    int i, ok = 1, count = plan->columns * plan->rows;
+    FILE *f = open_memstream(&text, &size);
+    if (!f) return NULL;
+    if (plan->columns == 1) snprintf(tiles, sizeof tiles, "%d", plan->rows);
+    else snprintf(tiles, sizeof tiles, "%dx%d", plan->columns, plan->rows);
+    if (which == FARM_RENDER) {
+        fprintf(f, "#!/bin/sh\n# Written by rrv farm slurm: task I renders tile I of %s as a part.\n", tiles);
+        fprintf(f, "#SBATCH --job-name=rrv-tiles\n#SBATCH --array=0-%d\n", count - 1);
+        ok &= put_directive_path(f, "output", plan->dir, "logs/tile_%a.log");
+        if (plan->partition) put_directive(f, "partition", plan->partition);
+        if (plan->cpus) fprintf(f, "#SBATCH --cpus-per-task=%d\n", plan->cpus);
+        if (plan->time_limit) put_directive(f, "time", plan->time_limit);
+        fputs("set -eu\ni=${SLURM_ARRAY_TASK_ID:?run through sbatch or set SLURM_ARRAY_TASK_ID}\n", f);
+        fputs("# --resume: a part already complete is kept; the part is written to a\n"
+              "# temporary file and renamed, so a killed task leaves no half part.\nexec ", f);
+        put_quoted(f, plan->rrv);
+        fputs(" render ", f);
+        put_quoted(f, plan->scene);
+        fputs(" -o ", f);
+        ok &= put_quoted_path(f, plan->dir, "parts/tile_");
+        fprintf(f, "\"$i\"'.exr' --tile \"$i\"/%s --resume", tiles);
+        if (plan->cpus) fprintf(f, " --threads %d", plan->cpus);
+        for (i = 0; i < plan->extra_count; ++i) {
+            fputc(' ', f);
+            put_quoted(f, plan->extra[i]);
+        }
+        fputc('\n', f);
+    } else if (which == FARM_MERGE) {
+        fprintf(f, "#!/bin/sh\n# Written by rrv farm slurm: merges the %d parts (after the array, afterok).\n",
+                count);
+        fputs("#SBATCH --job-name=rrv-merge\n", f);
+        ok &= put_directive_path(f, "output", plan->dir, "logs/merge.log");
+        if (plan->partition) put_directive(f, "partition", plan->partition);
+        fputs("set -eu\nexec ", f);
+        put_quoted(f, plan->rrv);
+        fputs(" merge ", f);
+        put_quoted(f, plan->output);
+        for (i = 0; i < count; ++i) {
+            snprintf(name, sizeof name, "parts/tile_%d.exr", i);
+            fputs(" \\\n    ", f);
+            ok &= put_quoted_path(f, plan->dir, name);
+        }
+        fputc('\n', f);
+    } else {
+        fputs("#!/bin/sh\n# Written by rrv farm slurm: submits the tiles and the merge that waits for them.\n"
+              "# Run it again after a failure: complete parts are kept.\nset -eu\n", f);
+        fputs("array=$(sbatch --parsable ", f);
+        ok &= put_quoted_path(f, plan->dir, "render.sbatch");
+        fputs(")\narray=${array%%;*}\nmerge=$(sbatch --parsable --dependency=afterok:\"$array\" ", f);
+        ok &= put_quoted_path(f, plan->dir, "merge.sbatch");
+        fprintf(f, ")\necho \"tiles: job $array (%d tasks); merge: job ${merge%%%%;*}\"\n", count);
+    }
+    if (ferror(f)) ok = 0;
+    if (fclose(f) != 0 || !text) ok = 0;
+    if (!ok) {
+        free(text);
+        return NULL;
+    }
+    return text;
 }
 
 /* An absolute path for a file that may not exist yet (its folder must). */
@@ -2083,39 +2502,36 @@ static char *absolute_path(const char *path)
     return out;
 }
 
-/* Ends the memory stream *f holding a script and writes it as dir/name,
-   executable; the stream and its text are released either way. */
-static int finish_script(const char *dir, const char *name, FILE **f, char **text)
+static int make_folder(const char *path)
 {
-    char path[8192];
-    FILE *out;
-    int ok = fclose(*f) == 0;
-    *f = NULL;
-    if (ok) {
-        snprintf(path, sizeof path, "%s/%s", dir, name);
-        out = fopen(path, "w");
-        ok = out != NULL && fputs(*text, out) >= 0;
-        if (out && fclose(out) != 0) ok = 0;
-        if (!ok) fprintf(stderr, "rrv: farm: cannot write \"%s\": %s\n", path, strerror(errno));
-        else chmod(path, 0755);
-    }
-    free(*text);
-    *text = NULL;
-    return ok;
+    if (mkdir(path, 0777) == 0 || errno == EEXIST) return 1;
+    fprintf(stderr, "rrv: farm: cannot create \"%s\": %s\n", path, strerror(errno));
+    return 0;
 }
 
 static int command_farm(int argc, char **argv)
 {
     arg_cursor args;
     const char *scene_path = NULL, *out_path = NULL, *tiles_text = NULL, *dir_arg = NULL;
-    const char *partition = NULL, *time_limit = NULL, *rrv_arg = NULL;
-    int cpus = 0, columns = 1, rows = 0, index, count, i, extra = argc;
-    char *scene = NULL, *out = NULL, *dir = NULL, *rrv_path = NULL, *text = NULL, default_dir[4200];
-    size_t text_size = 0;
-    FILE *f = NULL;
+    const char *rrv_arg = NULL;
+    int index, i, extra = argc, created = 0, width, height;
+    long long count;
+    char *scene = NULL, *out = NULL, *dir = NULL, *real_dir = NULL, *rrv_path = NULL, *dir_copy = NULL;
+    char *paths[FARM_SCRIPTS + 2], *text[FARM_SCRIPTS], default_dir[4200];
+    char **render_argv = NULL;
+    farm_plan plan;
+    render_options ropt;
+    input_list inputs;
+    rrv_scene *loaded = NULL;
+    pending_output outputs[FARM_SCRIPTS];
     int code = EXIT_USAGE;
 
     memset(&args, 0, sizeof args);
+    memset(&plan, 0, sizeof plan);
+    memset(&inputs, 0, sizeof inputs);
+    memset(paths, 0, sizeof paths);
+    memset(text, 0, sizeof text);
+    plan.columns = 1;
     args.argc = argc;
     args.argv = argv;
     args.command = "farm";
@@ -2140,13 +2556,13 @@ static int command_farm(int argc, char **argv)
         } else if (strcmp(arg, "--dir") == 0) {
             if (!take_value(&args, arg, "a folder", &dir_arg)) return EXIT_USAGE;
         } else if (strcmp(arg, "--partition") == 0) {
-            if (!take_value(&args, arg, "a partition name", &partition)) return EXIT_USAGE;
+            if (!take_value(&args, arg, "a partition name", &plan.partition)) return EXIT_USAGE;
         } else if (strcmp(arg, "--time") == 0) {
-            if (!take_value(&args, arg, "a time limit", &time_limit)) return EXIT_USAGE;
+            if (!take_value(&args, arg, "a time limit", &plan.time_limit)) return EXIT_USAGE;
         } else if (strcmp(arg, "--rrv") == 0) {
             if (!take_value(&args, arg, "a path to rrv", &rrv_arg)) return EXIT_USAGE;
         } else if (strcmp(arg, "--cpus-per-task") == 0) {
-            if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer", &cpus)) return EXIT_USAGE;
+            if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer", &plan.cpus)) return EXIT_USAGE;
         } else if (is_flag(arg)) {
             return usage_error(&args, "farm: unknown option \"%s\" (render options go after --)", arg);
         } else if (scene_path) {
@@ -2162,19 +2578,48 @@ static int command_farm(int argc, char **argv)
     {
         char tile_text[64];
         snprintf(tile_text, sizeof tile_text, "0/%s", tiles_text);
-        if (strlen(tiles_text) > 40 || !parse_tile(tile_text, &index, &columns, &rows))
+        if (strlen(tiles_text) > 40 || !parse_tile(tile_text, &index, &plan.columns, &plan.rows))
             return usage_error(&args, "--tiles needs N or CxR, positive integers, got \"%s\"", tiles_text);
     }
-    count = columns * rows;
+    count = (long long)plan.columns * plan.rows;
+    if (count > FARM_MAX_TILES)
+        return usage_error(&args, "--tiles %s makes %lld tiles; a farm has at most %d", tiles_text, count,
+                           FARM_MAX_TILES);
     if (!has_extension(out_path, ".exr") && !has_extension(out_path, ".pfm"))
         return usage_error(&args, "cannot tell the format of \"%s\": the output must end in .pfm or .exr", out_path);
     for (i = extra; i < argc; ++i)
         if (strcmp(argv[i], "-o") == 0 || strcmp(argv[i], "--output") == 0 || strcmp(argv[i], "--tile") == 0 ||
-            strcmp(argv[i], "--resume") == 0 || strcmp(argv[i], "--png") == 0 || strcmp(argv[i], "--crop") == 0)
+            strcmp(argv[i], "--samples") == 0 || strcmp(argv[i], "--resume") == 0 ||
+            strcmp(argv[i], "--png") == 0 || strcmp(argv[i], "--crop") == 0)
             return usage_error(&args, "farm: %s is set by the farm, not a render option to pass", argv[i]);
+    plan.extra = argv + extra;
+    plan.extra_count = argc - extra;
+    /* The render options are checked here, not on every node, and say how
+       large a grid the scene may load. */
+    render_argv = (char **)malloc((size_t)(plan.extra_count + 3) * sizeof *render_argv);
+    if (!render_argv) {
+        fprintf(stderr, "rrv: out of memory\n");
+        return EXIT_IO;
+    }
+    render_argv[0] = (char *)scene_path;
+    render_argv[1] = (char *)"-o";
+    render_argv[2] = (char *)"farm.exr";
+    for (i = 0; i < plan.extra_count; ++i) render_argv[3 + i] = plan.extra[i];
+    code = parse_render_options(plan.extra_count + 3, render_argv, &ropt);
+    free(render_argv);
+    if (code == HELP_SHOWN) return EXIT_OK;
+    if (code != EXIT_OK) return code;
 
+    /* Every path is resolved and every value checked before anything is
+       written. */
     code = EXIT_IO;
     snprintf(default_dir, sizeof default_dir, "%s.farm", out_path);
+    plan.dir_label = dir_arg ? "--dir" : "the farm folder (-o OUT.farm)";
+    if (!dir_arg) dir_arg = default_dir;
+    dir_copy = (char *)malloc(strlen(dir_arg) + 1);
+    if (!dir_copy) goto done;
+    strcpy(dir_copy, dir_arg);
+    for (i = (int)strlen(dir_copy) - 1; i > 0 && dir_copy[i] == '/'; --i) dir_copy[i] = '\0';
     scene = realpath(scene_path, NULL);
     if (!scene) {
         fprintf(stderr, "rrv: %s: cannot read scene file: %s\n", scene_path, strerror(errno));
@@ -2182,89 +2627,95 @@ static int command_farm(int argc, char **argv)
         goto done;
     }
     out = absolute_path(out_path);
-    if (!dir_arg) dir_arg = default_dir;
-    if (mkdir(dir_arg, 0777) != 0 && errno != EEXIST) {
-        fprintf(stderr, "rrv: farm: cannot create \"%s\": %s\n", dir_arg, strerror(errno));
-        goto done;
-    }
-    dir = realpath(dir_arg, NULL);
+    dir = realpath(dir_copy, NULL);
+    if (!dir) dir = absolute_path(dir_copy);
     rrv_path = rrv_arg ? realpath(rrv_arg, NULL) : realpath("/proc/self/exe", NULL);
     if (!out || !dir || !rrv_path) {
         fprintf(stderr, "rrv: farm: cannot resolve %s: %s\n", !out ? out_path : !dir ? dir_arg : "the rrv program",
                 strerror(errno));
         goto done;
     }
-    {
-        char sub[8192];
-        snprintf(sub, sizeof sub, "%s/parts", dir);
-        if (mkdir(sub, 0777) != 0 && errno != EEXIST) {
-            fprintf(stderr, "rrv: farm: cannot create \"%s\": %s\n", sub, strerror(errno));
+    plan.dir = dir;
+    plan.rrv = rrv_path;
+    plan.scene = scene;
+    plan.output = out;
+    if (!farm_plan_ok(&plan)) {
+        code = EXIT_USAGE;
+        goto done;
+    }
+    if (!check_output_target(out_path)) goto done;
+    /* As rrv render does: the scene's camera bounds the tiles, and an output
+       that is one of the scene's files is refused. */
+    if (!load_scene(scene_path, ropt.max_grid_bytes, &inputs, &loaded, 0)) {
+        code = EXIT_INPUT;
+        goto done;
+    }
+    width = loaded->camera.width;
+    height = loaded->camera.height;
+    rrv_scene_free(loaded);
+    if (!check_output_not_input(out_path, &inputs)) {
+        code = EXIT_USAGE;
+        goto done;
+    }
+    if (plan.columns > width || plan.rows > height) {
+        code = usage_error(&args, "--tiles %s: the %dx%d image has too few %s for that many tiles", tiles_text,
+                           width, height, plan.columns > width ? "columns" : "rows");
+        goto done;
+    }
+    if (count * (long long)(strlen(dir) + 32) + (long long)strlen(out) > FARM_MAX_MERGE_ARGS) {
+        code = usage_error(&args, "--tiles %s: the merge of %lld parts in \"%s\" would take more than %ld bytes "
+                           "of arguments: fewer tiles or a shorter --dir", tiles_text, count, dir,
+                           FARM_MAX_MERGE_ARGS);
+        goto done;
+    }
+    for (i = 0; i < FARM_SCRIPTS; ++i)
+        if (!(paths[i] = join_path(dir, farm_script_name[i]))) goto done;
+    if (!(paths[FARM_SCRIPTS] = join_path(dir, "parts")) || !(paths[FARM_SCRIPTS + 1] = join_path(dir, "logs")))
+        goto done;
+    for (i = 0; i < FARM_SCRIPTS; ++i)
+        if (!check_script_target(paths[i])) goto done;
+    for (i = 0; i < FARM_SCRIPTS; ++i)
+        if (!(text[i] = farm_script(&plan, i))) {
+            fprintf(stderr, "rrv: out of memory\n");
             goto done;
         }
-        snprintf(sub, sizeof sub, "%s/logs", dir);
-        if (mkdir(sub, 0777) != 0 && errno != EEXIST) {
-            fprintf(stderr, "rrv: farm: cannot create \"%s\": %s\n", sub, strerror(errno));
-            goto done;
-        }
+
+    if (mkdir(dir, 0777) == 0) created = 1;
+    else if (errno != EEXIST) {
+        fprintf(stderr, "rrv: farm: cannot create \"%s\": %s\n", dir, strerror(errno));
+        goto done;
     }
-
-    /* render.sbatch */
-    f = open_memstream(&text, &text_size);
-    if (!f) goto done;
-    fprintf(f, "#!/bin/sh\n# Written by rrv farm slurm: task I renders tile I of %s as a part.\n", tiles_text);
-    fprintf(f, "#SBATCH --job-name=rrv-tiles\n#SBATCH --array=0-%d\n", count - 1);
-    fprintf(f, "#SBATCH --output=%s/logs/tile_%%a.log\n", dir);
-    if (partition) fprintf(f, "#SBATCH --partition=%s\n", partition);
-    if (cpus) fprintf(f, "#SBATCH --cpus-per-task=%d\n", cpus);
-    if (time_limit) fprintf(f, "#SBATCH --time=%s\n", time_limit);
-    fprintf(f, "set -eu\ni=${SLURM_ARRAY_TASK_ID:?run through sbatch or set SLURM_ARRAY_TASK_ID}\n");
-    fprintf(f, "# --resume: a part already complete is kept; the part is written to a\n"
-               "# temporary file and renamed, so a killed task leaves no half part.\n");
-    fputs("exec ", f);
-    put_quoted(f, rrv_path);
-    fputs(" render ", f);
-    put_quoted(f, scene);
-    fprintf(f, " -o %s/parts/tile_\"$i\".exr --tile \"$i\"/%s --resume", dir, tiles_text);
-    if (cpus) fprintf(f, " --threads %d", cpus);
-    for (i = extra; i < argc; ++i) {
-        fputc(' ', f);
-        put_quoted(f, argv[i]);
+    /* The folder may have been a link (or became one): its real path must be
+       the one the scripts name. */
+    real_dir = realpath(dir, NULL);
+    if (!real_dir || strcmp(real_dir, dir) != 0) {
+        fprintf(stderr, "rrv: farm: \"%s\" changed while the scripts were written (now \"%s\")\n", dir,
+                real_dir ? real_dir : strerror(errno));
+        if (created) rmdir(dir);
+        goto done;
     }
-    fputc('\n', f);
-    if (!finish_script(dir, "render.sbatch", &f, &text)) goto done;
-
-    /* merge.sbatch */
-    f = open_memstream(&text, &text_size);
-    if (!f) goto done;
-    fprintf(f, "#!/bin/sh\n# Written by rrv farm slurm: merges the %d parts (after the array, afterok).\n", count);
-    fprintf(f, "#SBATCH --job-name=rrv-merge\n#SBATCH --output=%s/logs/merge.log\n", dir);
-    if (partition) fprintf(f, "#SBATCH --partition=%s\n", partition);
-    fputs("set -eu\nexec ", f);
-    put_quoted(f, rrv_path);
-    fputs(" merge ", f);
-    put_quoted(f, out);
-    for (i = 0; i < count; ++i) fprintf(f, " \\\n    %s/parts/tile_%d.exr", dir, i);
-    fputc('\n', f);
-    if (!finish_script(dir, "merge.sbatch", &f, &text)) goto done;
-
-    /* submit.sh */
-    f = open_memstream(&text, &text_size);
-    if (!f) goto done;
-    fprintf(f, "#!/bin/sh\n# Written by rrv farm slurm: submits the tiles and the merge that waits for them.\n"
-               "# Run it again after a failure: complete parts are kept.\nset -eu\n");
-    fprintf(f, "array=$(sbatch --parsable %s/render.sbatch)\narray=${array%%%%;*}\n", dir);
-    fprintf(f, "merge=$(sbatch --parsable --dependency=afterok:\"$array\" %s/merge.sbatch)\n", dir);
-    fprintf(f, "echo \"tiles: job $array (%d tasks); merge: job ${merge%%%%;*}\"\n", count);
-    if (!finish_script(dir, "submit.sh", &f, &text)) goto done;
-    printf("wrote %s/render.sbatch (%d tasks), %s/merge.sbatch, %s/submit.sh\nsubmit with: sh %s/submit.sh\n",
-           dir, count, dir, dir, dir);
+    if (!make_folder(paths[FARM_SCRIPTS]) || !make_folder(paths[FARM_SCRIPTS + 1])) goto done;
+    memset(outputs, 0, sizeof outputs);
+    for (i = 0; i < FARM_SCRIPTS; ++i) {
+        outputs[i].path = paths[i];
+        outputs[i].format = OUTPUT_SCRIPT;
+        outputs[i].script = text[i];
+    }
+    if (!write_outputs(outputs, FARM_SCRIPTS, NULL, 0, 0, 0)) goto done;
+    printf("wrote %s/render.sbatch (%lld tasks), %s/merge.sbatch, %s/submit.sh\nsubmit with: sh ", dir, count, dir,
+           dir);
+    put_quoted(stdout, paths[FARM_SUBMIT]);
+    putchar('\n');
     code = EXIT_OK;
 done:
-    if (f) fclose(f);
-    free(text);
+    for (i = 0; i < FARM_SCRIPTS; ++i) free(text[i]);
+    for (i = 0; i < FARM_SCRIPTS + 2; ++i) free(paths[i]);
+    free_inputs(&inputs);
     free(scene);
     free(out);
     free(dir);
+    free(real_dir);
+    free(dir_copy);
     free(rrv_path);
     return code;
 }
@@ -2400,8 +2851,11 @@ static void print_extinction(const rrv_medium *medium)
     putchar('\n');
 }
 
-static void print_medium(const rrv_medium *medium)
+static void print_medium(const rrv_scene *scene, int index)
 {
+    const rrv_medium *medium = &scene->media[index];
+    double jump[7];
+    int f, any = 0;
     printf("  %s: box %g %g %g .. %g %g %g", medium->name, medium->lo.x, medium->lo.y,
            medium->lo.z, medium->hi.x, medium->hi.y, medium->hi.z);
     print_field("density", &medium->density);
@@ -2416,6 +2870,12 @@ static void print_medium(const rrv_medium *medium)
     if (medium->ior.kind == RRV_FIELD_GRID)
         printf(" grid %dx%dx%d", medium->ior.grid.nx, medium->ior.grid.ny, medium->ior.grid.nz);
     putchar('\n');
+    if (rrv_medium_face_jumps(scene, index, jump) > 0) {
+        printf("    sharp IOR faces (eta jumps by):");
+        for (f = 0; f < 7; ++f)
+            if (jump[f] > 0) printf("%s %s %.3g", any++ ? "," : "", face_names[f], jump[f]);
+        putchar('\n');
+    }
     if (medium->density.kind != RRV_FIELD_NONE) print_extinction(medium);
     print_nanovdb("density", &medium->density);
     print_nanovdb("temperature", &medium->temperature);
@@ -2461,14 +2921,19 @@ static int command_info(int argc, char **argv)
     printf("spp: %d\n", scene->settings.spp);
     printf("max_depth: %d\n", scene->settings.max_depth);
     printf("seed: %" PRIu64 "\n", scene->settings.seed);
-    printf("integrator: %s\n", integrator_name(scene->settings.integrator));
+    if (scene->settings.integrator == RRV_INTEGRATOR_DEFAULT)
+        printf("integrator: %s (the default for this scene)\n", integrator_name(rrv_scene_integrator(scene)));
+    else
+        printf("integrator: %s\n", integrator_name(scene->settings.integrator));
+    printf("ambient ior: %.9g%s\n", scene->ambient_ior,
+           scene->settings.ambient_ior != 0 ? "" : scene->ambient_ior != 1 ? " (the gas at its ambient state)" : "");
     printf("materials: %d\n", scene->material_count);
     printf("shapes: %d (%d spheres, %d quads, %d triangles)\n", scene->shape_count,
            kind_counts[RRV_SHAPE_SPHERE], kind_counts[RRV_SHAPE_QUAD],
            kind_counts[RRV_SHAPE_TRIANGLE]);
     printf("lights: %d\n", scene->light_count);
     printf("media: %d\n", scene->medium_count);
-    for (i = 0; i < scene->medium_count; ++i) print_medium(&scene->media[i]);
+    for (i = 0; i < scene->medium_count; ++i) print_medium(scene, i);
     printf("bvh_nodes: %d\n", scene->bvh_node_count);
     format_bytes((double)scene->bytes, text, sizeof text);
     printf("scene_memory: %s\n", text);
@@ -2564,8 +3029,8 @@ static int command_trace(int argc, char **argv)
         rrv_scene_free(scene);
         return EXIT_INPUT;
     }
-    if (!has_integrator && scene->settings.integrator != RRV_INTEGRATOR_CLASSIC)
-        integrator = scene->settings.integrator;
+    if (!has_integrator && rrv_scene_integrator(scene) != RRV_INTEGRATOR_CLASSIC)
+        integrator = rrv_scene_integrator(scene);
     if (!has_seed) seed = scene->settings.seed;
 
     puts(print_path ? "walk,x,y,z,dx,dy,dz" : "x,y,z,dx,dy,dz,events");

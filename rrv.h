@@ -1,4 +1,4 @@
-/* rrv.h 0.4.0 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.9.1 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -6,6 +6,15 @@
    ray (Fraboni, Chan, Vergne, Jeziorski, "Can You See the Heat?", SIGGRAPH
    2023 talk), next to a classic null-scattering volume path tracer
    (Miller et al. 2019) and an eikonal ray-marching reference (Ament et al. 2014).
+
+   It does: participating media in boxes (density, temperature, pressure and
+   IOR from constants, Gaussian blobs, noise, gridvol and NanoVDB grids, the
+   gas law), diffuse and checker surfaces (spheres, quads, triangle meshes),
+   quad, triangle and sphere lights, a gradient or constant sky, blackbody
+   flames, three RGB channels, tiles and sample ranges that merge bit for bit.
+   It does not: dispersion (the IOR is achromatic), glossy or specular
+   surfaces, textures, motion, GPUs. The command-line client (main.c) and
+   the user's manual are in README.md; measurements in test/bench/RESULTS.md.
 
    EXAMPLE: a Luneburg lens built in code, rendered, written as PFM. Zero
    means default in every description. test/compile_checks.sh cuts out the
@@ -72,6 +81,27 @@
    ---- end of example --------------------------------------------------------
 
    INTEGRATORS (rrv_settings.integrator)
+     default     (zero; no `integrator` key, no --integrator) chosen from
+                 the prepared scene by one rule (rrv_scene_integrator):
+                 classic where no medium's IOR differs from the ambient
+                 one (bit for bit the classic render); eikonal with nee
+                 SHOOT where every refracting medium is clear (no medium
+                 with extinction overlaps its box) and a quad or triangle
+                 light is small from one (its side, the square root of its
+                 area, under 0.5 x its distance from the medium's box
+                 centre), and the IOR has the Hessian shooting needs;
+                 refractive (the comb, nee AIM) otherwise. Why: aimed
+                 shadow rays sample the light's straight cone, at about
+                 straight NEE's cost, which is right while bending is small
+                 against the light's angular size, but a caustic of a small
+                 light lies outside that cone and only forward paths find
+                 it (noise); shooting solves the bent connection, at 4x-50x
+                 the cost a sample, which pays where the receivers are
+                 surfaces seen through clear media, and not where a
+                 scattering medium makes every vertex a connection.
+                 Measured in test/bench/RESULTS.md ("Which integrator by default"):
+                 within 1.25x of the best unbiased mode on the bench scenes.
+                 An explicit `nee` other than shoot keeps the comb.
      classic     IOR 1 everywhere: delta tracking, ratio-tracked NEE with MIS,
                  spectral MIS for chromatic media (channels whose extinctions
                  differ more than 4x walk with majorants of their own). The
@@ -88,265 +118,57 @@
    NEXT-EVENT ESTIMATION (rrv_settings.nee, scene `render nee`, CLI --nee)
      Refractive and eikonal integrators only; classic always samples lights
      with straight shadow rays, which is exact for straight rays.
-     DEFAULT     SHOOT, the most efficient curved mode measured (README.md).
-                 With the refractive integrator, which shooting cannot
-                 differentiate, it aims (AIM): unbiased, about as cheap as
-                 STRAIGHT, but without focusing, so caustics of small
-                 lights stay noisy (MANIFOLD solves them there, at a high
-                 cost).
-     STRAIGHT    a straight shadow ray, ratio-tracked,
-                 combined by the power heuristic with the phase/BSDF-sampled
-                 continuation as though both sampled the same path. They do
-                 not: the continuation bends and the shadow ray does not, so
-                 wherever either crosses a refracting medium the sum is
-                 biased: a lens caustic comes out at half its radiance and
-                 white furnaces with refraction above 1 (test/test_nee.c).
-     NONE        no light sampling: lights, emitters and the sky count only
-                 where the bent path hits them, with MIS weight 1. Unbiased
-                 (furnaces give exactly 1), but noisy for small lights.
-     SHOOT       curved NEE by shooting (eikonal integrator), unbiased up
-                 to a cap on trials. The path from the last vertex to the
-                 light decides which estimators may make it: touching no
-                 refraction support (box or profile sphere), or weak (below),
-                 straight NEE and the forward path, by the power heuristic,
-                 as classic does; curved (part of it in a support, no sharp interface
-                 crossed) and ending on a quad or triangle light, the curved
-                 connection and the forward path, by the power heuristic on
-                 their solid-angle densities at the initial direction w0:
-                 p_nee = |det J_plane| / (area x light choices) (NEE's
-                 density had every solve found the root; the 1/p of the
-                 trials is an unbiased factor on top) and the vertex's own
-                 pdf of w0. The forward path computes det J_plane for itself
-                 from one shot along its own w0 with the same steps, so both
-                 sides evaluate the same function of the path, and the two
-                 weights sum to one (test/test_nee.c); any such weights keep
-                 the sum unbiased. Near a fold caustic det -> 0 and the
-                 forward path takes the path, which bounds NEE's 1/|det|
-                 (unweighted, its square is not integrable there).
-                 Everything else (across a sharp interface, to the sky, to
-                 sphere lights) only by forward paths, weight 1. The
-                 connection: a point y uniform on a light, Newton on the
-                 two angles of the initial direction so that the ray,
-                 traced with the same steps camera rays take, first crosses
-                 the light's plane from its front at y (at most 20 shots,
-                 residual < 1e-9 (1 + |y - x0|), step halved on a worse or
-                 failed shot and doubled up to 1, at most 0.5 rad, given up
-                 when three halvings in a row fail; det J = 0, a caustic,
-                 fails); the density from the Jacobi field of the same
-                 discrete steps, dw0 = dA_y / |det J_plane|
-                 (= |cos theta_y| / |det J_perp|); visibility and
-                 ratio-tracked transmittance along every chord. Seeds:
-                 Gaussians of 0.05 rad (6 in 10) and 0.3 rad (3 in 10)
-                 around the straight direction or a uniform direction, so
-                 every root has a nonzero probability p; a solve tries up to
-                 3 seeds; 1/p is estimated by repeating independent solves
-                 until the same root (within 1e-5) comes back, at most 64
-                 trials (Specular Manifold Sampling). A failed solve
-                 contributes zero. The derivative of grad eta has closed
-                 forms for the profiles and blobs; for grids (gridvol,
-                 NanoVDB, baked noise, a gas through Hauf-Grigull) it is
-                 the exact derivative of the blended gradient the rays
-                 use. With the refractive integrator SHOOT aims (AIM).
-     MANIFOLD    curved NEE by the paper's method (refractive and eikonal
-                 integrators, the same closed-form Hessians), partitioning
-                 path space by the same classes (weights: 1 for the estimator a
-                 path belongs to, 0 for the others; power heuristic only
-                 between straight NEE and forward paths outside supports).
-                 A point y uniform on a quad or triangle light; a chain of
-                 vertices on comb planes along the chord x0 -> y (spacing
-                 `step`, random offset, at most 512, wider beyond), each
-                 kicking the ray as the comb does (eta d += grad eta h,
-                 h the path it stands for); Newton on two unknowns a vertex
-                 (gauge `manifoldgauge chord`, the default: in the comb
-                 plane; `iso`: in the isosurface's tangent plane, the
-                 paper's, undefined where grad eta ~ 0) until every segment
-                 follows its kicked direction within 1e-9 rad:
-                 block-tridiagonal 2x2 Jacobian solved by block Thomas in
-                 O(n) inside a trust region (dogleg; radius halved on a
-                 step that does not lower the residual, doubled on one the
-                 linear model predicted), at most 40 evaluations; a
-                 singular pivot (a caustic) or a root that is not a
-                 physical path (a segment against its kick, a sharp
-                 interface crossed) fails. The density dw0/dA_y from the
-                 same block elimination (the generalised geometry term of
-                 Specular Manifold Sampling). Seeds: a direction from a
-                 mixture of Gaussians around the chord (0.02 rad half the
-                 time, 0.2 rad 3 in 8) and uniform (1 in 8), traced through
-                 the planes by the chain's own rule and aimed at y by
-                 shooting (at most 16 steps; a parabola where no trace
-                 reaches y's plane); the first solve and every trial draw
-                 from that one distribution. `manifoldtrials 0` (default, unbiased
-                 for the chain model): 1/p by repeating solves until the
-                 root recurs (initial directions within 1e-5), at most 64
-                 trials. `manifoldtrials M`: M solves, each distinct root
-                 counted once (biased low where a root's basin is small).
-                 `manifolddrop D`: leave out comb planes across which eta
-                 on the chord changes by less than D (faster, biased; 0, the
-                 default, keeps all). Unsupported IORs as for shoot.
-     AIM         bent shadow rays (refractive comb and eikonal integrators;
-                 the Poisson and midpoint schemes, whose rays bend at null
-                 events, leave curved connections to forward paths, counted
-                 in rrv_render_stats.solves_unsupported). The classes are
-                 SHOOT's; for a curved one, a point y uniform on a quad or
-                 triangle light gives w0 = (y - x0) / |y - x0|, and the
-                 shadow ray leaves x0 along w0 bent as camera rays are (the
-                 same comb kicks or eikonal steps), its transmittance
-                 ratio-tracked chord by chord; the light's radiance counts
-                 if the ray lands on that light's front, nothing if it meets
-                 anything else, leaves or crosses a sharp interface. w0 has
-                 the density of the straight line from x0 along w0 meeting
-                 the light, (|y - x0|^2 / |cos theta_y|) / (area x light
-                 choices), whichever face it meets: a function of w0 alone,
-                 so the power heuristic against the vertex's pdf of w0 is
-                 exact, and a forward path that reaches the light from x0
-                 along w0 takes the complementary weight wherever it lands
-                 on it. Unbiased for the integrator's own rays, no solve, no
-                 trials; as with NONE, focusing shows only as noise, so it
-                 suits weak heat haze (nearly every aimed ray lands) and not
-                 the caustics of small lights, which SHOOT solves.
-     The weak class (shoot, manifold and aim): a connection from x0 to y whose
-     straight chord touches no refraction support (or only supports with
-     zero gradient along it) is straight NEE's, with the ordinary MIS
-     weights; curved NEE skips it. A forward path that crossed no sharp
-     interface and ends at y (or leaves for the sky along d) is sorted by the
-     same function of its two ends, and, if its chord is weak but the path
-     itself turned (it left x0 at an angle to the chord larger than the
-     chord's bound on bending), it is another root of those two ends that no
-     light sample stands for. With aim it counts with weight 1; with shoot
-     and manifold it is shared by the power heuristic with one more ray a
-     vertex, drawn uniformly in the cone of a strongly refracting support
-     (one that can turn a ray by more than 0.05 rad across it: a lens) and
-     traced bent, which counts the light it lands on only for such roots
-     (rrv__cone_nee; the cone's density is a function of x0 and w0, so the
-     weights are exact). A build may set
-     RRV__WEAK_BEND to K > 0 to treat chords whose bound on bending (the
-     integral along the chord of each majorant cell's max |grad eta| over
-     the lowest eta) is at most K bend tolerances as straight too: on weak
-     heat haze that makes curved NEE cost ~1.3x straight NEE instead of
-     ~36x, but it is biased where a strong medium's gradient varies within
-     a cell (measured in README.md, "Weak connections"), so it is off.
+     DEFAULT     SHOOT (the default integrator is eikonal where shooting
+                 pays); with the refractive integrator, which shooting
+                 cannot differentiate, it aims (AIM).
+     STRAIGHT    a straight shadow ray, ratio-tracked, MIS with the bent
+                 continuation: biased wherever either crosses a refracting
+                 medium (a lens caustic at half its radiance).
+     NONE        no light sampling: unbiased (furnaces give exactly 1), noisy
+                 for small lights.
+     SHOOT       curved NEE by shooting (eikonal integrator): Newton on the
+                 initial direction until the bent ray lands on the light point,
+                 density from the Jacobi field, 1/p by repeated trials.
+     MANIFOLD    curved NEE by the paper's method (refractive and eikonal): a
+                 chain of comb vertices moved by a Newton-type solver until
+                 every segment follows its kick; slow.
+     AIM         bent shadow rays aimed at a light point (refractive comb and
+                 eikonal): unbiased, about straight NEE's cost, no focusing.
+     How each estimator works, its classes of paths and its MIS weights:
+     NOTES at the end of this file.
    Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2;
    blackbody emission is n^2 B where the IOR is n (Kirchhoff), so a fire does
    not dim by 1/n^2 on leaving a dense medium.
 
-   BOUNDARIES (design decisions)
-     Faces of refractive media (a medium's box; the sphere of a Luneburg or
-     fish-eye profile) end every straight segment. An IOR that jumps across
-     a face is a sharp interface: refracted once by Snell's law with the
-     face normal, reflected with the Fresnel probability or by total
-     internal reflection; such reflections count toward max_depth. A medium
-     whose IOR equals the ambient IOR everywhere does not refract. Outside an
-     IOR grid's own box (inside its medium's) the IOR is the ambient one,
-     unscaled by ior_scale.
+   BOUNDARIES, IOR GRIDS, BOUNDS: the faces of refractive media are sharp
+   interfaces where the IOR jumps (Snell, Fresnel); IOR grids are baked
+   trilinear (default) or tricubic (rrv_settings.ior_interpolation); hostile
+   input is refused at load and runaway paths are cut and counted
+   (rrv_render_stats.paths_cut). Without an `ambient ior` the air around a
+   gas medium is the same gas at its ambient state, so a plume whose faces
+   are at that state has no jump; a jump that remains is reported
+   (rrv_medium_face_jumps, `rrv info`, the render summary). The rules and
+   their limits: NOTES at the end.
 
-   IOR GRIDS (rrv_settings.ior_interpolation, scene `render iorinterp`)
-     Where the refractivity r = eta - 1 comes from a grid (IOR, gas state or
-     baked noise), prepare bakes it. TRILINEAR, the default: r trilinear and
-     grad r the trilinear blend of central differences, 16 bytes a sample.
-     That pair is only C0 and its gradient is not the value's derivative, so
-     on grids the comb and RK4 lose their orders (fitted 1.3 to 2.1 and 1.3
-     to 2.0; between neighbouring comb rates anywhere from 0.03 to 5.7).
-     CUBIC: the interpolating tricubic B-spline of r (end slopes from
-     one-sided differences, so cubics are reproduced), value and gradient
-     from one C2 function, 8 bytes a sample: the comb is second order and
-     RK4 third (2.9 to 3.9 measured) on grids, and rays through grids of
-     smooth fields land 65x to 550x closer to the fields' own, for ~1.4x the
-     time a comb kick and ~1.5x an RK4 step (README.md, "On IOR grids";
-     test/measure_grin.c grids). It rings (alternating, 0.27x a voxel) next to
-     features under ~2 voxels wide, where trilinear stays more faithful:
-     hence an option, not the default. Its value is floored halfway between
-     the lowest sample and -1, so eta stays positive where it overshoots.
-
-   BOUNDS
-     No input may hang a render, overflow a pixel or exhaust memory. Refused
-     at load with file:line: message (rrv_scene_prepare checks the media once
-     they are complete and names the statement that broke a limit; line 0 for
-     scenes built in code):
-       - an IOR outside [RRV_MIN_IOR, RRV_MAX_IOR] = [0.1, 10] anywhere in a
-         medium's box, from any field kind or the gas state: beyond it rays
-         are trapped or the radiance scale (eta_camera / eta)^2 explodes, and
-         no transparent material comes near 10;
-       - a peak extinction times the medium's size (its diagonal, or its
-         distance from the origin if larger) above RRV_MAX_OPTICAL_DEPTH =
-         1e12, or a density beyond float: the mean free flight must stay
-         thousands of rounding steps of the coordinates long, or tracking
-         stalls (an extinction of 3e38 gave flights of length 0);
-       - emission (L x scale, Le x Lescale) above RRV_MAX_RADIANCE = 1e20:
-         2^24 samples of it stay 1e11 below float's range;
-       - an ambient IOR above 10, a bend tolerance below 1e-4, mu_eta above
-         1e6 /m, an eikonal step outside [1e-6, 1e6] m (scene and CLI);
-       - a majorant or baked grid above the grid limit (max_grid_bytes);
-       - more than RRV_MAX_BLOBS = 4096 blobs in one field (every lookup
-         sums them all: a grid is the tool for more).
-     Cut and counted (rrv_render_stats.paths_cut, of them cut_tracking and
-     cut_samples):
-       - a tracking walk (one medium along one straight segment) after
-         64 + 4 (peak majorant x chord) tentative collisions (the majorant
-         of the channels it walks for: a channel whose extinction is 4x
-         below the densest walks with one of its own), at most
-         RRV_MAX_SEGMENT_EVENTS = 2^22: the count is Poisson with a mean of at
-         most the second term, so a correct walk never gets there (P < 1e-30);
-       - a leg of a path (between two real vertices) after 64 + 16 times the
-         loop iterations of one straight crossing of every medium at its
-         densest rate (comb kicks, null events, or 4 / step eikonal steps),
-         at most RRV_MAX_SEGMENT_STEPS = 1e7: only trapped rays get there;
-       - a camera path (one pixel sample; of paths_cut, cut_samples) when
-         its loop iterations over all legs plus the tentative collisions it
-         and its shadow rays sampled pass 4 (max_depth + 1) (64 + 16 (1 +
-         one crossing's iterations and collisions at the peak majorant)):
-         a leg and a shadow ray a vertex, each at the leg bound with a
-         collision every iteration, which a path whose legs are within
-         their bound passes only with collisions beyond 16 crossings a
-         leg; at most RRV_MAX_SAMPLE_WORK = 2^24 (a second of one core in
-         eikonal steps): legs each within their bound, 1025 of them (an
-         eikonal step of 1e-6 m in a closed white room) were minutes a
-         sample. It is checked once a loop iteration, so a sample overruns
-         it by at most one walk and one vertex's light sampling. The
-         scenes in scenes/ stay 310x below the cap with every integrator,
-         NEE and scheme, and 7x below their own term (README.md).
-       - a ray trapped in a refracting medium (of paths_cut, trapped_paths):
-         one whose run through the refraction supports since its last
-         vertex (real, or a reflection at a face) passes 2.83 times the sum
-         of the refracting boxes' diagonals, the longest straight run
-         through them all (rrv__trap_length). That is a bound in the
-         scene's scale, where the leg bound above counts iterations, which
-         a thin feature's fine comb makes dense: a ray circling in the 1 mm
-         layer of a shell of IOR 3 (a kick every 1.7 um) is ended after
-         10.8 m instead of 14 (the sample's bound), in a 5 cm layer after
-         1.3e5 kicks instead of 7.3e5. Safe: a walk that turns by at most a half circle in all
-         (kicks, steps, refractions at faces summed) runs at most 2 sqrt(2)
-         times that sum inside the boxes (split it where it has turned half
-         of it: each half keeps within 45 degrees of its middle direction,
-         so it advances along it by 1/sqrt(2) of its length, and in each
-         box by at most the diagonal), so only a ray that turned by more
-         than a half circle without a vertex is ended: one circling in a
-         waveguide or an orbit (a camera or a scattering point inside a
-         shell's layer of high IOR, inside Maxwell's fish-eye). The scenes
-         in scenes/ stay 2.9x below it with the comb, Poisson and eikonal
-         (README.md). The schemes that refract at null events keep the leg
-         bound alone: the midpoint scheme's first-order error sends rays
-         from outside a Luneburg or fish-eye lens into orbits that leak out
-         again past this bound (5.8% of luneburg.rrv's camera paths at 1
-         spp), and ending them darkened those renders by 8% and 13%; the
-         seed's Poisson events stay below it, but a bound that hangs on the
-         scheme's error is not one to trust. The light such a ray would still gather is lost, as
-         at the leg bound: none, for good, in an orbit without extinction
-         or surfaces; that of a fibre that lets it go after more than the
-         bound, or of a medium it would scatter in later. Its cost is an
-         addition a segment and a comparison a loop iteration.
-     A cut camera path keeps the light it gathered before the cut; a cut
-     shadow ray is dark. That is biased, so it is never silent: the CLI's
-     summary line prints the count. A sample above RRV_MAX_SAMPLE = 1e30 is
-     discarded as non-finite; pixel sums saturate at FLT_MAX. To keep cuts
-     rare, majorant cells follow the density voxels where a cell would hold
-     an optical depth above 64 (split into equal parts where fewer than 16
-     would cross the box, each bounded exactly; beside a grid's faces the
-     cells bound 0), and RK4 halves steps that span a feature of the IOR.
-     What is left is heavy-tailed: a path that scatters in the thin layer
-     where a grid's density rises from 0 pays null collisions to leave it,
-     about (cell size) x sqrt(2 x slope of the extinction) of them, so a
-     2^3 grid of 7e10 on one face in a 2 m box takes ~3e5 events a sample
-     at 16 cells an axis (test/test_budget.c).
+   READING MAP (the paper's terms and the functions that implement them;
+   `grep -n "^/\* [-=][-=][-=][-=]" rrv.h` lists the sections quoted)
+     refractive delta tracking, the paper's Algorithm 1 (Snell at every null
+       collision): rrv__refractive_delta_tracking, which bends through
+       rrv__bend_at_null_event and rrv__refract_at_null_event (scheme POISSON)
+     the comb (leapfrog kicks at spaced points, the default scheme):
+       rrv__comb_step, rrv__comb_kick, rrv__comb_spacing ("refraction along a
+       walk")
+     Hauf-Grigull (the IOR of a gas from T and P): rrv__refractivity and
+       rrv__gas_fused ("the refractive index"); CONVENTIONS below
+     refractive ratio tracking (the paper's NEE, nee MANIFOLD):
+       rrv__manifold_nee; its solver rrv__manifold_solve on the chain of
+       rrv__chain_* ("nee MANIFOLD")
+     curved NEE by shooting and aiming: rrv__shoot_nee, rrv__solve_shot_seeded;
+       rrv__aim_nee; rrv__cone_nee ("solver", "nee AIM")
+     the eikonal reference (Ament et al.): rrv__eikonal_step,
+       rrv__eikonal_step_controlled, rrv__eikonal_plan ("eikonal")
+     ratio tracking of shadow rays: rrv__ratio_tracking_transmittance;
+       the path tracer: rrv__trace_path; a rectangle: rrv_render_rect
 
    USAGE
      In exactly one C file:
@@ -407,6 +229,7 @@
      rrv_read_pfm_memory    the same from memory
      rrv_read_exr           read a scanline RGB OpenEXR file
      rrv_read_exr_memory    the same from memory
+     rrv_open_read          open a file for reading as every reader does (regular files only)
      rrv_exr_find_attribute an OpenEXR header attribute by name (rrv's part metadata)
      rrv_half_from_float    the IEEE half nearest a float (finite values clamped)
      rrv_crc32, rrv_adler32 the checksums the PNG and EXR writers use
@@ -419,14 +242,38 @@
      RRV_STATIC       make every public function static to the including file
      RRV_NO_STDIO     no FILE* I/O: load through rrv_load_options.read_file and
                       write through the callback writers
+     RRV_NO_POSIX     plain C files only. By default, where __unix__ or
+                      __APPLE__ is defined, the implementation uses POSIX's
+                      open, fstat and fcntl (and stat beside the writers'
+                      rename): every reader opens without blocking and
+                      refuses what is not a regular file (a FIFO, a device,
+                      a folder: rrv_open_read), the writers refuse such a
+                      target and create their temporary file exclusively.
+                      With RRV_NO_POSIX, or elsewhere, they use fopen alone:
+                      a FIFO given as input blocks until a writer opens it,
+                      an endless device is read up to the size limit, and
+                      a device node at a writer's target is replaced.
+                      The POSIX calls come from <fcntl.h>, <sys/stat.h> and
+                      <unistd.h>, which glibc declares under -std=c99 too,
+                      except fdopen: rrv.h declares that one itself (in C),
+                      so the header works after any includes of the user's.
+                      A libc that hides more under strict C wants
+                      _POSIX_C_SOURCE 200809L before its first header, as
+                      rrv_impl.c defines it.
 
    FILES
-     Every input is untrusted and read with bounds: a scene or OBJ file up to
-     rrv_load_options.max_grid_bytes, a PFM header and then exactly the pixels
-     it announces, an OpenEXR file whole (up to 2 GiB) with every offset and
-     size checked against it. Scene numbers are decimal (no hexadecimal) and read the
-     same in any locale. The file writers replace their target through a new
-     temporary file; rrv_write_pfm says what plain C cannot promise there.
+     Every input is untrusted and read with bounds, and only from a regular
+     file (rrv_open_read; a FIFO or a device is refused at once, unread):
+     a scene, OBJ or NanoVDB file up to rrv_load_options.max_grid_bytes (a
+     larger one refused by its size before any byte is read), a gridvol's
+     48-byte header and then exactly the samples it announces, a PFM
+     header and then exactly the pixels it announces (more than the file
+     holds is refused by its size), an OpenEXR file whole (up to 2 GiB)
+     with every offset and size checked against it. Scene numbers are
+     decimal (no hexadecimal) and read the same in any locale. The file
+     writers replace their target through a new temporary file and refuse
+     a target that is no regular file; rrv_write_pfm says how links are
+     treated and what plain C cannot promise there.
      Images out: rrv_write_pfm (float), rrv_write_exr (OpenEXR scanline, half
      or float, ZIP or uncompressed, a crop placed in a larger display
      window; rrv_half_from_float is its rounding), rrv_write_png (8-bit sRGB
@@ -437,24 +284,8 @@
    CONVENTIONS (the contract between scene files, the library and tests)
      Units: metres, kelvin, pascal; extinction in 1/m. Colour is linear RGB,
      three channels; the IOR is achromatic.
-     Grids ("gridvol", as defined by Mitsuba 0.6), all little endian:
-       3 bytes "VOL", 1 byte version 3, int32 encoding 1 (float32),
-       int32 xres yres zres (each >= 2), int32 channels (1 or 3),
-       float32 box xmin ymin zmin xmax ymax zmax, then float32 samples at
-       index ((z*yres + y)*xres + x)*channels + c.
-       Samples sit on corners: sample i along x is at xmin + i*(xmax-xmin)/
-       (xres-1), so the first and last lie on the box faces. Outside the box
-       a field takes its ambient value. A file is refused (with the reason)
-       for a wrong magic or version, a resolution < 2 or an overflowing
-       size, a byte count that does not match, an empty or non-finite box, a
-       NaN or infinite sample, or a negative density.
-     NanoVDB grids (.nvdb, NanoVDB 32.x as nanovdb_convert writes them,
-       little endian, uncompressed; float, fp4, fp8, fp16, fpN): value ijk
-       sits at world map * ijk + translation (the grid's own map), trilinear
-       between index points; where no data is stored, the grid's background,
-       and an IOR grid beyond one voxel past its data is the ambient IOR.
-       Every offset is checked against the grid's buffer and every value
-       must be finite; negative densities count as 0. See rrv_nanovdb.
+     Grids: gridvol (Mitsuba 0.6's format) and NanoVDB 32.x files; their
+       layout and why a file is refused: NOTES at the end of this file.
      Gas IOR (Hauf-Grigull; Gladstone-Dale for an ideal gas):
        eta - 1 = (eta_ref - 1) (P / P_ref) (T_ref / T), defaults eta_ref =
        1.000292, P_ref = 101325 Pa, T_ref = 300 K; its gradient is
@@ -463,77 +294,18 @@
      Precision: air's eta - 1 is ~3e-4 and a fire moves it by ~2e-4, about
        2000 float ulps of 1, so rays carry the refractivity r = eta - 1 in
        double, and IOR ratios are formed as 1 + (r_i - r_o) / (1 + r_o).
-     Snell at a null event: ratio m = eta_i / eta_o, normal n = grad eta / |
-       grad eta| facing the incoming ray, c = -n.d, k = 1 - m^2 (1 - c^2);
-       k < 0 reflects (d + 2 c n), else d' = m d + (m c - sqrt(k)) n, written
-       as a change of d so that m ~ 1 does not cancel.
      Radiance: L / eta^2 is invariant along a ray (Ament et al. 2014), so a
        path from an emitter at eta_e to the camera at eta_c scales by
        (eta_c / eta_e)^2; thermal emission follows Kirchhoff (above).
-
-   HISTORY
-     0.9.1  the refraction floor measured per sample (the comb without
-            kicks costs 1.40x / 1.51x classic's instructions on fire /
-            haze, above the 1.25x target; test/bench/per_sample.py);
-            cheaper looks for faces and majorant iterator set-up, the next
-            kick's cell prefetched (bit-identical); rrv info and
-            rrv_medium_channel_groups show a medium's channel groups; a
-            camera frame from vectors whose squares underflow is unit
-     0.9.0  channel groups: channels whose extinctions differ more than 4x
-            walk with majorants of their own (a thin channel no longer
-            takes a dense one's collisions: sigma_t 4, 6e10, 6 per metre
-            took 4e6-collision walks); with that, the Sobol sampler is the
-            default (lens caustic, 1 m light: shoot 7x none, from 1.6x);
-            free flights drawn as an optical depth walked through the
-            majorant cells (one random number a collision, not a cell)
-     0.8.0  one light draw a vertex shared by straight and curved NEE;
-            eikonal steps skip their support looks inside a safety ball
-            (bit-identical); shoot's coarse stage capped at 0.6 rad a
-            step; the Sobol sampler measured on every scene (up to 6x
-            less variance where light is sampled through refraction:
-            lens caustic, 1 m light, shoot 7x none with sobol), not yet
-            the default
-     0.7.0  nee shoot and manifold also draw rays toward strongly
-            refracting supports, for the roots of weak chords that
-            forward paths carried alone (the heavy tail of small-light
-            caustics); shoot's solves 1.7x-3x cheaper (steps and Jacobi
-            fields share lookups, fused profile and gas evaluations);
-            comb chords' walks and set-up cheaper (refraction 2.30x
-            classic on fire, 2.28x on haze, from 2.38x and 2.39x)
-     0.6.0  nee aim: bent shadow rays aimed at light samples, unbiased at
-            about straight NEE's cost, the refractive default (as shoot);
-            shoot's solve 3.4x cheaper on haze (fused Jacobian
-            lookup, polish memo, the root's own chords); cheaper faces of
-            refractive boxes (float rounding is no interface); a comb
-            spacing bounded by the gradient's variation, measured and
-            left off
-     0.5.0  unbiased NEE by default (shoot: curved connections solved with
-            the eikonal integrator, left to forward paths with the
-            refractive one); shoot shares paths with the
-            forward path by MIS; manifold's kick model, trust region and heap
-            scratch; exact derivatives of every IOR kind's gradient, so both
-            run in grids and gas states; exact majorants of coarse grids;
-            the comb's rate integrated cell by cell; scenes fire_caustic and
-            haze
-     0.4.0  scenes built in code (rrv_scene_create and friends: zero means
-            default, one check per object, the parser a client); nee manifold
-            (the paper's refractive ratio tracking); Sobol sampler; parallel
-            set-up (parallel_for); cheaper comb spacing; errors from
-            rrv_render_rect and the writers; deflated PNG; EXR attributes
-     0.3.0  boundaries: support faces are sharp interfaces (Snell, Fresnel,
-            total internal reflection) in every integrator; work bounds and
-            load-time limits; nee none|straight|shoot; OpenEXR in and out;
-            NanoVDB grids; cubic IOR grids; one segment planner shared by the
-            path tracer and rrv_trace_ray
-     0.2.0  refraction: IOR fields (gas state, profiles, grids), refractive
-            and eikonal integrators, rrv_trace_ray
-     0.1.0  classic null-scattering path tracer, scene format, image I/O
 */
 #ifndef RRV_H_INCLUDED
 #define RRV_H_INCLUDED
 
 #include <stddef.h>
 #include <stdint.h>
+#ifndef RRV_NO_STDIO
+#include <stdio.h> /* FILE, for rrv_open_read */
+#endif
 
 #define RRV_VERSION_MAJOR 0
 #define RRV_VERSION_MINOR 9
@@ -742,7 +514,11 @@ typedef struct rrv_camera {
 } rrv_camera;
 
 typedef enum rrv_integrator {
-    RRV_INTEGRATOR_CLASSIC = 0, /* IOR 1 everywhere: the production baseline */
+    RRV_INTEGRATOR_DEFAULT = 0, /* chosen from the scene (rrv_scene_integrator):
+                                   CLASSIC where nothing refracts, else
+                                   REFRACTIVE or EIKONAL by the rule in the
+                                   manual (INTEGRATORS, "default") */
+    RRV_INTEGRATOR_CLASSIC,     /* IOR 1 everywhere: the production baseline */
     RRV_INTEGRATOR_REFRACTIVE,  /* refractive delta tracking */
     RRV_INTEGRATOR_EIKONAL      /* ray-equation marching: the accuracy reference */
 } rrv_integrator;
@@ -827,7 +603,8 @@ typedef struct rrv_settings {
     rrv_refraction_scheme refraction; /* refractive */
     double step;          /* eikonal: step length h, m */
     rrv_stepper stepper;  /* eikonal */
-    double ambient_ior;   /* IOR outside every medium, >= 1 */
+    double ambient_ior;   /* IOR outside every medium, >= 1; 0 = the gas at its
+                             ambient state (BOUNDARIES in the manual), else 1 */
     int majorant_cells;   /* majorant grid cells per axis; 0 = automatic, 1 = one
                              global majorant (for comparisons). Used by prepare. */
     rrv_ior_interpolation ior_interpolation; /* grid refractivity; used by prepare */
@@ -869,6 +646,10 @@ typedef struct rrv_medium {
        temperature, pressure and ior statements, so that the limit checks of
        rrv_scene_prepare name the line that broke one; 0 = built in code. */
     int line[5];
+    /* The grid or NanoVDB file each of those field statements read, as the
+       scene wrote it (clipped to 127 bytes), or "": those checks name it
+       beside the scene line. */
+    char source[5][128];
     /* Built by rrv_scene_prepare; NULL before. */
     struct rrv__majorant_grid *majorant;
 } rrv_medium;
@@ -894,6 +675,12 @@ typedef struct rrv_scene {
     int *lights; int light_count;          /* indices of emissive shapes */
     struct rrv__bvh_node *bvh; int bvh_node_count;
     int *bvh_prims;                        /* shape indices in leaf order */
+    double ambient_ior;                    /* the IOR outside every medium:
+                                              settings.ambient_ior, or for 0
+                                              the first gas medium's at its
+                                              ambient state (1 without one) */
+    int prepared;                          /* 1 after rrv_scene_prepare succeeded, 0 again
+                                              after an edit through the calls */
     size_t bytes;                          /* heap bytes the scene holds */
     size_t grid_bytes;                     /* of which grid samples */
     size_t max_grid_bytes;                 /* the largest grid rrv_scene_prepare may
@@ -999,7 +786,9 @@ RRV_DEF const char *rrv_nanovdb_type_name(rrv_nanovdb_type type);
    Defaults a zero asks for:
      camera    up (0,1,0), fov 40, 320 x 240 (eye and look have none)
      settings  spp 16, max_depth 32, bend_tolerance 0.01, step 0.01,
-               ambient_ior 1; the enums' zero members are the defaults
+               ambient_ior from the gas, else 1 (BOUNDARIES); the enums'
+               zero members are the defaults (integrator: chosen from
+               the scene, INTEGRATORS)
      material  albedo 0.5 (diffuse) or 0.8 and albedo2 0.2 (checker),
                checker_scale 1
      medium    sigma_a and sigma_s 1 (when all six are zero), scale 1,
@@ -1133,11 +922,36 @@ typedef struct rrv_render_stats {
    Thread-safe for distinct pixels: the scene is only read (give each
    thread its own err, or NULL). With nee manifold each call allocates
    its solver's scratch (~250 KB, RRV_MALLOC) and frees it on return;
-   RRV_ERROR_MEMORY, with nothing added, when that fails. */
+   RRV_ERROR_MEMORY, with nothing added, when that fails. Refused with
+   RRV_ERROR_ARGUMENT, nothing added: a scene that was never prepared (or
+   edited since: rrv_scene_prepare), a rectangle outside the image, and
+   sample indices outside [0, RRV_MAX_SPP) -- the bound of a scene's spp,
+   where a float sum stops counting (2^24 + 1 rounds to 2^24). */
+#define RRV_MAX_SPP 16777216
 RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
                                    int sample_begin, int sample_end,
                                    float *sum, int stride, rrv_render_stats *stats,
                                    rrv_error *err);
+
+/* The integrator rrv_render_rect uses for a prepared scene: its settings'
+   one, or for RRV_INTEGRATOR_DEFAULT the manual's rule (INTEGRATORS,
+   "default"): CLASSIC where no medium's IOR differs from the ambient one,
+   EIKONAL (curved NEE solved by shooting) where every refracting medium is
+   clear and a quad or triangle light is small as seen from one, REFRACTIVE
+   otherwise. */
+RRV_DEF rrv_integrator rrv_scene_integrator(const rrv_scene *scene);
+
+/* The sharp interfaces of a prepared scene's medium: for each face of its
+   box (-x, +x, -y, +y, -z, +z) and, for a Luneburg or fish-eye profile,
+   its sphere (jump[6]; 0 for other media), the largest |eta just inside -
+   eta just outside| on a 65 x 65 lattice of the face (the sphere: 128 x
+   64 in longitude and latitude, where inside the box), where the refractivity on either side is
+   that of the scene (the ambient IOR, or another medium's where boxes
+   overlap). Jumps of 1e-7 or less, the float rounding of an IOR near 1
+   (where Fresnel reflects < 1e-14 and curved NEE crosses the face), are
+   0. Returns the largest of the seven, 0 for a medium that does not
+   refract or an index out of range. */
+RRV_DEF double rrv_medium_face_jumps(const rrv_scene *scene, int medium, double jump[7]);
 
 /* One walk of a ray through the refractive media only (absorption and
    scattering ignored), as `rrv trace` prints it. The visit callback, if not
@@ -1220,12 +1034,21 @@ RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char
 /* File forms. Writers write a new temporary file "<path>.<random>.tmp" next
    to path and rename it over path only when everything was written, so a
    failure never leaves half an image and never touches an existing file of
-   another name. Plain C cannot create a file exclusively before C11 nor tell
-   a device or a folder from a file, so with C99 two writers can in rare
-   cases pick the same temporary name, and an existing device node at path
-   is replaced: a client that needs more (rrv's CLI) uses its platform's
-   mkstemp, stat and rename around rrv_write_pfm_to. The reader reads the
-   header first and then exactly the pixel data it announces. */
+   another name. An existing path that is not a regular file (a device
+   node, a FIFO, a socket, a folder) is refused with RRV_ERROR_IO and
+   "cannot write: it is a FIFO, not a regular file" (or the kind it is),
+   and nothing is written. A symbolic link is judged by what it points to:
+   one to a device is refused; one to a regular file, or a dangling one, is
+   replaced by the image (rename replaces the link itself; the file it
+   pointed to is left as it was). The check and the rename are two steps,
+   so a path swapped between them is not caught. All of this needs POSIX
+   (CONFIGURATION: RRV_NO_POSIX); plain C cannot tell a device from a file
+   nor create a file exclusively before C11, so there an existing device
+   node at path is replaced and two writers can in rare cases pick the same
+   temporary name: a client that needs more uses its platform's calls
+   around rrv_write_pfm_to. The readers open only regular files, never
+   blocking on a FIFO (rrv_open_read), and read the header first and then
+   exactly the pixel data it announces. */
 RRV_DEF rrv_result rrv_write_pfm(const char *path, const float *rgb, int width, int height,
                                  rrv_error *err);
 RRV_DEF rrv_result rrv_write_png(const char *path, const float *rgb, int width, int height,
@@ -1236,6 +1059,16 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
                                 rrv_error *err);
 RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *height,
                                 rrv_exr_options *info, rrv_error *err);
+#ifndef RRV_NO_STDIO
+/* Opens path for reading ("rb") as every file reader of rrv does: only a
+   regular file, and without blocking on the way (opening a FIFO with no
+   writer, or a terminal, would wait forever). Anything else is refused with
+   RRV_ERROR_IO and err naming path, line 0, with "not a regular file" (or
+   "is a directory", "no such file", "permission denied"). *size gets the
+   file's size in bytes, or UINT64_MAX where it cannot be told. Without
+   POSIX (CONFIGURATION) it is plain fopen: a FIFO there still blocks. */
+RRV_DEF rrv_result rrv_open_read(const char *path, FILE **file, uint64_t *size, rrv_error *err);
+#endif
 
 /* Checksums the PNG writer uses, exposed for tests and tools. Start with 0 (crc)
    and 1 (adler). */
@@ -2621,6 +2454,35 @@ static int rrv__medium_refracts(const rrv_medium *m)
     return m->ior_from_gas || m->ior.kind != RRV_FIELD_NONE;
 }
 
+/* The IOR outside every medium: the scene's `ambient ior`, or where none
+   was given the one rrv_scene_prepare derived (rrv__resolve_ambient). */
+static double rrv__ambient_ior(const rrv_scene *scene)
+{
+    if (scene->settings.ambient_ior != 0.0) return scene->settings.ambient_ior;
+    return scene->ambient_ior > 0.0 ? scene->ambient_ior : 1.0;
+}
+
+/* No `ambient ior`: the air around a gas medium is the same gas at its
+   ambient state (T_ref, P_ref, where its fields end), so a plume whose
+   faces are at that state has no IOR jump whatever its iorscale. The
+   first gas medium listed sets it; another gas whose ambient state
+   differs keeps a jump at its faces, which rrv_medium_face_jumps reports.
+   Without a gas medium the ambient IOR is 1 (vacuum or unscaled air
+   whose refractivity is left out, as classic does). */
+static double rrv__resolve_ambient(const rrv_scene *scene)
+{
+    int i;
+    if (scene->settings.ambient_ior != 0.0) return scene->settings.ambient_ior;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        double eta;
+        if (!m->ior_from_gas) continue;
+        eta = 1.0 + (m->eta_ref - 1.0) * m->ior_scale;
+        return eta >= 1.0 && eta <= RRV_MAX_IOR ? eta : 1.0;
+    }
+    return 1.0;
+}
+
 /* An IOR that is the ambient one everywhere in the box (a constant equal to
    it) bends nothing and has no interface: such a medium renders exactly as
    classic does, paying nothing for its IOR. */
@@ -2635,7 +2497,7 @@ static int rrv__ior_is_ambient(const rrv_scene *scene, const rrv_medium *m)
     } else {
         return 0;
     }
-    return r == scene->settings.ambient_ior - 1.0;
+    return r == rrv__ambient_ior(scene) - 1.0;
 }
 
 /* The field to evaluate: the baked copy when there is one. */
@@ -3374,7 +3236,7 @@ static double rrv__refractivity_gradient_hessian(const rrv_medium *m, rrv_vec3 p
    medium whose box holds p, the ambient one elsewhere. */
 static double rrv__scene_refractivity(const rrv_scene *scene, rrv_vec3 p, rrv_vec3 *grad)
 {
-    double ambient_r = scene->settings.ambient_ior - 1.0;
+    double ambient_r = rrv__ambient_ior(scene) - 1.0;
     int i;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
@@ -3931,7 +3793,7 @@ static rrv_result rrv__bake_cubic(const rrv_scene *scene, rrv_medium *m, const r
                                   rrv_error *err)
 {
     struct rrv__majorant_grid *g = m->majorant;
-    double ambient_r = scene->settings.ambient_ior - 1.0, rmin = DBL_MAX, *c, *scratch;
+    double ambient_r = rrv__ambient_ior(scene) - 1.0, rmin = DBL_MAX, *c, *scratch;
     int n[3], P[3], x, y, z, longest;
     size_t count, sx, sy, sz;
     n[0] = lattice->nx; n[1] = lattice->ny; n[2] = lattice->nz;
@@ -4022,7 +3884,7 @@ static rrv_result rrv__bake_refraction(const rrv_scene *scene, rrv_medium *m, si
     rrv_grid nanovdb_lattice;
     const rrv_field *candidates[2];
     struct rrv__majorant_grid *g = m->majorant;
-    double ambient_r = scene->settings.ambient_ior - 1.0;
+    double ambient_r = rrv__ambient_ior(scene) - 1.0;
     size_t count, i;
     int k, x, y, z, n[3];
     float *data;
@@ -4302,7 +4164,7 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
         rrv__majorant_bake job;
         job.m = m;
         job.g = g;
-        job.ambient_r = scene->settings.ambient_ior - 1.0;
+        job.ambient_r = rrv__ambient_ior(scene) - 1.0;
         rrv__parallel_for(scene, g->n[2], rrv__majorant_slice, &job);
     }
     for (c = 0; c < cells; ++c) {
@@ -5426,7 +5288,7 @@ static inline double rrv__kick_lookup(const rrv_scene *scene, rrv_vec3 p, const 
     const struct rrv__majorant_grid *mg = medium ? medium->majorant : NULL;
     return mg && mg->refraction.data && !mg->cubic && rrv__inside_box(p, mg->refraction.lo, mg->refraction.hi)
                ? rrv__refraction_lookup(mg, p, grad)
-           : medium ? rrv__refractivity_gradient(medium, p, scene->settings.ambient_ior - 1.0, grad)
+           : medium ? rrv__refractivity_gradient(medium, p, rrv__ambient_ior(scene) - 1.0, grad)
                     : rrv__scene_refractivity(scene, p, grad);
 }
 
@@ -6732,6 +6594,7 @@ static void rrv__scene_release_prepared(rrv_scene *scene)
     scene->bvh_prims = NULL;
     scene->lights = NULL;
     scene->bvh_node_count = scene->light_count = 0;
+    scene->prepared = 0;
 }
 
 /* The limits of BOUNDS for one medium, with the scene line of the statement
@@ -6750,6 +6613,11 @@ static rrv_result rrv__check_medium(const rrv_scene *scene, const rrv_medium *m,
                          RRV_MAX_RADIANCE);
     if (!rrv__medium_extinction_ok(m, &a)) {
         at = m->line[1] > m->line[0] ? 1 : 0;
+        if (m->source[at][0])
+            return rrv__fail(err, m->line[at] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[at],
+                             "%s: grid \"%s\" gives medium \"%s\" an extinction of %g /m, over its %g m an "
+                             "optical depth above the %g rrv accepts",
+                             stmt[at], m->source[at], m->name, a, rrv__medium_size(m), RRV_MAX_OPTICAL_DEPTH);
         return rrv__fail(err, m->line[at] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[at],
                          "%s: medium \"%s\" reaches an extinction of %g /m, over its %g m an optical depth "
                          "above the %g rrv accepts",
@@ -6761,6 +6629,10 @@ static rrv_result rrv__check_medium(const rrv_scene *scene, const rrv_medium *m,
             if (m->line[2] > m->line[at]) at = 2;
             if (m->line[3] > m->line[at]) at = 3;
         }
+        if (m->source[at][0])
+            return rrv__fail(err, m->line[at] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[at],
+                             "%s: grid \"%s\" gives medium \"%s\" an IOR from %g to %g; it must stay within "
+                             "[%g, %g]", stmt[at], m->source[at], m->name, a, b, RRV_MIN_IOR, RRV_MAX_IOR);
         return rrv__fail(err, m->line[at] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[at],
                          "%s: medium \"%s\" gets an IOR from %g to %g; it must stay within [%g, %g]", stmt[at],
                          m->name, a, b, RRV_MIN_IOR, RRV_MAX_IOR);
@@ -6784,6 +6656,7 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
        code get the same refusals here (scene file section: the checks). */
     res = rrv__scene_check(scene, err);
     if (res != RRV_OK) return res;
+    scene->ambient_ior = rrv__resolve_ambient(scene);
     for (i = 0; i < scene->medium_count; ++i) {
         res = rrv__check_medium(scene, &scene->media[i], err);
         if (res != RRV_OK) return res;
@@ -6820,6 +6693,7 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
         }
         if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
     }
+    scene->prepared = 1;
     return RRV_OK;
 }
 
@@ -6858,11 +6732,133 @@ static rrv_vec3 rrv__camera_ray(const rrv__camera_frame *f, const rrv_camera *ca
     return rrv__normalize(rrv__add(f->forward, rrv__add(rrv__scale(f->right, sx), rrv__scale(f->up, sy))));
 }
 
+static int rrv__jump_counts(double jump);
+
+/* The jump of the scene's refractivity across a surface at `at`, a few
+   rounding gaps to either side along its normal; 0 where it is one curved
+   connections cross (RRV__SOLVE_JUMP: below it Fresnel reflects < 1e-14,
+   the rounding of an IOR near 1 in float). */
+static double rrv__jump_at(const rrv_scene *scene, rrv_vec3 at, rrv_vec3 normal)
+{
+    double gap = 4.0 * rrv__face_gap(at);
+    double r_in = rrv__scene_refractivity(scene, rrv__madd(at, normal, -gap), NULL);
+    double r_out = rrv__scene_refractivity(scene, rrv__madd(at, normal, gap), NULL);
+    return rrv__is_jump(r_in, r_out) && rrv__jump_counts(fabs(r_in - r_out)) ? fabs(r_in - r_out) : 0.0;
+}
+
+#define RRV__JUMP_LATTICE 65
+
+RRV_DEF double rrv_medium_face_jumps(const rrv_scene *scene, int medium, double jump[7])
+{
+    const rrv_medium *m;
+    double worst = 0;
+    int f, i, j;
+    for (f = 0; f < 7; ++f) jump[f] = 0;
+    if (!scene || medium < 0 || medium >= scene->medium_count) return 0;
+    m = &scene->media[medium];
+    if (!rrv__medium_refracts(m)) return 0;
+    for (f = 0; f < 6; ++f) {
+        int a = f / 2, u = (a + 1) % 3, v = (a + 2) % 3;
+        double lo[3], hi[3], n[3] = {0, 0, 0};
+        lo[0] = m->lo.x; lo[1] = m->lo.y; lo[2] = m->lo.z;
+        hi[0] = m->hi.x; hi[1] = m->hi.y; hi[2] = m->hi.z;
+        n[a] = f & 1 ? 1.0 : -1.0;
+        for (i = 0; i < RRV__JUMP_LATTICE; ++i)
+            for (j = 0; j < RRV__JUMP_LATTICE; ++j) {
+                double x[3];
+                x[a] = f & 1 ? hi[a] : lo[a];
+                /* cell centres: an edge belongs to two faces and to neither's normal */
+                x[u] = lo[u] + (hi[u] - lo[u]) * (i + 0.5) / RRV__JUMP_LATTICE;
+                x[v] = lo[v] + (hi[v] - lo[v]) * (j + 0.5) / RRV__JUMP_LATTICE;
+                jump[f] = rrv__maxd(jump[f], rrv__jump_at(scene, rrv__v3(x[0], x[1], x[2]), rrv__v3(n[0], n[1], n[2])));
+            }
+    }
+    if (rrv__has_sphere_support(m)) {
+        const rrv_field *s = &m->ior;
+        for (i = 0; i < 2 * (RRV__JUMP_LATTICE - 1); ++i)
+            for (j = 0; j < RRV__JUMP_LATTICE - 1; ++j) {
+                double phi = 2.0 * RRV__PI * (i + 0.5) / (2.0 * (RRV__JUMP_LATTICE - 1));
+                double theta = RRV__PI * (j + 0.5) / (RRV__JUMP_LATTICE - 1);
+                rrv_vec3 n = rrv__v3(sin(theta) * cos(phi), cos(theta), sin(theta) * sin(phi));
+                rrv_vec3 at = rrv__madd(s->center, n, s->radius);
+                if (!rrv__inside_box(at, m->lo, m->hi)) continue;
+                jump[6] = rrv__maxd(jump[6], rrv__jump_at(scene, at, n));
+            }
+    }
+    for (f = 0; f < 7; ++f) worst = rrv__maxd(worst, jump[f]);
+    return worst;
+}
+
+/* The default integrator's light-size threshold: a quad or triangle light
+   whose side (the square root of its area) over its distance from a clear
+   refracting medium's box centre is below this is small (test/bench/RESULTS.md,
+   "Which integrator by default"). */
+#define RRV__SMALL_LIGHT 0.5
+
+static int rrv__boxes_overlap(const rrv_medium *a, const rrv_medium *b)
+{
+    return a->lo.x <= b->hi.x && b->lo.x <= a->hi.x && a->lo.y <= b->hi.y && b->lo.y <= a->hi.y &&
+           a->lo.z <= b->hi.z && b->lo.z <= a->hi.z;
+}
+
+/* Shooting pays where its solves are few and the light it finds is
+   focused: every refracting medium clear (no medium with extinction
+   overlaps its box, so the only vertices that connect through it lie on
+   surfaces, and the caustic they see is sharp) and some area light small
+   from one of them (aimed shadow rays sample the straight cone of the
+   light, which misses the bent rays' preimage once the light's angular
+   size falls to the order of the bending). Elsewhere the comb with aimed
+   shadow rays is the cheaper unbiased estimator (README.md measures
+   both). */
+static rrv_integrator rrv__default_integrator(const rrv_scene *scene)
+{
+    int i, j, k, refracts = 0, clear = 1, small = 0;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        rrv_vec3 c;
+        if (!rrv__medium_refracts(m)) continue;
+        refracts = 1;
+        for (j = 0; j < scene->medium_count; ++j)
+            if (scene->media[j].majorant && !scene->media[j].majorant->empty && rrv__boxes_overlap(m, &scene->media[j]))
+                clear = 0;
+        c = rrv__scale(rrv__add(m->lo, m->hi), 0.5);
+        for (k = 0; k < scene->light_count; ++k) {
+            const rrv_shape *l = &scene->shapes[scene->lights[k]];
+            double area, d;
+            rrv_vec3 at;
+            if (l->kind == RRV_SHAPE_QUAD) {
+                area = rrv__length(rrv__cross(l->e1, l->e2));
+                at = rrv__add(l->p0, rrv__scale(rrv__add(l->e1, l->e2), 0.5));
+            } else if (l->kind == RRV_SHAPE_TRIANGLE) {
+                area = 0.5 * rrv__length(rrv__cross(l->e1, l->e2));
+                at = rrv__add(l->p0, rrv__scale(rrv__add(l->e1, l->e2), 1.0 / 3.0));
+            } else {
+                continue; /* curved nee does not connect to spheres */
+            }
+            d = rrv__length(rrv__sub(at, c));
+            if (sqrt(area) < RRV__SMALL_LIGHT * d) small = 1;
+        }
+    }
+    if (!refracts) return RRV_INTEGRATOR_CLASSIC;
+    if (clear && small && (scene->settings.nee == RRV_NEE_DEFAULT || scene->settings.nee == RRV_NEE_SHOOT) &&
+        rrv__solver_supports_scene(scene))
+        return RRV_INTEGRATOR_EIKONAL;
+    return RRV_INTEGRATOR_REFRACTIVE;
+}
+
+RRV_DEF rrv_integrator rrv_scene_integrator(const rrv_scene *scene)
+{
+    if (!scene) return RRV_INTEGRATOR_DEFAULT;
+    if (scene->settings.integrator != RRV_INTEGRATOR_DEFAULT) return scene->settings.integrator;
+    return rrv__default_integrator(scene);
+}
+
 RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
                                    int sample_begin, int sample_end,
                                    float *sum, int stride, rrv_render_stats *stats,
                                    rrv_error *err)
 {
+    rrv_integrator integrator;
     rrv__context ctx;
     rrv__camera_frame frame;
     double r_camera;
@@ -6877,27 +6873,28 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     if (stride < x1 - x0)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
                          "rrv_render_rect: stride %d is below the rectangle's width %d", stride, x1 - x0);
-    if (sample_begin < 0 || sample_begin > sample_end)
+    if (sample_begin < 0 || sample_begin > sample_end || sample_end > RRV_MAX_SPP)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
-                         "rrv_render_rect: samples [%d,%d) are not a range of indices >= 0", sample_begin,
-                         sample_end);
-    if ((scene->shape_count && !scene->bvh) || (scene->medium_count && !scene->media[0].majorant))
+                         "rrv_render_rect: samples [%d,%d) are not a range of indices in [0, %d)", sample_begin,
+                         sample_end, RRV_MAX_SPP);
+    if (!scene->prepared)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
                          "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
     memset(&ctx, 0, sizeof ctx);
     ctx.scene = scene;
     sobol = scene->settings.sampler != RRV_SAMPLER_PCG;
-    if (scene->settings.integrator == RRV_INTEGRATOR_REFRACTIVE) {
+    integrator = rrv_scene_integrator(scene);
+    if (integrator == RRV_INTEGRATOR_REFRACTIVE) {
         ctx.comb = rrv__resolve_scheme(scene->settings.refraction) == RRV_REFRACTION_COMB;
         ctx.refract_nulls = !ctx.comb;
     }
-    ctx.eikonal = scene->settings.integrator == RRV_INTEGRATOR_EIKONAL;
+    ctx.eikonal = integrator == RRV_INTEGRATOR_EIKONAL;
     ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
-    ctx.step_bound = rrv__step_bound(scene, scene->settings.integrator);
+    ctx.step_bound = rrv__step_bound(scene, integrator);
     /* the schemes that refract at null events keep the leg bound alone
        (BOUNDS: the midpoint scheme's orbits leak out again) */
     ctx.trap_length = ctx.refract_nulls ? DBL_MAX : rrv__trap_length(scene);
-    ctx.sample_bound = rrv__sample_bound(scene, scene->settings.integrator);
+    ctx.sample_bound = rrv__sample_bound(scene, integrator);
     /* shoot by default, also where it cannot solve (the refractive
        integrator), where it aims: manifold solves there, but at 100x-1000x
        straight NEE's cost on a scene like scenes/fire.rrv (README.md), while
@@ -6917,7 +6914,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
        Poisson and midpoint schemes refract at null events): there the
        connections stay with forward paths. */
     ctx.aim = ctx.partition && !ctx.refract_nulls && (nee == RRV_NEE_AIM || (nee == RRV_NEE_SHOOT && !ctx.shoot));
-    ctx.eta_floor = scene->settings.ambient_ior;
+    ctx.eta_floor = rrv__ambient_ior(scene);
     if (ctx.partition) {
         for (i = 0; i < scene->medium_count; ++i) {
             const rrv_medium *m = &scene->media[i];
@@ -6943,7 +6940,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.eta_camera2 = (1.0 + r_camera) * (1.0 + r_camera);
     /* Blackbody radiance B is taken as the ambient air's, so a classic
        render and a refractive one of a fire in air agree exactly. */
-    ctx.thermal_scale = ctx.bends ? ctx.eta_camera2 / (scene->settings.ambient_ior * scene->settings.ambient_ior) : 1.0;
+    ctx.thermal_scale = ctx.bends ? ctx.eta_camera2 / (rrv__ambient_ior(scene) * rrv__ambient_ior(scene)) : 1.0;
     for (y = y0; y < y1; ++y) {
         for (x = x0; x < x1; ++x) {
             double acc[3] = {0, 0, 0};
@@ -7016,6 +7013,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
     if (!(rrv__length(direction) > 0) || rrv__length(direction) > DBL_MAX)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "the ray direction must be finite and nonzero");
     d = rrv__normalize(direction);
+    if (integrator == RRV_INTEGRATOR_DEFAULT) integrator = rrv_scene_integrator(scene);
     bound = (uint64_t)rrv__step_bound(scene, integrator == RRV_INTEGRATOR_EIKONAL ? integrator
                                                                              : RRV_INTEGRATOR_REFRACTIVE);
     rrv__rng_seed(&rng, seed, walk, 0x7261797472616365ULL);
@@ -7155,7 +7153,7 @@ static int rrv__solver_supports_scene(const rrv_scene *scene)
    grad_i / d x_j; not symmetric in grids, see the media section). */
 static void rrv__scene_hessian(const rrv_scene *scene, rrv_vec3 p, double H[9])
 {
-    double ambient_r = scene->settings.ambient_ior - 1.0;
+    double ambient_r = rrv__ambient_ior(scene) - 1.0;
     int i, k;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
@@ -7171,7 +7169,7 @@ static void rrv__scene_hessian(const rrv_scene *scene, rrv_vec3 p, double H[9])
    (rrv__scene_hessian's) at p, the medium found once. */
 static double rrv__eta_gradient_hessian(const rrv_scene *scene, rrv_vec3 p, rrv_vec3 *grad, double H[9])
 {
-    double ambient_r = scene->settings.ambient_ior - 1.0;
+    double ambient_r = rrv__ambient_ior(scene) - 1.0;
     int i, k;
     for (i = scene->medium_count - 1; i >= 0; --i) {
         const rrv_medium *m = &scene->media[i];
@@ -11202,6 +11200,20 @@ RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char
 #ifndef RRV_NO_STDIO
 #include <errno.h>
 #include <time.h>
+#if (defined(__unix__) || defined(__APPLE__)) && !defined(RRV_NO_POSIX)
+#define RRV__POSIX 1
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#ifndef __cplusplus
+/* POSIX's own prototype: glibc's <stdio.h> declares it only when a feature
+   macro came before its first include, which the user's includes may have
+   settled already (CONFIGURATION). C++ compilers define _GNU_SOURCE. */
+FILE *fdopen(int fd, const char *mode);
+#endif
+#else
+#define RRV__POSIX 0
+#endif
 
 static int rrv__fwrite_callback(void *user, const void *data, size_t size)
 {
@@ -11224,6 +11236,87 @@ static const char *rrv__io_reason(int errnum)
 #endif
     (void)errnum;
     return "";
+}
+
+#if RRV__POSIX
+static const char *rrv__file_kind(mode_t mode)
+{
+    if (S_ISDIR(mode)) return "a directory";
+    if (S_ISCHR(mode)) return "a character device";
+    if (S_ISBLK(mode)) return "a block device";
+    if (S_ISFIFO(mode)) return "a FIFO";
+#ifdef S_ISSOCK
+    if (S_ISSOCK(mode)) return "a socket";
+#endif
+    return "not a regular file";
+}
+#endif
+
+/* The one way every reader opens a file. O_NONBLOCK makes the open itself
+   return at once for a FIFO without a writer (and O_NOCTTY keeps a terminal
+   from becoming ours); fstat on the descriptor then judges the very file
+   that was opened, not a name that may have been swapped since. A regular
+   file never blocks, so the flag is cleared again before stdio reads. *why
+   is "" or the reason in words; *size the size or UINT64_MAX. */
+static FILE *rrv__open_read(const char *path, uint64_t *size, const char **why)
+{
+#if RRV__POSIX
+    struct stat st;
+    int fd, flags = O_RDONLY | O_NONBLOCK | O_NOCTTY;
+    FILE *f;
+#ifdef O_CLOEXEC
+    flags |= O_CLOEXEC; /* a client's child processes need not inherit it */
+#endif
+    *size = UINT64_MAX;
+    *why = "";
+    errno = 0;
+    fd = open(path, flags);
+    if (fd < 0) {
+        *why = rrv__io_reason(errno);
+        return NULL;
+    }
+    if (fstat(fd, &st) != 0) {
+        *why = rrv__io_reason(errno);
+        close(fd);
+        return NULL;
+    }
+    if (!S_ISREG(st.st_mode)) {
+        /* a folder keeps the words fopen's EISDIR gave before */
+        *why = S_ISDIR(st.st_mode) ? "is a directory" : "not a regular file";
+        close(fd);
+        errno = 0;
+        return NULL;
+    }
+    flags = fcntl(fd, F_GETFL);
+    if (flags == -1 || fcntl(fd, F_SETFL, flags & ~O_NONBLOCK) == -1 || !(f = fdopen(fd, "rb"))) {
+        *why = rrv__io_reason(errno);
+        close(fd);
+        return NULL;
+    }
+    if (st.st_size >= 0) *size = (uint64_t)st.st_size;
+    return f;
+#else
+    FILE *f;
+    *size = UINT64_MAX;
+    errno = 0;
+    f = fopen(path, "rb");
+    *why = f ? "" : rrv__io_reason(errno);
+    return f;
+#endif
+}
+
+RRV_DEF rrv_result rrv_open_read(const char *path, FILE **file, uint64_t *size, rrv_error *err)
+{
+    const char *why = "";
+    uint64_t bytes;
+    if (file) *file = NULL;
+    if (size) *size = UINT64_MAX;
+    if (!path || !file) return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_open_read: NULL argument");
+    *file = rrv__open_read(path, &bytes, &why);
+    if (!*file) return rrv__fail(err, RRV_ERROR_IO, path, 0, "%s", why[0] ? why : "cannot open");
+    if (size) *size = bytes;
+    rrv__clear_error(err);
+    return RRV_OK;
 }
 
 /* Stops a stream read early: sees the whole buffer after each piece. */
@@ -11286,8 +11379,8 @@ static rrv_result rrv__read_stream(FILE *f, size_t first, size_t piece, size_t l
 /* Opens a new temporary file next to path. The name carries a value mixed
    from the clock, the address of the stack and the attempt, so two writers
    to one path (or a leftover file) rarely meet; a name that exists is
-   skipped, and C11's exclusive "x" mode closes the remaining race where it
-   is available. */
+   skipped. POSIX's O_EXCL, or else C11's exclusive "x" mode, closes the
+   remaining race where it is available. */
 static FILE *rrv__open_temp(const char *path, char *temp_path, size_t cap)
 {
     int attempt;
@@ -11296,6 +11389,23 @@ static FILE *rrv__open_temp(const char *path, char *temp_path, size_t cap)
                                   ((uint64_t)(uintptr_t)&attempt << 7) ^ (uint64_t)attempt);
         FILE *f;
         snprintf(temp_path, cap, "%s.%08lx.tmp", path, (unsigned long)(mix & 0xffffffffu));
+#if RRV__POSIX
+        {
+            /* O_EXCL creates the name or fails, also where a link or a FIFO
+               stands at it; 0666 less the umask is what fopen would give */
+            int fd = open(temp_path, O_WRONLY | O_CREAT | O_EXCL | O_NOCTTY, 0666);
+            if (fd < 0) {
+                if (errno == EEXIST) continue;
+                return NULL;
+            }
+            f = fdopen(fd, "wb");
+            if (!f) {
+                close(fd);
+                remove(temp_path);
+            }
+            return f;
+        }
+#else
         f = fopen(temp_path, "rb");
         if (f) { /* taken: never write over a file we did not create */
             fclose(f);
@@ -11311,6 +11421,7 @@ static FILE *rrv__open_temp(const char *path, char *temp_path, size_t cap)
         if (errno == EEXIST) continue;
 #endif
         return NULL;
+#endif
     }
     return NULL;
 }
@@ -11336,6 +11447,16 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
     if (format == RRV__IMAGE_PNG && !isfinite(exposure))
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "exposure must be finite");
 
+#if RRV__POSIX
+    {
+        /* stat follows a link: what matters is what rename would replace
+           for the reader of path, and a link to a device reads the device */
+        struct stat st;
+        if (stat(path, &st) == 0 && !S_ISREG(st.st_mode))
+            return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot write: it is %s, not a regular file",
+                             rrv__file_kind(st.st_mode));
+    }
+#endif
     cap = strlen(path) + 16; /* ".%08lx.tmp" and the NUL */
     temp_path = (char *)RRV_MALLOC(cap);
     if (!temp_path) return rrv__fail(err, RRV_ERROR_MEMORY, path, 0, "out of memory");
@@ -11430,6 +11551,8 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
     unsigned char header[RRV__PFM_HEADER_MAX], *data = NULL;
     size_t header_size, have = 0;
     rrv__pfm_header h;
+    uint64_t file_size;
+    const char *why;
     FILE *file;
     rrv_result result;
     int errnum;
@@ -11439,12 +11562,8 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
     if (height) *height = 0;
     if (!path || !rgb || !width || !height)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_read_pfm: NULL argument");
-    errno = 0;
-    file = fopen(path, "rb");
-    if (!file) {
-        const char *why = rrv__io_reason(errno);
-        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open%s%s", why[0] ? ": " : "", why);
-    }
+    file = rrv__open_read(path, &file_size, &why);
+    if (!file) return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open%s%s", why[0] ? ": " : "", why);
 
     /* The header first, then exactly the pixel data it announces: a stream
        without end (a device, a pipe) is read no further than that. */
@@ -11464,8 +11583,13 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
         return result;
     }
 
-    /* The buffer grows with what arrives, so a header announcing more than
-       the file holds costs at most twice what the file holds. */
+    /* A header announcing more than the file holds is refused by the
+       file's size; where that is unknown the buffer grows with what
+       arrives, so it costs at most twice what the file holds. */
+    if (file_size != UINT64_MAX && header_size <= file_size && h.data_bytes > file_size - header_size) {
+        fclose(file);
+        return rrv__pfm_truncated(err, path, &h, (size_t)(file_size - header_size));
+    }
     result = rrv__read_stream(file, (size_t)1 << 20, SIZE_MAX, h.data_bytes, 0, NULL, &data, &have,
                               &errnum);
     fclose(file);
@@ -11501,6 +11625,8 @@ RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *
 {
     unsigned char *data = NULL;
     size_t have = 0;
+    uint64_t file_size;
+    const char *why;
     FILE *file;
     rrv_result result;
     int errnum;
@@ -11509,14 +11635,15 @@ RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *
     if (height) *height = 0;
     if (!path || !rgb || !width || !height)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "rrv_read_exr: NULL argument");
-    errno = 0;
-    file = fopen(path, "rb");
-    if (!file) {
-        const char *why = rrv__io_reason(errno);
-        return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open%s%s", why[0] ? ": " : "", why);
-    }
+    file = rrv__open_read(path, &file_size, &why);
+    if (!file) return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot open%s%s", why[0] ? ": " : "", why);
     /* The first read is 8 bytes, so a stream that is no EXR (a device, a
-       pipe) is refused without reading on. */
+       pipe, where plain C cannot refuse them) is refused without reading on. */
+    if (file_size != UINT64_MAX && file_size > RRV__EXR_FILE_MAX) {
+        fclose(file);
+        return rrv__fail(err, RRV_ERROR_LIMIT, path, 0, "OpenEXR file larger than %llu bytes",
+                         (unsigned long long)RRV__EXR_FILE_MAX);
+    }
     result = rrv__read_stream(file, 8, SIZE_MAX, RRV__EXR_FILE_MAX, 1, rrv__exr_stop, &data, &have,
                               &errnum);
     fclose(file);
@@ -12184,22 +12311,37 @@ static int rrv__sf_text_stop(const unsigned char *data, size_t have, size_t got)
     return memchr(data + have - got, '\0', got) != NULL;
 }
 
-/* A whole file, at most max_bytes of it (rrv__read_stream). */
+/* A binary file (NanoVDB, the only one read whole) stops after its first
+   piece unless it starts as one: where plain C cannot refuse a device,
+   /dev/zero is not read up to the limit either. */
+static int rrv__sf_binary_stop(const unsigned char *data, size_t have, size_t got)
+{
+    (void)got;
+    return have >= 7 && memcmp(data, "NanoVDB", 7) != 0;
+}
+
+/* A whole file, at most max_bytes of it (rrv__read_stream): one larger by
+   its size is refused before a byte is read, and a file of known size is
+   read into one buffer of that size (plus the byte that finds growth). */
 static rrv_result rrv__sf_stdio_read(const char *path, size_t max_bytes, int text, void **data,
                                      size_t *size, const char **why)
 {
     enum { PIECE = 64 * 1024 };
     unsigned char *buf;
+    size_t first = 2 * (size_t)PIECE;
+    uint64_t file_size;
     rrv_result r;
     int errnum;
-    FILE *f;
-    errno = 0;
-    f = fopen(path, "rb");
-    if (!f) {
-        *why = rrv__io_reason(errno);
-        return RRV_ERROR_IO;
+    FILE *f = rrv__open_read(path, &file_size, why);
+    if (!f) return RRV_ERROR_IO;
+    if (file_size != UINT64_MAX) {
+        if (file_size > max_bytes) {
+            fclose(f);
+            return RRV_ERROR_LIMIT;
+        }
+        first = (size_t)file_size + 1;
     }
-    r = rrv__read_stream(f, 2 * (size_t)PIECE, PIECE, max_bytes, 1, text ? rrv__sf_text_stop : NULL,
+    r = rrv__read_stream(f, first, PIECE, max_bytes, 1, text ? rrv__sf_text_stop : rrv__sf_binary_stop,
                          &buf, size, &errnum);
     fclose(f);
     if (r == RRV_ERROR_IO) *why = rrv__io_reason(errnum);
@@ -12528,12 +12670,9 @@ static rrv_result rrv__sf_grid_read_stdio(const char *path, const char *name, si
     rrv_result r;
     FILE *f;
     int sized;
-    errno = 0;
-    f = fopen(path, "rb");
-    if (!f) {
-        *why = rrv__io_reason(errno);
-        return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
-    }
+    uint64_t file_size;
+    f = rrv__open_read(path, &file_size, why);
+    if (!f) return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
     /* The header is read before the size is asked for: a folder opens and
        may claim any size, and only a read says what it is. */
     errno = 0;
@@ -12543,7 +12682,8 @@ static rrv_result rrv__sf_grid_read_stdio(const char *path, const char *name, si
         fclose(f);
         return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file%s%s", (*why)[0] ? ": " : "", *why);
     }
-    sized = rrv__sf_stdio_size(f, &total) && fseek(f, (long)got, SEEK_SET) == 0;
+    total = file_size;
+    sized = file_size != UINT64_MAX || (rrv__sf_stdio_size(f, &total) && fseek(f, (long)got, SEEK_SET) == 0);
     if (!sized) {
         fclose(f);
         return rrv__fail(err, RRV_ERROR_IO, name, 0, "cannot read the file: cannot tell its size");
@@ -12888,10 +13028,10 @@ static const rrv__sf_key rrv__sf_camera_keys[] = {
     {"resolution", RRV__SF_INT, 2, 0, 1.0, 16384.0, NULL},
 };
 static const rrv__sf_key rrv__sf_render_keys[] = {
-    {"spp", RRV__SF_INT, 1, 0, 1.0, 16777216.0, NULL},
+    {"spp", RRV__SF_INT, 1, 0, 1.0, (double)RRV_MAX_SPP, NULL},
     {"maxdepth", RRV__SF_INT, 1, 0, 1.0, 1024.0, NULL},
     {"seed", RRV__SF_U64, 1, 0, RRV__SF_NN, NULL},
-    {"integrator", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "classic|refractive|eikonal"},
+    {"integrator", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|classic|refractive|eikonal"},
     /* bounded so one event or step cannot be absurdly small (BOUNDS) */
     {"bendtolerance", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_UNIT, NULL}, /* and >= 1e-4 */
     {"mueta", RRV__SF_NUM, 1, 0, 0.0, 1e6, NULL},
@@ -12909,7 +13049,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
 static const rrv_integrator rrv__sf_integrators[] = {
-    RRV_INTEGRATOR_CLASSIC, RRV_INTEGRATOR_REFRACTIVE, RRV_INTEGRATOR_EIKONAL};
+    RRV_INTEGRATOR_DEFAULT, RRV_INTEGRATOR_CLASSIC, RRV_INTEGRATOR_REFRACTIVE, RRV_INTEGRATOR_EIKONAL};
 static const rrv_stepper rrv__sf_steppers[] = {RRV_STEPPER_DEFAULT, RRV_STEPPER_LEAPFROG,
                                                RRV_STEPPER_RK4};
 static const rrv_refraction_scheme rrv__sf_schemes[] = {
@@ -13389,7 +13529,6 @@ static void rrv__settings_def(rrv_settings *s)
     if (s->max_depth == 0) s->max_depth = 32;
     if (s->bend_tolerance == 0.0) s->bend_tolerance = 0.01;
     if (s->step == 0.0) s->step = 0.01;
-    if (s->ambient_ior == 0.0) s->ambient_ior = 1.0;
 }
 
 static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
@@ -13427,7 +13566,8 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
     RRV__CK(rrv__ck_key(ck, &k[14], s->manifold_drop));
     if (s->max_bake_samples < 0)
         return rrv__ck_fail(ck, RRV_OK, "max_bake_samples must be >= 0, got %d", s->max_bake_samples);
-    RRV__CK(rrv__ck_key(ambient, &rrv__sf_ambient_keys[0], s->ambient_ior));
+    if (s->ambient_ior != 0.0) /* 0: from the gas (rrv__resolve_ambient) */
+        RRV__CK(rrv__ck_key(ambient, &rrv__sf_ambient_keys[0], s->ambient_ior));
     if (s->ambient_ior > RRV_MAX_IOR)
         return rrv__ck_fail(ambient, RRV_OK, "ior must be at most %g, got %g", RRV_MAX_IOR,
                             s->ambient_ior);
@@ -14138,6 +14278,7 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
     rrv__sf_field_free(rrv__medium_field_of(m, which));
     *rrv__medium_field_of(m, which) = f;
     m->line[1 + which] = 0;
+    m->source[1 + which][0] = '\0';
     rrv__api_edited(scene);
     return RRV_OK;
 }
@@ -14804,6 +14945,15 @@ static rrv_result rrv__sf_field_gas(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv
     return RRV_OK;
 }
 
+/* The medium's limit checks name the file a field came from. */
+static void rrv__sf_keep_source(rrv_medium *m, rrv_medium_field which, const char *written)
+{
+    size_t n = strlen(written);
+    if (n >= sizeof m->source[0]) n = sizeof m->source[0] - 1;
+    memcpy(m->source[1 + which], written, n);
+    m->source[1 + which][n] = '\0';
+}
+
 static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const rrv__sf_fs *fs, rrv_field *f)
 {
     char written[RRV__SF_PATH_MAX], full[RRV__SF_PATH_MAX];
@@ -14830,6 +14980,7 @@ static rrv_result rrv__sf_field_grid(rrv__sf_parser *p, const rrv__sf_fs *fs, rr
     if (fs->which != RRV_MEDIUM_DENSITY && f->grid.channels != 1)
         return rrv__sf_perr(p, RRV_ERROR_FORMAT, "grid \"%s\": %s grids need 1 channel, found %d",
                             written, stmt, f->grid.channels);
+    rrv__sf_keep_source(fs->m, fs->which, written);
     return RRV_OK;
 }
 
@@ -14864,6 +15015,7 @@ static rrv_result rrv__sf_field_nanovdb(rrv__sf_parser *p, const rrv__sf_fs *fs,
     if (r != RRV_OK) return rrv__sf_perr(p, r, "NanoVDB file \"%s\": %s", written, e.message);
     f->kind = RRV_FIELD_NANOVDB;
     p->scene->grid_bytes += f->nanovdb.size;
+    rrv__sf_keep_source(fs->m, fs->which, written);
     return RRV_OK;
 }
 
@@ -15015,7 +15167,11 @@ static rrv_result rrv__sf_st_field(rrv__sf_parser *p)
         else
             rrv__sf_field_free(&fresh);
     }
-    if (r == RRV_OK) fs.m->line[1 + which] = p->line;
+    if (r == RRV_OK) {
+        fs.m->line[1 + which] = p->line;
+        /* the grid kinds wrote their file's name; every other kind clears it */
+        if (kind != RRV__SF_K_GRID && kind != RRV__SF_K_NANOVDB) fs.m->source[1 + which][0] = '\0';
+    }
     return r;
 }
 
@@ -15195,6 +15351,367 @@ RRV_DEF rrv_result rrv_scene_load(const char *path, const rrv_load_options *opt,
 
 #endif /* RRV_IMPLEMENTATION_INCLUDED */
 #endif /* RRV_IMPLEMENTATION */
+
+/*
+------------------------------------------------------------------------------
+NOTES: how the estimators work, and the rules behind BOUNDARIES, IOR GRIDS
+and BOUNDS (moved here from the manual at the top, word for word)
+------------------------------------------------------------------------------
+
+   NEXT-EVENT ESTIMATION, in detail
+     DEFAULT     SHOOT, the most efficient curved mode measured (test/bench/RESULTS.md;
+                 the default integrator is eikonal where shooting pays).
+                 With the refractive integrator, which shooting cannot
+                 differentiate, it aims (AIM): unbiased, about as cheap as
+                 STRAIGHT, but without focusing, so caustics of small
+                 lights stay noisy (MANIFOLD solves them there, at a high
+                 cost).
+     STRAIGHT    a straight shadow ray, ratio-tracked,
+                 combined by the power heuristic with the phase/BSDF-sampled
+                 continuation as though both sampled the same path. They do
+                 not: the continuation bends and the shadow ray does not, so
+                 wherever either crosses a refracting medium the sum is
+                 biased: a lens caustic comes out at half its radiance and
+                 white furnaces with refraction above 1 (test/test_nee.c).
+     NONE        no light sampling: lights, emitters and the sky count only
+                 where the bent path hits them, with MIS weight 1. Unbiased
+                 (furnaces give exactly 1), but noisy for small lights.
+     SHOOT       curved NEE by shooting (eikonal integrator), unbiased up
+                 to a cap on trials. The path from the last vertex to the
+                 light decides which estimators may make it: touching no
+                 refraction support (box or profile sphere), or weak (below),
+                 straight NEE and the forward path, by the power heuristic,
+                 as classic does; curved (part of it in a support, no sharp interface
+                 crossed) and ending on a quad or triangle light, the curved
+                 connection and the forward path, by the power heuristic on
+                 their solid-angle densities at the initial direction w0:
+                 p_nee = |det J_plane| / (area x light choices) (NEE's
+                 density had every solve found the root; the 1/p of the
+                 trials is an unbiased factor on top) and the vertex's own
+                 pdf of w0. The forward path computes det J_plane for itself
+                 from one shot along its own w0 with the same steps, so both
+                 sides evaluate the same function of the path, and the two
+                 weights sum to one (test/test_nee.c); any such weights keep
+                 the sum unbiased. Near a fold caustic det -> 0 and the
+                 forward path takes the path, which bounds NEE's 1/|det|
+                 (unweighted, its square is not integrable there).
+                 Everything else (across a sharp interface, to the sky, to
+                 sphere lights) only by forward paths, weight 1. The
+                 connection: a point y uniform on a light, Newton on the
+                 two angles of the initial direction so that the ray,
+                 traced with the same steps camera rays take, first crosses
+                 the light's plane from its front at y (at most 20 shots,
+                 residual < 1e-9 (1 + |y - x0|), step halved on a worse or
+                 failed shot and doubled up to 1, at most 0.5 rad, given up
+                 when three halvings in a row fail; det J = 0, a caustic,
+                 fails); the density from the Jacobi field of the same
+                 discrete steps, dw0 = dA_y / |det J_plane|
+                 (= |cos theta_y| / |det J_perp|); visibility and
+                 ratio-tracked transmittance along every chord. Seeds:
+                 Gaussians of 0.05 rad (6 in 10) and 0.3 rad (3 in 10)
+                 around the straight direction or a uniform direction, so
+                 every root has a nonzero probability p; a solve tries up to
+                 3 seeds; 1/p is estimated by repeating independent solves
+                 until the same root (within 1e-5) comes back, at most 64
+                 trials (Specular Manifold Sampling). A failed solve
+                 contributes zero. The derivative of grad eta has closed
+                 forms for the profiles and blobs; for grids (gridvol,
+                 NanoVDB, baked noise, a gas through Hauf-Grigull) it is
+                 the exact derivative of the blended gradient the rays
+                 use. With the refractive integrator SHOOT aims (AIM).
+     MANIFOLD    curved NEE by the paper's method (refractive and eikonal
+                 integrators, the same closed-form Hessians), partitioning
+                 path space by the same classes (weights: 1 for the estimator a
+                 path belongs to, 0 for the others; power heuristic only
+                 between straight NEE and forward paths outside supports).
+                 A point y uniform on a quad or triangle light; a chain of
+                 vertices on comb planes along the chord x0 -> y (spacing
+                 `step`, random offset, at most 512, wider beyond), each
+                 kicking the ray as the comb does (eta d += grad eta h,
+                 h the path it stands for); Newton on two unknowns a vertex
+                 (gauge `manifoldgauge chord`, the default: in the comb
+                 plane; `iso`: in the isosurface's tangent plane, the
+                 paper's, undefined where grad eta ~ 0) until every segment
+                 follows its kicked direction within 1e-9 rad:
+                 block-tridiagonal 2x2 Jacobian solved by block Thomas in
+                 O(n) inside a trust region (dogleg; radius halved on a
+                 step that does not lower the residual, doubled on one the
+                 linear model predicted), at most 40 evaluations; a
+                 singular pivot (a caustic) or a root that is not a
+                 physical path (a segment against its kick, a sharp
+                 interface crossed) fails. The density dw0/dA_y from the
+                 same block elimination (the generalised geometry term of
+                 Specular Manifold Sampling). Seeds: a direction from a
+                 mixture of Gaussians around the chord (0.02 rad half the
+                 time, 0.2 rad 3 in 8) and uniform (1 in 8), traced through
+                 the planes by the chain's own rule and aimed at y by
+                 shooting (at most 16 steps; a parabola where no trace
+                 reaches y's plane); the first solve and every trial draw
+                 from that one distribution. `manifoldtrials 0` (default, unbiased
+                 for the chain model): 1/p by repeating solves until the
+                 root recurs (initial directions within 1e-5), at most 64
+                 trials. `manifoldtrials M`: M solves, each distinct root
+                 counted once (biased low where a root's basin is small).
+                 `manifolddrop D`: leave out comb planes across which eta
+                 on the chord changes by less than D (faster, biased; 0, the
+                 default, keeps all). Unsupported IORs as for shoot.
+     AIM         bent shadow rays (refractive comb and eikonal integrators;
+                 the Poisson and midpoint schemes, whose rays bend at null
+                 events, leave curved connections to forward paths, counted
+                 in rrv_render_stats.solves_unsupported). The classes are
+                 SHOOT's; for a curved one, a point y uniform on a quad or
+                 triangle light gives w0 = (y - x0) / |y - x0|, and the
+                 shadow ray leaves x0 along w0 bent as camera rays are (the
+                 same comb kicks or eikonal steps), its transmittance
+                 ratio-tracked chord by chord; the light's radiance counts
+                 if the ray lands on that light's front, nothing if it meets
+                 anything else, leaves or crosses a sharp interface. w0 has
+                 the density of the straight line from x0 along w0 meeting
+                 the light, (|y - x0|^2 / |cos theta_y|) / (area x light
+                 choices), whichever face it meets: a function of w0 alone,
+                 so the power heuristic against the vertex's pdf of w0 is
+                 exact, and a forward path that reaches the light from x0
+                 along w0 takes the complementary weight wherever it lands
+                 on it. Unbiased for the integrator's own rays, no solve, no
+                 trials; as with NONE, focusing shows only as noise, so it
+                 suits weak heat haze (nearly every aimed ray lands) and not
+                 the caustics of small lights, which SHOOT solves.
+     The weak class (shoot, manifold and aim): a connection from x0 to y whose
+     straight chord touches no refraction support (or only supports with
+     zero gradient along it) is straight NEE's, with the ordinary MIS
+     weights; curved NEE skips it. A forward path that crossed no sharp
+     interface and ends at y (or leaves for the sky along d) is sorted by the
+     same function of its two ends, and, if its chord is weak but the path
+     itself turned (it left x0 at an angle to the chord larger than the
+     chord's bound on bending), it is another root of those two ends that no
+     light sample stands for. With aim it counts with weight 1; with shoot
+     and manifold it is shared by the power heuristic with one more ray a
+     vertex, drawn uniformly in the cone of a strongly refracting support
+     (one that can turn a ray by more than 0.05 rad across it: a lens) and
+     traced bent, which counts the light it lands on only for such roots
+     (rrv__cone_nee; the cone's density is a function of x0 and w0, so the
+     weights are exact). A build may set
+     RRV__WEAK_BEND to K > 0 to treat chords whose bound on bending (the
+     integral along the chord of each majorant cell's max |grad eta| over
+     the lowest eta) is at most K bend tolerances as straight too: on weak
+     heat haze that makes curved NEE cost ~1.3x straight NEE instead of
+     ~36x, but it is biased where a strong medium's gradient varies within
+     a cell (measured in test/bench/RESULTS.md, "Weak connections"), so it is off.
+
+   BOUNDARIES (design decisions)
+     Faces of refractive media (a medium's box; the sphere of a Luneburg or
+     fish-eye profile) end every straight segment. An IOR that jumps across
+     a face is a sharp interface: refracted once by Snell's law with the
+     face normal, reflected with the Fresnel probability or by total
+     internal reflection; such reflections count toward max_depth. A medium
+     whose IOR equals the ambient IOR everywhere does not refract. The
+     ambient IOR (rrv_settings.ambient_ior, scene `ambient ior`) left 0 is
+     that of the air a gas medium (ior ... gas) sits in: the same gas
+     relation at its ambient state (T_ref, P_ref, what its fields give
+     outside their boxes), 1 + iorscale (eta_ref - 1), from the first gas
+     medium listed; 1 without one. So a plume whose faces are at the
+     ambient state has no jump whatever its iorscale; a given `ambient ior`
+     is used as given. A jump that remains (a field that does not end at
+     the ambient state, glass, a second gas with another iorscale) is a
+     sharp interface: rrv_medium_face_jumps measures it per face and
+     `rrv info` and the render summary report it. Outside an
+     IOR grid's own box (inside its medium's) the IOR is the ambient one,
+     unscaled by ior_scale.
+
+   IOR GRIDS (rrv_settings.ior_interpolation, scene `render iorinterp`)
+     Where the refractivity r = eta - 1 comes from a grid (IOR, gas state or
+     baked noise), prepare bakes it. TRILINEAR, the default: r trilinear and
+     grad r the trilinear blend of central differences, 16 bytes a sample.
+     That pair is only C0 and its gradient is not the value's derivative, so
+     on grids the comb and RK4 lose their orders (fitted 1.3 to 2.1 and 1.3
+     to 2.0; between neighbouring comb rates anywhere from 0.03 to 5.7).
+     CUBIC: the interpolating tricubic B-spline of r (end slopes from
+     one-sided differences, so cubics are reproduced), value and gradient
+     from one C2 function, 8 bytes a sample: the comb is second order and
+     RK4 third (2.9 to 3.9 measured) on grids, and rays through grids of
+     smooth fields land 65x to 550x closer to the fields' own, for ~1.4x the
+     time a comb kick and ~1.5x an RK4 step (test/bench/RESULTS.md, "On IOR grids";
+     test/measure_grin.c grids). It rings (alternating, 0.27x a voxel) next to
+     features under ~2 voxels wide, where trilinear stays more faithful:
+     hence an option, not the default. Its value is floored halfway between
+     the lowest sample and -1, so eta stays positive where it overshoots.
+
+   BOUNDS
+     No input may hang a render, overflow a pixel or exhaust memory. Refused
+     at load with file:line: message (rrv_scene_prepare checks the media once
+     they are complete and names the statement that broke a limit; line 0 for
+     scenes built in code):
+       - an IOR outside [RRV_MIN_IOR, RRV_MAX_IOR] = [0.1, 10] anywhere in a
+         medium's box, from any field kind or the gas state: beyond it rays
+         are trapped or the radiance scale (eta_camera / eta)^2 explodes, and
+         no transparent material comes near 10;
+       - a peak extinction times the medium's size (its diagonal, or its
+         distance from the origin if larger) above RRV_MAX_OPTICAL_DEPTH =
+         1e12, or a density beyond float: the mean free flight must stay
+         thousands of rounding steps of the coordinates long, or tracking
+         stalls (an extinction of 3e38 gave flights of length 0);
+       - emission (L x scale, Le x Lescale) above RRV_MAX_RADIANCE = 1e20:
+         2^24 samples of it stay 1e11 below float's range;
+       - an ambient IOR above 10, a bend tolerance below 1e-4, mu_eta above
+         1e6 /m, an eikonal step outside [1e-6, 1e6] m (scene and CLI);
+       - a majorant or baked grid above the grid limit (max_grid_bytes);
+       - more than RRV_MAX_BLOBS = 4096 blobs in one field (every lookup
+         sums them all: a grid is the tool for more).
+     Cut and counted (rrv_render_stats.paths_cut, of them cut_tracking and
+     cut_samples):
+       - a tracking walk (one medium along one straight segment) after
+         64 + 4 (peak majorant x chord) tentative collisions (the majorant
+         of the channels it walks for: a channel whose extinction is 4x
+         below the densest walks with one of its own), at most
+         RRV_MAX_SEGMENT_EVENTS = 2^22: the count is Poisson with a mean of at
+         most the second term, so a correct walk never gets there (P < 1e-30);
+       - a leg of a path (between two real vertices) after 64 + 16 times the
+         loop iterations of one straight crossing of every medium at its
+         densest rate (comb kicks, null events, or 4 / step eikonal steps),
+         at most RRV_MAX_SEGMENT_STEPS = 1e7: only trapped rays get there;
+       - a camera path (one pixel sample; of paths_cut, cut_samples) when
+         its loop iterations over all legs plus the tentative collisions it
+         and its shadow rays sampled pass 4 (max_depth + 1) (64 + 16 (1 +
+         one crossing's iterations and collisions at the peak majorant)):
+         a leg and a shadow ray a vertex, each at the leg bound with a
+         collision every iteration, which a path whose legs are within
+         their bound passes only with collisions beyond 16 crossings a
+         leg; at most RRV_MAX_SAMPLE_WORK = 2^24 (a second of one core in
+         eikonal steps): legs each within their bound, 1025 of them (an
+         eikonal step of 1e-6 m in a closed white room) were minutes a
+         sample. It is checked once a loop iteration, so a sample overruns
+         it by at most one walk and one vertex's light sampling. The
+         scenes in scenes/ stay 310x below the cap with every integrator,
+         NEE and scheme, and 7x below their own term (test/bench/RESULTS.md).
+       - a ray trapped in a refracting medium (of paths_cut, trapped_paths):
+         one whose run through the refraction supports since its last
+         vertex (real, or a reflection at a face) passes 2.83 times the sum
+         of the refracting boxes' diagonals, the longest straight run
+         through them all (rrv__trap_length). That is a bound in the
+         scene's scale, where the leg bound above counts iterations, which
+         a thin feature's fine comb makes dense: a ray circling in the 1 mm
+         layer of a shell of IOR 3 (a kick every 1.7 um) is ended after
+         10.8 m instead of 14 (the sample's bound), in a 5 cm layer after
+         1.3e5 kicks instead of 7.3e5. Safe: a walk that turns by at most a half circle in all
+         (kicks, steps, refractions at faces summed) runs at most 2 sqrt(2)
+         times that sum inside the boxes (split it where it has turned half
+         of it: each half keeps within 45 degrees of its middle direction,
+         so it advances along it by 1/sqrt(2) of its length, and in each
+         box by at most the diagonal), so only a ray that turned by more
+         than a half circle without a vertex is ended: one circling in a
+         waveguide or an orbit (a camera or a scattering point inside a
+         shell's layer of high IOR, inside Maxwell's fish-eye). The scenes
+         in scenes/ stay 2.9x below it with the comb, Poisson and eikonal
+         (test/bench/RESULTS.md). The schemes that refract at null events keep the leg
+         bound alone: the midpoint scheme's first-order error sends rays
+         from outside a Luneburg or fish-eye lens into orbits that leak out
+         again past this bound (5.8% of luneburg.rrv's camera paths at 1
+         spp), and ending them darkened those renders by 8% and 13%; the
+         seed's Poisson events stay below it, but a bound that hangs on the
+         scheme's error is not one to trust. The light such a ray would still gather is lost, as
+         at the leg bound: none, for good, in an orbit without extinction
+         or surfaces; that of a fibre that lets it go after more than the
+         bound, or of a medium it would scatter in later. Its cost is an
+         addition a segment and a comparison a loop iteration.
+     A cut camera path keeps the light it gathered before the cut; a cut
+     shadow ray is dark. That is biased, so it is never silent: the CLI's
+     summary line prints the count. A sample above RRV_MAX_SAMPLE = 1e30 is
+     discarded as non-finite; pixel sums saturate at FLT_MAX. To keep cuts
+     rare, majorant cells follow the density voxels where a cell would hold
+     an optical depth above 64 (split into equal parts where fewer than 16
+     would cross the box, each bounded exactly; beside a grid's faces the
+     cells bound 0), and RK4 halves steps that span a feature of the IOR.
+     What is left is heavy-tailed: a path that scatters in the thin layer
+     where a grid's density rises from 0 pays null collisions to leave it,
+     about (cell size) x sqrt(2 x slope of the extinction) of them, so a
+     2^3 grid of 7e10 on one face in a 2 m box takes ~3e5 events a sample
+     at 16 cells an axis (test/test_budget.c).
+
+
+   FILE FORMATS AND SNELL'S LAW (from CONVENTIONS above)
+     Grids ("gridvol", as defined by Mitsuba 0.6), all little endian:
+       3 bytes "VOL", 1 byte version 3, int32 encoding 1 (float32),
+       int32 xres yres zres (each >= 2), int32 channels (1 or 3),
+       float32 box xmin ymin zmin xmax ymax zmax, then float32 samples at
+       index ((z*yres + y)*xres + x)*channels + c.
+       Samples sit on corners: sample i along x is at xmin + i*(xmax-xmin)/
+       (xres-1), so the first and last lie on the box faces. Outside the box
+       a field takes its ambient value. A file is refused (with the reason)
+       for a wrong magic or version, a resolution < 2 or an overflowing
+       size, a byte count that does not match, an empty or non-finite box, a
+       NaN or infinite sample, or a negative density.
+     NanoVDB grids (.nvdb, NanoVDB 32.x as nanovdb_convert writes them,
+       little endian, uncompressed; float, fp4, fp8, fp16, fpN): value ijk
+       sits at world map * ijk + translation (the grid's own map), trilinear
+       between index points; where no data is stored, the grid's background,
+       and an IOR grid beyond one voxel past its data is the ambient IOR.
+       Every offset is checked against the grid's buffer and every value
+       must be finite; negative densities count as 0. See rrv_nanovdb.
+     Snell at a null event: ratio m = eta_i / eta_o, normal n = grad eta / |
+       grad eta| facing the incoming ray, c = -n.d, k = 1 - m^2 (1 - c^2);
+       k < 0 reflects (d + 2 c n), else d' = m d + (m c - sqrt(k)) n, written
+       as a change of d so that m ~ 1 does not cancel.
+
+------------------------------------------------------------------------------
+VERSION HISTORY
+------------------------------------------------------------------------------
+     0.9.1  the refraction floor measured per sample (the comb without
+            kicks costs 1.40x / 1.51x classic's instructions on fire /
+            haze, above the 1.25x target; test/bench/per_sample.py);
+            cheaper looks for faces and majorant iterator set-up, the next
+            kick's cell prefetched (bit-identical); rrv info and
+            rrv_medium_channel_groups show a medium's channel groups; a
+            camera frame from vectors whose squares underflow is unit
+     0.9.0  channel groups: channels whose extinctions differ more than 4x
+            walk with majorants of their own (a thin channel no longer
+            takes a dense one's collisions: sigma_t 4, 6e10, 6 per metre
+            took 4e6-collision walks); with that, the Sobol sampler is the
+            default (lens caustic, 1 m light: shoot 7x none, from 1.6x);
+            free flights drawn as an optical depth walked through the
+            majorant cells (one random number a collision, not a cell)
+     0.8.0  one light draw a vertex shared by straight and curved NEE;
+            eikonal steps skip their support looks inside a safety ball
+            (bit-identical); shoot's coarse stage capped at 0.6 rad a
+            step; the Sobol sampler measured on every scene (up to 6x
+            less variance where light is sampled through refraction:
+            lens caustic, 1 m light, shoot 7x none with sobol), not yet
+            the default
+     0.7.0  nee shoot and manifold also draw rays toward strongly
+            refracting supports, for the roots of weak chords that
+            forward paths carried alone (the heavy tail of small-light
+            caustics); shoot's solves 1.7x-3x cheaper (steps and Jacobi
+            fields share lookups, fused profile and gas evaluations);
+            comb chords' walks and set-up cheaper (refraction 2.30x
+            classic on fire, 2.28x on haze, from 2.38x and 2.39x)
+     0.6.0  nee aim: bent shadow rays aimed at light samples, unbiased at
+            about straight NEE's cost, the refractive default (as shoot);
+            shoot's solve 3.4x cheaper on haze (fused Jacobian
+            lookup, polish memo, the root's own chords); cheaper faces of
+            refractive boxes (float rounding is no interface); a comb
+            spacing bounded by the gradient's variation, measured and
+            left off
+     0.5.0  unbiased NEE by default (shoot: curved connections solved with
+            the eikonal integrator, left to forward paths with the
+            refractive one); shoot shares paths with the
+            forward path by MIS; manifold's kick model, trust region and heap
+            scratch; exact derivatives of every IOR kind's gradient, so both
+            run in grids and gas states; exact majorants of coarse grids;
+            the comb's rate integrated cell by cell; scenes fire_caustic and
+            haze
+     0.4.0  scenes built in code (rrv_scene_create and friends: zero means
+            default, one check per object, the parser a client); nee manifold
+            (the paper's refractive ratio tracking); Sobol sampler; parallel
+            set-up (parallel_for); cheaper comb spacing; errors from
+            rrv_render_rect and the writers; deflated PNG; EXR attributes
+     0.3.0  boundaries: support faces are sharp interfaces (Snell, Fresnel,
+            total internal reflection) in every integrator; work bounds and
+            load-time limits; nee none|straight|shoot; OpenEXR in and out;
+            NanoVDB grids; cubic IOR grids; one segment planner shared by the
+            path tracer and rrv_trace_ray
+     0.2.0  refraction: IOR fields (gas state, profiles, grids), refractive
+            and eikonal integrators, rrv_trace_ray
+     0.1.0  classic null-scattering path tracer, scene format, image I/O
+*/
 
 /*
 ------------------------------------------------------------------------------

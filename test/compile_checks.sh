@@ -15,7 +15,8 @@ if command -v "$cxx" >/dev/null 2>&1; then
 else
     echo "FAIL header_compiles_as_cxx ($cxx not found)"
 fi
-if ${CC:-cc} -std=c99 -O2 -c rrv_impl.c -o "$build/rrv_impl_symbols.o" 2>/dev/null; then
+# (Unoptimised: the exported symbols are the same at any level.)
+if ${CC:-cc} -std=c99 -O0 -c rrv_impl.c -o "$build/rrv_impl_symbols.o" 2>/dev/null; then
     others=$(nm -g --defined-only "$build/rrv_impl_symbols.o" | awk '{print $3}' | grep -v '^rrv_' || true)
     count=$(nm -g --defined-only "$build/rrv_impl_symbols.o" | awk '{print $3}' | grep -c '^rrv_')
     if [ -z "$others" ] && [ "$count" -gt 0 ]; then echo "PASS exports_only_rrv_symbols ($count symbols)"
@@ -31,12 +32,33 @@ if out=$(${CC:-cc} -std=c99 -Wall -Wextra -pedantic -Werror -I. -c "$build/nostd
 then echo "PASS header_compiles_without_stdio"
 else printf '%s\n' "$out" | head -20; echo "FAIL header_compiles_without_stdio"
 fi
+# The implementation after the user's own system headers under strict C99
+# (glibc then declares no fdopen: rrv.h must declare it itself), and the
+# plain-C file I/O of RRV_NO_POSIX, with both compilers.
+printf '#include <stdio.h>\n#include <stdlib.h>\n#include <string.h>\n#define RRV_IMPLEMENTATION\n#include "rrv.h"\n' > "$build/after_includes_check.c"
+ok=1
+for c in ${CC:-cc} gcc clang; do
+    command -v "$c" >/dev/null 2>&1 || continue
+    for flags in "" "-DRRV_NO_POSIX"; do
+        if ! out=$("$c" -std=c99 -Wall -Wextra -pedantic -Werror $flags -I. -c "$build/after_includes_check.c" -o "$build/after_includes_check.o" 2>&1)
+        then printf '%s\n' "$out" | head -10; echo "  $c $flags"; ok=0
+        fi
+    done
+done
+if [ $ok = 1 ]; then echo "PASS header_compiles_after_user_includes"; else echo "FAIL header_compiles_after_user_includes"; fi
 # gcc and clang once drew random numbers in different orders (two draws as
 # arguments of one call): both builds must render the same bytes.
 if command -v gcc >/dev/null 2>&1 && command -v clang >/dev/null 2>&1; then
     ok=1
     for c in gcc clang; do
-        $c -std=c99 -O2 -DRRV_THREADS=0 -o "$build/rrv_$c" main.c rrv_impl.c -lm 2>/dev/null || ok=0
+        # make test passes the object it built at -O2 -g and its compiler:
+        # the same code as a -O2 compile, so that compiler links it.
+        impl=rrv_impl.c
+        if [ -n "${RRV_IMPL_OBJ:-}" ] && [ -f "$RRV_IMPL_OBJ" ] &&
+           [ "$($c --version 2>/dev/null | head -1)" = "$(${RRV_IMPL_CC:-cc} --version 2>/dev/null | head -1)" ]; then
+            impl=$RRV_IMPL_OBJ
+        fi
+        $c -std=c99 -O2 -DRRV_THREADS=0 -o "$build/rrv_$c" main.c "$impl" -lm 2>/dev/null || ok=0
     done
     if [ $ok = 1 ]; then
         for scene in smoke fire; do
@@ -72,3 +94,55 @@ for prog in manual_example_c manual_example_cxx; do
     [ "$size" -gt $((64 * 48 * 12)) ] || { echo "  $prog wrote $size bytes"; ok=0; }
 done
 if [ $ok = 1 ]; then echo "PASS manual_example_builds_and_runs"; else echo "FAIL manual_example_builds_and_runs"; fi
+# The header's first line names the version its macros define (one source
+# of truth for the number), and README.md stays a manual: at most 450 lines.
+major=$(sed -n 's/^#define RRV_VERSION_MAJOR \([0-9]*\)$/\1/p' rrv.h)
+minor=$(sed -n 's/^#define RRV_VERSION_MINOR \([0-9]*\)$/\1/p' rrv.h)
+patch=$(sed -n 's/^#define RRV_VERSION_PATCH \([0-9]*\)$/\1/p' rrv.h)
+if [ -n "$major$minor$patch" ] && head -1 rrv.h | grep -q "^/\* rrv\.h $major\.$minor\.$patch "
+then echo "PASS header_names_its_version ($major.$minor.$patch)"
+else echo "  line 1 of rrv.h: $(head -1 rrv.h)"; echo "FAIL header_names_its_version (macros say $major.$minor.$patch)"
+fi
+lines=$(wc -l < README.md)
+if [ "$lines" -le 450 ]; then echo "PASS readme_is_a_manual ($lines lines)"
+else echo "  README.md has $lines lines; measurements belong in test/bench/RESULTS.md"; echo "FAIL readme_is_a_manual"
+fi
+# Every `$ ./rrv ...` line in a code block of README.md is run (with this
+# build's rrv) and must print exactly the lines that follow it.
+awk '/^ *```/ {if (inblock) print ""; inblock = !inblock; next}
+     inblock { sub(/^ +/, ""); print }' README.md > "$build/readme_blocks.txt"
+ok=1; count=0; cmd=""; : > "$build/readme_expected.txt"
+check_readme_command() {
+    [ -n "$cmd" ] || return 0
+    count=$((count + 1))
+    run=$(printf '%s' "$cmd" | sed "s#^\./rrv #$build/rrv #")
+    if ! sh -c "$run" > "$build/readme_actual.txt" 2>&1 || ! cmp -s "$build/readme_expected.txt" "$build/readme_actual.txt"; then
+        echo "  README.md: \$ $cmd"; diff "$build/readme_expected.txt" "$build/readme_actual.txt" | head -6; ok=0
+    fi
+}
+while IFS= read -r line; do
+    case $line in
+        '$ '*) check_readme_command; cmd=${line#\$ }; : > "$build/readme_expected.txt" ;;
+        '') check_readme_command; cmd="" ;;
+        *) [ -n "$cmd" ] && printf '%s\n' "$line" >> "$build/readme_expected.txt" ;;
+    esac
+done < "$build/readme_blocks.txt"
+check_readme_command
+if [ $ok = 1 ] && [ $count -gt 0 ]; then echo "PASS readme_outputs_are_true ($count commands)"
+else echo "FAIL readme_outputs_are_true"
+fi
+# Every ```rrv block of README.md (the recipes) is a whole scene that loads
+# and renders (one sample of a 16 x 16 corner, so only cheaply).
+rm -f "$build"/readme_scene_*
+awk '/^```rrv$/ {on = 1; n++; f = sprintf("'"$build"'/readme_scene_%d.rrv", n); printf "" > f; next}
+     /^```$/ {on = 0}
+     on {print >> f}' README.md
+ok=1; count=0
+for scene in "$build"/readme_scene_*.rrv; do
+    [ -e "$scene" ] || continue
+    count=$((count + 1))
+    "$build/rrv" render "$scene" -o "${scene%.rrv}.pfm" --spp 1 --crop 0 0 16 16 -q || { echo "  README.md: the scene of $scene does not render"; ok=0; }
+done
+if [ $ok = 1 ] && [ $count -gt 0 ]; then echo "PASS readme_scenes_render ($count scenes)"
+else echo "FAIL readme_scenes_render"
+fi

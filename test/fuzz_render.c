@@ -64,7 +64,7 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size)
             float pixel[3] = {0, 0, 0};
             int k = y * FUZZ_SIZE + x;
             /* only rrv_render_rect reads these, so no new prepare is needed */
-            scene->settings.integrator = (rrv_integrator)((integrator + k) % 3);
+            scene->settings.integrator = (rrv_integrator)((integrator + k) % 4);
             scene->settings.refraction = (rrv_refraction_scheme)((scheme + k / 3) % 4);
             scene->settings.stepper = (rrv_stepper)((stepper + k / 3) % 3);
             if (rrv_render_rect(scene, x, y, x + 1, y + 1, 0, 1, pixel, 1, &stats, NULL) != RRV_OK) __builtin_trap();

@@ -67,6 +67,13 @@ seeds() {
         cp test/corpus/nanovdb_*.nvdb "$2"/
         cp build*/nanovdb_tmp/*.nvdb "$2"/ 2>/dev/null || true
         ;;
+    # 4 bytes (cpus, columns, rows, partition/time given), then the values
+    # separated by NUL (test/fuzz_farm.c)
+    farm)
+        printf '\003\001\002\003/tmp/a b.farm\000/usr/bin/rrv\000/s/scene.rrv\000/o/out.exr\000short\0002:00:00\000--spp\00016' > "$2/plain"
+        printf '\000\003\000\000/x/$(touch PWNED) `id` '"'"'q'"'"' "d"\000/r/-rrv\000/s/\377\376.rrv\000/o/\n.exr\000' > "$2/hostile"
+        printf '\001\000\000\002/x/50%%\000/r\000/s\000/o\000p\0001:00\nid\000' > "$2/refused"
+        ;;
     *) echo "fuzz_run.sh: no seeds for harness '$1'" >&2; return 1 ;;
     esac
 }

@@ -9,6 +9,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include "vec3.h"
 
 static void tb_must(rrv_result r, const rrv_error *err)
 {
@@ -29,7 +30,7 @@ static rrv_scene *tb_scene(int width, int height)
     memset(&set, 0, sizeof set);
     memset(&grey, 0, sizeof grey);
     tb_must(rrv_scene_create(&s, &err), &err);
-    cam.eye = rrv__v3(0, 0, -5);
+    cam.eye = tv3(0, 0, -5);
     cam.fov = 30;
     cam.width = width;
     cam.height = height;

@@ -4,9 +4,9 @@
    bit-identically to the same scene parsed from text, the file-read
    callback gets every buffer back through its release pair, and
    rrv_render_rect says what is wrong. Run from the repository root. */
-#define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
+#include "vec3.h"
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -47,13 +47,14 @@ static void test_zero_means_default(void)
     CHECK(s->camera.fov == 40 && s->camera.up.y == 1 && s->camera.width == 8);
     CHECK(rrv_scene_set_settings(s, &set, &err) == RRV_OK);
     CHECK(s->settings.spp == 16 && s->settings.max_depth == 32 && s->settings.bend_tolerance == 0.01 &&
-          s->settings.step == 0.01 && s->settings.ambient_ior == 1);
+          s->settings.step == 0.01 && s->settings.ambient_ior == 0 &&
+          s->settings.integrator == RRV_INTEGRATOR_DEFAULT);
     mat.kind = RRV_MATERIAL_CHECKER;
     CHECK(rrv_scene_add_material(s, &mat, &i, &err) == RRV_OK && i == 0);
     CHECK(s->materials[0].albedo[1] == 0.8 && s->materials[0].albedo2[2] == 0.2 &&
           s->materials[0].checker_scale == 1 && strcmp(s->materials[0].name, "material 0") == 0);
-    med.lo = rrv__v3(-1, -2, -3);
-    med.hi = rrv__v3(1, 2, 5);
+    med.lo = tv3(-1, -2, -3);
+    med.hi = tv3(1, 2, 5);
     CHECK(rrv_scene_add_medium(s, &med, &i, &err) == RRV_OK && i == 0);
     CHECK(s->media[0].scale == 1 && s->media[0].sigma_a[2] == 1 && s->media[0].sigma_s[0] == 1 &&
           s->media[0].Lescale == 1 && s->media[0].eta_ref == 1.000292 && s->media[0].P_ref == 101325 &&
@@ -68,7 +69,142 @@ static void test_zero_means_default(void)
         CHECK(f->noise.radius == 1); /* half the smallest side */
     }
     CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+    /* no gas medium: the ambient IOR is 1 */
+    CHECK(s->ambient_ior == 1);
     rrv_scene_free(s);
+}
+
+/* A clear plume of hot air (blobs that have fallen to ~1e-30 K at the
+   faces) under a 0.2 m light 2.5 m away, iorscale 100, no `ambient ior`:
+   the scene the default integrator and the face-jump report are tested on.
+   `extra` is appended (a light, a smoke, an ambient or render line). */
+static rrv_scene *plume_scene(const char *extra, int with_ior)
+{
+    char text[2048];
+    rrv_scene *s = NULL;
+    rrv_error err;
+    snprintf(text, sizeof text,
+             "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
+             "render spp 2 maxdepth 2 seed 3 %s\n"
+             "material white diffuse\n"
+             "quad origin -2 0 -2 u 0 0 4 v 4 0 0 material white\n"
+             "quad origin -0.1 3.5 -0.1 u 0.2 0 0 v 0 0 0.2 L 50 50 50\n"
+             "medium plume box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+             "temperature plume blob center 0 1 0 radius 0.06 weight 600 base 300\n"
+             "%s\n%s\n",
+             strncmp(extra, "render:", 7) == 0 ? extra + 7 : "", with_ior ? "ior plume gas iorscale 100" : "",
+             strncmp(extra, "render:", 7) == 0 ? "" : extra);
+    CHECKF(rrv_scene_parse(text, strlen(text), "plume", NULL, NULL, &s, &err) == RRV_OK, "%s", err.message);
+    return s;
+}
+
+static int same_render(rrv_scene *a, rrv_scene *b)
+{
+    float ia[8 * 6 * 3], ib[8 * 6 * 3];
+    memset(ia, 0, sizeof ia);
+    memset(ib, 0, sizeof ib);
+    CHECK(rrv_render_rect(a, 0, 0, 8, 6, 0, 2, ia, 8, NULL, NULL) == RRV_OK);
+    CHECK(rrv_render_rect(b, 0, 0, 8, 6, 0, 2, ib, 8, NULL, NULL) == RRV_OK);
+    return memcmp(ia, ib, sizeof ia) == 0;
+}
+
+/* No integrator key: classic where nothing refracts (the same render bit
+   for bit), eikonal where a clear refracting medium sees a small light,
+   the comb otherwise (a large light, a smoke in the plume's box, an
+   explicit nee other than shoot). */
+static void test_default_integrator(void)
+{
+    struct {
+        const char *extra;
+        int ior;
+        rrv_integrator expect;
+    } cases[] = {
+        {"", 0, RRV_INTEGRATOR_CLASSIC},
+        {"", 1, RRV_INTEGRATOR_EIKONAL},
+        {"render:nee shoot", 1, RRV_INTEGRATOR_EIKONAL},
+        {"render:nee aim", 1, RRV_INTEGRATOR_REFRACTIVE},
+        /* a 4 m light at 2.5 m (1.6 rad) besides the small one: one small light is enough */
+        {"quad origin -2 3.5 -2 u 4 0 0 v 0 0 4 L 1 1 1", 1, RRV_INTEGRATOR_EIKONAL},
+        /* the 4 m light alone: not small */
+        {"", 3, RRV_INTEGRATOR_REFRACTIVE},
+        {"medium smoke box -1 0 -1 1 2 1\ndensity smoke constant 0.1", 1, RRV_INTEGRATOR_REFRACTIVE},
+        /* a smoke that does not touch the plume's box keeps it clear */
+        {"medium smoke box 2 0 -1 3 2 1\ndensity smoke constant 0.1", 1, RRV_INTEGRATOR_EIKONAL},
+        /* the IOR of a bare gas box equals the ambient one it sets: inert */
+        {"", 2, RRV_INTEGRATOR_CLASSIC},
+    };
+    int k;
+    for (k = 0; k < (int)(sizeof cases / sizeof cases[0]); ++k) {
+        rrv_scene *s, *t;
+        rrv_integrator got;
+        rrv_error err;
+        if (cases[k].ior >= 2) {
+            const char *text = cases[k].ior == 2
+                ? "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
+                  "quad origin -0.1 3.5 -0.1 u 0.2 0 0 v 0 0 0.2 L 50 50 50\n"
+                  "medium plume box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+                  "ior plume gas iorscale 100\n"
+                : "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
+                  "quad origin -2 3.5 -2 u 4 0 0 v 0 0 4 L 1 1 1\n"
+                  "medium plume box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+                  "temperature plume blob center 0 1 0 radius 0.06 weight 600 base 300\n"
+                  "ior plume gas iorscale 100\n";
+            CHECKF(rrv_scene_parse(text, strlen(text), "bare", NULL, NULL, &s, &err) == RRV_OK, "%s", err.message);
+        } else {
+            s = plume_scene(cases[k].extra, cases[k].ior);
+        }
+        if (!s) continue;
+        got = rrv_scene_integrator(s);
+        CHECKF(got == cases[k].expect, "case %d (%s): integrator %d, expected %d", k, cases[k].extra, (int)got,
+               (int)cases[k].expect);
+        /* the render is the chosen integrator's, draw for draw */
+        t = cases[k].ior >= 2 ? NULL : plume_scene(cases[k].extra, cases[k].ior);
+        if (t) {
+            t->settings.integrator = cases[k].expect;
+            CHECKF(same_render(s, t), "case %d: the default render differs from integrator %d", k,
+                   (int)cases[k].expect);
+            rrv_scene_free(t);
+        }
+        rrv_scene_free(s);
+    }
+}
+
+/* No silent glass: with no `ambient ior` the ambient IOR is the gas's at
+   its ambient state (1 + 100 x 2.92e-4), so the plume's faces, at 300 K,
+   have no jump; `ambient ior 1` makes every face a jump of 0.0292. */
+static void test_face_jumps(void)
+{
+    double jump[7];
+    rrv_scene *s = plume_scene("", 1);
+    int f;
+    if (!s) return;
+    CHECKF(fabs(s->ambient_ior - 1.0292) < 1e-12 && s->settings.ambient_ior == 0, "ambient %.17g",
+           s->ambient_ior);
+    CHECK(rrv_medium_face_jumps(s, 0, jump) == 0);
+    for (f = 0; f < 7; ++f) CHECKF(jump[f] == 0, "face %d jumps by %g", f, jump[f]);
+    CHECK(rrv_medium_face_jumps(s, 1, jump) == 0 && rrv_medium_face_jumps(s, -1, jump) == 0);
+    CHECK(rrv_medium_face_jumps(NULL, 0, jump) == 0);
+    rrv_scene_free(s);
+    s = plume_scene("ambient ior 1", 1);
+    if (!s) return;
+    CHECK(s->ambient_ior == 1);
+    CHECKF(fabs(rrv_medium_face_jumps(s, 0, jump) - 0.0292) < 1e-9, "largest jump %.17g", jump[0]);
+    for (f = 0; f < 6; ++f) CHECKF(fabs(jump[f] - 0.0292) < 1e-9, "face %d jumps by %.17g", f, jump[f]);
+    CHECK(jump[6] == 0); /* no profile sphere */
+    rrv_scene_free(s);
+    /* a Luneburg lens meets the ambient IOR at its sphere and, outside
+       it, in its box: only rounding (~1e-8) is left there, no glass */
+    {
+        static const char lens[] = "camera eye 0 0 -3 look 0 0 0 resolution 8 6\n"
+                                   "medium lens box -0.5 -0.5 -0.5 0.5 0.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+                                   "ior lens luneburg radius 0.5\n";
+        rrv_error err;
+        CHECKF(rrv_scene_parse(lens, strlen(lens), "lens", NULL, NULL, &s, &err) == RRV_OK, "%s", err.message);
+        if (!s) return;
+        CHECKF(rrv_medium_face_jumps(s, 0, jump) == 0, "faces jump by %g %g %g %g %g %g, sphere %g", jump[0], jump[1],
+               jump[2], jump[3], jump[4], jump[5], jump[6]);
+        rrv_scene_free(s);
+    }
 }
 
 static void test_refusals_name_the_object(void)
@@ -90,15 +226,15 @@ static void test_refusals_name_the_object(void)
     expect_message(rrv_scene_set_camera(s, &cam, &err), &err, RRV_ERROR_ARGUMENT,
                    "camera: fov must be in (0, 180), got 180");
     cam.fov = 0;
-    cam.up = rrv__v3(0, 0, 2);
+    cam.up = tv3(0, 0, 2);
     expect_message(rrv_scene_set_camera(s, &cam, &err), &err, RRV_ERROR_ARGUMENT,
                    "camera: up is parallel to the view direction");
     CHECK(s->camera.eye.z == 5); /* a refused camera changes nothing */
 
     memset(&med, 0, sizeof med);
     strcpy(med.name, "smoke");
-    med.lo = rrv__v3(1, -1, -1);
-    med.hi = rrv__v3(-1, 1, 1);
+    med.lo = tv3(1, -1, -1);
+    med.hi = tv3(-1, 1, 1);
     expect_message(rrv_scene_add_medium(s, &med, &i, &err), &err, RRV_ERROR_ARGUMENT,
                    "medium \"smoke\": box is empty along x (1 is not below -1)");
     med.lo.x = -1;
@@ -133,11 +269,11 @@ static void test_refusals_name_the_object(void)
 
     memset(&quad, 0, sizeof quad);
     quad.kind = RRV_SHAPE_QUAD;
-    quad.e1 = rrv__v3(1, 0, 0);
-    quad.e2 = rrv__v3(2, 0, 0);
+    quad.e1 = tv3(1, 0, 0);
+    quad.e2 = tv3(2, 0, 0);
     expect_message(rrv_scene_add_shape(s, &quad, &i, &err), &err, RRV_ERROR_ARGUMENT,
                    "shape 0 (quad): u and v are parallel (zero area)");
-    quad.e2 = rrv__v3(0, 1, 0);
+    quad.e2 = tv3(0, 1, 0);
     quad.material = 3;
     expect_message(rrv_scene_add_shape(s, &quad, &i, &err), &err, RRV_ERROR_ARGUMENT,
                    "shape 0 (quad): material 3 is not one of the scene's 1");
@@ -188,8 +324,8 @@ static void test_code_only_refusals(void)
     sh.L[0] = 1e30;
     expect_message(rrv_scene_add_shape(s, &sh, NULL, &err), &err, RRV_ERROR_ARGUMENT,
                    "shape 0 (sphere): L times scale must be at most 1e+20, got 1e+30");
-    med.lo = rrv__v3(-1, -1, -1);
-    med.hi = rrv__v3(1, 1, 1);
+    med.lo = tv3(-1, -1, -1);
+    med.hi = tv3(1, 1, 1);
     CHECK(rrv_scene_add_medium(s, &med, NULL, &err) == RRV_OK);
     f.kind = (rrv_field_kind)99;
     expect_message(rrv_scene_set_field(s, 0, RRV_MEDIUM_IOR, &f, &err), &err, RRV_ERROR_ARGUMENT,
@@ -198,7 +334,7 @@ static void test_code_only_refusals(void)
     f.gradient = 0.1;
     expect_message(rrv_scene_set_field(s, 0, RRV_MEDIUM_IOR, &f, &err), &err, RRV_ERROR_ARGUMENT,
                    "ior of medium \"medium 0\": slab normal must be nonzero");
-    f.normal = rrv__v3(0, 3, 4);
+    f.normal = tv3(0, 3, 4);
     CHECK(rrv_scene_set_field(s, 0, RRV_MEDIUM_IOR, &f, &err) == RRV_OK);
     CHECK(fabs(s->media[0].ior.normal.y - 0.6) < 1e-15 && fabs(s->media[0].ior.normal.z - 0.8) < 1e-15);
     f.kind = RRV_FIELD_CONSTANT;
@@ -215,14 +351,14 @@ static void test_prepare_checks_hand_edits(void)
     rrv_medium med;
     rrv_error err;
     memset(&med, 0, sizeof med);
-    med.lo = rrv__v3(-1, -1, -1);
-    med.hi = rrv__v3(1, 1, 1);
+    med.lo = tv3(-1, -1, -1);
+    med.hi = tv3(1, 1, 1);
     CHECK(rrv_scene_add_medium(s, &med, NULL, &err) == RRV_OK);
     CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
     s->camera.look = s->camera.eye;
     expect_message(rrv_scene_prepare(s, &err), &err, RRV_ERROR_ARGUMENT,
                    "camera: eye and look must be distinct finite points");
-    s->camera.look = rrv__v3(0, 0, 0);
+    s->camera.look = tv3(0, 0, 0);
     s->camera.fov = 0;
     expect_message(rrv_scene_prepare(s, &err), &err, RRV_ERROR_ARGUMENT,
                    "camera: fov must be in (0, 180), got 0");
@@ -275,7 +411,7 @@ static rrv_scene *scene_in_code(void)
     memset(&puff, 0, sizeof puff);
     memset(&density, 0, sizeof density);
     memset(&ior, 0, sizeof ior);
-    cam.eye = rrv__v3(0, 0.5, 4);
+    cam.eye = tv3(0, 0.5, 4);
     cam.fov = 35;
     cam.width = 12;
     cam.height = 9;
@@ -290,17 +426,17 @@ static rrv_scene *scene_in_code(void)
     red.albedo[0] = 0.8;
     red.albedo[1] = red.albedo[2] = 0.2;
     quad.kind = RRV_SHAPE_QUAD;
-    quad.p0 = rrv__v3(-3, -1, -3);
-    quad.e1 = rrv__v3(6, 0, 0);
-    quad.e2 = rrv__v3(0, 0, 6);
+    quad.p0 = tv3(-3, -1, -3);
+    quad.e1 = tv3(6, 0, 0);
+    quad.e2 = tv3(0, 0, 6);
     light.kind = RRV_SHAPE_SPHERE;
-    light.center = rrv__v3(0, 3, 0);
+    light.center = tv3(0, 3, 0);
     light.radius = 0.5;
     light.material = 1; /* the parser made "default" second */
     light.L[0] = light.L[1] = light.L[2] = 4;
     strcpy(puff.name, "puff");
-    puff.lo = rrv__v3(-1, -1, -1);
-    puff.hi = rrv__v3(1, 1, 1);
+    puff.lo = tv3(-1, -1, -1);
+    puff.hi = tv3(1, 1, 1);
     puff.sigma_a[0] = puff.sigma_a[1] = puff.sigma_a[2] = 0.5;
     /* in code a zero sigma_s beside a nonzero sigma_a is a zero; the file's
        unsaid sigma_s is 1 */
@@ -398,14 +534,58 @@ static void test_render_rect_errors(void)
     expect_message(rrv_render_rect(s, 0, 0, 12, 9, 0, 1, sum, 11, NULL, &err), &err, RRV_ERROR_ARGUMENT,
                    "rrv_render_rect: stride 11 is below the rectangle's width 12");
     expect_message(rrv_render_rect(s, 0, 0, 12, 9, 2, 1, sum, 12, NULL, &err), &err, RRV_ERROR_ARGUMENT,
-                   "rrv_render_rect: samples [2,1) are not a range of indices >= 0");
+                   "rrv_render_rect: samples [2,1) are not a range of indices in [0, 16777216)");
+    /* the bound the header states: indices below RRV_MAX_SPP, the spp bound */
+    expect_message(rrv_render_rect(s, 0, 0, 12, 9, RRV_MAX_SPP, RRV_MAX_SPP + 1, sum, 12, NULL, &err), &err,
+                   RRV_ERROR_ARGUMENT,
+                   "rrv_render_rect: samples [16777216,16777217) are not a range of indices in [0, 16777216)");
+    expect_message(rrv_render_rect(s, 0, 0, 12, 9, INT_MAX - 1, INT_MAX, sum, 12, NULL, &err), &err,
+                   RRV_ERROR_ARGUMENT,
+                   "rrv_render_rect: samples [2147483646,2147483647) are not a range of indices in [0, 16777216)");
+    memset(sum, 0, sizeof sum);
+    CHECK(rrv_render_rect(s, 0, 0, 1, 1, RRV_MAX_SPP - 1, RRV_MAX_SPP, sum, 1, NULL, &err) == RRV_OK);
     memset(&extra, 0, sizeof extra);
-    extra.lo = rrv__v3(2, 2, 2);
-    extra.hi = rrv__v3(3, 3, 3);
+    extra.lo = tv3(2, 2, 2);
+    extra.hi = tv3(3, 3, 3);
     CHECK(rrv_scene_add_medium(s, &extra, NULL, &err) == RRV_OK);
     CHECK(rrv_render_rect(s, 0, 0, 12, 9, 0, 1, sum, 12, NULL, &err) == RRV_ERROR_ARGUMENT);
     CHECK(strstr(err.message, "not prepared") != NULL);
     CHECK(rrv_render_rect(s, 0, 0, 12, 9, 0, 1, sum, 12, NULL, NULL) == RRV_ERROR_ARGUMENT);
+    rrv_scene_free(s);
+}
+
+/* A scene made in code and never prepared is refused, whatever it holds
+   (one with neither shapes nor media rendered its sky and returned RRV_OK),
+   and so is one edited after rrv_scene_prepare; preparing makes it render. */
+static void test_unprepared_scene_is_refused(void)
+{
+    rrv_scene *s = NULL;
+    rrv_environment sky;
+    rrv_settings settings;
+    rrv_camera cam;
+    float sum[3 * 4] = {0};
+    rrv_error err;
+    int i;
+    memset(&sky, 0, sizeof sky);
+    sky.kind = RRV_ENV_CONSTANT;
+    sky.L[0] = sky.L[1] = sky.L[2] = 1;
+    memset(&cam, 0, sizeof cam);
+    cam.eye.z = 4;
+    cam.width = cam.height = 2;
+    CHECK(rrv_scene_create(&s, &err) == RRV_OK);
+    if (!s) return;
+    CHECK(rrv_scene_set_camera(s, &cam, &err) == RRV_OK);
+    CHECK(rrv_scene_set_environment(s, &sky, &err) == RRV_OK);
+    expect_message(rrv_render_rect(s, 0, 0, 2, 2, 0, 1, sum, 2, NULL, &err), &err, RRV_ERROR_ARGUMENT,
+                   "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
+    for (i = 0; i < 12; ++i) CHECK(sum[i] == 0);
+    CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+    CHECKF(rrv_render_rect(s, 0, 0, 2, 2, 0, 1, sum, 2, NULL, &err) == RRV_OK, "%s", err.message);
+    CHECKF(sum[0] > 0.5f, "the sky gave %g", sum[0]);
+    settings = s->settings;
+    CHECK(rrv_scene_set_settings(s, &settings, &err) == RRV_OK);
+    expect_message(rrv_render_rect(s, 0, 0, 2, 2, 0, 1, sum, 2, NULL, &err), &err, RRV_ERROR_ARGUMENT,
+                   "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
     rrv_scene_free(s);
 }
 
@@ -425,8 +605,8 @@ static void test_fields_and_meshes_are_copied(void)
     memset(&f, 0, sizeof f);
     memset(blobs, 0, sizeof blobs);
     memset(&proto, 0, sizeof proto);
-    med.lo = rrv__v3(-1, -1, -1);
-    med.hi = rrv__v3(1, 1, 1);
+    med.lo = tv3(-1, -1, -1);
+    med.hi = tv3(1, 1, 1);
     CHECK(rrv_scene_add_medium(s, &med, NULL, &err) == RRV_OK);
     blobs[0].radius = blobs[1].radius = 0.3;
     blobs[1].weight = 2;
@@ -611,12 +791,15 @@ static void test_tiny_camera_vectors(void)
 int main(void)
 {
     RUN(test_zero_means_default);
+    RUN(test_default_integrator);
+    RUN(test_face_jumps);
     RUN(test_refusals_name_the_object);
     RUN(test_code_only_refusals);
     RUN(test_prepare_checks_hand_edits);
     RUN(test_code_and_file_agree);
     RUN(test_prepare_twice);
     RUN(test_render_rect_errors);
+    RUN(test_unprepared_scene_is_refused);
     RUN(test_fields_and_meshes_are_copied);
     RUN(test_read_release_pair);
     RUN(test_channel_groups_reported);

@@ -3,6 +3,7 @@
    does not depend on the thread count or on being split into crops.
    Runs BUILD/rrv as a child process; argv[1] is the build folder. */
 #define _POSIX_C_SOURCE 200809L
+#define RRV_IMPLEMENTATION /* rrv_write_exr, for a hand-made merge part */
 #include "../rrv.h"
 #include "check.h"
 
@@ -595,14 +596,159 @@ static void odd_inputs_get_messages(void)
                strcmp(last_run.err, "test/corpus: cannot read scene file: is a directory\n") == 0,
            "exit %d, stderr %s", last_run.code, last_run.err);
     CHECKF(rrv("info /dev/zero") == 2 &&
-               strcmp(last_run.err, "/dev/zero:1: NUL byte in column 1: not a text file\n") == 0,
+               strcmp(last_run.err, "/dev/zero: cannot read scene file: not a regular file\n") == 0,
            "exit %d, stderr %s", last_run.code, last_run.err);
     snprintf(arguments, sizeof arguments, "diff /dev/zero '%s'", tiny_scene);
-    CHECKF(rrv(arguments) == 2 && strstr(last_run.err, "/dev/zero: not a PFM file") != NULL,
+    CHECKF(rrv(arguments) == 2 && strstr(last_run.err, "/dev/zero: cannot open: not a regular file") != NULL,
            "exit %d, stderr %s", last_run.code, last_run.err);
     CHECKF(rrv("diff test/corpus test/corpus") == 2 &&
-               strstr(last_run.err, "test/corpus: cannot read: is a directory") != NULL,
+               strstr(last_run.err, "test/corpus: cannot open: is a directory") != NULL,
            "exit %d, stderr %s", last_run.code, last_run.err);
+}
+
+/* A FIFO without a writer blocks a plain fopen forever: wherever rrv reads a
+   file (the scene, every kind of file a scene names, a merge part, the
+   --resume probe, diff's images) it is refused at once with the file's name
+   ("not a regular file"), and so is /dev/zero, which merge read to 2 GiB
+   before. Every run has a timeout, so a reader that blocks fails the test
+   (exit 124) instead of hanging it. */
+static void fifo_inputs_are_refused(void)
+{
+    const char *fifo = tmp_path("in_fifo"), *scene = tmp_path("fifo_scene.rrv");
+    const char *out = tmp_path("fifo_out.exr"), *fifo_exr = tmp_path("fifo_part.exr");
+    static const struct {
+        const char *statement, *expect;
+    } named[] = {
+        {"density m grid in_fifo", "cannot read grid file \"in_fifo\": not a regular file"},
+        {"density m nanovdb in_fifo", "cannot read NanoVDB file \"in_fifo\": not a regular file"},
+        {"density m nanovdb /dev/zero", "cannot read NanoVDB file \"/dev/zero\": not a regular file"},
+        {"ior m grid in_fifo", "cannot read grid file \"in_fifo\": not a regular file"},
+        {"mesh file in_fifo", "cannot read OBJ file \"in_fifo\": not a regular file"},
+    };
+    char arguments[4 * PATH_SIZE], want[4 * PATH_SIZE], text[512];
+    struct stat st;
+    size_t i;
+    remove(fifo);
+    remove(out);
+    CHECK(mkfifo(fifo, 0600) == 0);
+
+    snprintf(arguments, sizeof arguments, "info '%s'", fifo);
+    snprintf(want, sizeof want, "%s: cannot read scene file: not a regular file\n", fifo);
+    CHECKF(rrv_prefixed("timeout 20", arguments) == 2 && strcmp(last_run.err, want) == 0,
+           "info FIFO: exit %d, stderr %s", last_run.code, last_run.err);
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' -q", fifo, out);
+    CHECKF(rrv_prefixed("timeout 20", arguments) == 2 && strcmp(last_run.err, want) == 0,
+           "render FIFO: exit %d, stderr %s", last_run.code, last_run.err);
+    snprintf(arguments, sizeof arguments, "trace '%s' --ray 0 0 5 0 0 -1", fifo);
+    CHECKF(rrv_prefixed("timeout 20", arguments) == 2 && strcmp(last_run.err, want) == 0,
+           "trace FIFO: exit %d, stderr %s", last_run.code, last_run.err);
+
+    for (i = 0; i < sizeof named / sizeof named[0]; ++i) {
+        snprintf(text, sizeof text, "camera eye 0 0 5 look 0 0 0\nmedium m box -1 -1 -1 1 1 1\n%s\n",
+                 named[i].statement);
+        CHECK(write_text(scene, text));
+        snprintf(arguments, sizeof arguments, "info '%s'", scene);
+        snprintf(want, sizeof want, "%s:3: %s\n", scene, named[i].expect);
+        CHECKF(rrv_prefixed("timeout 20", arguments) == 2 && strcmp(last_run.err, want) == 0,
+               "%s: exit %d, stderr %s", named[i].statement, last_run.code, last_run.err);
+    }
+
+    snprintf(arguments, sizeof arguments, "merge '%s' '%s'", out, fifo);
+    snprintf(want, sizeof want, "rrv: merge: \"%s\": cannot read: not a regular file\n", fifo);
+    CHECKF(rrv_prefixed("timeout 20", arguments) == 2 && strcmp(last_run.err, want) == 0,
+           "merge FIFO: exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(!file_exists(out));
+    snprintf(arguments, sizeof arguments, "merge --status '%s'", fifo);
+    CHECKF(rrv_prefixed("timeout 20", arguments) != 0 && strstr(last_run.err, "not a regular file") != NULL,
+           "merge --status FIFO: exit %d, stderr %s", last_run.code, last_run.err);
+    snprintf(arguments, sizeof arguments, "merge '%s' /dev/zero", out);
+    CHECKF(rrv_prefixed("timeout 20", arguments) == 2 &&
+               strcmp(last_run.err, "rrv: merge: \"/dev/zero\": cannot read: not a regular file\n") == 0,
+           "merge /dev/zero: exit %d, stderr %s", last_run.code, last_run.err);
+    snprintf(arguments, sizeof arguments, "diff '%s' '%s'", fifo, fifo);
+    snprintf(want, sizeof want, "%s: cannot open: not a regular file", fifo);
+    CHECKF(rrv_prefixed("timeout 20", arguments) == 2 && strstr(last_run.err, want) != NULL,
+           "diff FIFO: exit %d, stderr %s", last_run.code, last_run.err);
+    /* --resume looks at an existing output before rendering: a FIFO there is
+       refused by the output check first */
+    remove(fifo_exr);
+    CHECK(mkfifo(fifo_exr, 0600) == 0);
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --tile 0/1 --resume -q", tiny_scene, fifo_exr);
+    CHECKF(rrv_prefixed("timeout 20", arguments) == 3 && strstr(last_run.err, "it is a FIFO, not a regular file"),
+           "--resume onto a FIFO: exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(stat(fifo_exr, &st) == 0 && S_ISFIFO(st.st_mode));
+    remove(fifo);
+    remove(fifo_exr);
+    remove(scene);
+}
+
+/* A part may claim any image size: one of INT_MAX x INT_MAX pixels holding
+   a 2 x 2 tile made the hole search allocate a byte per pixel (4.6e18:
+   "out of memory", an abort under AddressSanitizer). The hole is found from
+   the rectangles alone, and the first one is named. */
+static void merge_of_a_huge_claimed_image(void)
+{
+    const char *part = tmp_path("huge_part.exr"), *out = tmp_path("huge_merged.exr");
+    float pixels[2 * 2 * 3] = {0};
+    char attribute[512], arguments[4 * PATH_SIZE];
+    rrv_exr_options exr;
+    rrv_error err;
+    memset(&exr, 0, sizeof exr);
+    exr.pixel = RRV_EXR_FLOAT;
+    exr.display_width = exr.display_height = INT_MAX;
+    exr.text_name = "rrvPart";
+    snprintf(attribute, sizeof attribute,
+             "rrv part 1\nhash 0123456789abcdef\nimage %d %d\ntile 0/1\nrect 0 0 2 2\nsamples 0 1\nspp 1\n",
+             INT_MAX, INT_MAX);
+    exr.text = attribute;
+    remove(out);
+    CHECKF(rrv_write_exr(part, pixels, 2, 2, &exr, &err) == RRV_OK, "%s", err.message);
+    snprintf(arguments, sizeof arguments, "merge '%s' '%s'", out, part);
+    CHECKF(rrv_prefixed("timeout 60", arguments) == 2 &&
+               strcmp(last_run.err, "rrv: merge: pixel 2,0 is in no part: a tile is missing (the parts cover 4 of "
+                                    "2147483647x2147483647 pixels)\n") == 0,
+           "exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(!file_exists(out));
+    remove(part);
+}
+
+/* An option whose value is missing must not take the next option as a file
+   name (`--png -q` wrote a file called "-q"); "./-q" names such a file, and
+   negative numbers are still values. */
+static void option_values_are_not_options(void)
+{
+    const char *out = tmp_path("dash_out.pfm"), *png = tmp_path("dash_out.png");
+    char arguments[8 * PATH_SIZE], here[PATH_SIZE];
+    remove(out);
+    remove(png);
+    remove("-q");
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --png -q", tiny_scene, out);
+    CHECKF(rrv(arguments) == 1 &&
+               strstr(last_run.err, "rrv: --png needs an output path, got the option \"-q\" (for a file of that "
+                                    "name write \"./-q\")") == last_run.err,
+           "--png -q: exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(!file_exists("-q") && !file_exists(out));
+    snprintf(arguments, sizeof arguments, "render '%s' -o -q", tiny_scene);
+    CHECKF(rrv(arguments) == 1 && strstr(last_run.err, "got the option \"-q\""),
+           "-o -q: exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(!file_exists("-q"));
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --png '%s' --exposure -1 --crop 0 0 2 2 -q",
+             tiny_scene, out, png);
+    CHECKF(rrv(arguments) == 0, "--exposure -1: exit %d, stderr %s", last_run.code, last_run.err);
+    CHECK(file_exists(out) && file_exists(png));
+    remove(out);
+    CHECK(getcwd(here, sizeof here) != NULL);
+    snprintf(arguments, sizeof arguments, "cd '%s' && '%s%s%s' render '%s%s%s' -o ./-q.pfm --crop 0 0 2 2 -q",
+             tmp_dir, rrv_binary[0] == '/' ? "" : here, rrv_binary[0] == '/' ? "" : "/", rrv_binary,
+             tiny_scene[0] == '/' ? "" : here, tiny_scene[0] == '/' ? "" : "/", tiny_scene);
+    CHECKF(system(arguments) == 0 && file_exists(tmp_path("-q.pfm")), "./-q.pfm was not written");
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --seed -1", tiny_scene, out);
+    CHECKF(rrv(arguments) == 1 && strstr(last_run.err, "--seed needs"),
+           "--seed -1: exit %d, stderr %s", last_run.code, last_run.err);
+    remove(tmp_path("-q.pfm"));
+    remove("-q"); /* what the defect wrote */
+    remove(out);
+    remove(png);
 }
 
 static void diff_reports_known_errors(void)
@@ -730,6 +876,42 @@ static void info_describes_scene(void)
     CHECKF(find_key(last_run.out, "scene_memory") != NULL, "%s", last_run.out);
 }
 
+/* No silent glass: a plume of hot air (iorscale 100) whose faces sit at
+   300 K has no IOR jump without an `ambient ior` line (the ambient is the
+   same gas at 300 K), and `rrv info` and the render summary say nothing;
+   `ambient ior 1` makes every face glass, and both say so. */
+static void face_jumps_are_reported(void)
+{
+    static const char plume[] =
+        "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
+        "render spp 1 maxdepth 1\n"
+        "quad origin -0.1 3.5 -0.1 u 0.2 0 0 v 0 0 0.2 L 50 50 50\n"
+        "medium plume box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+        "temperature plume blob center 0 1 0 radius 0.06 weight 600 base 300\n"
+        "ior plume gas iorscale 100\n";
+    static const char summary[] =
+        "sharp IOR faces: eta jumps by 0.0292 at the -x face of medium \"plume\" (and at 5 more faces): "
+        "refracted and reflected there as glass; curved nee does not cross them\n";
+    char text[1024], arguments[3 * PATH_SIZE];
+    const char *scene = tmp_path("plume.rrv"), *out = tmp_path("plume.pfm"), *line;
+    int glass;
+    for (glass = 0; glass < 2; ++glass) {
+        snprintf(text, sizeof text, "%s%s", plume, glass ? "ambient ior 1\n" : "");
+        CHECK(write_text(scene, text));
+        snprintf(arguments, sizeof arguments, "info '%s'", scene);
+        CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+        CHECKF((strstr(last_run.out, "ambient ior: 1.0292 (the gas at its ambient state)\n") != NULL) == !glass,
+               "%s", last_run.out);
+        CHECKF((strstr(last_run.out, "    sharp IOR faces (eta jumps by): -x 0.0292, +x 0.0292, -y 0.0292, "
+                                     "+y 0.0292, -z 0.0292, +z 0.0292\n") != NULL) == glass,
+               "%s", last_run.out);
+        snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --threads 1", scene, out);
+        CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+        line = strstr(last_run.err, "sharp IOR");
+        CHECKF(glass ? line && strcmp(line, summary) == 0 : !line, "%s", last_run.err);
+    }
+}
+
 /* rrv_trace_ray may still be unimplemented: then the tool must fail cleanly. */
 static void trace_prints_csv(void)
 {
@@ -810,9 +992,13 @@ int main(int argc, char **argv)
     RUN(non_regular_output_is_refused);
     RUN(temporary_files_are_private);
     RUN(odd_inputs_get_messages);
+    RUN(fifo_inputs_are_refused);
+    RUN(option_values_are_not_options);
+    RUN(merge_of_a_huge_claimed_image);
     RUN(diff_reports_known_errors);
     RUN(render_is_deterministic);
     RUN(info_describes_scene);
+    RUN(face_jumps_are_reported);
     RUN(trace_prints_csv);
     return CHECK_EXIT_CODE();
 }

@@ -9,11 +9,11 @@
 #if defined(__unix__) || defined(__APPLE__)
 #define _POSIX_C_SOURCE 200809L
 #endif
-#define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
 #include "inflate.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>

@@ -4,13 +4,13 @@
    its message, exit 2 and no output; rrv farm slurm's scripts run as a
    scheduler would run them (without one: each array task in turn) and
    resume. Runs BUILD/rrv as a child process; argv[1] is the build folder. */
-#define _POSIX_C_SOURCE 200809L
-#define RRV_IMPLEMENTATION
+#define _XOPEN_SOURCE 700 /* POSIX 2008 with realpath */
 #include "../rrv.h"
 #include "check.h"
 
 #include <dirent.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -145,6 +145,8 @@ static void part_options_are_checked(void)
         { "--tile 0/20", "rrv: --tile 0/1x20: the 31x19 image has too few rows for that many tiles\n" },
         { "--tile 0/2 --crop 0 0 4 4", "rrv: --crop cannot be combined with --tile or --samples\n" },
         { "--resume", "rrv: --resume needs --tile or --samples\n" },
+        { "--tile 0/1x0", "rrv: --tile needs I/N (tile I of N bands of rows) or I/CxR (tile I of a C by R grid), "
+                          "0 <= I < N, got \"0/1x0\"\n" },
     };
     char args[PATH_SIZE];
     int i;
@@ -247,8 +249,8 @@ static void farm_scripts_render_and_resume(void)
     CHECKF(sh("\"$RRV\" farm slurm tiny.rrv -o farm.exr --tiles 2x2 --partition short --dir farm -- " SPP
               " > farm.txt", NULL, NULL) == 0, "%s", last_err);
     script = (char *)read_file(in_tmp("farm/render.sbatch"), NULL);
-    CHECKF(script && strstr(script, "#SBATCH --array=0-3\n") && strstr(script, "#SBATCH --partition=short\n") &&
-               strstr(script, "--tile \"$i\"/2x2 --resume '--spp' '13'"), "%s", script ? script : "(none)");
+    CHECKF(script && strstr(script, "#SBATCH --array=0-3\n") && strstr(script, "#SBATCH --partition=\"short\"\n") &&
+               strstr(script, "--tile \"$i\"/2x2 --resume '--spp' '13'\n"), "%s", script ? script : "(none)");
     free(script);
     script = (char *)read_file(in_tmp("farm/submit.sh"), NULL);
     CHECKF(script && strstr(script, "--dependency=afterok:\"$array\""), "%s", script ? script : "(none)");
@@ -264,6 +266,336 @@ static void farm_scripts_render_and_resume(void)
     CHECKF(strstr(last_err, "farm/parts/tile_0.exr\" is complete (tile 0/2x2, samples 0:13): kept") &&
                strstr(last_err, "tile_3.exr\" is not this part: rendering it again"), "%s", last_err);
     CHECK(same_image("farm.exr", "single.exr"));
+}
+
+/* Runs argv (argv[0] a path, or "sh") in the scratch folder without a shell
+   in between, so hostile names reach it byte for byte; stubs, if not NULL,
+   is put first on PATH. stdout goes to run_out.txt, stderr to last_err. */
+static int run(const char *const *argv, const char *stubs)
+{
+    char out_path[PATH_SIZE + 32], err_path[PATH_SIZE + 32], *err;
+    int status;
+    pid_t pid;
+    snprintf(out_path, sizeof out_path, "%s/run_out.txt", tmp_dir);
+    snprintf(err_path, sizeof err_path, "%s/run_err.txt", tmp_dir);
+    fflush(stdout);
+    pid = fork();
+    if (pid < 0) return -1;
+    if (pid == 0) {
+        char path[4 * PATH_SIZE];
+        int in = open("/dev/null", O_RDONLY), out = open(out_path, O_WRONLY | O_CREAT | O_TRUNC, 0644),
+            er = open(err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        if (in < 0 || out < 0 || er < 0 || dup2(in, 0) < 0 || dup2(out, 1) < 0 || dup2(er, 2) < 0 ||
+            chdir(tmp_dir) != 0)
+            _exit(127);
+        if (stubs) {
+            snprintf(path, sizeof path, "%s:%s", stubs, getenv("PATH") ? getenv("PATH") : "/usr/bin:/bin");
+            setenv("PATH", path, 1);
+        }
+        execvp(argv[0], (char *const *)argv);
+        _exit(127);
+    }
+    if (waitpid(pid, &status, 0) != pid) return -1;
+    err = (char *)read_file(err_path, NULL);
+    snprintf(last_err, sizeof last_err, "%s", err ? err : "");
+    free(err);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+static int write_text(const char *path, const char *text, int mode)
+{
+    FILE *f = fopen(path, "w");
+    int ok = f && fputs(text, f) >= 0;
+    if (f && fclose(f) != 0) ok = 0;
+    return ok && chmod(path, (mode_t)mode) == 0;
+}
+
+/* Whether a payload ran: it makes a file called PWNED in the folder it
+   runs in, which is the scratch folder or below it. */
+static int payload_ran(void)
+{
+    char command[PATH_SIZE + 64];
+    snprintf(command, sizeof command, "find '%s' -name PWNED | grep -q .", tmp_dir);
+    return system(command) == 0;
+}
+
+/* Where sbatch is installed (CI installs Slurm): the #SBATCH arguments it
+   reads from script, as it logs them at -vvv before it would contact a
+   controller; --mem with --mem-per-cpu makes it stop right there (a
+   made-up slurm.conf, no daemon). Returns 0 when sbatch is not installed. */
+static int sbatch_reads(const char *script, const char *const *expected, int count)
+{
+    const char *which[] = { "sh", "-c", "command -v sbatch", NULL };
+    char conf[PATH_SIZE + 32], env[PATH_SIZE + 48], *line, *end;
+    const char *argv[] = { "env", env, "sbatch", "-vvv", "--mem=1", "--mem-per-cpu=1", script, NULL };
+    int found = 0;
+    if (run(which, NULL) != 0) return 0;
+    snprintf(conf, sizeof conf, "%s/dummy_slurm.conf", tmp_dir);
+    CHECK(write_text(conf, "ClusterName=t\nSlurmctldHost=localhost(127.0.0.1)\nSlurmctldPort=26999\n"
+                           "NodeName=localhost CPUs=1 State=UNKNOWN\nPartitionName=p Nodes=localhost Default=YES\n",
+                     0644));
+    CHECK(realpath(conf, env + 11) != NULL);
+    memcpy(env, "SLURM_CONF=", 11);
+    run(argv, NULL);
+    for (line = last_err; (line = strstr(line, "Found in script, argument \"")) != NULL; line = end) {
+        line += strlen("Found in script, argument \"");
+        end = strchr(line, '\n');
+        if (!end) break;
+        CHECKF(found < count && end - line == (long)strlen(expected[found]) + 1 &&
+                   memcmp(line, expected[found], strlen(expected[found])) == 0 && end[-1] == '"',
+               "sbatch read argument %d of %s as %.*s", found, script, (int)(end - line), line);
+        ++found;
+    }
+    CHECKF(found == count, "sbatch read %d #SBATCH arguments of %s, not %d: %s", found, script, count, last_err);
+    return 1;
+}
+
+#define PAYLOAD "$(touch PWNED)`touch PWNED`';touch PWNED;'\";touch PWNED;\""
+
+/* rrv farm slurm with names that hold shell syntax, quotes, blanks, a
+   leading dash and bytes that are no UTF-8, in the output, the farm folder,
+   the scene, the rrv program and the folder above them all; submit.sh runs
+   with a stand-in sbatch that runs each script at once (each array task
+   with SLURM_ARRAY_TASK_ID). No payload runs and the merge is the single
+   render. */
+static void farm_scripts_take_hostile_names(void)
+{
+    static const char sbatch_stub[] =
+        "#!/bin/sh\n"
+        "# sbatch for tests: runs the script now, an array's tasks in turn, and\n"
+        "# prints a job id as --parsable does.\n"
+        "script=\n"
+        "for a in \"$@\"; do case $a in -*) ;; *) script=$a ;; esac; done\n"
+        "[ -f \"$script\" ] || { echo \"sbatch stub: no script in $*\" >&2; exit 1; }\n"
+        "last=$(sed -n 's/^#SBATCH --array=0-\\([0-9]*\\)$/\\1/p' \"$script\")\n"
+        "if [ -n \"$last\" ]; then\n"
+        "    i=0\n"
+        "    while [ \"$i\" -le \"$last\" ]; do\n"
+        "        SLURM_ARRAY_TASK_ID=$i sh \"$script\" >&2 || exit 1\n"
+        "        i=$((i + 1))\n"
+        "    done\n"
+        "else\n"
+        "    sh \"$script\" >&2 || exit 1\n"
+        "fi\n"
+        "echo \"$$;test\"\n";
+    static const char srun_stub[] = "#!/bin/sh\nexec \"$@\"\n";
+    static const char *const top = "top " PAYLOAD " \xff\xfe";
+    char stubs[PATH_SIZE], path[4 * PATH_SIZE], rrv_copy[4 * PATH_SIZE], scene[4 * PATH_SIZE],
+        out[4 * PATH_SIZE], dir[4 * PATH_SIZE + 16], submit[4 * PATH_SIZE + 32];
+    int k;
+    CHECKF(realpath(tmp_dir, stubs) != NULL, "%s", tmp_dir);
+    strcat(stubs, "/stubs");
+    CHECK(mkdir(stubs, 0777) == 0 || errno == EEXIST);
+    snprintf(path, sizeof path, "%s/sbatch", stubs);
+    CHECK(write_text(path, sbatch_stub, 0755));
+    snprintf(path, sizeof path, "%s/srun", stubs);
+    CHECK(write_text(path, srun_stub, 0755));
+    CHECK(mkdir(in_tmp(top), 0777) == 0);
+    /* The rrv the nodes run, copied under a hostile name (a link would be
+       resolved to the real program). */
+    snprintf(rrv_copy, sizeof rrv_copy, "%s/-rrv " PAYLOAD, top);
+    {
+        const char *cp[] = { "cp", rrv_binary, rrv_copy, NULL };
+        CHECKF(run(cp, NULL) == 0, "%s", last_err);
+    }
+    snprintf(scene, sizeof scene, "%s/-scene " PAYLOAD ".rrv", top);
+    {
+        const char *cp[] = { "cp", "tiny.rrv", scene, NULL };
+        CHECKF(run(cp, NULL) == 0, "%s", last_err);
+    }
+    for (k = 0; k < 2; ++k) {
+        /* 0: the default folder next to the output; 1: --dir, with a
+           leading dash, a blank and the payload. */
+        const char *farm[24];
+        int n = 0;
+        snprintf(out, sizeof out, "./%s/-out %d " PAYLOAD " \xc3\x28.exr", top, k);
+        if (k == 0) snprintf(dir, sizeof dir, "%s.farm", out);
+        else snprintf(dir, sizeof dir, "./%s/-dir " PAYLOAD " \xff", top);
+        farm[n++] = rrv_binary;
+        farm[n++] = "farm";
+        farm[n++] = "slurm";
+        farm[n++] = scene;
+        farm[n++] = "-o";
+        farm[n++] = out;
+        farm[n++] = "--tiles";
+        farm[n++] = k == 0 ? "3" : "2x2";
+        farm[n++] = "--partition";
+        farm[n++] = "p \"q\" 'r' #s \\t " PAYLOAD;
+        farm[n++] = "--time";
+        farm[n++] = "1:00 " PAYLOAD;
+        farm[n++] = "--rrv";
+        farm[n++] = rrv_copy;
+        if (k == 1) {
+            farm[n++] = "--dir";
+            farm[n++] = dir;
+        }
+        farm[n++] = "--";
+        farm[n++] = "--spp";
+        farm[n++] = "13";
+        farm[n] = NULL;
+        CHECKF(run(farm, NULL) == 0, "farm %d: %s", k, last_err);
+        {
+            char render[4 * PATH_SIZE + 32], output[4 * PATH_SIZE + 64], real_dir[PATH_SIZE * 4],
+                full[6 * PATH_SIZE];
+            const char *args[6];
+            snprintf(full, sizeof full, "%s/%s", tmp_dir, dir);
+            CHECK(realpath(full, real_dir) != NULL);
+            snprintf(render, sizeof render, "%s/render.sbatch", real_dir);
+            snprintf(output, sizeof output, "--output=%s/logs/tile_%%a.log", real_dir);
+            args[0] = "--job-name=rrv-tiles";
+            args[1] = k == 0 ? "--array=0-2" : "--array=0-3";
+            args[2] = output;
+            args[3] = "--partition=p \"q\" 'r' #s \\t " PAYLOAD;
+            args[4] = "--time=1:00 " PAYLOAD;
+            if (!sbatch_reads(render, args, 5) && k == 0)
+                printf("(sbatch is not installed: not asked how it reads the #SBATCH lines)\n");
+        }
+        snprintf(submit, sizeof submit, "%s/submit.sh", dir);
+        {
+            const char *sh_submit[] = { "sh", submit, NULL };
+            CHECKF(run(sh_submit, stubs) == 0, "submit %d: %s", k, last_err);
+        }
+        CHECKF(!payload_ran(), "a payload ran in farm %d", k);
+        CHECKF(same_image(out, "single.exr"), "farm %d: the merge differs from the single render", k);
+    }
+}
+
+/* What the farm refuses, each with its exact message and exit status and
+   nothing written: values that no #SBATCH line can carry, tile counts the
+   image or the farm cannot take, options the farm sets, an output that is
+   one of the scene's files, and a script target that is not a regular
+   file. TMP in a message stands for the scratch folder's real path. */
+#define LONG_NAME "a-folder-name-long-enough-that-ten-thousand-part-paths-in-it-pass-one-mebibyte-of-arguments"
+static void farm_refusals_write_nothing(void)
+{
+    static const struct {
+        const char *args[8]; /* after "rrv farm slurm tiny.rrv"; NULL ends */
+        int status;
+        const char *message;
+        const char *absent;  /* must not exist afterwards */
+    } cases[] = {
+        { { "-o", "r1.exr", "--tiles", "2", "--dir", "d1\nx" }, 1,
+          "rrv: farm: --dir \"TMP/d1\\nx\" holds a newline, which has no safe form in a #SBATCH line\n", "d1\nx" },
+        { { "-o", "r2\n.exr", "--tiles", "2" }, 1,
+          "rrv: farm: the farm folder (-o OUT.farm) \"TMP/r2\\n.exr.farm\" holds a newline, which has no safe "
+          "form in a #SBATCH line\n", "r2\n.exr.farm" },
+        { { "-o", "r3.exr", "--tiles", "2", "--dir", "d3%a" }, 1,
+          "rrv: farm: --dir \"TMP/d3%a\" holds '%', which has no safe form in a #SBATCH line\n", "d3%a" },
+        { { "-o", "r4%j.exr", "--tiles", "2" }, 1,
+          "rrv: farm: the farm folder (-o OUT.farm) \"TMP/r4%j.exr.farm\" holds '%', which has no safe form in "
+          "a #SBATCH line\n", "r4%j.exr.farm" },
+        { { "-o", "r5.exr", "--tiles", "2", "--partition", "p\n#SBATCH --wrap=touch PWNED" }, 1,
+          "rrv: farm: --partition \"p\\n#SBATCH --wrap=touch PWNED\" holds a newline, which has no safe form in a "
+          "#SBATCH line\n", "r5.exr.farm" },
+        { { "-o", "r6.exr", "--tiles", "2", "--time", "1:00\ntouch PWNED" }, 1,
+          "rrv: farm: --time \"1:00\\ntouch PWNED\" holds a newline, which has no safe form in a #SBATCH line\n",
+          "r6.exr.farm" },
+        { { "-o", "r7.exr", "--tiles", "2", "--partition", "a%b" }, 1,
+          "rrv: farm: --partition \"a%b\" holds '%', which has no safe form in a #SBATCH line\n", "r7.exr.farm" },
+        { { "-o", "r8.exr", "--tiles", "2", "--dir", "HetJob" }, 1,
+          "rrv: farm: --dir \"TMP/HetJob\" holds \"hetjob\", which has no safe form in a #SBATCH line\n",
+          "HetJob" },
+        { { "-o", "r9.exr", "--tiles", "2", "--partition", "x\x01packjob" }, 1,
+          "rrv: farm: --partition \"x\\x01packjob\" holds \"packjob\", which has no safe form in a #SBATCH "
+          "line\n", "r9.exr.farm" },
+        { { "-o", "r10.exr", "--tiles", "1x0" }, 1,
+          "rrv: --tiles needs N or CxR, positive integers, got \"1x0\"\n", "r10.exr.farm" },
+        { { "-o", "r11.exr", "--tiles", "65536x65536" }, 1,
+          "rrv: --tiles 65536x65536 makes 4294967296 tiles; a farm has at most 10000\n", "r11.exr.farm" },
+        { { "-o", "r12.exr", "--tiles", "65536x32767" }, 1,
+          "rrv: --tiles 65536x32767 makes 2147418112 tiles; a farm has at most 10000\n", "r12.exr.farm" },
+        { { "-o", "r13.exr", "--tiles", "20" }, 1,
+          "rrv: --tiles 20: the 31x19 image has too few rows for that many tiles\n", "r13.exr.farm" },
+        { { "-o", "r14.exr", "--tiles", "32x1" }, 1,
+          "rrv: --tiles 32x1: the 31x19 image has too few columns for that many tiles\n", "r14.exr.farm" },
+        { { "-o", "r15.exr", "--tiles", "2", "--", "--samples", "0:1" }, 1,
+          "rrv: farm: --samples is set by the farm, not a render option to pass\n", "r15.exr.farm" },
+        { { "-o", "r16.exr", "--tiles", "2", "--", "--spp", "0" }, 1,
+          "rrv: --spp needs a positive integer, got \"0\"\n", "r16.exr.farm" },
+        { { "-o", "tiny.pfm", "--tiles", "2" }, 1, "rrv: refusing to write \"tiny.pfm\": it is the scene file\n",
+          "tiny.pfm.farm" },
+        { { "-o", "grid.exr", "--tiles", "2" }, 1,
+          "rrv: refusing to write \"grid.exr\": the scene reads it (as \"grid.vol\")\n", "grid.exr.farm" },
+        { { "-o", "r19.exr", "--tiles", "100x100", "--dir", LONG_NAME }, 1,
+          "rrv: --tiles 100x100: the merge of 10000 parts in \"TMP/" LONG_NAME "\" would take more than 1048576 "
+          "bytes of arguments: fewer tiles or a shorter --dir\n", LONG_NAME },
+    };
+    char real[PATH_SIZE], expected[2 * PATH_SIZE], *at;
+    int i, k;
+    CHECK(realpath(tmp_dir, real) != NULL);
+    /* tiny.pfm is a scene (the extension is only a name); grid.exr is a link
+       to the grid that grid.rrv reads; big.rrv is 10000 pixels wide. */
+    CHECK(sh("cp tiny.rrv tiny.pfm && cp '%s/scenes/assets/tiny.vol' grid.vol && ln -sf grid.vol grid.exr && "
+             "sed 's/^density fog constant .*/density fog grid grid.vol/' tiny.rrv > grid.rrv && "
+             "sed 's/resolution 31 19/resolution 10000 100/' tiny.rrv > big.rrv", repo_dir, NULL) == 0);
+    for (i = 0; i < (int)(sizeof cases / sizeof cases[0]); ++i) {
+        const char *argv[16];
+        int n = 0;
+        argv[n++] = rrv_binary;
+        argv[n++] = "farm";
+        argv[n++] = "slurm";
+        argv[n++] = strcmp(cases[i].args[1], "tiny.pfm") == 0   ? "tiny.pfm"
+                    : strcmp(cases[i].args[1], "grid.exr") == 0 ? "grid.rrv"
+                    : strcmp(cases[i].args[1], "r19.exr") == 0  ? "big.rrv"
+                                                                : "tiny.rrv";
+        for (k = 0; k < 8 && cases[i].args[k]; ++k) argv[n++] = cases[i].args[k];
+        argv[n] = NULL;
+        expected[0] = '\0';
+        for (at = (char *)cases[i].message; *at;) {
+            char *tmp = strstr(at, "TMP");
+            size_t l = strlen(expected);
+            if (!tmp) {
+                snprintf(expected + l, sizeof expected - l, "%s", at);
+                break;
+            }
+            snprintf(expected + l, sizeof expected - l, "%.*s%s", (int)(tmp - at), at, real);
+            at = tmp + 3;
+        }
+        CHECKF(run(argv, NULL) == cases[i].status, "case %d: exit status (%s)", i, last_err);
+        at = strstr(last_err, "run \"rrv ");
+        if (at) *at = '\0';
+        CHECKF(strcmp(last_err, expected) == 0, "case %d:\n    got      %s    expected %s", i, last_err,
+               expected);
+        CHECKF(access(in_tmp(cases[i].absent), F_OK) != 0, "case %d: \"%s\" was written", i, cases[i].absent);
+    }
+    /* A link, a FIFO or a folder standing at a script's path: refused,
+       nothing written, the link's target untouched. */
+    {
+        static const char *const setups[] = {
+            "mkdir -p lnk.exr.farm && echo keep > kept.txt && ln -sf ../kept.txt lnk.exr.farm/submit.sh",
+            "mkdir -p fifo.exr.farm && rm -f fifo.exr.farm/render.sbatch && mkfifo fifo.exr.farm/render.sbatch",
+            "mkdir -p dir.exr.farm/merge.sbatch",
+        };
+        static const char *const messages[] = {
+            "rrv: refusing to write \"TMP/lnk.exr.farm/submit.sh\": it is a symbolic link, not a regular file\n",
+            "rrv: refusing to write \"TMP/fifo.exr.farm/render.sbatch\": it is a FIFO, not a regular file\n",
+            "rrv: refusing to write \"TMP/dir.exr.farm/merge.sbatch\": it is a directory, not a regular file\n",
+        };
+        for (i = 0; i < 3; ++i) {
+            const char *argv[] = { rrv_binary, "farm", "slurm", "tiny.rrv", "-o", NULL, "--tiles", "2", NULL };
+            char out[32], name[64];
+            snprintf(out, sizeof out, "%s", i == 0 ? "lnk.exr" : i == 1 ? "fifo.exr" : "dir.exr");
+            argv[5] = out;
+            CHECKF(sh("%s", setups[i], NULL) == 0, "%s", last_err);
+            snprintf(expected, sizeof expected, "%s", messages[i]);
+            at = strstr(expected, "TMP");
+            if (at) {
+                char tail[PATH_SIZE];
+                snprintf(tail, sizeof tail, "%s", at + 3);
+                snprintf(at, sizeof expected - (size_t)(at - expected), "%s%s", real, tail);
+            }
+            CHECKF(run(argv, NULL) == 3, "script target %d: exit status (%s)", i, last_err);
+            CHECKF(strcmp(last_err, expected) == 0, "script target %d:\n    got      %s    expected %s", i,
+                   last_err, expected);
+            for (k = 0; k < 3; ++k) {
+                static const char *const scripts[] = { "render.sbatch", "merge.sbatch", "submit.sh" };
+                struct stat st;
+                snprintf(name, sizeof name, "%s.farm/%s", out, scripts[k]);
+                CHECKF(lstat(in_tmp(name), &st) != 0 || !S_ISREG(st.st_mode), "%s was written", name);
+            }
+        }
+        CHECK(sh("test \"$(cat kept.txt)\" = keep && test -L lnk.exr.farm/submit.sh", NULL, NULL) == 0);
+    }
 }
 
 typedef struct byte_sink { unsigned char data[8192]; size_t size; } byte_sink;
@@ -331,5 +663,7 @@ int main(int argc, char **argv)
     RUN(merge_errors_match_the_corpus);
     RUN(status_reports_parts);
     RUN(farm_scripts_render_and_resume);
+    RUN(farm_scripts_take_hostile_names);
+    RUN(farm_refusals_write_nothing);
     return CHECK_EXIT_CODE();
 }

@@ -7,7 +7,6 @@
    and for a FIFO, /dev/zero and folders as inputs. */
 #define _POSIX_C_SOURCE 200809L
 #endif
-#define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
 #include "inflate.h"
@@ -1078,49 +1077,112 @@ static void test_pfm_file_reader_bounds(void)
     remove(path);
 
 #if HAVE_FILE_SIZE_LIMIT
-    /* a device without end and a folder: clear messages, no endless read */
+    /* a device without end, a folder and a FIFO are no regular files:
+       refused when opened, nothing read (before, /dev/zero was read for its
+       header and a FIFO without a writer blocked in fopen: the alarm ends
+       a reader that still does, and the test with it) */
     r = rrv_read_pfm("/dev/zero", &rgb, &w, &h, &err);
-    CHECKF(r == RRV_ERROR_FORMAT &&
-               strcmp(err.message, "not a PFM file (it must start with \"PF\" or \"Pf\")") == 0,
+    CHECKF(r == RRV_ERROR_IO && strcmp(err.message, "cannot open: not a regular file") == 0,
            "/dev/zero: %s: %s", rrv_result_string(r), err.message);
     r = rrv_read_pfm(build_dir, &rgb, &w, &h, &err);
-    CHECKF(r == RRV_ERROR_IO && strcmp(err.message, "cannot read: is a directory") == 0,
+    CHECKF(r == RRV_ERROR_IO && strcmp(err.message, "cannot open: is a directory") == 0,
            "a folder: %s: %s", rrv_result_string(r), err.message);
     CHECK(rgb == NULL && w == 0 && h == 0);
-
-    /* a pipe that never ends after a good image: the read stops at the
-       image's end (a reader that read to EOF would hang until the alarm) */
     make_path(path, sizeof path, "test_image_fifo.pfm");
     remove(path);
     if (mkfifo(path, 0600) == 0) {
-        pid_t child = fork();
-        if (child == 0) {
-            FILE *f = fopen(path, "wb");
-            static const unsigned char junk[4096];
-            signal(SIGPIPE, SIG_DFL);
-            alarm(30);
-            if (!f) _exit(1);
-            sink_init(&s, (size_t)-1);
-            if (rrv_write_pfm_to(sink_write, &s, pixel, 1, 1, NULL) != RRV_OK) _exit(1);
-            fwrite(s.data, 1, s.size, f);
-            for (;;) fwrite(junk, 1, sizeof junk, f); /* until the reader closes */
-        } else if (child > 0) {
-            int status = 0;
-            alarm(30);
-            r = rrv_read_pfm(path, &rgb, &w, &h, &err);
-            alarm(0);
-            CHECKF(r == RRV_OK && w == 1 && h == 1 && rgb[1] == 2.0f, "FIFO: %s",
-                   r == RRV_OK ? "wrong pixels" : err.message);
-            if (r == RRV_OK) rrv_free(rgb);
-            kill(child, SIGKILL);
-            waitpid(child, &status, 0);
-        } else {
-            CHECKF(0, "fork failed");
-        }
+        alarm(20);
+        r = rrv_read_pfm(path, &rgb, &w, &h, &err);
+        CHECKF(r == RRV_ERROR_IO && strcmp(err.file, path) == 0 &&
+                   strcmp(err.message, "cannot open: not a regular file") == 0,
+               "FIFO: %s: %s", rrv_result_string(r), err.message);
+        r = rrv_read_exr(path, &rgb, &w, &h, NULL, &err);
+        CHECKF(r == RRV_ERROR_IO && strcmp(err.message, "cannot open: not a regular file") == 0,
+               "FIFO as EXR: %s: %s", rrv_result_string(r), err.message);
+        alarm(0);
+        CHECK(rgb == NULL);
         remove(path);
     } else {
         CHECKF(0, "mkfifo %s failed", path);
     }
+#endif
+}
+
+/* The file writers refuse an existing target that is not a regular file
+   (it stays what it was, and no temporary file is left), also through a
+   symbolic link; a link to a regular file, or a dangling one, is replaced
+   by the image and the file it pointed to is left alone. */
+static void test_writers_refuse_non_regular_targets(void)
+{
+#if HAVE_FILE_SIZE_LIMIT
+    char fifo[1024], folder[1024], link_fifo[1024], kept[1024], link_kept[1024], dangling[1024];
+    float pixel[3] = {1, 2, 3};
+    struct stat st;
+    rrv_error err;
+    rrv_result r;
+    int kind;
+    make_path(fifo, sizeof fifo, "test_image_target_fifo");
+    make_path(folder, sizeof folder, "test_image_target_folder");
+    make_path(link_fifo, sizeof link_fifo, "test_image_target_link_fifo");
+    make_path(kept, sizeof kept, "test_image_target_kept");
+    make_path(link_kept, sizeof link_kept, "test_image_target_link_kept");
+    make_path(dangling, sizeof dangling, "test_image_target_dangling");
+    remove(fifo);
+    rmdir(folder);
+    remove(link_fifo);
+    remove(link_kept);
+    remove(dangling);
+    CHECK(mkfifo(fifo, 0600) == 0);
+    CHECK(mkdir(folder, 0700) == 0);
+    CHECK(symlink("test_image_target_fifo", link_fifo) == 0);
+    alarm(20); /* a writer that opened the FIFO would block */
+    for (kind = 0; kind < 3; ++kind) {
+        const char *names[3] = {"PFM", "PNG", "EXR"};
+        const char *targets[4] = {fifo, link_fifo, folder, "/dev/null"};
+        const char *kinds[4] = {"a FIFO", "a FIFO", "a directory", "a character device"};
+        char want[128];
+        int t;
+        /* /dev/null last, and only after the FIFO was refused: a writer
+           that replaces device nodes must not get to replace the system's */
+        for (t = 0; t < 4 && !check__failed_in_test; ++t) {
+            r = kind == 0   ? rrv_write_pfm(targets[t], pixel, 1, 1, &err)
+                : kind == 1 ? rrv_write_png(targets[t], pixel, 1, 1, 0.0, &err)
+                            : rrv_write_exr(targets[t], pixel, 1, 1, NULL, &err);
+            snprintf(want, sizeof want, "cannot write: it is %s, not a regular file", kinds[t]);
+            CHECKF(r == RRV_ERROR_IO && strcmp(err.file, targets[t]) == 0 && strcmp(err.message, want) == 0,
+                   "%s to %s: %s: %s", names[kind], targets[t], rrv_result_string(r), err.message);
+        }
+    }
+    alarm(0);
+    CHECK(lstat(fifo, &st) == 0 && S_ISFIFO(st.st_mode));
+    CHECK(lstat(link_fifo, &st) == 0 && S_ISLNK(st.st_mode));
+    CHECK(stat(folder, &st) == 0 && S_ISDIR(st.st_mode));
+    CHECK(stat("/dev/null", &st) == 0 && S_ISCHR(st.st_mode));
+    CHECK(count_temp_files("test_image_target") == 0);
+
+    /* a link to a regular file: the link becomes the image, the file stays */
+    CHECK(write_text_file(kept, "keep me"));
+    CHECK(symlink("test_image_target_kept", link_kept) == 0);
+    CHECK(symlink("test_image_target_nowhere", dangling) == 0);
+    r = rrv_write_pfm(link_kept, pixel, 1, 1, &err);
+    CHECKF(r == RRV_OK, "%s", err.message);
+    CHECK(lstat(link_kept, &st) == 0 && S_ISREG(st.st_mode));
+    CHECK(text_file_is(kept, "keep me"));
+    r = rrv_write_pfm(dangling, pixel, 1, 1, &err);
+    CHECKF(r == RRV_OK, "%s", err.message);
+    CHECK(lstat(dangling, &st) == 0 && S_ISREG(st.st_mode));
+    {
+        float *rgb = NULL;
+        int w = 0, h = 0;
+        CHECK(rrv_read_pfm(link_kept, &rgb, &w, &h, &err) == RRV_OK && w == 1 && h == 1 && rgb[1] == 2.0f);
+        rrv_free(rgb);
+    }
+    remove(fifo);
+    rmdir(folder);
+    remove(link_fifo);
+    remove(kept);
+    remove(link_kept);
+    remove(dangling);
 #endif
 }
 
@@ -1135,5 +1197,6 @@ int main(int argc, char **argv)
     RUN(test_writer_failures);
     RUN(test_pfm_png_files);
     RUN(test_pfm_file_reader_bounds);
+    RUN(test_writers_refuse_non_regular_targets);
     return CHECK_EXIT_CODE();
 }

@@ -9,7 +9,6 @@
    Every check holds to 4 standard errors with fixed seeds; where every
    pixel has the same expectation, pixel samples are the independent
    estimates. INTEGRATORS_VERBOSE=1 prints the values. */
-#define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
 #include "say.h"
@@ -33,6 +32,7 @@ static const method methods[] = {
     {RRV_INTEGRATOR_EIKONAL, RRV_REFRACTION_DEFAULT, "eikonal"},
 };
 #define METHOD_COUNT ((int)(sizeof methods / sizeof methods[0]))
+#define PI 3.14159265358979323846
 
 static void use(rrv_scene *s, const method *m)
 {
@@ -113,7 +113,7 @@ static rrv_scene *sky_scene(int size, double L)
 static void furnace(double s0, double s1, double s2, int spp, double max_rel_se, const char *name)
 {
     rrv_scene *s = sky_scene(6, 0.75);
-    rrv_medium *m = tb_medium(s, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 0.0, 1.0);
+    rrv_medium *m = tb_medium(s, tv3(-1, -1, -1), tv3(1, 1, 1), 0.0, 1.0);
     static const double expected[3] = {0.75, 0.75, 0.75};
     m->sigma_s[0] = s0; m->sigma_s[1] = s1; m->sigma_s[2] = s2;
     m->g = 0.6;
@@ -152,16 +152,16 @@ static void test_refractive_furnace_lens(void)
     rrv_scene *s = sky_scene(8, 0.5);
     rrv_medium *a, *b;
     static const double expected[3] = {0.5, 0.5, 0.5};
-    tb_medium(s, rrv__v3(-1.2, -0.6, -0.6), rrv__v3(0, 0.6, 0.6), 0, 0);
-    tb_medium(s, rrv__v3(0, -0.6, -0.6), rrv__v3(1.2, 0.6, 0.6), 0, 0);
+    tb_medium(s, tv3(-1.2, -0.6, -0.6), tv3(0, 0.6, 0.6), 0, 0);
+    tb_medium(s, tv3(0, -0.6, -0.6), tv3(1.2, 0.6, 0.6), 0, 0);
     a = &s->media[0]; /* after both: adding a medium may move the array */
     b = &s->media[1];
     a->density.kind = b->density.kind = RRV_FIELD_NONE;
     a->ior.kind = RRV_FIELD_LUNEBURG;
-    a->ior.center = rrv__v3(-0.6, 0, 0);
+    a->ior.center = tv3(-0.6, 0, 0);
     a->ior.radius = 0.55;
     b->ior.kind = RRV_FIELD_FISHEYE;
-    b->ior.center = rrv__v3(0.6, 0, 0);
+    b->ior.center = tv3(0.6, 0, 0);
     b->ior.radius = 0.55;
     b->ior.n0 = 1.6;
     s->settings.step = 0.02;
@@ -197,7 +197,7 @@ static void test_refractive_furnace_sharp_box(void)
     /* A box of constant IOR 1.5: its faces refract and reflect (Fresnel),
        which moves light around but neither makes nor loses any. */
     rrv_scene *s = sky_scene(8, 0.5);
-    rrv_medium *m = tb_medium(s, rrv__v3(-0.7, -0.5, -0.6), rrv__v3(0.7, 0.5, 0.6), 0, 0);
+    rrv_medium *m = tb_medium(s, tv3(-0.7, -0.5, -0.6), tv3(0.7, 0.5, 0.6), 0, 0);
     static const double expected[3] = {0.5, 0.5, 0.5};
     m->density.kind = RRV_FIELD_NONE;
     m->ior.kind = RRV_FIELD_CONSTANT;
@@ -212,15 +212,15 @@ static void test_camera_inside_luneburg(void)
     /* At the lens centre eta = sqrt(2); basic radiance L / eta^2 is
        invariant along rays, so the sky (at eta 1) looks 2 times as bright. */
     rrv_scene *s = sky_scene(6, 0.5);
-    rrv_medium *m = tb_medium(s, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 0, 0);
+    rrv_medium *m = tb_medium(s, tv3(-1, -1, -1), tv3(1, 1, 1), 0, 0);
     static const double expected[3] = {1.0, 1.0, 1.0};
     int i, c;
     m->density.kind = RRV_FIELD_NONE;
     m->ior.kind = RRV_FIELD_LUNEBURG;
-    m->ior.center = rrv__v3(0, 0, 0);
+    m->ior.center = tv3(0, 0, 0);
     m->ior.radius = 1;
-    s->camera.eye = rrv__v3(0, 0, 0);
-    s->camera.look = rrv__v3(0, 0, 1);
+    s->camera.eye = tv3(0, 0, 0);
+    s->camera.look = tv3(0, 0, 1);
     s->camera.fov = 90;
     s->settings.step = 0.02;
     prepare(s);
@@ -244,28 +244,28 @@ static void test_no_ior_renders_alike(void)
        the refractive and eikonal integrators must do exactly what classic
        does, sample for sample. */
     rrv_scene *s = sky_scene(10, 0.3);
-    rrv_medium *m = tb_medium(s, rrv__v3(-1, 0, -1), rrv__v3(1, 1.5, 1), 0.3, 2.0);
+    rrv_medium *m = tb_medium(s, tv3(-1, 0, -1), tv3(1, 1.5, 1), 0.3, 2.0);
     rrv_shape *floor_quad, *light;
     rrv_blob *b = tb_blobs(&m->density, 1);
     size_t n = 10 * 10 * 3;
     float *ref = (float *)calloc(n, sizeof(float)), *img = (float *)calloc(n, sizeof(float));
     int i;
-    b->center = rrv__v3(0, 0.7, 0);
+    b->center = tv3(0, 0.7, 0);
     b->radius = 0.4;
     b->weight = 2;
     tb_shape(s, RRV_SHAPE_QUAD);
     tb_shape(s, RRV_SHAPE_QUAD);
     floor_quad = &s->shapes[0]; /* after both: adding a shape may move the array */
     light = &s->shapes[1];
-    floor_quad->p0 = rrv__v3(-4, 0, -4);
-    floor_quad->e1 = rrv__v3(0, 0, 8);
-    floor_quad->e2 = rrv__v3(8, 0, 0);
-    light->p0 = rrv__v3(-0.5, 3, -0.5);
-    light->e1 = rrv__v3(1, 0, 0);
-    light->e2 = rrv__v3(0, 0, 1);
+    floor_quad->p0 = tv3(-4, 0, -4);
+    floor_quad->e1 = tv3(0, 0, 8);
+    floor_quad->e2 = tv3(8, 0, 0);
+    light->p0 = tv3(-0.5, 3, -0.5);
+    light->e1 = tv3(1, 0, 0);
+    light->e2 = tv3(0, 0, 1);
     light->L[0] = light->L[1] = light->L[2] = 5;
-    s->camera.eye = rrv__v3(0, 1.5, -5);
-    s->camera.look = rrv__v3(0, 0.6, 0);
+    s->camera.eye = tv3(0, 1.5, -5);
+    s->camera.look = tv3(0, 0.6, 0);
     s->camera.fov = 35;
     s->settings.max_depth = 16;
     prepare(s);
@@ -302,30 +302,30 @@ static void light_shape_case(rrv_shape_kind kind, const char *name)
     const double albedo = 0.6, L = 4, h = 1.5, half = 0.5;
     double E, expected;
     int i;
-    s->camera.eye = rrv__v3(0, 2, -3);
-    s->camera.look = rrv__v3(0, 0, 0);
+    s->camera.eye = tv3(0, 2, -3);
+    s->camera.look = tv3(0, 0, 0);
     s->camera.fov = 0.01;
     /* one bounce: lights are diffuse surfaces too, and light the floor sends
        back off them is not in the closed form */
     s->settings.max_depth = 1;
     s->settings.seed = 5;
     s->materials[0].albedo[0] = s->materials[0].albedo[1] = s->materials[0].albedo[2] = albedo;
-    floor_quad->p0 = rrv__v3(-5, 0, -5);
-    floor_quad->e1 = rrv__v3(0, 0, 10);
-    floor_quad->e2 = rrv__v3(10, 0, 0);
+    floor_quad->p0 = tv3(-5, 0, -5);
+    floor_quad->e1 = tv3(0, 0, 10);
+    floor_quad->e2 = tv3(10, 0, 0);
     if (kind == RRV_SHAPE_SPHERE) {
         /* E = pi L sin^2(alpha), sin(alpha) = R / distance */
         rrv_shape *sph = tb_shape(s, RRV_SHAPE_SPHERE);
-        sph->center = rrv__v3(0, h, 0);
+        sph->center = tv3(0, h, 0);
         sph->radius = 0.4;
         sph->L[0] = sph->L[1] = sph->L[2] = L;
-        E = RRV__PI * L * (0.4 / h) * (0.4 / h);
+        E = PI * L * (0.4 / h) * (0.4 / h);
     } else if (kind == RRV_SHAPE_QUAD) {
         /* a square centred above: four corner rectangles */
         rrv_shape *q = tb_shape(s, RRV_SHAPE_QUAD);
-        q->p0 = rrv__v3(-half, h, -half);
-        q->e1 = rrv__v3(2 * half, 0, 0);
-        q->e2 = rrv__v3(0, 0, 2 * half); /* e1 x e2 = -y: emits down */
+        q->p0 = tv3(-half, h, -half);
+        q->e1 = tv3(2 * half, 0, 0);
+        q->e2 = tv3(0, 0, 2 * half); /* e1 x e2 = -y: emits down */
         q->L[0] = q->L[1] = q->L[2] = L;
         E = 4 * corner_rectangle_irradiance(L, half, half, h);
     } else {
@@ -333,13 +333,13 @@ static void light_shape_case(rrv_shape_kind kind, const char *name)
            about the vertical axis maps one triangle onto the other, so each
            gives half the square's irradiance */
         rrv_shape *t = tb_shape(s, RRV_SHAPE_TRIANGLE);
-        t->p0 = rrv__v3(-half, h, -half);
-        t->e1 = rrv__v3(2 * half, 0, 0);
-        t->e2 = rrv__v3(2 * half, 0, 2 * half);
+        t->p0 = tv3(-half, h, -half);
+        t->e1 = tv3(2 * half, 0, 0);
+        t->e2 = tv3(2 * half, 0, 2 * half);
         t->L[0] = t->L[1] = t->L[2] = L;
         E = 2 * corner_rectangle_irradiance(L, half, half, h);
     }
-    expected = albedo / RRV__PI * E;
+    expected = albedo / PI * E;
     prepare(s);
     for (i = 0; i < METHOD_COUNT; ++i) {
         stats st;

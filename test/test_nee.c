@@ -24,27 +24,7 @@
      ~500 vertices, chains no solve can use, and a refused allocation.
    Fixed seeds; the renders compared are independent (distinct seeds).
    NEE_VERBOSE=1 prints the values. */
-#include <stdlib.h>
-/* Allocations pass through a counter so that a test can refuse one (the
-   render context's chain for nee manifold). */
-static long allocations_to_pass = -1; /* then one is refused; -1: none is */
-static void *t_malloc(size_t n)
-{
-    if (allocations_to_pass == 0) {
-        allocations_to_pass = -1;
-        return NULL;
-    }
-    if (allocations_to_pass > 0) --allocations_to_pass;
-    return malloc(n);
-}
-/* nee aim aims only where a ray will likely land (RRV__AIM_REACH, 1 in the
-   header); the tests of strong media aim everywhere, so that the aimed
-   estimator itself is checked where refraction turns most rays off. */
-static double aim_reach = 1.0;
-#define RRV__AIM_REACH aim_reach
-#define RRV_MALLOC(sz) t_malloc(sz)
-#define RRV_REALLOC(p, sz) realloc(p, sz)
-#define RRV_FREE(p) free(p)
+#include "alloc_hook.h" /* refuses an allocation on request; aim_reach */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"

@@ -15,25 +15,7 @@
 #include <float.h>
 #include <locale.h>
 
-static size_t t_largest;     /* largest single request since reset */
-static long t_alloc_count;   /* requests since reset */
-static long t_fail_at = -1;  /* request index to refuse, -1: none */
-
-static void *t_malloc(size_t n)
-{
-    if (t_fail_at >= 0 && t_alloc_count++ == t_fail_at) return NULL;
-    if (n > t_largest) t_largest = n;
-    return malloc(n);
-}
-static void *t_realloc(void *p, size_t n)
-{
-    if (t_fail_at >= 0 && t_alloc_count++ == t_fail_at) return NULL;
-    if (n > t_largest) t_largest = n;
-    return realloc(p, n);
-}
-#define RRV_MALLOC(sz) t_malloc(sz)
-#define RRV_REALLOC(p, sz) t_realloc(p, sz)
-#define RRV_FREE(p) free(p)
+#include "alloc_hook.h" /* counts allocations, refuses the Nth on request */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
@@ -365,10 +347,11 @@ static void test_defaults_and_values(void)
     CHECK(s->camera.fov == 40 && s->camera.width == 320 && s->camera.height == 240);
     CHECK(s->camera.up.y == 1 && s->camera.eye.z == 3);
     CHECK(s->settings.spp == 16 && s->settings.max_depth == 32 && s->settings.seed == 0);
-    CHECK(s->settings.integrator == RRV_INTEGRATOR_CLASSIC && s->settings.stepper == RRV_STEPPER_DEFAULT);
+    CHECK(s->settings.integrator == RRV_INTEGRATOR_DEFAULT && s->settings.stepper == RRV_STEPPER_DEFAULT);
     CHECK(s->settings.refraction == RRV_REFRACTION_DEFAULT && s->settings.majorant_cells == 0);
     CHECK(s->settings.bend_tolerance == 0.01 && s->settings.mu_eta == 0 && s->settings.step == 0.01);
-    CHECK(s->settings.ambient_ior == 1);
+    /* no `ambient`: the air around gas b, at its ambient state, iorscale 1 */
+    CHECK(s->settings.ambient_ior == 0 && s->ambient_ior == 1.0 + (1.000292 - 1.0));
     CHECK(s->shape_count == 2 && s->material_count == 2);
     CHECK(strcmp(s->materials[s->shapes[0].material].name, "default") == 0);
     CHECK(s->materials[0].albedo[1] == 0.5);
@@ -672,6 +655,17 @@ static void test_locale_independence(void)
     rrv_scene_free(s);
 }
 
+/* A file holding `text`, then (if size is larger) a hole up to size bytes. */
+static int write_sparse(const char *path, const char *text, long size)
+{
+    FILE *f = fopen(path, "wb");
+    int ok;
+    if (!f) return 0;
+    ok = fputs(text, f) >= 0;
+    if (ok && size > (long)strlen(text)) ok = fseek(f, size - 1, SEEK_SET) == 0 && fputc(0, f) == 0;
+    return fclose(f) == 0 && ok;
+}
+
 /* Paths, inputs and odd files: "C:" is a drive only on Windows, every file
    read is reported through on_input, and a folder or an endless device as
    the scene gets a message after a bounded read. */
@@ -756,13 +750,44 @@ static void test_paths_and_inputs(void)
            "%s: %s", rrv_result_string(r), err.message);
     CHECKF(t_largest <= ((size_t)1 << 20), "largest allocation %lu", (unsigned long)t_largest);
 #ifndef _WIN32
-    /* an endless device stops at its first piece, whose NUL is refused */
+    /* an endless device is not a regular file: refused before a byte is read */
     t_largest = 0;
     r = rrv_scene_load("/dev/zero", NULL, &s, &err);
-    CHECKF(r == RRV_ERROR_PARSE && err.line == 1 &&
-               strcmp(err.message, "NUL byte in column 1: not a text file") == 0,
+    CHECKF(r == RRV_ERROR_IO && err.line == 0 &&
+               strcmp(err.message, "cannot read scene file: not a regular file") == 0,
            "%s: %s", rrv_result_string(r), err.message);
     CHECKF(t_largest <= ((size_t)1 << 20), "largest allocation %lu", (unsigned long)t_largest);
+
+    /* files over the limit are refused by their size, before a byte is
+       read: a 128 MiB NanoVDB file (sparse, so it costs no disk) and a
+       scene as large, under a limit of 64 MiB, each allocate nothing near
+       it (they were read up to the limit first) */
+    {
+        char nvdb[600], scene[600];
+        rrv_load_options opt;
+        snprintf(nvdb, sizeof nvdb, "%s/t_big.nvdb", t_build_dir);
+        snprintf(scene, sizeof scene, "%s/t_big.rrv", t_build_dir);
+        memset(&opt, 0, sizeof opt);
+        opt.max_grid_bytes = (size_t)64 << 20;
+        CHECK(write_sparse(nvdb, "NanoVDB0", (long)128 << 20));
+        CHECK(write_sparse(scene, "camera eye 0 0 5 look 0 0 0\nmedium m box -1 -1 -1 1 1 1\n"
+                                  "density m nanovdb t_big.nvdb\n", 0));
+        t_largest = 0;
+        r = rrv_scene_load(scene, &opt, &s, &err);
+        CHECKF(r == RRV_ERROR_LIMIT && err.line == 3 &&
+                   strcmp(err.message, "NanoVDB file \"t_big.nvdb\": the file is larger than the limit of 67108864 "
+                                       "bytes (raise it with --max-grid-mb N)") == 0,
+               "%s: %d: %s", rrv_result_string(r), err.line, err.message);
+        CHECKF(t_largest <= ((size_t)1 << 20), "largest allocation %lu", (unsigned long)t_largest);
+        CHECK(write_sparse(scene, "camera eye 0 0 5 look 0 0 0\n", (long)128 << 20));
+        t_largest = 0;
+        r = rrv_scene_load(scene, &opt, &s, &err);
+        CHECKF(r == RRV_ERROR_LIMIT && strcmp(err.message, "scene file is larger than the limit of 67108864 bytes") == 0,
+               "%s: %s", rrv_result_string(r), err.message);
+        CHECKF(t_largest <= ((size_t)1 << 20), "largest allocation %lu", (unsigned long)t_largest);
+        remove(nvdb);
+        remove(scene);
+    }
 #endif
     CHECK(s == NULL);
 }

@@ -6,7 +6,6 @@
    is scanned, so a new scene is covered without touching this file.
    Run from the repository root; argv[1] is the build folder (unused). */
 #define _POSIX_C_SOURCE 200809L
-#define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
 

@@ -7,7 +7,7 @@ ratios compare runs made on the same machine at the same time. Error is
 against the references in test/ref/ (`make refs`), computed by
 build/ref_compare (OpenEXR). Seeds are fixed.
 
-Writes test/bench/results/bench.md (the tables README shows) and
+Writes test/bench/results/bench.md (the tables test/bench/RESULTS.md quotes) and
 test/bench/results/bench.svg (log CPU time against log RMSE, one panel per
 scene, one curve per method), and prints the tables.
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Cost per sample of refraction against classic (README, "Per sample, and
+"""Cost per sample of refraction against classic (test/bench/RESULTS.md, "Per sample, and
 what 1.25x would take"), from the repository root after `make`:
 
     python3 test/bench/per_sample.py [--rounds N] [--instructions] [--curve] [SCENE ...]
