@@ -955,6 +955,7 @@ static void add_stats(rrv_render_stats *into, const rrv_render_stats *from)
     into->cone_shots += from->cone_shots;
     into->cone_counted += from->cone_counted;
     into->cut_samples += from->cut_samples;
+    into->trapped_paths += from->trapped_paths;
 }
 
 /* ---- the sample tree ------------------------------------------------------------
@@ -1651,6 +1652,7 @@ static void print_render_summary(int width, int height, int spp, double seconds,
     if (stats->paths_cut > 0)
         fprintf(stderr, " (%" PRIu64 " paths cut at a work bound, %" PRIu64 " of them in tracking, %" PRIu64
                 " at the sample's)", stats->paths_cut, stats->cut_tracking, stats->cut_samples);
+    if (stats->trapped_paths > 0) fprintf(stderr, " (%" PRIu64 " of them trapped in a refracting medium)", stats->trapped_paths);
     if (stats->solves > 0) {
         double n = (double)stats->solves, conv = (double)stats->solves_converged;
         fprintf(stderr, "; curved nee: %" PRIu64 " solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, "

@@ -1523,6 +1523,7 @@ static void cone_context(rrv__context *ctx, const rrv_scene *s)
     ctx->partition = ctx->shoot = ctx->sample_lights = 1;
     ctx->eta_floor = 1;
     ctx->step_bound = rrv__step_bound(s, RRV_INTEGRATOR_EIKONAL);
+    ctx->trap_length = rrv__trap_length(s);
     rrv__cone_setup(ctx);
 }
 

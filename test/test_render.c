@@ -643,6 +643,60 @@ static void test_trapped_eikonal_rays_are_bounded_and_counted(void)
     rrv_scene_free(s);
 }
 
+static void test_rays_trapped_in_a_waveguide_end_early_and_are_counted(void)
+{
+    /* The camera inside the layer of a shell whose IOR rises to 3 (2 cm
+       thick, 12.5 mm edges), looking along it within 5 degrees (2 x 2 pixels): every camera
+       ray is guided by the layer (eta r cos(angle) at the camera, 2.85,
+       exceeds the r <= 1.0 any ray leaving it needs) and circles the
+       sphere for good. The comb kicks it at most grad_peak / tolerance
+       times a metre, so a ray ended at the trap length takes at most that
+       rate times the length in kicks (64 spare); the step bound, which
+       ended these rays before, allows over 4 times as many. Every sample
+       must be ended as trapped, counted (trapped_paths, also in
+       paths_cut), and dark: a furnace of 1 that a trapped ray never sees. */
+    rrv_scene *s = tb_scene(2, 2);
+    rrv_medium *m = tb_medium(s, rrv__v3(-1.1, -1.1, -1.1), rrv__v3(1.1, 1.1, 1.1), 0.0, 0.0);
+    rrv_render_stats st;
+    rrv_error err;
+    float img[2 * 2 * 3];
+    double trap, per_trap;
+    long bound;
+    int i;
+    m->ior.kind = RRV_FIELD_SHELL;
+    m->ior.center = rrv__v3(0, 0, 0);
+    m->ior.radius = 1.0;
+    m->ior.thickness = 0.05;
+    m->ior.edge = 0.0125;
+    m->ior.amplitude = 2.0;
+    s->environment.kind = RRV_ENV_CONSTANT;
+    s->environment.L[0] = s->environment.L[1] = s->environment.L[2] = 1;
+    s->camera.eye = rrv__v3(0, 0.975, 0);
+    s->camera.look = rrv__v3(0, 0.975, -1);
+    s->camera.fov = 10;
+    s->settings.integrator = RRV_INTEGRATOR_REFRACTIVE;
+    s->settings.nee = RRV_NEE_NONE;
+    CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "%s", err.message);
+    trap = rrv__trap_length(s);
+    CHECKF(fabs(trap - RRV__TRAP_CROSSINGS * 2.2 * sqrt(3.0)) < 1e-12, "trap length %g", trap);
+    per_trap = 64 + trap * m->majorant->grad_peak / s->settings.bend_tolerance;
+    bound = rrv__step_bound(s, RRV_INTEGRATOR_REFRACTIVE);
+    CHECKF(4 * per_trap < (double)bound, "a trap's %g kicks against the step bound's %ld", per_trap, bound);
+    memset(&st, 0, sizeof st);
+    memset(img, 0, sizeof img);
+    CHECK(rrv_render_rect(s, 0, 0, 2, 2, 0, 1, img, 2, &st, NULL) == RRV_OK);
+    printf("  %.3g kicks a trapped sample (at most %.3g; the step bound %ld)\n",
+           (double)st.events / (double)st.samples, per_trap, bound);
+    CHECKF(st.samples == 4 && st.trapped_paths == st.samples && st.paths_cut == st.trapped_paths &&
+               st.cut_tracking == 0 && st.cut_samples == 0,
+           "%llu samples, %llu trapped, %llu cut", (unsigned long long)st.samples,
+           (unsigned long long)st.trapped_paths, (unsigned long long)st.paths_cut);
+    CHECKF((double)st.events <= (double)st.samples * per_trap, "%llu kicks for %llu samples",
+           (unsigned long long)st.events, (unsigned long long)st.samples);
+    for (i = 0; i < 2 * 2 * 3; ++i) CHECKF(img[i] == 0.0f, "pixel value %g", img[i]);
+    rrv_scene_free(s);
+}
+
 static void test_tracking_walks_are_bounded(void)
 {
     /* A majorant of 1e30 over a density of 1e-30: free flights of 1e-30 m
@@ -905,6 +959,7 @@ int main(int argc, char **argv)
     RUN(test_grid_gradient_stencil);
     RUN(test_blackbody);
     RUN(test_trapped_eikonal_rays_are_bounded_and_counted);
+    RUN(test_rays_trapped_in_a_waveguide_end_early_and_are_counted);
     RUN(test_tracking_walks_are_bounded);
     RUN(test_majorant_follows_large_voxels);
     RUN(test_prepare_accounting_and_limits);
