@@ -219,6 +219,8 @@
      rrv_scene_add_medium   check and add a medium's box and coefficients
      rrv_scene_set_field    check and set a medium's density, temperature, pressure or IOR
      rrv_medium_channel_groups which of a medium's channels share a free-flight majorant
+     rrv_medium_face_jumps  a prepared medium's IOR jump at each face (sharp interfaces)
+     rrv_scene_integrator   the integrator a prepared scene renders with (its default resolved)
      rrv_render_rect        add the radiance sums of a pixel rectangle and sample range
      rrv_trace_ray          walk one ray through the refractive media
      rrv_grid_read          read and validate a gridvol file
