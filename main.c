@@ -2331,7 +2331,7 @@ static void put_quoted(FILE *f, const char *text)
 /* An #SBATCH line is a comment to the shell but is read by sbatch, which
    splits it at blanks, ends it at an unquoted #, takes '...' and "..." as
    groups and a backslash as "the next byte as it is". So a value goes in
-   double quotes with " and \ escaped; farm_directive_ok refused first what
+   double quotes with " and \ escaped; farm_directive_problem refused first what
    no quoting carries. */
 static void put_directive(FILE *f, const char *option, const char *value)
 {
