@@ -618,7 +618,7 @@ typedef enum rrv_manifold_solver {
 
 /* Where a pixel's samples take their random numbers. */
 typedef enum rrv_sampler {
-    RRV_SAMPLER_DEFAULT = 0, /* Sobol (README.md, "Samplers": never more than a few
+    RRV_SAMPLER_DEFAULT = 0, /* Sobol (test/bench/RESULTS.md, "Samplers": never more than a few
                                 per cent worse than PCG, up to 6x better) */
     RRV_SAMPLER_PCG,         /* an independent PCG32 stream per (pixel, sample) */
     RRV_SAMPLER_SOBOL        /* the first RRV_SOBOL_DIMENSIONS numbers of a sample
@@ -2568,8 +2568,6 @@ static double rrv__pressure(const rrv_medium *m, rrv_vec3 p)
     return rrv__field_eval(rrv__field_of(m, RRV__PRESSURE), p, 0, m->P_ref);
 }
 
-/* Refractivity eta - 1 of a refractive medium at p, including its artist
-   scale; Hauf-Grigull for a gas: r = r_ref (P / P_ref) (T_ref / T). */
 /* Cubic B-spline weights of the four coefficients around a point at
    fraction t of its cell, and their derivatives in t. */
 static void rrv__bspline_weights(double t, double w[4], double dw[4])
@@ -2853,6 +2851,8 @@ static double rrv__baked_refractivity(const rrv_medium *m, const rrv_grid *baked
     return rrv__refraction_lookup(m->majorant, p, grad);
 }
 
+/* Refractivity eta - 1 of a refractive medium at p, including its artist
+   scale; Hauf-Grigull for a gas: r = r_ref (P / P_ref) (T_ref / T). */
 static double rrv__refractivity(const rrv_medium *m, rrv_vec3 p, double ambient_r)
 {
     double r;
@@ -7668,7 +7668,7 @@ static int rrv__boxes_overlap(const rrv_medium *a, const rrv_medium *b)
    from one of them (aimed shadow rays sample the straight cone of the
    light, which misses the bent rays' preimage once the light's angular
    size falls to the order of the bending). Elsewhere the comb with aimed
-   shadow rays is the cheaper unbiased estimator (README.md measures
+   shadow rays is the cheaper unbiased estimator (test/bench/RESULTS.md measures
    both). */
 static rrv_integrator rrv__default_integrator(const rrv_scene *scene)
 {
@@ -7757,7 +7757,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     ctx.sample_bound = rrv__sample_bound(scene, integrator);
     /* shoot by default, also where it cannot solve (the refractive
        integrator), where it aims: manifold solves there, but at 100x-1000x
-       straight NEE's cost on a scene like scenes/fire.rrv (README.md), while
+       straight NEE's cost on a scene like scenes/fire.rrv (test/bench/RESULTS.md), while
        aiming stays unbiased at about straight's cost */
     nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : RRV_NEE_SHOOT;
     ctx.sample_lights = !ctx.bends || nee != RRV_NEE_NONE;
@@ -7765,7 +7765,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
        pays (test/bench/campfire.rrv: 9.1x the efficiency at maxdepth 1,
        3.7x at 2), while beside an area light and a sky (scenes/fire.rrv) the
        extra shadow ray a vertex cost more than the variance it saved
-       (0.46x classic, 0.70x refractive; README.md, "Fire as a light"). */
+       (0.46x classic, 0.70x refractive; test/bench/RESULTS.md, "Fire as a light"). */
     ctx.emission = ctx.sample_lights && scene->emitters &&
                    (scene->settings.emission_nee == RRV_EMISSION_NEE_ON ||
                     (scene->settings.emission_nee == RRV_EMISSION_NEE_DEFAULT && scene->light_count == 0 &&
@@ -7970,7 +7970,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
 /* Halvings of the Newton step a solve may make: on the lens caustic (h =
    0.2, floor to light) 0.3 % of the solves that converged halved more than
    twice, and every one that failed by halving halved four times or more,
-   after 9.4 shots on average (README.md). */
+   after 9.4 shots on average (test/bench/RESULTS.md). */
 #ifndef RRV__SOLVE_HALVINGS
 #define RRV__SOLVE_HALVINGS 3
 #endif
@@ -8599,7 +8599,7 @@ static int rrv__solve_shot(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv
    a seed whose ray passes beside a Luneburg lens, where the endpoint moves
    as the square root of the depth of a grazing ray, sends Newton across
    the rim and back (measured there, floor to light: 0.3 rad alone
-   converged 63 % of solves, this mixture 83 %; README.md). */
+   converged 63 % of solves, this mixture 83 %; test/bench/RESULTS.md). */
 static rrv_vec3 rrv__solver_seed(rrv_vec3 x0, rrv_vec3 y, rrv__rng *rng)
 {
     double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng);
@@ -9138,7 +9138,7 @@ static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const 
    stands for (rrv__forward_weak 2). Forward paths find them only as often
    as the vertex's own sampling sends rays into the lens, and carry the
    light's full radiance when they do: under small lights the heaviest
-   tail of nee shoot's error (README.md, "Weak connections"). So where a
+   tail of nee shoot's error (test/bench/RESULTS.md, "Weak connections"). So where a
    support turns rays strongly, nee shoot and manifold also draw at every
    vertex outside it one direction w0 uniformly in the cone of the sphere
    that bounds it (one support picked uniformly among those whose sphere
@@ -9315,7 +9315,7 @@ static void rrv__cone_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const
    eta at the chord's comb point; where grad eta ~ 0 the isosurface is
    undefined and ISO drops those planes; and its levels are the chord's,
    which a curved path through a lens's centre region need not reach, so
-   ISO finds few roots there (measured in README.md).
+   ISO finds few roots there (measured in test/bench/RESULTS.md).
    The Jacobian is block tridiagonal with 2x2 blocks; the chain is solved
    by Levenberg-Marquardt, whose normal equations are block pentadiagonal
    and factored in O(n) (rrv__manifold_solve). At the root, block Thomas
