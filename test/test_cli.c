@@ -980,6 +980,15 @@ static void trace_says_when_nothing_refracts(void)
     snprintf(arguments, sizeof arguments, "trace '%s' --ray 0 0 -3 0 0 1", glass);
     CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
     CHECKF(last_run.err[0] == '\0', "a refracting scene got: %s", last_run.err);
+
+    /* the scene's own integrator choice does not make it refract */
+    CHECK(write_text(glass, "camera eye 0 0 -3 look 0 0 0\n"
+                            "render integrator refractive\n"
+                            "medium fog box -1 -1 -1 1 1 1\n"
+                            "density fog constant 1\n"));
+    CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+    snprintf(note, sizeof note, "rrv: trace: %s has no refracting medium; the ray goes straight\n", glass);
+    CHECKF(strcmp(last_run.err, note) == 0, "%s", last_run.err);
 }
 
 static int write_scenes(void)

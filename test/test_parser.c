@@ -483,6 +483,8 @@ static void test_statement_errors(void)
     expect_error(WITH_CAM("render stepper rk\n"), RRV_ERROR_PARSE, 2,
                  "render: stepper must be one of default|leapfrog|rk4, got \"rk\" (did you mean \"rk4\"?)");
     expect_error(WITH_CAM("\"render\" spp 2\n"), RRV_ERROR_PARSE, 2, "unknown statement \"render\"");
+    /* a swap of neighbours is one edit, so a short word still gets its hint */
+    expect_error(WITH_CAM("iro g constant 1.3\n"), RRV_ERROR_PARSE, 2, "unknown statement \"iro\" (did you mean \"ior\"?)");
     /* two edits from "quad", but not fewer than half its length: no hint */
     expect_error(WITH_CAM("qd\n"), RRV_ERROR_PARSE, 2, "unknown statement \"qd\"");
     expect_error(WITH_CAM("material a234567890123456789012345678901234567890123456789012345678901234 diffuse\n"),
