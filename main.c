@@ -154,7 +154,8 @@ static const char trace_help[] =
     "Walks a ray through the scene's refractive media (absorption and\n"
     "scattering ignored) and prints CSV on stdout: the header\n"
     "x,y,z,dx,dy,dz,events and one row per walk with where and in which\n"
-    "direction the ray left the last medium.\n"
+    "direction the ray left the last medium. In a scene where nothing\n"
+    "refracts the ray goes straight, and a note on stderr says so.\n"
     "\n"
     "options:\n"
     "  --ray OX OY OZ DX DY DZ   origin and direction (required; the direction\n"
@@ -202,6 +203,52 @@ static int usage_error(const arg_cursor *args, const char *fmt, ...)
     else
         fputs("\nrun \"rrv --help\" for usage\n", stderr);
     return EXIT_USAGE;
+}
+
+/* "did you mean" for an unknown flag: the nearest "--name" in the command's
+   help texts, compared without leading dashes by optimal string alignment
+   (Levenshtein plus a swap of neighbours), within two edits and fewer than
+   half the longer name; ties go to the first in the help. Names over 32
+   bytes are no typo. The library's scene parser has its own, for keys. */
+static int edit_distance(const char *a, size_t an, const char *b, size_t bn)
+{
+    int d[33][33];
+    size_t i, j;
+    if (an > 32 || bn > 32) return INT_MAX;
+    for (i = 0; i <= an; ++i)
+        for (j = 0; j <= bn; ++j) {
+            int best = i == 0 || j == 0 ? (int)(i + j) : d[i - 1][j - 1] + (a[i - 1] != b[j - 1]);
+            if (i > 0 && d[i - 1][j] + 1 < best) best = d[i - 1][j] + 1;
+            if (j > 0 && d[i][j - 1] + 1 < best) best = d[i][j - 1] + 1;
+            if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] && d[i - 2][j - 2] + 1 < best)
+                best = d[i - 2][j - 2] + 1;
+            d[i][j] = best;
+        }
+    return d[an][bn];
+}
+
+static const char *flag_hint(const char *arg, const char *help, const char *more, char hint[80])
+{
+    const char *texts[2], *best = NULL, *s;
+    size_t an, n, best_n = 0;
+    int t, d, best_d = 3;
+    while (*arg == '-') ++arg;
+    an = strlen(arg);
+    texts[0] = help;
+    texts[1] = more;
+    for (t = 0; t < 2; ++t)
+        for (s = texts[t]; s && (s = strstr(s, "--")) != NULL; s += 2 + n) {
+            for (n = 0; isalnum((unsigned char)s[2 + n]) || s[2 + n] == '-'; ++n) {}
+            d = edit_distance(arg, an, s + 2, n);
+            if (n > 0 && d < best_d && (size_t)(2 * d) < (an > n ? an : n)) {
+                best = s;
+                best_n = n + 2;
+                best_d = d;
+            }
+        }
+    hint[0] = '\0';
+    if (best) snprintf(hint, 80, " (did you mean \"%.*s\"?)", (int)best_n, best);
+    return hint;
 }
 
 /* ---- strict number parsing ----------------------------------------------------
@@ -1567,7 +1614,9 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
         } else if ((taken = take_refraction_option(&args, &opt->refraction)) != 0) {
             if (taken < 0) return EXIT_USAGE;
         } else if (is_flag(arg)) {
-            return usage_error(&args, "render: unknown option \"%s\"", arg);
+            char hint[80];
+            return usage_error(&args, "render: unknown option \"%s\"%s", arg,
+                               flag_hint(arg, render_help, refraction_help, hint));
         } else if (opt->scene_path) {
             return usage_error(&args, "render: unexpected argument \"%s\"", arg);
         } else {
@@ -2092,8 +2141,9 @@ static int command_merge(int argc, char **argv)
         } else if (strcmp(arg, "-q") == 0 || strcmp(arg, "--quiet") == 0) {
             quiet = 1;
         } else if (is_flag(arg)) {
+            char hint[80];
             free(paths);
-            return usage_error(&args, "merge: unknown option \"%s\"", arg);
+            return usage_error(&args, "merge: unknown option \"%s\"%s", arg, flag_hint(arg, merge_help, NULL, hint));
         } else if (!status && !out_path) {
             out_path = arg;
         } else {
@@ -2564,7 +2614,9 @@ static int command_farm(int argc, char **argv)
         } else if (strcmp(arg, "--cpus-per-task") == 0) {
             if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer", &plan.cpus)) return EXIT_USAGE;
         } else if (is_flag(arg)) {
-            return usage_error(&args, "farm: unknown option \"%s\" (render options go after --)", arg);
+            char hint[80];
+            return usage_error(&args, "farm: unknown option \"%s\"%s (render options go after --)", arg,
+                               flag_hint(arg, farm_help, NULL, hint));
         } else if (scene_path) {
             return usage_error(&args, "farm: unexpected argument \"%s\"", arg);
         } else {
@@ -2739,7 +2791,8 @@ static int command_diff(int argc, char **argv)
             fputs(diff_help, stdout);
             return EXIT_OK;
         } else if (is_flag(arg)) {
-            return usage_error(&args, "diff: unknown option \"%s\"", arg);
+            char hint[80];
+            return usage_error(&args, "diff: unknown option \"%s\"%s", arg, flag_hint(arg, diff_help, NULL, hint));
         } else if (count == 2) {
             return usage_error(&args, "diff: unexpected argument \"%s\"", arg);
         } else {
@@ -2903,7 +2956,8 @@ static int command_info(int argc, char **argv)
         } else if (strcmp(arg, "--max-grid-mb") == 0) {
             if (!take_grid_limit(&args, &max_grid_bytes)) return EXIT_USAGE;
         } else if (is_flag(arg)) {
-            return usage_error(&args, "info: unknown option \"%s\"", arg);
+            char hint[80];
+            return usage_error(&args, "info: unknown option \"%s\"%s", arg, flag_hint(arg, info_help, NULL, hint));
         } else if (scene_path) {
             return usage_error(&args, "info: unexpected argument \"%s\"", arg);
         } else {
@@ -2959,6 +3013,19 @@ static void print_trace_vertex(void *user, rrv_vec3 position, rrv_vec3 direction
            position.z, direction.x, direction.y, direction.z);
 }
 
+/* Whether any medium bends light, by the library's own rule: the default
+   integrator is classic exactly where nothing refracts (an IOR equal to the
+   ambient one throughout included), so ask it with the scene's choice unset. */
+static int scene_refracts(rrv_scene *scene)
+{
+    rrv_integrator chosen = scene->settings.integrator;
+    int refracts;
+    scene->settings.integrator = RRV_INTEGRATOR_DEFAULT;
+    refracts = rrv_scene_integrator(scene) != RRV_INTEGRATOR_CLASSIC;
+    scene->settings.integrator = chosen;
+    return refracts;
+}
+
 static int command_trace(int argc, char **argv)
 {
     arg_cursor args;
@@ -3005,7 +3072,9 @@ static int command_trace(int argc, char **argv)
         } else if ((taken = take_refraction_option(&args, &refraction)) != 0) {
             if (taken < 0) return EXIT_USAGE;
         } else if (is_flag(arg)) {
-            return usage_error(&args, "trace: unknown option \"%s\"", arg);
+            char hint[80];
+            return usage_error(&args, "trace: unknown option \"%s\"%s", arg,
+                               flag_hint(arg, trace_help, refraction_help, hint));
         } else if (scene_path) {
             return usage_error(&args, "trace: unexpected argument \"%s\"", arg);
         } else {
@@ -3032,6 +3101,8 @@ static int command_trace(int argc, char **argv)
     if (!has_integrator && rrv_scene_integrator(scene) != RRV_INTEGRATOR_CLASSIC)
         integrator = rrv_scene_integrator(scene);
     if (!has_seed) seed = scene->settings.seed;
+    if (!scene_refracts(scene))
+        fprintf(stderr, "rrv: trace: %s has no refracting medium; the ray goes straight\n", scene_path);
 
     puts(print_path ? "walk,x,y,z,dx,dy,dz" : "x,y,z,dx,dy,dz,events");
     for (walk = 0; walk < walks; ++walk) {
@@ -3111,7 +3182,8 @@ int main(int argc, char **argv)
     } else if (strcmp(command, "trace") == 0) {
         code = command_trace(argc - 2, argv + 2);
     } else if (is_flag(command)) {
-        code = usage_error(NULL, "unknown option \"%s\"", command);
+        char hint[80];
+        code = usage_error(NULL, "unknown option \"%s\"%s", command, flag_hint(command, usage_text, NULL, hint));
     } else {
         code = usage_error(NULL, "unknown command \"%s\"", command);
     }

@@ -14432,6 +14432,85 @@ static const rrv__sf_key rrv__sf_temperature_extra_keys[] = {
 
 #define RRV__SF_COUNT(a) (int)(sizeof(a) / sizeof((a)[0]))
 
+/* "did you mean": the candidate nearest a misspelt word, by optimal string
+   alignment (Levenshtein plus a swap of neighbours, the commonest typo).
+   Only within two edits and fewer than half the longer word's length, so a
+   short word does not match everything; ties go to the first candidate
+   tried, which is table order. Words over 32 bytes are no typo of a name. */
+#define RRV__SF_NEAR_MAX 32
+typedef struct rrv__sf_near {
+    const rrv__sf_tok *word;
+    const char *best;
+    size_t best_n;
+    int d;
+} rrv__sf_near;
+
+static int rrv__sf_edit_distance(const char *a, size_t an, const char *b, size_t bn)
+{
+    int d[RRV__SF_NEAR_MAX + 1][RRV__SF_NEAR_MAX + 1];
+    size_t i, j;
+    if (an > RRV__SF_NEAR_MAX || bn > RRV__SF_NEAR_MAX) return INT_MAX;
+    for (i = 0; i <= an; ++i) d[i][0] = (int)i;
+    for (j = 0; j <= bn; ++j) d[0][j] = (int)j;
+    for (i = 1; i <= an; ++i)
+        for (j = 1; j <= bn; ++j) {
+            int best = d[i - 1][j - 1] + (a[i - 1] != b[j - 1]);
+            if (d[i - 1][j] + 1 < best) best = d[i - 1][j] + 1;
+            if (d[i][j - 1] + 1 < best) best = d[i][j - 1] + 1;
+            if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] && d[i - 2][j - 2] + 1 < best)
+                best = d[i - 2][j - 2] + 1;
+            d[i][j] = best;
+        }
+    return d[an][bn];
+}
+
+/* A distance of 0 is a quoted keyword: no hint, the quotes are the problem. */
+static void rrv__sf_near_try(rrv__sf_near *nr, const char *c, size_t cn)
+{
+    size_t longer = cn > nr->word->n ? cn : nr->word->n;
+    int d = rrv__sf_edit_distance(nr->word->p, nr->word->n, c, cn);
+    if (d >= 1 && d <= 2 && (size_t)(2 * d) < longer && (!nr->best || d < nr->d)) {
+        nr->best = c;
+        nr->best_n = cn;
+        nr->d = d;
+    }
+}
+
+/* The hint to append to a message ("" without one); buf holds >= 64 bytes. */
+static const char *rrv__sf_near_hint(const rrv__sf_near *nr, char *buf, size_t size)
+{
+    if (!nr->best) return "";
+    snprintf(buf, size, " (did you mean \"%.*s\"?)", (int)nr->best_n, nr->best);
+    return buf;
+}
+
+/* The hint for a word among the names of a key table. */
+static const char *rrv__sf_near_key(const rrv__sf_tok *t, const rrv__sf_key *keys, int nkeys, char *buf,
+                                    size_t size)
+{
+    rrv__sf_near nr;
+    int k;
+    memset(&nr, 0, sizeof nr);
+    nr.word = t;
+    for (k = 0; k < nkeys; ++k)
+        rrv__sf_near_try(&nr, keys[k].name, strlen(keys[k].name));
+    return rrv__sf_near_hint(&nr, buf, size);
+}
+
+/* The hint for a word among "a|b|c" choices, or "a, b or c" kind lists. */
+static const char *rrv__sf_near_list(const rrv__sf_tok *t, const char *list, char *buf, size_t size)
+{
+    rrv__sf_near nr;
+    memset(&nr, 0, sizeof nr);
+    nr.word = t;
+    while (*list) {
+        size_t len = strcspn(list, "|, ");
+        if (len && !(len == 2 && memcmp(list, "or", 2) == 0)) rrv__sf_near_try(&nr, list, len);
+        list += len + (list[len] != '\0');
+    }
+    return rrv__sf_near_hint(&nr, buf, size);
+}
+
 static int rrv__sf_find_key(const rrv__sf_key *keys, int nkeys, const rrv__sf_tok *t)
 {
     int k;
@@ -14527,8 +14606,11 @@ static rrv_result rrv__sf_parse_keys(rrv__sf_parser *p, const char *stmt, size_t
                                     keys[prev].arity == 1 ? "" : "s",
                                     (unsigned long long)(keys[prev].arity + extra));
             }
-            return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: unknown key \"%.*s\"", stmt,
-                                RRV__SF_CLIP(t));
+            {
+                char hint[96];
+                return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: unknown key \"%.*s\"%s", stmt, RRV__SF_CLIP(t),
+                                    rrv__sf_near_key(t, keys, nkeys, hint, sizeof hint));
+            }
         }
         if (slots[k].given)
             return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: \"%s\" given twice", stmt, keys[k].name);
@@ -14569,10 +14651,12 @@ static rrv_result rrv__sf_parse_keys(rrv__sf_parser *p, const char *stmt, size_t
                     c += len + (c[len] == '|');
                     ++index;
                 }
-                if (found < 0)
-                    return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                                        "%s: %s must be one of %s, got \"%.*s\"", stmt,
-                                        keys[k].name, keys[k].choices, RRV__SF_CLIP(&toks[i]));
+                if (found < 0) {
+                    char hint[96];
+                    return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: %s must be one of %s, got \"%.*s\"%s", stmt,
+                                        keys[k].name, keys[k].choices, RRV__SF_CLIP(&toks[i]),
+                                        rrv__sf_near_list(&toks[i], keys[k].choices, hint, sizeof hint));
+                }
                 slots[k].choice = found;
             }
             ++i;
@@ -15822,10 +15906,11 @@ static rrv_result rrv__sf_st_material(rrv__sf_parser *p)
         checker = 0;
     else if (rrv__sf_tok_is(kind, "checker"))
         checker = 1;
-    else
-        return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                            "material: unknown kind \"%.*s\" (expected diffuse or checker)",
-                            RRV__SF_CLIP(kind));
+    else {
+        char hint[96];
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "material: unknown kind \"%.*s\" (expected diffuse or checker)%s",
+                            RRV__SF_CLIP(kind), rrv__sf_near_list(kind, "diffuse|checker", hint, sizeof hint));
+    }
     if (checker)
         r = rrv__sf_parse_keys(p, "material", 3, rrv__sf_checker_keys,
                                RRV__SF_COUNT(rrv__sf_checker_keys), sl);
@@ -16002,9 +16087,10 @@ static rrv_result rrv__sf_st_environment(rrv__sf_parser *p)
             env->L2[c] = sl[1].v[c] * k;
         }
     } else {
+        char hint[96];
         return rrv__sf_perr(p, RRV_ERROR_PARSE,
-                            "environment: unknown kind \"%.*s\" (expected constant or gradient)",
-                            RRV__SF_CLIP(kind));
+                            "environment: unknown kind \"%.*s\" (expected constant or gradient)%s",
+                            RRV__SF_CLIP(kind), rrv__sf_near_list(kind, "constant|gradient", hint, sizeof hint));
     }
     rrv__sf_ck(p, &ck, "environment");
     return rrv__environment_check(&ck, env);
@@ -16368,9 +16454,12 @@ static rrv_result rrv__sf_st_field(rrv__sf_parser *p)
         if (rrv__sf_tok_is(&toks[2], rrv__sf_field_kinds[kind].name) &&
             (which == RRV_MEDIUM_IOR || !rrv__sf_field_kinds[kind].ior_only))
             break;
-    if (kind == RRV__SF_K_COUNT)
-        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: unknown kind \"%.*s\" (expected %s)", fs.stmt,
-                            RRV__SF_CLIP(&toks[2]), which == RRV_MEDIUM_IOR ? kinds_ior : kinds_other);
+    if (kind == RRV__SF_K_COUNT) {
+        char hint[96];
+        const char *kinds = which == RRV_MEDIUM_IOR ? kinds_ior : kinds_other;
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: unknown kind \"%.*s\" (expected %s)%s", fs.stmt,
+                            RRV__SF_CLIP(&toks[2]), kinds, rrv__sf_near_list(&toks[2], kinds, hint, sizeof hint));
+    }
     /* blob statements accumulate; anything else may be given once */
     fs.first = f->kind != RRV_FIELD_BLOBS;
     if (f->kind != RRV_FIELD_NONE || (which == RRV_MEDIUM_IOR && fs.m->ior_from_gas)) {
@@ -16519,9 +16608,16 @@ static rrv_result rrv__sf_parse_lines(rrv__sf_parser *p, const char *text, size_
         if (p->toks.n == 0) continue;
         for (k = 0; k < RRV__SF_COUNT(rrv__sf_statements); ++k)
             if (rrv__sf_tok_is(&p->toks.v[0], rrv__sf_statements[k].name)) break;
-        if (k == RRV__SF_COUNT(rrv__sf_statements))
-            return rrv__sf_perr(p, RRV_ERROR_PARSE, "unknown statement \"%.*s\"",
-                                RRV__SF_CLIP(&p->toks.v[0]));
+        if (k == RRV__SF_COUNT(rrv__sf_statements)) {
+            rrv__sf_near nr;
+            char hint[96];
+            memset(&nr, 0, sizeof nr);
+            nr.word = &p->toks.v[0];
+            for (k = 0; k < RRV__SF_COUNT(rrv__sf_statements); ++k)
+                rrv__sf_near_try(&nr, rrv__sf_statements[k].name, strlen(rrv__sf_statements[k].name));
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "unknown statement \"%.*s\"%s", RRV__SF_CLIP(&p->toks.v[0]),
+                                rrv__sf_near_hint(&nr, hint, sizeof hint));
+        }
         r = rrv__sf_statements[k].parse(p);
         if (r != RRV_OK) return r;
     }

@@ -939,6 +939,58 @@ static void trace_prints_csv(void)
     }
 }
 
+/* A misspelt flag gets the nearest one from the command's help (the
+   refraction options' help included); a word near nothing gets no hint. */
+static void unknown_flags_get_a_hint(void)
+{
+    static const struct {
+        const char *arguments, *line;
+    } cases[] = {
+        {"render s.rrv -o o.pfm --sp 4", "rrv: render: unknown option \"--sp\" (did you mean \"--spp\"?)\n"},
+        {"render s.rrv -o o.pfm -spp 4", "rrv: render: unknown option \"-spp\" (did you mean \"--spp\"?)\n"},
+        {"render s.rrv -o o.pfm --refractoin comb",
+         "rrv: render: unknown option \"--refractoin\" (did you mean \"--refraction\"?)\n"},
+        {"trace s.rrv --rya 0 0 0 0 0 1", "rrv: trace: unknown option \"--rya\" (did you mean \"--ray\"?)\n"},
+        {"--versoin", "rrv: unknown option \"--versoin\" (did you mean \"--version\"?)\n"},
+        {"render s.rrv -o o.pfm --xyzzy", "rrv: render: unknown option \"--xyzzy\"\n"},
+        {"trace s.rrv --x", "rrv: trace: unknown option \"--x\"\n"},
+    };
+    size_t i;
+    for (i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
+        size_t n = strlen(cases[i].line);
+        CHECKF(rrv(cases[i].arguments) == 1, "%s: exit %d", cases[i].arguments, last_run.code);
+        CHECKF(strncmp(last_run.err, cases[i].line, n) == 0, "%s: %s", cases[i].arguments, last_run.err);
+    }
+}
+
+/* A scene that bends nothing: the straight ray, exit 0, and one line saying why. */
+static void trace_says_when_nothing_refracts(void)
+{
+    char arguments[2 * PATH_SIZE], note[2 * PATH_SIZE];
+    const char *glass = tmp_path("glass.rrv");
+    snprintf(arguments, sizeof arguments, "trace '%s' --ray 0 1 -3 0 0 1", tiny_scene);
+    CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+    CHECKF(strcmp(last_run.out, "x,y,z,dx,dy,dz,events\n0,1,-3,0,0,1,0\n") == 0, "%s", last_run.out);
+    snprintf(note, sizeof note, "rrv: trace: %s has no refracting medium; the ray goes straight\n", tiny_scene);
+    CHECKF(strcmp(last_run.err, note) == 0, "%s", last_run.err);
+
+    CHECK(write_text(glass, "camera eye 0 0 -3 look 0 0 0\n"
+                            "medium glass box -1 -1 -1 1 1 1\n"
+                            "ior glass constant 1.3\n"));
+    snprintf(arguments, sizeof arguments, "trace '%s' --ray 0 0 -3 0 0 1", glass);
+    CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+    CHECKF(last_run.err[0] == '\0', "a refracting scene got: %s", last_run.err);
+
+    /* the scene's own integrator choice does not make it refract */
+    CHECK(write_text(glass, "camera eye 0 0 -3 look 0 0 0\n"
+                            "render integrator refractive\n"
+                            "medium fog box -1 -1 -1 1 1 1\n"
+                            "density fog constant 1\n"));
+    CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
+    snprintf(note, sizeof note, "rrv: trace: %s has no refracting medium; the ray goes straight\n", glass);
+    CHECKF(strcmp(last_run.err, note) == 0, "%s", last_run.err);
+}
+
 static int write_scenes(void)
 {
     /* Quad edges u x v point the light down onto the floor. */
@@ -1000,5 +1052,7 @@ int main(int argc, char **argv)
     RUN(info_describes_scene);
     RUN(face_jumps_are_reported);
     RUN(trace_prints_csv);
+    RUN(unknown_flags_get_a_hint);
+    RUN(trace_says_when_nothing_refracts);
     return CHECK_EXIT_CODE();
 }

@@ -252,6 +252,8 @@ static const struct corpus_case {
     {"undefined_material", RRV_ERROR_PARSE}, {"undefined_medium", RRV_ERROR_PARSE},
     {"unknown_key", RRV_ERROR_PARSE},      {"unknown_statement", RRV_ERROR_PARSE},
     {"unterminated_quote", RRV_ERROR_PARSE},
+    {"misspelt_statement", RRV_ERROR_PARSE}, {"misspelt_key", RRV_ERROR_PARSE},
+    {"misspelt_choice", RRV_ERROR_PARSE},  {"far_statement", RRV_ERROR_PARSE},
     {"hex_number", RRV_ERROR_PARSE},       {"nan_number", RRV_ERROR_PARSE},
     {"nul_byte", RRV_ERROR_PARSE},         {"control_byte", RRV_ERROR_PARSE},
     {"too_many_media", RRV_ERROR_LIMIT},   {"camera_far", RRV_ERROR_PARSE},
@@ -471,7 +473,20 @@ static void test_statement_errors(void)
     expect_error(WITH_CAM("material m glossy\n"), RRV_ERROR_PARSE, 2,
                  "material: unknown kind \"glossy\" (expected diffuse or checker)");
     expect_error(WITH_CAM("material m diffuse albedo2 1 1 1\n"), RRV_ERROR_PARSE, 2,
-                 "material: unknown key \"albedo2\"");
+                 "material: unknown key \"albedo2\" (did you mean \"albedo\"?)");
+    /* kinds and choices get the hint too; a quoted keyword does not (the quotes are the fault) */
+    expect_error(WITH_CAM("material m difuse\n"), RRV_ERROR_PARSE, 2,
+                 "material: unknown kind \"difuse\" (expected diffuse or checker) (did you mean \"diffuse\"?)");
+    expect_error(WITH_CAM("medium g box -1 -1 -1 1 1 1\nior g sheel\n"), RRV_ERROR_PARSE, 3,
+                 "ior: unknown kind \"sheel\" (expected constant, blob, noise, grid, nanovdb, luneburg, fisheye, "
+                 "slab, shell or gas) (did you mean \"shell\"?)");
+    expect_error(WITH_CAM("render stepper rk\n"), RRV_ERROR_PARSE, 2,
+                 "render: stepper must be one of default|leapfrog|rk4, got \"rk\" (did you mean \"rk4\"?)");
+    expect_error(WITH_CAM("\"render\" spp 2\n"), RRV_ERROR_PARSE, 2, "unknown statement \"render\"");
+    /* a swap of neighbours is one edit, so a short word still gets its hint */
+    expect_error(WITH_CAM("iro g constant 1.3\n"), RRV_ERROR_PARSE, 2, "unknown statement \"iro\" (did you mean \"ior\"?)");
+    /* two edits from "quad", but not fewer than half its length: no hint */
+    expect_error(WITH_CAM("qd\n"), RRV_ERROR_PARSE, 2, "unknown statement \"qd\"");
     expect_error(WITH_CAM("material a234567890123456789012345678901234567890123456789012345678901234 diffuse\n"),
                  RRV_ERROR_PARSE, 2,
                  /* quoted tokens are clipped to 60 characters in messages */
