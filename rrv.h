@@ -128,7 +128,8 @@
                  for small lights.
      SHOOT       curved NEE by shooting (eikonal integrator): Newton on the
                  initial direction until the bent ray lands on the light point,
-                 density from the Jacobi field, 1/p by repeated trials.
+                 density from the Jacobi field, 1/p by repeated trials (exact
+                 by Russian roulette past 64).
      MANIFOLD    curved NEE by the paper's method (refractive and eikonal): a
                  chain of comb vertices moved by the paper's solver,
                  Levenberg-Marquardt (`manifoldsolver dogleg`: a trust-region
@@ -7955,7 +7956,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
 
 /* Shots a solve may take: of the solves that converged within 40, 99 % took 15 or fewer. */
 #define RRV__SOLVE_ITERATIONS 20
-#define RRV__SOLVE_TRIALS 64          /* shoot: cap on the trials that estimate 1/p; manifold: trials before roulette */
+#define RRV__SOLVE_TRIALS 64          /* trials that estimate 1/p before Russian roulette (shoot, manifold) */
 #define RRV__SOLVE_RESTARTS 3         /* seeds a solve may try */
 /* eikonal: a solve first converges with steps at most this much longer
    (rrv__solve_coarse_step), each turning a ray by at most about
@@ -8917,11 +8918,71 @@ static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3
     return 1.0 - rrv__shoot_mis_weight(ctx->scene, s, det, pdf_dir);
 }
 
+/* An unbiased estimate of 1/p from independent Bernoulli(p) trials
+   (trial(user, rng) != 0 a success), with bounded expected work.
+   Counting the trials up to the first success, N, is the plain estimate:
+   N = sum_i [N >= i], and P(N >= i) = (1 - p)^(i-1) sums to 1/p; but
+   its work is 1/p too, unbounded as p -> 0, and stopping at a cap M
+   estimates (1 - (1 - p)^M) / p instead, low by the factor 1 - (1 -
+   p)^M (a root with p = 1/200 counted at 27 % under M = 64). Here the
+   trials beyond `start` continue by Russian roulette: trial i > start is
+   made only if the walk survives to it, with probability S_i = (start /
+   i)^2 (a survival draw with probability ((i - 1) / i)^2 before each),
+   independent of the trials, and a trial made adds 1 / S_i. Then
+   E[estimate] = sum_i P(N >= i) S_i / S_i = sum_i (1 - p)^(i-1) = 1/p
+   exactly, for every p > 0. The expected number of trials is at most
+   start + sum_(i > start) S_i < 2 start + 1 whatever p, and because
+   S_i falls only polynomially the variance, sum_i (1 - p)^(i-1) / S_i
+   and the cross terms, is finite for every p > 0 (a geometric roulette,
+   S_i = q^(i - start), would leave it infinite for 1 - p >= q). Up to
+   `start` trials it is the plain count and draws nothing else. */
+typedef int (*rrv__trial_func)(void *user, rrv__rng *rng);
+static double rrv__inverse_probability(rrv__rng *rng, int start, rrv__trial_func trial, void *user, long *trials)
+{
+    double estimate = 0;
+    long i;
+    for (i = 1;; ++i) {
+        double survive = 1.0;
+        if (i > start) {
+            double q = (double)(i - 1) / (double)i;
+            if (!(rrv__uniform(rng) < q * q)) { --i; break; }
+            survive = (double)start / (double)i;
+            survive *= survive;
+        }
+        estimate += 1.0 / survive;
+        if (trial(user, rng)) break;
+    }
+    *trials = i;
+    return estimate;
+}
+
+/* One trial of shoot's 1/p estimate: a fresh seeded solve toward the
+   same light point that comes back to the root w0. */
+typedef struct rrv__shot_recurrence {
+    rrv__context *ctx;
+    rrv_vec3 x0, y, ny, w0;
+    rrv__polish_memo *memo;
+} rrv__shot_recurrence;
+static int rrv__shot_recurs(void *user, rrv__rng *rng)
+{
+    rrv__shot_recurrence *t = (rrv__shot_recurrence *)user;
+    rrv__root again;
+    int found;
+    ++t->ctx->stats.solves;
+    found = rrv__solve_shot_seeded(t->ctx, t->x0, t->y, &t->ny, rng, t->memo, NULL, &again);
+    t->ctx->stats.solve_iterations += (uint64_t)again.iterations;
+    if (!found) return 0;
+    ++t->ctx->stats.solves_converged;
+    t->ctx->stats.solve_segments += (uint64_t)again.segments;
+    return rrv__length(rrv__sub(again.w0, t->w0)) < RRV__SOLVE_SAME_ROOT;
+}
+
 /* Curved NEE from vertex x0: a point y sampled uniformly on one area light,
    one root w0 of the two-point problem from a random seed, and its inverse
    probability estimated by repeated trials until the same root comes back
-   (Specular Manifold Sampling, Zeltner et al. 2020): E[trials] = 1/p, so
-   summed over roots the estimate is unbiased up to the cap on trials.
+   (Specular Manifold Sampling, Zeltner et al. 2020), past
+   RRV__SOLVE_TRIALS of them by Russian roulette (rrv__inverse_probability):
+   E = 1/p exactly, so summed over roots the estimate is unbiased.
    Only curved paths are counted here (part of them in a refraction support,
    no sharp interface crossed): straight ones belong to straight NEE. Curved
    paths to quad and triangle lights are shared with the forward path by
@@ -8933,12 +8994,13 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
                            const rrv__light_draw *draw, rrv__rng *rng)
 {
     const rrv_scene *scene = ctx->scene;
-    int count, c;
+    long count;
+    int c;
     rrv_vec3 y, ny, e1, e2;
-    rrv__root root, again;
+    rrv__root root;
     rrv__polish_memo memo;
     rrv__chords kept;
-    double pdf_area, T[3], f[3], k;
+    double pdf_area, T[3], f[3], k, inverse_p;
     const rrv_shape *s = rrv__pick_area_light(scene, draw, &y, &ny, &pdf_area);
     if (!s) return;
     {
@@ -8966,20 +9028,20 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
         rrv__shoot(ctx, x0, root.w0, e1, e2, y, &ny, rng, T, &shot);
         if (shot.status != RRV__SHOT_REACHED || !(rrv__max3(T) > 0)) return;
     }
-    for (count = 1; count < RRV__SOLVE_TRIALS; ++count) {
-        int found;
-        ++ctx->stats.solves;
-        found = rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &memo, NULL, &again);
-        ctx->stats.solve_iterations += (uint64_t)again.iterations;
-        if (!found) continue;
-        ++ctx->stats.solves_converged;
-        ctx->stats.solve_segments += (uint64_t)again.segments;
-        if (rrv__length(rrv__sub(again.w0, root.w0)) < RRV__SOLVE_SAME_ROOT) break;
+    {
+        rrv__shot_recurrence t;
+        t.ctx = ctx;
+        t.x0 = x0;
+        t.y = y;
+        t.ny = ny;
+        t.w0 = root.w0;
+        t.memo = &memo;
+        inverse_p = rrv__inverse_probability(rng, RRV__SOLVE_TRIALS, rrv__shot_recurs, &t, &count);
     }
     ctx->stats.solve_trials += (uint64_t)count;
     ++ctx->stats.solve_connections;
     /* dw0 = dA_y / |det J_plane| (= dA_y |cos theta_y| / |det J_perp|) */
-    k = rrv__shoot_mis_weight(scene, s, root.det, rrv__vertex_pdf(v, root.w0)) / (fabs(root.det) * pdf_area) * count *
+    k = rrv__shoot_mis_weight(scene, s, root.det, rrv__vertex_pdf(v, root.w0)) / (fabs(root.det) * pdf_area) * inverse_p *
         rrv__eta_scale(ctx, y) * rrv__path_mis(path);
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
@@ -10563,44 +10625,6 @@ static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, r
         ctx->stats.solve_segments += (uint64_t)(ch->n + 1);
     }
     return found;
-}
-
-/* An unbiased estimate of 1/p from independent Bernoulli(p) trials
-   (trial(user, rng) != 0 a success), with bounded expected work.
-   Counting the trials up to the first success, N, is the plain estimate:
-   N = sum_i [N >= i], and P(N >= i) = (1 - p)^(i-1) sums to 1/p; but
-   its work is 1/p too, unbounded as p -> 0, and stopping at a cap M
-   estimates (1 - (1 - p)^M) / p instead, low by the factor 1 - (1 -
-   p)^M (a root with p = 1/200 counted at 27 % under M = 64). Here the
-   trials beyond `start` continue by Russian roulette: trial i > start is
-   made only if the walk survives to it, with probability S_i = (start /
-   i)^2 (a survival draw with probability ((i - 1) / i)^2 before each),
-   independent of the trials, and a trial made adds 1 / S_i. Then
-   E[estimate] = sum_i P(N >= i) S_i / S_i = sum_i (1 - p)^(i-1) = 1/p
-   exactly, for every p > 0. The expected number of trials is at most
-   start + sum_(i > start) S_i < 2 start + 1 whatever p, and because
-   S_i falls only polynomially the variance, sum_i (1 - p)^(i-1) / S_i
-   and the cross terms, is finite for every p > 0 (a geometric roulette,
-   S_i = q^(i - start), would leave it infinite for 1 - p >= q). Up to
-   `start` trials it is the plain count and draws nothing else. */
-typedef int (*rrv__trial_func)(void *user, rrv__rng *rng);
-static double rrv__inverse_probability(rrv__rng *rng, int start, rrv__trial_func trial, void *user, long *trials)
-{
-    double estimate = 0;
-    long i;
-    for (i = 1;; ++i) {
-        double survive = 1.0;
-        if (i > start) {
-            double q = (double)(i - 1) / (double)i;
-            if (!(rrv__uniform(rng) < q * q)) { --i; break; }
-            survive = (double)start / (double)i;
-            survive *= survive;
-        }
-        estimate += 1.0 / survive;
-        if (trial(user, rng)) break;
-    }
-    *trials = i;
-    return estimate;
 }
 
 /* One trial of the 1/p estimate: a fresh solve that comes back to the
@@ -16765,8 +16789,9 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  around the straight direction or a uniform direction, so
                  every root has a nonzero probability p; a solve tries up to
                  3 seeds; 1/p is estimated by repeating independent solves
-                 until the same root (within 1e-5) comes back, at most 64
-                 trials (Specular Manifold Sampling). A failed solve
+                 until the same root (within 1e-5) comes back, past 64
+                 trials by Russian roulette as for MANIFOLD (Specular
+                 Manifold Sampling; E = 1/p exactly). A failed solve
                  contributes zero. The derivative of grad eta has closed
                  forms for the profiles and blobs; for grids (gridvol,
                  NanoVDB, baked noise, a gas through Hauf-Grigull) it is
