@@ -324,7 +324,7 @@ def main():
     t0 = time.time()
     machine(b)
     refs = b.refs
-    for scene in ("plume", "luneburg", "fire", "fisheye", "lens_caustic", "fire_caustic", "haze"):
+    for scene in ("plume", "luneburg", "fire", "fisheye", "lens_caustic", "fire_caustic", "haze", "heat_shadow"):
         if scene not in refs or not os.path.exists(os.path.join(ROOT, "test", "ref", scene + ".exr")):
             sys.exit("bench: no reference for %s: run make refs" % scene)
 
@@ -366,6 +366,18 @@ def main():
                 ("refractive comb, nee aim", ["--integrator", "refractive", "--nee", "aim"],
                  (16, 64) if quick else (16, 64, 256))]
     b.sweep("fire_caustic", fcaustic, ())
+    # a heat shadow whose temperature is a grid, under a small light; the scene
+    # states no integrator, so its first row is what a new user gets
+    shadow = [("default (no integrator key)", [], (1, 4) if quick else (1, 4, 16)),
+              ("eikonal RK4, nee shoot", ["--integrator", "eikonal", "--nee", "shoot"],
+               (1, 4) if quick else (1, 4, 16)),
+              ("refractive comb, nee aim", ["--integrator", "refractive", "--nee", "aim"],
+               (16, 64) if quick else (16, 64, 256)),
+              ("refractive comb, nee manifold", ["--integrator", "refractive", "--nee", "manifold"],
+               (1,) if quick else (1, 4)),
+              ("refractive comb, nee none", ["--integrator", "refractive", "--nee", "none"],
+               (64, 256) if quick else (64, 256, 1024))]
+    b.sweep("heat_shadow", shadow, ())
     # weak heat haze: aimed shadow rays against forward paths and straight ones
     haze = [("refractive comb, nee none", ["--integrator", "refractive", "--nee", "none"],
              (16, 64) if quick else (16, 64, 256)),

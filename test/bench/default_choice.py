@@ -19,13 +19,14 @@ OUT = os.path.join(ROOT, "build", "default_choice")
 SEED = 11  # not the references' (1..8)
 # the MSE each reference's own noise adds (bench.md, ref_compare --floor)
 FLOOR = {"luneburg": 1.14e-4, "fire": 4.50e-4, "lens_caustic": 9.07e-4, "fire_caustic": 9.03e-5,
-         "haze": 3.06e-5, "plume": 4.32e-7}
+         "haze": 3.06e-5, "plume": 4.32e-7, "heat_shadow": 5.79e-6}
 MODES = {
     "default": [],
     "refractive+aim": ["--integrator", "refractive", "--nee", "aim"],
     "refractive+none": ["--integrator", "refractive", "--nee", "none"],
     "eikonal+shoot": ["--integrator", "eikonal", "--nee", "shoot"],
     "eikonal+none": ["--integrator", "eikonal", "--nee", "none"],
+    "refractive+manifold": ["--integrator", "refractive", "--nee", "manifold"],
 }
 
 
@@ -70,7 +71,7 @@ def measure(rrv, scene, args, seconds):
 def main():
     rrv = sys.argv[1]
     seconds = float(sys.argv[sys.argv.index("--seconds") + 1]) if "--seconds" in sys.argv else 2.0
-    scenes = ["lens_caustic", "fire_caustic", "haze", "fire", "luneburg"]
+    scenes = ["lens_caustic", "fire_caustic", "haze", "fire", "luneburg", "heat_shadow"]
     if "--scenes" in sys.argv: scenes = sys.argv[sys.argv.index("--scenes") + 1].split(",")
     modes = list(MODES)
     if "--modes" in sys.argv: modes = sys.argv[sys.argv.index("--modes") + 1].split(",")

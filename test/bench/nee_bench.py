@@ -77,6 +77,9 @@ def scene_with(extra, workdir, light=1.0):
     with open(SCENE) as f:
         text = f.read()
     text = re.sub(r"^(render .*)$", lambda m: m.group(1) + " " + extra, text, count=1, flags=re.M)
+    # the copy lives in a temporary folder: files the scene reads by a
+    # relative path (its grids in assets/) are named from the scene's folder
+    text = re.sub(r"(\s)(assets/\S+)", lambda m: m.group(1) + os.path.join(os.path.dirname(SCENE), m.group(2)), text)
     if light != 1.0:
         quad = "quad origin -0.5 3 -0.5  u 1 0 0  v 0 0 1  L 10 10 10"
         assert quad in text, "the light of scenes/lens_caustic.rrv changed"
