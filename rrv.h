@@ -86,10 +86,10 @@
                  classic where no medium's IOR differs from the ambient
                  one (bit for bit the classic render); eikonal with nee
                  SHOOT where every refracting medium is clear (no medium
-                 with extinction overlaps its box) and a quad or triangle
-                 light is small from one (its side, the square root of its
-                 area, under 0.5 x its distance from the medium's box
-                 centre), and the IOR has the Hessian shooting needs;
+                 with extinction overlaps its box) and a light is small
+                 from one (its side, the square root of its area, or a
+                 sphere's disc's, under 0.5 x its distance from the
+                 medium's box centre), and the IOR has the Hessian shooting needs;
                  refractive (the comb, nee AIM) otherwise. Why: aimed
                  shadow rays sample the light's straight cone, at about
                  straight NEE's cost, which is right while bending is small
@@ -980,7 +980,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
    one, or for RRV_INTEGRATOR_DEFAULT the manual's rule (INTEGRATORS,
    "default"): CLASSIC where no medium's IOR differs from the ambient one,
    EIKONAL (curved NEE solved by shooting) where every refracting medium is
-   clear and a quad or triangle light is small as seen from one, REFRACTIVE
+   clear and a light is small as seen from one, REFRACTIVE
    otherwise. */
 RRV_DEF rrv_integrator rrv_scene_integrator(const rrv_scene *scene);
 
@@ -7003,8 +7003,8 @@ static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, 
 static double rrv__cone_pdf(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0);
 static void rrv__cone_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
 static void rrv__cone_setup(rrv__context *ctx);
-static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 *y,
-                                             rrv_vec3 *ny, double *pdf_area);
+static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 x0,
+                                             int spheres, rrv_vec3 *y, rrv_vec3 *ny, double *pdf_area);
 #define RRV__CHAIN_MAX 512 /* comb planes a manifold chain may have (more: wider spacing) */
 static struct rrv__chain *rrv__chain_new(int cap);
 static void rrv__chain_delete(struct rrv__chain *ch);
@@ -7224,8 +7224,7 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
     int front = rrv__dot(n, cp->d) < 0, c;
     if ((s->L[0] > 0 || s->L[1] > 0 || s->L[2] > 0) && front) {
         double w = 1.0;
-        if (cp->prev_pdf > 0 && ctx->sample_lights && ctx->aim && cp->touched && !cp->jumped &&
-            s->kind != RRV_SHAPE_SPHERE) {
+        if (cp->prev_pdf > 0 && ctx->sample_lights && ctx->aim && cp->touched && !cp->jumped) {
             /* nee aim draws w0 toward this light with a density the path's
                end does not change: the light's straight crossing along w0
                (rrv__aim_nee). A weak chord's path is that straight line, so
@@ -7241,7 +7240,7 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
                 w = rrv__power_heuristic(cp->prev_pdf, rrv__emitter_pdf(s, cp->vertex, x, n) / rrv__light_choices(scene));
             else if (weak == 2) /* a root no light sample stands for: the cones' (rrv__cone_nee) */
                 w = rrv__power_heuristic(cp->prev_pdf, rrv__cone_pdf(ctx, cp->vertex, cp->w0));
-            else if (ctx->shoot && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
+            else if (ctx->shoot && !cp->jumped)
                 w = rrv__shoot_forward_weight(ctx, cp->vertex, cp->w0, cp->prev_pdf, s, x); /* MIS with shooting */
             else if (ctx->manifold && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
                 w = 0.0; /* counted by the curved connection alone */
@@ -7650,8 +7649,8 @@ RRV_DEF double rrv_medium_face_jumps(const rrv_scene *scene, int medium, double 
     return worst;
 }
 
-/* The default integrator's light-size threshold: a quad or triangle light
-   whose side (the square root of its area) over its distance from a clear
+/* The default integrator's light-size threshold: a light whose side (the
+   square root of its area; a sphere's disc's) over its distance from a clear
    refracting medium's box centre is below this is small (test/bench/RESULTS.md,
    "Which integrator by default"). */
 #define RRV__SMALL_LIGHT 0.5
@@ -7694,7 +7693,8 @@ static rrv_integrator rrv__default_integrator(const rrv_scene *scene)
                 area = 0.5 * rrv__length(rrv__cross(l->e1, l->e2));
                 at = rrv__add(l->p0, rrv__scale(rrv__add(l->e1, l->e2), 1.0 / 3.0));
             } else {
-                continue; /* curved nee does not connect to spheres */
+                area = RRV__PI * l->radius * l->radius; /* its disc, as seen from anywhere */
+                at = l->center;
             }
             d = rrv__length(rrv__sub(at, c));
             if (sqrt(area) < RRV__SMALL_LIGHT * d) small = 1;
@@ -8882,40 +8882,89 @@ static double rrv__vertex_pdf(const rrv__vertex_bsdf *v, rrv_vec3 w)
     return v->surface ? fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI : rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
 }
 
+/* The plane a shot toward light point y (normal ny) is solved in: a quad's
+   or triangle's own, where the ray first crosses it from its front; for a
+   sphere none (NULL), the solve aims the ray through y across its arriving
+   chord, since a sphere's tangent plane at a point near its rim is crossed
+   at a grazing angle, where the crossing point races along the plane and
+   Newton's linear model fails (on a small sphere through a lens, 13 % of
+   solves on the tangent plane failed). */
+static const rrv_vec3 *rrv__shoot_plane(const rrv_shape *s, const rrv_vec3 *ny)
+{
+    return s->kind == RRV_SHAPE_SPHERE ? NULL : ny;
+}
+
+/* A root's det J_plane on the light's surface at y (normal ny): solved on
+   the light's plane it is the solve's own; solved across the arriving
+   chord (a sphere), det J_perp / |cos theta_y|, the area at y a unit of
+   the chord's cross-section covers. 0 where the chord arrives from behind
+   the surface or along it. */
+static double rrv__root_det_on_light(const rrv__root *root, const rrv_vec3 *plane, rrv_vec3 ny)
+{
+    double cos_y;
+    if (plane) return root->det;
+    cos_y = -rrv__dot(root->dir, ny);
+    return cos_y > 0 ? root->det / cos_y : 0.0;
+}
+
+/* The area density with which rrv__pick_area_light names the point y of
+   light s from x0, selection included: uniform on a quad or triangle; on
+   a sphere the cone's solid-angle density turned into area at y, on the
+   cap x0 sees (0 elsewhere: no draw names a point x0 does not see). */
+static double rrv__light_area_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 y)
+{
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv_vec3 to_x0 = rrv__sub(x0, y), n = rrv__sub(y, s->center);
+        double dist2 = rrv__dot(to_x0, to_x0), facing = rrv__dot(n, to_x0) / s->radius;
+        if (!(facing > 0) || !(dist2 > 0)) return 0.0;
+        return rrv__emitter_pdf(s, x0, y, n) * facing / (sqrt(dist2) * dist2) / rrv__light_choices(scene);
+    }
+    return 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
+}
+
 /* The MIS weight of curved NEE for a curved path x0 -> y on light s whose
    initial direction w0 the vertex samples with density pdf_dir, the
    endpoint moving on the light's plane as dA_y = |det| dw0: the power
    heuristic between NEE's solid-angle density, had every solve found the
-   root (1/(area choices) |det|), and pdf_dir. The forward path's weight is
+   root (|det| times the light point's area density), and pdf_dir. The forward path's weight is
    one minus it, computed from the same two numbers. */
-static double rrv__shoot_mis_weight(const rrv_scene *scene, const rrv_shape *s, double det, double pdf_dir)
+static double rrv__shoot_mis_weight(double pdf_area, double det, double pdf_dir)
 {
-    double pdf_nee = fabs(det) / (rrv__shape_area(s) * rrv__light_choices(scene));
-    return rrv__power_heuristic(pdf_nee, pdf_dir);
+    return rrv__power_heuristic(fabs(det) * pdf_area, pdf_dir);
 }
 
 /* The MIS weight of a forward path that left the vertex x0 along w0
    (density pdf_dir), touched a refraction support without crossing a sharp
-   interface and hit the quad or triangle light s at x: the one shot that
-   curved NEE would trace for it, from x0 along w0 with the same steps,
-   gives its |det J_plane|. Where that shot does not first cross the
-   light's plane from its front at x (it passed the plane beside the light
-   first, or a face grazed), no solve can return this path and the forward
-   path keeps it whole. */
+   interface and hit the light s at x: the one shot that curved NEE would
+   trace for it, from x0 along w0 with the same steps and in the same
+   plane (rrv__shoot_plane), gives its |det J_plane| at x. Where that shot
+   does not pass x as the solve's residual measures it (it first crossed
+   a quad's plane beside the light, an earlier chord of a shot toward a
+   sphere came closest to x, a face grazed), or no draw names x (a
+   sphere's side x0 does not see), no solve can return this path and the
+   forward path keeps it whole. */
 static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir, const rrv_shape *s,
                                         rrv_vec3 x)
 {
-    rrv_vec3 ny = rrv__normalize(rrv__cross(s->e1, s->e2)), e1, e2;
+    rrv_vec3 ny, e1, e2;
+    const rrv_vec3 *plane;
     rrv__shot shot;
-    double r[2], Jp[4], det;
+    rrv__root root;
+    double r[2], Jp[4], det, pdf_area = rrv__light_area_pdf(ctx->scene, s, x0, x);
+    if (!(pdf_area > 0)) return 1.0;
+    ny = s->kind == RRV_SHAPE_SPHERE ? rrv__scale(rrv__sub(x, s->center), 1.0 / s->radius)
+                                     : rrv__normalize(rrv__cross(s->e1, s->e2));
+    plane = rrv__shoot_plane(s, &ny);
     rrv__frame(w0, &e1, &e2);
-    rrv__shoot(ctx, x0, w0, e1, e2, x, &ny, NULL, NULL, &shot);
+    rrv__shoot(ctx, x0, w0, e1, e2, x, plane, NULL, NULL, &shot);
     if (shot.status != RRV__SHOT_REACHED || !shot.curved) return 1.0;
-    rrv__shot_residual(&shot, x, &ny, r, Jp);
+    rrv__shot_residual(&shot, x, plane, r, Jp);
     if (!(sqrt(r[0] * r[0] + r[1] * r[1]) <= 1e-6 * (1.0 + rrv__length(rrv__sub(x, x0))))) return 1.0;
-    det = Jp[0] * Jp[3] - Jp[1] * Jp[2];
-    if (!(fabs(det) < DBL_MAX)) return 1.0;
-    return 1.0 - rrv__shoot_mis_weight(ctx->scene, s, det, pdf_dir);
+    root.det = Jp[0] * Jp[3] - Jp[1] * Jp[2];
+    root.dir = shot.dir;
+    det = rrv__root_det_on_light(&root, plane, ny);
+    if (!(fabs(det) > 0) || !(fabs(det) < DBL_MAX)) return 1.0;
+    return 1.0 - rrv__shoot_mis_weight(pdf_area, det, pdf_dir);
 }
 
 /* An unbiased estimate of 1/p from independent Bernoulli(p) trials
@@ -8960,7 +9009,8 @@ static double rrv__inverse_probability(rrv__rng *rng, int start, rrv__trial_func
    same light point that comes back to the root w0. */
 typedef struct rrv__shot_recurrence {
     rrv__context *ctx;
-    rrv_vec3 x0, y, ny, w0;
+    rrv_vec3 x0, y, w0;
+    const rrv_vec3 *plane;
     rrv__polish_memo *memo;
 } rrv__shot_recurrence;
 static int rrv__shot_recurs(void *user, rrv__rng *rng)
@@ -8969,7 +9019,7 @@ static int rrv__shot_recurs(void *user, rrv__rng *rng)
     rrv__root again;
     int found;
     ++t->ctx->stats.solves;
-    found = rrv__solve_shot_seeded(t->ctx, t->x0, t->y, &t->ny, rng, t->memo, NULL, &again);
+    found = rrv__solve_shot_seeded(t->ctx, t->x0, t->y, t->plane, rng, t->memo, NULL, &again);
     t->ctx->stats.solve_iterations += (uint64_t)again.iterations;
     if (!found) return 0;
     ++t->ctx->stats.solves_converged;
@@ -8985,11 +9035,12 @@ static int rrv__shot_recurs(void *user, rrv__rng *rng)
    E = 1/p exactly, so summed over roots the estimate is unbiased.
    Only curved paths are counted here (part of them in a refraction support,
    no sharp interface crossed): straight ones belong to straight NEE. Curved
-   paths to quad and triangle lights are shared with the forward path by
-   the power heuristic (rrv__shoot_mis_weight): near a caustic |det| -> 0
-   and the forward path takes them, which keeps the estimate's 1/|det|
-   bounded. The sky and sphere lights (whose samples cover only what is
-   seen straight) are left to forward paths. */
+   paths to quad, triangle and sphere lights are shared with the forward
+   path by the power heuristic (rrv__shoot_mis_weight): near a caustic
+   |det| -> 0 and the forward path takes them, which keeps the estimate's
+   1/|det| bounded. A sphere's points are those x0 sees straight
+   (rrv__pick_area_light): bent paths to its far side are the forward
+   path's alone. The sky is left to forward paths. */
 static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                            const rrv__light_draw *draw, rrv__rng *rng)
 {
@@ -9000,8 +9051,10 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     rrv__root root;
     rrv__polish_memo memo;
     rrv__chords kept;
-    double pdf_area, T[3], f[3], k, inverse_p;
-    const rrv_shape *s = rrv__pick_area_light(scene, draw, &y, &ny, &pdf_area);
+    double pdf_area, T[3], f[3], k, inverse_p, det;
+    const rrv_shape *s = rrv__pick_area_light(scene, draw, x0, 1, &y, &ny, &pdf_area);
+    /* a sphere's solve aims through y across the arriving chord (rrv__shoot_plane) */
+    const rrv_vec3 *plane = s ? rrv__shoot_plane(s, &ny) : NULL;
     if (!s) return;
     {
         double to_y = rrv__length(rrv__sub(y, x0));
@@ -9009,14 +9062,14 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     }
     ++ctx->stats.solves;
     memo.valid = 0;
-    if (!rrv__solve_shot_seeded(ctx, x0, y, &ny, rng, &memo, &kept, &root)) {
+    if (!rrv__solve_shot_seeded(ctx, x0, y, plane, rng, &memo, &kept, &root)) {
         ctx->stats.solve_iterations += (uint64_t)root.iterations;
         return;
     }
     ctx->stats.solve_iterations += (uint64_t)root.iterations;
     ++ctx->stats.solves_converged;
     ctx->stats.solve_segments += (uint64_t)root.segments;
-    if (!root.curved) return;
+    if (!root.curved || !(det = rrv__root_det_on_light(&root, plane, ny)) ) return;
     rrv__vertex_eval(v, root.w0, f);
     if (!(rrv__max3(f) > 0)) return;
     if (kept.n > 0) {
@@ -9025,7 +9078,7 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     } else {
         rrv__shot shot;
         rrv__frame(root.w0, &e1, &e2);
-        rrv__shoot(ctx, x0, root.w0, e1, e2, y, &ny, rng, T, &shot);
+        rrv__shoot(ctx, x0, root.w0, e1, e2, y, plane, rng, T, &shot);
         if (shot.status != RRV__SHOT_REACHED || !(rrv__max3(T) > 0)) return;
     }
     {
@@ -9033,7 +9086,7 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
         t.ctx = ctx;
         t.x0 = x0;
         t.y = y;
-        t.ny = ny;
+        t.plane = plane;
         t.w0 = root.w0;
         t.memo = &memo;
         inverse_p = rrv__inverse_probability(rng, RRV__SOLVE_TRIALS, rrv__shot_recurs, &t, &count);
@@ -9041,7 +9094,7 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     ctx->stats.solve_trials += (uint64_t)count;
     ++ctx->stats.solve_connections;
     /* dw0 = dA_y / |det J_plane| (= dA_y |cos theta_y| / |det J_perp|) */
-    k = rrv__shoot_mis_weight(scene, s, root.det, rrv__vertex_pdf(v, root.w0)) / (fabs(root.det) * pdf_area) * inverse_p *
+    k = rrv__shoot_mis_weight(pdf_area, det, rrv__vertex_pdf(v, root.w0)) / (fabs(det) * pdf_area) * inverse_p *
         rrv__eta_scale(ctx, y) * rrv__path_mis(path);
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
@@ -9049,7 +9102,7 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
 /* ---- nee AIM: bent shadow rays aimed at light samples -----------------------------
    Where the two-point problem is not solved (the comb, whose kick points
    move with the ray and have no Jacobi field; or by choice), light is still
-   sampled: a point y uniform on a quad or triangle light gives the
+   sampled: a point y on a light (rrv__pick_area_light) gives the
    direction w0 from x0 to it, and the shadow ray leaves along w0 bent
    exactly as a camera ray would be (the same comb kicks or eikonal steps,
    its transmittance ratio-tracked chord by chord). If it lands on the front
@@ -9068,11 +9121,12 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
    straight NEE's without its bias.
    The classes are shoot's: a weak chord (rrv__weak_chord) is straight
    NEE's, a path crossing a sharp interface (Fresnel) is the forward path's
-   alone, and the sky and sphere lights are not aimed at. */
+   alone, and the sky is not aimed at. A sphere light's w is straight
+   NEE's draw in its cone (rrv__pick_area_light). */
 
 
 /* Who carries a connection from x0 along unit w over len to a point of
-   the quad or triangle light s: 0, straight NEE (a weak chord,
+   the light s: 0, straight NEE (a weak chord,
    rrv__weak_chord); 1, nee aim; 2, the forward path alone (the chord
    crosses a sharp interface, or bends too much to be worth aiming:
    RRV__AIM_REACH). A function of x0 and w alone (len and s are where w's
@@ -9080,21 +9134,34 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
 static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double len)
 {
     double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
-    double reach = RRV__AIM_REACH * sqrt(rrv__shape_area(s)) / len, bound;
+    /* the light's size across: a sphere's by its disc's area */
+    double size = s->kind == RRV_SHAPE_SPHERE ? sqrt(RRV__PI) * s->radius : sqrt(rrv__shape_area(s));
+    double reach = RRV__AIM_REACH * size / len, bound;
     if (!rrv__chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound)) return 2;
     if (bound <= tolerance) return 0;
     return bound <= reach ? 1 : 2;
 }
 
-/* The solid-angle density of nee aim's w toward the quad or triangle light
-   s from x0, light choice included: 0 where the line from x0 along unit w
-   misses s. Both faces count: the point is drawn whatever side of s faces
-   x0, and a bent ray aimed at the back may land on the front. *len: how
-   far along w the line meets s. */
+/* The solid-angle density of nee aim's w toward the light s from x0,
+   light choice included: 0 where the line from x0 along unit w misses s.
+   Both faces of a quad or triangle count: the point is drawn whatever
+   side of s faces x0, and a bent ray aimed at the back may land on the
+   front. A sphere's is its cone's (rrv__pick_area_light). *len: how far
+   along w the line meets s. */
 static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double *len)
 {
-    rrv_vec3 n = rrv__cross(s->e1, s->e2), rel;
-    double n2 = rrv__dot(n, n), facing = rrv__dot(n, w), t, a, b, cos_y;
+    rrv_vec3 n, rel;
+    double n2, facing, t, a, b, cos_y;
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv_vec3 to_c = rrv__sub(s->center, x0);
+        double along = rrv__dot(to_c, w), miss2 = rrv__dot(to_c, to_c) - along * along, r2 = s->radius * s->radius;
+        if (!(along > 0) || !(miss2 < r2) || !(rrv__dot(to_c, to_c) > r2)) return 0.0;
+        *len = along - sqrt(r2 - miss2);
+        return rrv__emitter_pdf(s, x0, x0, w) / rrv__light_choices(scene);
+    }
+    n = rrv__cross(s->e1, s->e2);
+    n2 = rrv__dot(n, n);
+    facing = rrv__dot(n, w);
     if (!(facing != 0) || !(n2 > 0)) return 0.0;
     t = rrv__dot(n, rrv__sub(s->p0, x0)) / facing;
     if (!(t > 0) || !(t < DBL_MAX)) return 0.0;
@@ -9108,7 +9175,7 @@ static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 
 }
 
 /* The density nee (straight or aimed) draws w with from x0 toward the
-   quad or triangle light s, 0 where it leaves w to forward paths: what a
+   light s, 0 where it leaves w to forward paths: what a
    forward path that reached s from x0 along w weighs itself against. */
 static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w)
 {
@@ -9169,7 +9236,7 @@ static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const 
     rrv__hit hit;
     double pdf_area, to_y, pdf_aim, pdf_dir, f[3], T[3], k;
     int c, met;
-    const rrv_shape *s = rrv__pick_area_light(scene, draw, &y, &ny, &pdf_area);
+    const rrv_shape *s = rrv__pick_area_light(scene, draw, x0, 1, &y, &ny, &pdf_area);
     (void)pdf_area;
     if (!s) return;
     to_y = rrv__length(rrv__sub(y, x0));
@@ -9305,8 +9372,9 @@ static double rrv__cone_sample(const rrv__context *ctx, rrv_vec3 x0, rrv__rng *r
 }
 
 /* Where the bent ray from x0 along w0 lands as a root of a weak chord
-   (rrv__forward_weak 2) on the front of a quad or triangle light: that
-   light (*hit, T the transmittance up to it), else NULL. */
+   (rrv__forward_weak 2) on the front of a light: that light (*hit, T the
+   transmittance up to it), else NULL. Sphere lights too: a forward path
+   of that class weighs itself against the cones whatever light it hits. */
 static const rrv_shape *rrv__cone_trace(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv__rng *rng, rrv__hit *hit,
                                         double T[3])
 {
@@ -9316,8 +9384,7 @@ static const rrv_shape *rrv__cone_trace(rrv__context *ctx, rrv_vec3 x0, rrv_vec3
     int met = rrv__aim_trace(ctx, x0, &d, rng, hit, T);
     if (met < 0) return NULL;
     s = &ctx->scene->shapes[met];
-    if (s->kind == RRV_SHAPE_SPHERE || !(s->L[0] > 0 || s->L[1] > 0 || s->L[2] > 0) || !(rrv__dot(hit->n, d) < 0))
-        return NULL;
+    if (!(s->L[0] > 0 || s->L[1] > 0 || s->L[2] > 0) || !(rrv__dot(hit->n, d) < 0)) return NULL;
     to_x = rrv__length(rrv__sub(hit->p, x0));
     if (!(to_x > 0) || rrv__forward_weak(ctx, x0, w0, rrv__scale(rrv__sub(hit->p, x0), 1.0 / to_x), to_x) != 2)
         return NULL;
@@ -10574,17 +10641,29 @@ static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__
     return 1;
 }
 
-/* A point y uniform on one area light (quads and triangles; the sky and
-   sphere lights are left to forward paths), its normal and area pdf
-   (selection included). Draws three numbers whatever it returns. */
-static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 *y,
-                                             rrv_vec3 *ny, double *pdf_area)
+/* The light point y the draw names from x0 for a curved connection, its
+   normal and its area pdf (selection included); NULL for the sky, and for
+   sphere lights unless spheres is set. A quad's or triangle's point is
+   uniform in area; a sphere's is where the direction straight NEE draws
+   uniformly in the sphere's cone from x0 meets its near side, so that
+   one draw names one point whichever class routes it (straight NEE, a
+   curved estimator). The estimators divide by pdf_area, and the forward
+   paths weigh themselves with rrv__light_area_pdf, the same density. */
+static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 x0,
+                                             int spheres, rrv_vec3 *y, rrv_vec3 *ny, double *pdf_area)
 {
     int pick = rrv__light_pick(scene, draw);
     const rrv_shape *s;
     if (pick < 0 || pick == scene->light_count) return NULL;
     s = &scene->shapes[scene->lights[pick]];
-    if (s->kind == RRV_SHAPE_SPHERE) return NULL;
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv__light_sample ls;
+        if (!spheres || !rrv__sample_light(scene, x0, draw, &ls) || !(ls.dist > 0)) return NULL;
+        *y = ls.point;
+        *ny = rrv__scale(rrv__sub(ls.point, s->center), 1.0 / s->radius);
+        *pdf_area = rrv__light_area_pdf(scene, s, x0, ls.point);
+        return *pdf_area > 0 ? s : NULL;
+    }
     *y = rrv__area_light_point(s, draw->u1, draw->u2);
     *ny = rrv__normalize(rrv__cross(s->e1, s->e2));
     *pdf_area = 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
@@ -10659,7 +10738,7 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
     rrv__mroot root;
     rrv_vec3 y, ny, roots[RRV__MANIFOLD_ROOTS];
     double pdf_area, carried[3], k;
-    const rrv_shape *s = rrv__pick_area_light(scene, draw, &y, &ny, &pdf_area);
+    const rrv_shape *s = rrv__pick_area_light(scene, draw, x0, 0, &y, &ny, &pdf_area);
     int c, nroots = 0, trial;
     double to_y;
     if (!s || !ch) return;
@@ -16753,16 +16832,15 @@ and BOUNDS (moved here from the manual at the top, word for word)
      NONE        no light sampling: lights, emitters and the sky count only
                  where the bent path hits them, with MIS weight 1. Unbiased
                  (furnaces give exactly 1), but noisy for small lights.
-     SHOOT       curved NEE by shooting (eikonal integrator), unbiased up
-                 to a cap on trials. The path from the last vertex to the
+     SHOOT       curved NEE by shooting (eikonal integrator), unbiased. The path from the last vertex to the
                  light decides which estimators may make it: touching no
                  refraction support (box or profile sphere), or weak (below),
                  straight NEE and the forward path, by the power heuristic,
                  as classic does; curved (part of it in a support, no sharp interface
-                 crossed) and ending on a quad or triangle light, the curved
-                 connection and the forward path, by the power heuristic on
-                 their solid-angle densities at the initial direction w0:
-                 p_nee = |det J_plane| / (area x light choices) (NEE's
+                 crossed) and ending on a quad, triangle or sphere light,
+                 the curved connection and the forward path, by the power
+                 heuristic on their solid-angle densities at the initial
+                 direction w0: p_nee = |det J_plane| p_area(y) (NEE's
                  density had every solve found the root; the 1/p of the
                  trials is an unbiased factor on top) and the vertex's own
                  pdf of w0. The forward path computes det J_plane for itself
@@ -16773,8 +16851,13 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  forward path takes the path, which bounds NEE's 1/|det|
                  (unweighted, its square is not integrable there).
                  Everything else (across a sharp interface, to the sky, to
-                 sphere lights) only by forward paths, weight 1. The
-                 connection: a point y uniform on a light, Newton on the
+                 the far side of a sphere light) only by forward paths,
+                 weight 1. The connection: a point y on a light (uniform
+                 on a quad or triangle, p_area = 1 / (area x light
+                 choices); on a sphere, where straight NEE's direction
+                 in its cone meets the side x0 sees, p_area that density
+                 times cos theta_y / |y - x0|^2, on the tangent plane
+                 at y), Newton on the
                  two angles of the initial direction so that the ray,
                  traced with the same steps camera rays take, first crosses
                  the light's plane from its front at y (at most 20 shots,
@@ -16802,7 +16885,8 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  path space by the same classes (weights: 1 for the estimator a
                  path belongs to, 0 for the others; power heuristic only
                  between straight NEE and forward paths outside supports).
-                 A point y uniform on a quad or triangle light; a chain of
+                 A point y uniform on a quad or triangle light (sphere
+                 lights are left to forward paths); a chain of
                  vertices on comb planes along the chord x0 -> y (spacing
                  `step`, random offset, at most 512, wider beyond), each
                  kicking the ray as the comb does (eta d += grad eta h,
@@ -16850,7 +16934,8 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  events, leave curved connections to forward paths, counted
                  in rrv_render_stats.solves_unsupported). The classes are
                  SHOOT's; for a curved one, a point y uniform on a quad or
-                 triangle light gives w0 = (y - x0) / |y - x0|, and the
+                 triangle light, or straight NEE's direction in a sphere's
+                 cone, gives w0 = (y - x0) / |y - x0|, and the
                  shadow ray leaves x0 along w0 bent as camera rays are (the
                  same comb kicks or eikonal steps), its transmittance
                  ratio-tracked chord by chord; the light's radiance counts

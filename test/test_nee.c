@@ -431,6 +431,79 @@ static void test_small_light_caustic_shoot(void)
     rrv_scene_free(s);
 }
 
+/* The small light as a sphere of about the same power: shoot (eikonal)
+   and aim (comb) agree with nee none (comb) in 4x4-pixel blocks within 4
+   standard errors, and shoot, which solves the connections to the side of
+   the sphere a vertex sees, has far less variance at the caustic than
+   forward paths alone. The Luneburg lens is a strong support, so the rays
+   drawn toward it (rrv__cone_nee) take their share of the sphere too. */
+static const char sphere_caustic_text[] =
+    "camera eye 0 0.6 -1.8  look 0 0 0.2  up 0 1 0  fov 40  resolution 32 24\n"
+    "render maxdepth 1 step 0.01\n"
+    "material white diffuse albedo 1 1 1\n"
+    "quad origin -3 0 -3  u 6 0 0  v 0 0 6  material white\n"
+    "sphere center 0 3 0  radius 0.15  L 140 140 140\n"
+    "medium lens box -0.5 0.7 -0.5 0.5 1.7 0.5  sigma_a 0 0 0  sigma_s 0 0 0\n"
+    "ior lens luneburg center 0 1.2 0 radius 0.5\n";
+
+/* The mean over a crop's blocks (of equal size) of two independent
+   renders agree within 4 standard errors: a check ~3x finer than one
+   block's, for a bias spread over the crop. */
+static void crops_agree(const stats *ref, const stats *got, int x0, int y0, int x1, int y1, const char *what)
+{
+    double m_ref = 0, m_got = 0, v_ref = 0, v_got = 0, se;
+    int bx, by, n = 0;
+    for (by = y0 / BLOCK; by < y1 / BLOCK; ++by)
+        for (bx = x0 / BLOCK; bx < x1 / BLOCK; ++bx) {
+            int i = by * BLOCKS_X + bx;
+            m_ref += stats_mean(&ref[i]);
+            m_got += stats_mean(&got[i]);
+            v_ref += stats_se(&ref[i]) * stats_se(&ref[i]);
+            v_got += stats_se(&got[i]) * stats_se(&got[i]);
+            ++n;
+        }
+    se = sqrt(v_ref + v_got) / n;
+    m_ref /= n;
+    m_got /= n;
+    SAY("  %s, crop: reference %.4f, %.4f, difference %.4f, se %.4f\n", what, m_ref, m_got, m_got - m_ref, se);
+    CHECKF(fabs(m_got - m_ref) <= 4 * se, "%s, crop: %.4f against the reference's %.4f, over 4 se %.4f", what, m_got,
+           m_ref, 4 * se);
+}
+
+static void test_sphere_light_caustic(void)
+{
+    rrv_scene *s = NULL;
+    rrv_render_stats rs;
+    stats a[NBLOCKS], b[NBLOCKS], c[NBLOCKS];
+    int peak;
+    const int x0 = 8, y0 = 8, x1 = 24, y1 = 20;
+    if (!(s = parse_text(sphere_caustic_text, sizeof sphere_caustic_text - 1, "sphere caustic"))) return;
+    memset(a, 0, sizeof a);
+    memset(b, 0, sizeof b);
+    memset(c, 0, sizeof c);
+    memset(&rs, 0, sizeof rs);
+    render_blocks(s, &comb, RRV_NEE_NONE, 61, 4096, x0, y0, x1, y1, BLOCK, a, NULL);
+    render_blocks(s, &eikonal, RRV_NEE_SHOOT, 62, 16, x0, y0, x1, y1, BLOCK, b, &rs);
+    peak = blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, "sphere light, eikonal shoot");
+    crops_agree(a, b, x0, y0, x1, y1, "sphere light, eikonal shoot");
+    SAY("  sphere light shoot: %llu solves, %.1f%% converged; %llu rays toward the lens, %llu counted\n",
+        (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)(rs.solves ? rs.solves : 1),
+        (unsigned long long)rs.cone_shots, (unsigned long long)rs.cone_counted);
+    CHECKF(rs.solves > 1000 && rs.solves_converged >= 0.9 * rs.solves, "%llu of %llu solves converged",
+           (unsigned long long)rs.solves_converged, (unsigned long long)rs.solves);
+    {
+        double vs = sample_variance(&b[peak]), vn = sample_variance(&a[peak]);
+        SAY("  sphere light caustic variance per sample: shoot %.3f, none %.3f\n", vs, vn);
+        CHECKF(vs * 30 < vn, "sphere light caustic: variance per sample %.3f with shoot, %.3f with none", vs, vn);
+    }
+    memset(&rs, 0, sizeof rs);
+    render_blocks(s, &comb, RRV_NEE_AIM, 63, 1024, x0, y0, x1, y1, BLOCK, c, &rs);
+    blocks_agree(a, c, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, "sphere light, comb aim");
+    crops_agree(a, c, x0, y0, x1, y1, "sphere light, comb aim");
+    CHECKF(rs.aim_shots > 0, "no aimed shadow rays toward the sphere (%llu)", (unsigned long long)rs.aim_shots);
+    rrv_scene_free(s);
+}
+
 /* nee manifold against nee none (comb) in 4x4-pixel blocks around the
    caustic, within 4 standard errors, for the unbiased estimate in the
    CHORD gauge with the eikonal and the comb integrator; the ISO gauge is shown
@@ -1291,11 +1364,21 @@ static void test_manifold_out_of_memory(void)
    same weight: NEE from its root (w0, det J_plane from the solve), the
    forward path from the one shot it traces along its own w0 to the light
    point it hit. Here, for connections from the floor of the caustic scene
-   through the lens to the light: the two weights sum to one within 1e-6
-   (the root is converged to 1e-9, the weights are smooth in it), and the
-   connections include paths where neither weight is close to 0 or 1
-   (|det| / (area choices) near the vertex's pdf). */
-static void test_shoot_mis_weights_sum_to_one(void)
+   through the lens to the light, a quad and then a sphere (the plane the
+   shot aims at is its tangent plane at y, on the side the floor sees):
+   the two weights sum to one within 1e-6 (the root is converged to 1e-9,
+   the weights are smooth in it), and the connections include paths where
+   neither weight is close to 0 or 1 (|det| p_area near the vertex's pdf). */
+static const char sphere_lens_text[] =
+    "camera eye 0 0.6 -1.8  look 0 0 0.2  up 0 1 0  fov 40  resolution 32 24\n"
+    "render maxdepth 1 step 0.01\n"
+    "material white diffuse albedo 1 1 1\n"
+    "quad origin -3 0 -3  u 6 0 0  v 0 0 6  material white\n"
+    "sphere center 0 3 0  radius 0.5  L 10 10 10\n"
+    "medium lens box -0.5 0.7 -0.5 0.5 1.7 0.5  sigma_a 0 0 0  sigma_s 0 0 0\n"
+    "ior lens luneburg center 0 1.2 0 radius 0.5\n";
+
+static void shoot_mis_weights_case(const char *text, size_t size, const char *name)
 {
     rrv_scene *s = NULL;
     rrv__context ctx;
@@ -1304,7 +1387,7 @@ static void test_shoot_mis_weights_sum_to_one(void)
     rrv__vertex_bsdf vb;
     int k, roots = 0, shared = 0;
     double worst = 0;
-    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
+    if (!(s = parse_text(text, size, name))) return;
     solver_context(&ctx, s);
     ctx.partition = ctx.shoot = ctx.sample_lights = 1;
     light = &s->shapes[s->lights[0]];
@@ -1314,28 +1397,45 @@ static void test_shoot_mis_weights_sum_to_one(void)
     rrv__rng_seed(&rng, 41, 0, 0);
     for (k = 0; k < 600; ++k) {
         rrv_vec3 x0 = rrv__v3(1.2 * rrv__uniform(&rng) - 0.6, 1e-5, 1.2 * rrv__uniform(&rng) - 0.6);
-        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5);
-        const rrv_vec3 down = rrv__v3(0, -1, 0);
+        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5), ny = rrv__v3(0, -1, 0);
         rrv__root root;
-        double pdf, w_nee, w_fwd;
-        if (!rrv__solve_shot(&ctx, x0, y, &down, rrv__solver_seed(x0, y, &rng), NULL, &root) || !root.curved) continue;
+        double pdf, w_nee, w_fwd, pdf_area;
+        if (light->kind == RRV_SHAPE_SPHERE) {
+            /* a point of the lower half, seen from x0 or not (then no draw names it) */
+            ny = rrv__normalize(rrv__v3(y.x, -0.3 - rrv__uniform(&rng), y.z));
+            y = rrv__madd(light->center, ny, light->radius);
+        }
+        pdf_area = rrv__light_area_pdf(s, light, x0, y);
+        if (!(pdf_area > 0)) {
+            CHECKF(rrv__dot(rrv__sub(x0, y), ny) <= 0, "%s, connection %d: a point x0 sees has no density", name, k);
+            continue;
+        }
+        if (!rrv__solve_shot(&ctx, x0, y, rrv__shoot_plane(light, &ny), rrv__solver_seed(x0, y, &rng), NULL, &root) ||
+            !root.curved)
+            continue;
         ++roots;
         /* every other vertex a medium with a forward phase function about
            the chord (density up to 15 per sr), which shares many paths */
         vb.surface = k & 1;
         vb.d_in = rrv__normalize(rrv__sub(y, x0));
         pdf = rrv__vertex_pdf(&vb, root.w0);
-        w_nee = rrv__shoot_mis_weight(s, light, root.det, pdf);
+        w_nee = rrv__shoot_mis_weight(pdf_area, rrv__root_det_on_light(&root, rrv__shoot_plane(light, &ny), ny), pdf);
         w_fwd = rrv__shoot_forward_weight(&ctx, x0, root.w0, pdf, light, y);
         if (w_nee > 0.05 && w_nee < 0.95) ++shared;
         worst = fmax(worst, fabs(w_nee + w_fwd - 1.0));
-        CHECKF(fabs(w_nee + w_fwd - 1.0) < 1e-6, "connection %d: NEE weight %.9f + forward weight %.9f, |det| %g", k,
-               w_nee, w_fwd, fabs(root.det));
+        CHECKF(fabs(w_nee + w_fwd - 1.0) < 1e-6, "%s, connection %d: NEE weight %.9f + forward weight %.9f, |det| %g",
+               name, k, w_nee, w_fwd, fabs(root.det));
     }
-    SAY("  shoot MIS: %d curved roots, %d with both weights in (0.05, 0.95), worst |sum - 1| %.1e\n", roots, shared,
-        worst);
-    CHECK(roots > 200 && shared > 20);
+    SAY("  shoot MIS, %s: %d curved roots, %d with both weights in (0.05, 0.95), worst |sum - 1| %.1e\n", name, roots,
+        shared, worst);
+    CHECKF(roots > 200 && shared > 20, "%s: %d roots, %d shared", name, roots, shared);
     rrv_scene_free(s);
+}
+
+static void test_shoot_mis_weights_sum_to_one(void)
+{
+    shoot_mis_weights_case(caustic_text, sizeof caustic_text - 1, "quad light");
+    shoot_mis_weights_case(sphere_lens_text, sizeof sphere_lens_text - 1, "sphere light");
 }
 
 /* nee aim on weak heat haze: a scattering box whose IOR carries weak noise
@@ -1876,6 +1976,7 @@ int main(void)
     NEE_RUN(test_lens_caustic);
     NEE_RUN(test_lens_caustic_shoot);
     NEE_RUN(test_small_light_caustic_shoot);
+    NEE_RUN(test_sphere_light_caustic);
     NEE_RUN(test_fog_in_lens_shoot);
     NEE_RUN(test_weak_haze_aim);
     NEE_RUN(test_two_lights_aim);
