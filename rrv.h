@@ -162,7 +162,8 @@
 
 
    READING MAP (the paper's terms and the functions that implement them;
-   `grep -n "^/\* [-=][-=][-=][-=]" rrv.h` lists the sections quoted)
+   `grep -n '/\* >>' rrv.h` is the table of contents, in the order a ray
+   lives; `grep -n '/\* ----' rrv.h` the subsections quoted)
      refractive delta tracking, the paper's Algorithm 1 (Snell at every null
        collision): rrv__refractive_delta_tracking, which bends through
        rrv__bend_at_null_event and rrv__refract_at_null_event (scheme POISSON)
@@ -175,7 +176,7 @@
        rrv__manifold_nee; its solver rrv__manifold_solve on the chain of
        rrv__chain_* ("nee MANIFOLD")
      curved NEE by shooting and aiming: rrv__shoot_nee, rrv__solve_shot_seeded;
-       rrv__aim_nee; rrv__cone_nee ("solver", "nee AIM")
+       rrv__aim_nee; rrv__cone_nee (>> 11, "nee AIM")
      the eikonal reference (Ament et al.): rrv__eikonal_step,
        rrv__eikonal_step_controlled, rrv__eikonal_plan ("eikonal")
      ratio tracking of shadow rays: rrv__ratio_tracking_transmittance;
@@ -1130,7 +1131,7 @@ RRV_DEF uint32_t rrv_adler32(uint32_t adler, const void *data, size_t size);
 #ifndef RRV_IMPLEMENTATION_INCLUDED
 #define RRV_IMPLEMENTATION_INCLUDED
 
-/* ==== common: configuration, allocation, errors ============================ */
+/* >> 1 common: configuration, allocation, errors ============================ */
 #include <math.h>
 #include <string.h>
 #include <stdarg.h>
@@ -1204,7 +1205,7 @@ static void rrv__clear_error(rrv_error *err)
     }
 }
 
-/* ==== math: vectors, orthonormal frames, the PCG32 random stream ============
+/* >> 2 math: vectors, orthonormal frames, the PCG32 stream, the Sobol sampler =
    Everything geometric is double: a fire changes the IOR of air by ~2e-4, and
    the positions and directions that carry such bends must not lose them. */
 
@@ -1384,7 +1385,7 @@ static double rrv__uniform(rrv__rng *rng)
     return (double)(hi * 67108864.0 + lo) * (1.0 / 9007199254740992.0);
 }
 
-/* ==== sampling: free flights, directions, phase function, MIS ============== */
+/* >> 3 sampling: free flights, directions, phase function, MIS ============== */
 
 static double rrv__sample_free_flight(double majorant, rrv__rng *rng)
 {
@@ -1430,7 +1431,7 @@ static double rrv__power_heuristic(double pdf_a, double pdf_b)
     return a + b > 0 ? a / (a + b) : 0.0;
 }
 
-/* ==== geometry: ray-primitive intersection and the binned-SAH BVH ========== */
+/* >> 4 geometry: ray-primitive intersection and the binned-SAH BVH ========== */
 
 typedef struct rrv__hit {
     double t;
@@ -1701,7 +1702,7 @@ static rrv_result rrv__build_bvh(rrv_scene *scene, rrv_error *err)
     return RRV_OK;
 }
 
-/* ==== media and fields: densities, gas state, IOR, majorant grids ========== */
+/* >> 5 fields and refractivity: densities, grids, gas state, the IOR ======== */
 
 static double rrv__smoothstep(double e0, double e1, double x)
 {
@@ -3294,6 +3295,9 @@ static double rrv__scene_refractivity(const rrv_scene *scene, rrv_vec3 p, rrv_ve
     return ambient_r;
 }
 
+/* >> 6 majorants and bounds: a medium's limits, majorant grids, the medium at a
+   point, the emission grid ===================================================== */
+
 /* ---- the limits a medium must respect (BOUNDS) --------------------------------
    Checked by rrv_scene_prepare (rrv__check_medium) once a medium is
    complete, with the lines the parser recorded in rrv_medium.line. */
@@ -4734,8 +4738,7 @@ static int rrv__emitter_sample(const struct rrv__emitters *e, const rrv__emit_fr
     return g->medium;
 }
 
-/* ==== integrators: delta and ratio tracking, refraction, eikonal marching, =====
-   lights, the path tracer, and the public render and trace calls. */
+/* >> 7 tracking: majorant traversal, delta and ratio tracking ================ */
 
 /* ---- majorant traversal: a DDA over one medium's majorant grid ----------------
    Like pbrt-v4's DDAMajorantIterator: the part of a ray inside a medium's
@@ -5194,6 +5197,8 @@ static void rrv__walker_advance(rrv__walker *w, rrv__rng *rng, uint64_t *events)
     }
     w->t_event = DBL_MAX;
 }
+
+/* >> 8 refraction: eikonal marching, supports and faces, the comb ============ */
 
 /* ---- eikonal: marching the ray equation d/ds(eta dx/ds) = grad eta ------------- */
 
@@ -6208,6 +6213,8 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     }
 }
 
+/* >> 9 path tracer: null-scattering paths, emitters and lights, camera paths = */
+
 /* ---- integrators: classic and refractive null-scattering path tracing ---------- */
 
 /* How far, in the light's size (the square root of its area), the bound
@@ -6984,7 +6991,7 @@ typedef struct rrv__vertex_bsdf {
     rrv_vec3 d_in;
 } rrv__vertex_bsdf;
 
-/* In the solver section, below. */
+/* In the curved NEE section (>> 11), below. */
 static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x);
 static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d);
 static int rrv__jump_counts(double jump);
@@ -7414,6 +7421,8 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
     for (c = 0; c < 3; ++c) L[c] = cp.path.L[c];
 }
 
+
+/* >> 10 render: preparing a scene, rendering rectangles, tracing one ray ===== */
 
 /* ---- preparing a scene and rendering rectangles --------------------------------- */
 
@@ -7939,7 +7948,7 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
     return RRV_OK;
 }
 
-/* ==== solver: curved next-event estimation by shooting ==========================
+/* >> 11 curved NEE (module): shoot, aim, the cones, the manifold walk =========
    nee SHOOT (eikonal integrator). A connection from a vertex x0 to a point y
    on an area light along the bent ray is found by Newton's method on the two
    angles of the initial direction w0, the ray traced with exactly the
@@ -10776,7 +10785,7 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
     }
 }
 
-/* ==== image I/O: PFM and PNG files, checksums =================================
+/* >> 12 image I/O (module): PFM, PNG and OpenEXR files, checksums ===========
    This section owns everything that turns a float RGB buffer into bytes and
    back: the PFM writer and reader, the PNG preview writer (with its own
    deflate, which the EXR writer's ZIP chunks share), the CRC-32 and
@@ -13026,7 +13035,7 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
 
 #endif /* RRV_NO_STDIO */
 
-/* ==== NanoVDB files: segments, grids and the validation of their trees =======
+/* >> 13 NanoVDB files (module): segments, grids and the validation of trees ==
    Reads what nanovdb_convert writes: a file of segments, each a 16-byte
    header ("NanoVDB0" or the newer "NanoVDB2", version, grid count, codec)
    followed by 176 bytes of metadata and the name of each grid, then the
@@ -13619,7 +13628,7 @@ RRV_DEF void rrv_nanovdb_free(rrv_nanovdb *grid)
     grid->size = 0;
 }
 
-/* ==== scene file: the .rrv parser, the OBJ loader, the gridvol reader =======
+/* >> 14 scene file (module): the .rrv parser, OBJ, gridvol; building scenes =
    This section owns rrv_scene_load, rrv_scene_parse, rrv_scene_free,
    rrv_grid_read and rrv_grid_read_memory, the OBJ loader behind `mesh file`,
    the default (stdio) file reader, and the scene-building calls
