@@ -13215,22 +13215,13 @@ static const char *rrv__nv_any_type_name(uint32_t t)
     return t < sizeof names / sizeof names[0] ? names[t] : "unknown";
 }
 
-/* Checks the grid buffer b[0, size) and fills g (not g->buffer). */
-static rrv_result rrv__nv_check_grid(const unsigned char *b, uint64_t size, const char *name, rrv_nanovdb *g,
-                                     rrv_error *err)
+/* The grid's header: its name (made printable), NanoVDB version, size and
+   value type, into g. */
+static rrv_result rrv__nv_check_header(const unsigned char *b, uint64_t size, const char *name, rrv_nanovdb *g,
+                                       rrv_error *err)
 {
-    rrv__nv_check c;
-    uint64_t tree = RRV__NV_GRID, root, tiles, t;
     uint32_t version, type;
-    double det;
-    int a, lv;
-    rrv_result r = RRV_OK;
-    memset(&c, 0, sizeof c);
-    c.g = g;
-    c.b = b;
-    c.size = size;
-    c.name = name;
-    c.err = err;
+    int a;
     if (size < RRV__NV_GRID + RRV__NV_TREE)
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "a grid of %llu bytes is shorter than its %d-byte header",
                          (unsigned long long)size, RRV__NV_GRID + RRV__NV_TREE);
@@ -13254,7 +13245,16 @@ static rrv_result rrv__nv_check_grid(const unsigned char *b, uint64_t size, cons
                          "grid \"%s\" holds %s values; rrv reads float, fp4, fp8, fp16 and fpN grids",
                          g->name, rrv__nv_any_type_name(type));
     g->type = (rrv_nanovdb_type)type;
-    /* the double-precision map: 3x3 matrix, its inverse, translation */
+    return RRV_OK;
+}
+
+/* The double-precision map (3x3 matrix, its inverse, translation) into g;
+   the stored inverse must be the map's: world and index would otherwise
+   disagree about where a voxel is. */
+static rrv_result rrv__nv_check_map(const unsigned char *b, const char *name, rrv_nanovdb *g, rrv_error *err)
+{
+    double det;
+    int a, ok, i, j, k;
     for (a = 0; a < 9; ++a) {
         uint64_t u = rrv__nv_u64(b + 384 + 8 * (size_t)a), v = rrv__nv_u64(b + 456 + 8 * (size_t)a);
         memcpy(&g->map[a], &u, 8);
@@ -13267,80 +13267,92 @@ static rrv_result rrv__nv_check_grid(const unsigned char *b, uint64_t size, cons
     det = g->map[0] * (g->map[4] * g->map[8] - g->map[5] * g->map[7]) -
           g->map[1] * (g->map[3] * g->map[8] - g->map[5] * g->map[6]) +
           g->map[2] * (g->map[3] * g->map[7] - g->map[4] * g->map[6]);
-    {
-        /* the stored inverse must be the map's: world and index would
-           otherwise disagree about where a voxel is */
-        int ok = rrv__nv_finite(det) && det != 0.0, i, j, k;
-        for (a = 0; a < 9 && ok; ++a) ok = rrv__nv_finite(g->map[a]) && rrv__nv_finite(g->inverse[a]);
-        for (a = 0; a < 3 && ok; ++a) ok = rrv__nv_finite(g->translation[a]);
-        for (i = 0; i < 3 && ok; ++i)
-            for (j = 0; j < 3 && ok; ++j) {
-                double s = 0;
-                for (k = 0; k < 3; ++k) s += g->map[3 * i + k] * g->inverse[3 * k + j];
-                ok = fabs(s - (i == j ? 1.0 : 0.0)) < 1e-6;
-            }
-        if (!ok)
-            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
-                             "grid \"%s\": its index-to-world map is not finite and invertible, or its stored inverse does not match it",
-                             g->name);
-    }
+    ok = rrv__nv_finite(det) && det != 0.0;
+    for (a = 0; a < 9 && ok; ++a) ok = rrv__nv_finite(g->map[a]) && rrv__nv_finite(g->inverse[a]);
+    for (a = 0; a < 3 && ok; ++a) ok = rrv__nv_finite(g->translation[a]);
+    for (i = 0; i < 3 && ok; ++i)
+        for (j = 0; j < 3 && ok; ++j) {
+            double s = 0;
+            for (k = 0; k < 3; ++k) s += g->map[3 * i + k] * g->inverse[3 * k + j];
+            ok = fabs(s - (i == j ? 1.0 : 0.0)) < 1e-6;
+        }
+    if (!ok)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
+                         "grid \"%s\": its index-to-world map is not finite and invertible, or its stored inverse does not match it",
+                         g->name);
+    return RRV_OK;
+}
+
+/* The tree's three node arrays (leaves, lower, upper) fit in the grid;
+   each gets its flags of nodes seen, and FpN leaves, which vary in size,
+   the start of each. */
+static rrv_result rrv__nv_check_levels(rrv__nv_check *c, uint64_t tree)
+{
+    const unsigned char *b = c->b;
+    const uint64_t size = c->size;
+    rrv_nanovdb *g = c->g;
+    int lv;
     for (lv = 0; lv < 3; ++lv) {
-        rrv__nv_array *arr = &c.level[lv];
+        rrv__nv_array *arr = &c->level[lv];
         uint64_t offset = rrv__nv_u64(b + tree + 8 * (size_t)lv);
         arr->count = rrv__nv_u32(b + tree + 32 + 4 * (size_t)lv);
         arr->size = lv == 2 ? RRV__NV_UPPER : lv == 1 ? RRV__NV_LOWER : rrv__nv_leaf_size(g->type);
         g->node_count[lv] = (uint32_t)arr->count;
         if (arr->count == 0) continue;
         /* an FpN leaf has at least 1 bit a value: 96 + 64 bytes */
-        if (offset > size - tree || arr->count > (size - tree - offset) / (arr->size ? arr->size : 160)) {
-            r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0,
-                          "grid \"%s\": its %llu %s at byte %llu do not fit in its %llu bytes", g->name,
-                          (unsigned long long)arr->count, rrv__nv_level_plurals[lv],
-                          (unsigned long long)(tree + offset), (unsigned long long)size);
-            goto done;
-        }
+        if (offset > size - tree || arr->count > (size - tree - offset) / (arr->size ? arr->size : 160))
+            return rrv__fail(c->err, RRV_ERROR_FORMAT, c->name, 0,
+                             "grid \"%s\": its %llu %s at byte %llu do not fit in its %llu bytes", g->name,
+                             (unsigned long long)arr->count, rrv__nv_level_plurals[lv],
+                             (unsigned long long)(tree + offset), (unsigned long long)size);
         arr->first = tree + offset;
         arr->seen = (unsigned char *)RRV_MALLOC((size_t)arr->count);
-        if (!arr->seen) { r = rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory checking a grid"); goto done; }
+        if (!arr->seen) return rrv__fail(c->err, RRV_ERROR_MEMORY, c->name, 0, "out of memory checking a grid");
         memset(arr->seen, 0, (size_t)arr->count);
     }
-    if (g->type == RRV_NANOVDB_FPN && c.level[0].count) {
+    if (g->type == RRV_NANOVDB_FPN && c->level[0].count) {
         /* FpN leaves follow each other, each 96 bytes plus 64 per bit */
-        rrv__nv_array *arr = &c.level[0];
+        rrv__nv_array *arr = &c->level[0];
         uint64_t at = arr->first, k;
         arr->starts = (uint64_t *)RRV_MALLOC((size_t)arr->count * sizeof(uint64_t));
-        if (!arr->starts) { r = rrv__fail(err, RRV_ERROR_MEMORY, name, 0, "out of memory checking a grid"); goto done; }
+        if (!arr->starts) return rrv__fail(c->err, RRV_ERROR_MEMORY, c->name, 0, "out of memory checking a grid");
         for (k = 0; k < arr->count; ++k) {
             unsigned bits;
-            if (at > size - RRV__NV_LEAF_DATA || (b[at + 15] >> 5) > 4) {
-                r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\": fpN leaf %llu at byte %llu is %s",
-                              g->name, (unsigned long long)k, (unsigned long long)at,
-                              at > size - RRV__NV_LEAF_DATA ? "outside the grid" : "of an unknown bit width");
-                goto done;
-            }
+            if (at > size - RRV__NV_LEAF_DATA || (b[at + 15] >> 5) > 4)
+                return rrv__fail(c->err, RRV_ERROR_FORMAT, c->name, 0, "grid \"%s\": fpN leaf %llu at byte %llu is %s",
+                                 g->name, (unsigned long long)k, (unsigned long long)at,
+                                 at > size - RRV__NV_LEAF_DATA ? "outside the grid" : "of an unknown bit width");
             bits = 1u << (b[at + 15] >> 5);
-            if (64u * bits > size - at - RRV__NV_LEAF_DATA) {
-                r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\": fpN leaf %llu at byte %llu ends outside the grid",
-                              g->name, (unsigned long long)k, (unsigned long long)at);
-                goto done;
-            }
+            if (64u * bits > size - at - RRV__NV_LEAF_DATA)
+                return rrv__fail(c->err, RRV_ERROR_FORMAT, c->name, 0,
+                                 "grid \"%s\": fpN leaf %llu at byte %llu ends outside the grid", g->name,
+                                 (unsigned long long)k, (unsigned long long)at);
             arr->starts[k] = at;
             at += RRV__NV_LEAF_DATA + 64u * bits;
         }
     }
-    root = rrv__nv_u64(b + tree + 24);
-    if (root > size - tree || size - tree - root < RRV__NV_ROOT) {
-        r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\": its root node lies outside its %llu bytes",
-                      g->name, (unsigned long long)size);
-        goto done;
-    }
+    return RRV_OK;
+}
+
+/* The root node and its tiles: g's root, background, active box and value
+   range; every child reached from a tile is checked (rrv__nv_check_internal). */
+static rrv_result rrv__nv_check_root(rrv__nv_check *c, uint64_t tree)
+{
+    const unsigned char *b = c->b;
+    const uint64_t size = c->size;
+    rrv_nanovdb *g = c->g;
+    uint64_t root = rrv__nv_u64(b + tree + 24), tiles, t;
+    rrv_result r = RRV_OK;
+    int a;
+    if (root > size - tree || size - tree - root < RRV__NV_ROOT)
+        return rrv__fail(c->err, RRV_ERROR_FORMAT, c->name, 0, "grid \"%s\": its root node lies outside its %llu bytes",
+                         g->name, (unsigned long long)size);
     root += tree;
     tiles = rrv__nv_u32(b + root + 24);
-    if (tiles > (size - root - RRV__NV_ROOT) / RRV__NV_TILE) {
-        r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\": its root's %llu tiles do not fit in its %llu bytes",
-                      g->name, (unsigned long long)tiles, (unsigned long long)size);
-        goto done;
-    }
+    if (tiles > (size - root - RRV__NV_ROOT) / RRV__NV_TILE)
+        return rrv__fail(c->err, RRV_ERROR_FORMAT, c->name, 0,
+                         "grid \"%s\": its root's %llu tiles do not fit in its %llu bytes", g->name,
+                         (unsigned long long)tiles, (unsigned long long)size);
     g->root = (size_t)root;
     g->root_tiles = (uint32_t)tiles;
     g->background = rrv__nv_f32(b + root + 28);
@@ -13349,10 +13361,9 @@ static rrv_result rrv__nv_check_grid(const unsigned char *b, uint64_t size, cons
         g->active_hi[a] = rrv__nv_s32(rrv__nv_u32(b + root + 12 + 4 * (size_t)a));
     }
     g->active_voxels = rrv__nv_u64(b + tree + 56);
-    if (!rrv__nv_finite(g->background)) {
-        r = rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\": its background value is not finite", g->name);
-        goto done;
-    }
+    if (!rrv__nv_finite(g->background))
+        return rrv__fail(c->err, RRV_ERROR_FORMAT, c->name, 0, "grid \"%s\": its background value is not finite",
+                         g->name);
     g->value_min = g->value_max = g->background;
     for (a = 0; a < 3; ++a) {
         g->data_lo[a] = INT64_MAX;
@@ -13367,42 +13378,64 @@ static rrv_result rrv__nv_check_grid(const unsigned char *b, uint64_t size, cons
         o[2] = rrv__nv_s32((uint32_t)((key & 0x1fffffu) << 12));
         if (child == 0) {
             double v = rrv__nv_f32(tile + 20);
-            if (!rrv__nv_finite(v)) { r = rrv__nv_bad_value(&c, "root tile", o); break; }
+            if (!rrv__nv_finite(v)) { r = rrv__nv_bad_value(c, "root tile", o); break; }
             rrv__nv_value_seen(g, v);
             if (v != g->background) rrv__nv_include(g, o, 4096);
             continue;
         }
         if (child <= -RRV__NV_FAR || child >= RRV__NV_FAR) child = -(int64_t)root - 1;
-        k = rrv__nv_node_index(&c, 2, (int64_t)root + child, "a root tile");
+        k = rrv__nv_node_index(c, 2, (int64_t)root + child, "a root tile");
         if (k < 0) { r = RRV_ERROR_FORMAT; break; }
-        if (c.level[2].seen[k]) { rrv__nv_include(g, o, 4096); continue; }
-        c.level[2].seen[k] = 1;
-        r = rrv__nv_check_internal(&c, 2, (uint64_t)((int64_t)root + child), o);
+        if (c->level[2].seen[k]) { rrv__nv_include(g, o, 4096); continue; }
+        c->level[2].seen[k] = 1;
+        r = rrv__nv_check_internal(c, 2, (uint64_t)((int64_t)root + child), o);
     }
-    if (r == RRV_OK) {
-        /* the world box of the index region the trilinear field can reach
-           from the data: one voxel beyond it each side */
-        rrv_vec3 lo = rrv__v3(DBL_MAX, DBL_MAX, DBL_MAX), hi = rrv__v3(-DBL_MAX, -DBL_MAX, -DBL_MAX);
-        int corner;
-        if (g->data_lo[0] > g->data_hi[0]) {
-            /* no data: an empty box at the origin */
-            for (a = 0; a < 3; ++a) { g->data_lo[a] = 1; g->data_hi[a] = 0; }
-            lo = hi = rrv__v3(g->translation[0], g->translation[1], g->translation[2]);
-        }
-        for (corner = 0; corner < 8 && g->data_lo[0] <= g->data_hi[0]; ++corner) {
-            double u[3], w[3];
-            u[0] = corner & 1 ? (double)g->data_hi[0] + 1.0 : (double)g->data_lo[0] - 1.0;
-            u[1] = corner & 2 ? (double)g->data_hi[1] + 1.0 : (double)g->data_lo[1] - 1.0;
-            u[2] = corner & 4 ? (double)g->data_hi[2] + 1.0 : (double)g->data_lo[2] - 1.0;
-            for (a = 0; a < 3; ++a)
-                w[a] = g->map[3 * a] * u[0] + g->map[3 * a + 1] * u[1] + g->map[3 * a + 2] * u[2] + g->translation[a];
-            lo = rrv__vmin(lo, rrv__v3(w[0], w[1], w[2]));
-            hi = rrv__vmax(hi, rrv__v3(w[0], w[1], w[2]));
-        }
-        g->lo = lo;
-        g->hi = hi;
+    return r;
+}
+
+/* The world box of the index region the trilinear field can reach from
+   the data: one voxel beyond it each side (no data: an empty box at the
+   origin). */
+static void rrv__nv_world_box(rrv_nanovdb *g)
+{
+    rrv_vec3 lo = rrv__v3(DBL_MAX, DBL_MAX, DBL_MAX), hi = rrv__v3(-DBL_MAX, -DBL_MAX, -DBL_MAX);
+    int corner, a;
+    if (g->data_lo[0] > g->data_hi[0]) {
+        for (a = 0; a < 3; ++a) { g->data_lo[a] = 1; g->data_hi[a] = 0; }
+        lo = hi = rrv__v3(g->translation[0], g->translation[1], g->translation[2]);
     }
-done:
+    for (corner = 0; corner < 8 && g->data_lo[0] <= g->data_hi[0]; ++corner) {
+        double u[3], w[3];
+        u[0] = corner & 1 ? (double)g->data_hi[0] + 1.0 : (double)g->data_lo[0] - 1.0;
+        u[1] = corner & 2 ? (double)g->data_hi[1] + 1.0 : (double)g->data_lo[1] - 1.0;
+        u[2] = corner & 4 ? (double)g->data_hi[2] + 1.0 : (double)g->data_lo[2] - 1.0;
+        for (a = 0; a < 3; ++a)
+            w[a] = g->map[3 * a] * u[0] + g->map[3 * a + 1] * u[1] + g->map[3 * a + 2] * u[2] + g->translation[a];
+        lo = rrv__vmin(lo, rrv__v3(w[0], w[1], w[2]));
+        hi = rrv__vmax(hi, rrv__v3(w[0], w[1], w[2]));
+    }
+    g->lo = lo;
+    g->hi = hi;
+}
+
+/* Checks the grid buffer b[0, size) and fills g (not g->buffer). */
+static rrv_result rrv__nv_check_grid(const unsigned char *b, uint64_t size, const char *name, rrv_nanovdb *g,
+                                     rrv_error *err)
+{
+    rrv__nv_check c;
+    rrv_result r;
+    int lv;
+    memset(&c, 0, sizeof c);
+    c.g = g;
+    c.b = b;
+    c.size = size;
+    c.name = name;
+    c.err = err;
+    if ((r = rrv__nv_check_header(b, size, name, g, err)) != RRV_OK) return r;
+    if ((r = rrv__nv_check_map(b, name, g, err)) != RRV_OK) return r;
+    r = rrv__nv_check_levels(&c, RRV__NV_GRID);
+    if (r == RRV_OK) r = rrv__nv_check_root(&c, RRV__NV_GRID);
+    if (r == RRV_OK) rrv__nv_world_box(g);
     for (lv = 0; lv < 3; ++lv) {
         RRV_FREE(c.level[lv].seen);
         RRV_FREE(c.level[lv].starts);
