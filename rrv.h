@@ -1193,6 +1193,11 @@ static rrv_result rrv__fail(rrv_error *err, rrv_result code, const char *file, i
     return code;
 }
 
+/* The refusal of a call that needs a part the build leaves out
+   (CONFIGURATION): the part and the switch named, as RRV_NO_STDIO's are. */
+#define rrv__left_out(err, file, part, name) \
+    rrv__fail((err), RRV_ERROR_UNSUPPORTED, (file), 0, "%s is disabled (%s)", (part), (name))
+
 static void rrv__clear_error(rrv_error *err)
 {
     if (err) {
@@ -10731,6 +10736,7 @@ RRV_DEF uint32_t rrv_adler32(uint32_t adler, const void *data, size_t size)
 
 /* ---- shared helpers ----------------------------------------------------------- */
 
+#if !defined(RRV_NO_PNG) || !defined(RRV_NO_EXR)
 static void rrv__put_u32_be(unsigned char *out, uint32_t v)
 {
     out[0] = (unsigned char)(v >> 24);
@@ -10738,6 +10744,7 @@ static void rrv__put_u32_be(unsigned char *out, uint32_t v)
     out[2] = (unsigned char)(v >> 8);
     out[3] = (unsigned char)v;
 }
+#endif
 
 /* Returns RRV_OK when rgb can hold width x height pixels whose byte count
    fits in size_t, so later index arithmetic cannot overflow. */
@@ -10824,6 +10831,8 @@ static rrv_result rrv__write_pfm_to(rrv_write_func write, void *user,
     return w.failed ? RRV_ERROR_IO : RRV_OK;
 }
 
+/* Deflate serves PNG and the EXR writer: a build without both leaves it out. */
+#if !defined(RRV_NO_PNG) || !defined(RRV_NO_EXR)
 /* ---- deflate (zlib), for PNG's IDAT and EXR's ZIP chunks ---------------------
    Greedy LZ77 over a 32 KiB window with hash chains, then blocks with
    Huffman codes made for their tokens. rrv__zlib_compress writes one block
@@ -11121,6 +11130,7 @@ static void rrv__deflate_block(rrv__bit_writer *b, const uint32_t *token_list, s
     rrv__bits_put_code(b, lit_code[256], lit_len[256]);
 }
 
+#ifndef RRV_NO_EXR /* PNG streams its blocks itself */
 /* Compresses data into out as a zlib stream of one block; returns its size,
    or 0 when it would not fit in capacity. */
 static size_t rrv__zlib_compress(rrv__deflater *z, const unsigned char *data, size_t size,
@@ -11144,8 +11154,10 @@ static size_t rrv__zlib_compress(rrv__deflater *z, const unsigned char *data, si
     rrv__put_u32_be(out + b.size, rrv_adler32(1, data, size));
     return b.size + 4;
 }
+#endif /* RRV_NO_EXR */
+#endif /* deflate */
 
-
+#ifndef RRV_NO_PNG
 /* ---- PNG writer ------------------------------------------------------------------
    Each row takes the filter (None, Sub, Up, Average, Paeth) whose output has
    the smallest sum of absolute values as signed bytes, libpng's default
@@ -11382,6 +11394,8 @@ done:
     return result;
 }
 
+#endif /* RRV_NO_PNG */
+
 /* ---- OpenEXR writer ---------------------------------------------------------------
    Layout: magic, version 2 (single-part scanline), the header's attributes
    and a NUL, one 64-bit offset per chunk, then chunks of (int32 y, int32
@@ -11421,6 +11435,7 @@ RRV_DEF uint16_t rrv_half_from_float(float value)
     }
 }
 
+#ifndef RRV_NO_EXR
 /* -- the file ------------------------------------------------------------------ */
 
 #define RRV__EXR_ZIP_LINES 16
@@ -12198,6 +12213,8 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
     return RRV_OK;
 }
 
+#endif /* RRV_NO_EXR */
+
 /* ---- the callback writers' public forms: the result as an rrv_error ---- */
 
 static rrv_result rrv__writer_error(rrv_result r, const char *writer, int width, int height,
@@ -12223,16 +12240,49 @@ RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user, const floa
 RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user, const float *rgb, int width,
                                     int height, double exposure, rrv_error *err)
 {
+#ifdef RRV_NO_PNG
+    (void)write; (void)user; (void)rgb; (void)width; (void)height; (void)exposure;
+    return rrv__left_out(err, NULL, "PNG output", "RRV_NO_PNG");
+#else
     return rrv__writer_error(rrv__write_png_to(write, user, rgb, width, height, exposure),
                              "rrv_write_png_to", width, height, err);
+#endif
 }
 
 RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb, int width,
                                     int height, const rrv_exr_options *options, rrv_error *err)
 {
+#ifdef RRV_NO_EXR
+    (void)write; (void)user; (void)rgb; (void)width; (void)height; (void)options;
+    return rrv__left_out(err, NULL, "OpenEXR output", "RRV_NO_EXR");
+#else
     return rrv__writer_error(rrv__write_exr_to(write, user, rgb, width, height, options),
                              "rrv_write_exr_to", width, height, err);
+#endif
 }
+
+#ifdef RRV_NO_EXR
+/* The reader's public forms without it: refused, outputs cleared. */
+RRV_DEF rrv_result rrv_exr_find_attribute(const void *data, size_t size, const char *attr_name,
+                                          const char **type, const void **value, size_t *value_size)
+{
+    (void)data; (void)size; (void)attr_name;
+    if (type) *type = NULL;
+    if (value) *value = NULL;
+    if (value_size) *value_size = 0;
+    return RRV_ERROR_UNSUPPORTED;
+}
+
+RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char *name, float **rgb,
+                                       int *width, int *height, rrv_exr_options *info, rrv_error *err)
+{
+    (void)data; (void)size; (void)info;
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    return rrv__left_out(err, name, "OpenEXR input", "RRV_NO_EXR");
+}
+#endif
 
 /* ---- PFM reader ------------------------------------------------------------------ */
 
@@ -12672,10 +12722,19 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
     rrv_result result;
     int closed;
 
+#ifdef RRV_NO_EXR
+    (void)exr;
+#endif
     if (!path) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "no output path");
     if (rrv__check_image_args(rgb, width, height) != RRV_OK)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "invalid image (%dx%d, data %s)",
                          width, height, rgb ? "given" : "NULL");
+#ifdef RRV_NO_PNG
+    if (format == RRV__IMAGE_PNG) return rrv__left_out(err, path, "PNG output", "RRV_NO_PNG");
+#endif
+#ifdef RRV_NO_EXR
+    if (format == RRV__IMAGE_EXR) return rrv__left_out(err, path, "OpenEXR output", "RRV_NO_EXR");
+#endif
     if (format == RRV__IMAGE_PNG && !isfinite(exposure))
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "exposure must be finite");
 
@@ -12700,11 +12759,16 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
         return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot write: cannot create a temporary file%s%s",
                          why[0] ? ": " : "", why);
     }
+#ifndef RRV_NO_PNG
     if (format == RRV__IMAGE_PNG)
         result = rrv__write_png_to(rrv__fwrite_callback, file, rgb, width, height, exposure);
-    else if (format == RRV__IMAGE_EXR)
+    else
+#endif
+#ifndef RRV_NO_EXR
+    if (format == RRV__IMAGE_EXR)
         result = rrv__write_exr_to(rrv__fwrite_callback, file, rgb, width, height, exr);
     else
+#endif
         result = rrv__write_pfm_to(rrv__fwrite_callback, file, rgb, width, height);
     closed = fclose(file) == 0;
     if (result != RRV_OK || !closed) {
@@ -12842,6 +12906,7 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
     return RRV_OK;
 }
 
+#ifndef RRV_NO_EXR
 /* A file can be no larger than this to be read whole. */
 #define RRV__EXR_FILE_MAX ((size_t)1 << 31)
 
@@ -12892,8 +12957,28 @@ RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *
     RRV_FREE(data);
     return result;
 }
+#endif /* RRV_NO_EXR */
 
 #else /* RRV_NO_STDIO */
+
+RRV_DEF rrv_result rrv_write_exr(const char *path, const float *rgb, int width, int height,
+                                 const rrv_exr_options *options, rrv_error *err)
+{
+    (void)rgb; (void)width; (void)height; (void)options;
+    return rrv__fail(err, RRV_ERROR_UNSUPPORTED, path, 0,
+                     "file output is disabled (RRV_NO_STDIO); use rrv_write_exr_to");
+}
+
+RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *height,
+                                rrv_exr_options *info, rrv_error *err)
+{
+    (void)info;
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    return rrv__fail(err, RRV_ERROR_UNSUPPORTED, path, 0,
+                     "file input is disabled (RRV_NO_STDIO); use rrv_read_exr_memory");
+}
 
 RRV_DEF rrv_result rrv_write_pfm(const char *path, const float *rgb, int width, int height,
                                  rrv_error *err)
@@ -12923,6 +13008,18 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
 
 #endif /* RRV_NO_STDIO */
 
+#if defined(RRV_NO_EXR) && !defined(RRV_NO_STDIO)
+RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *height,
+                                rrv_exr_options *info, rrv_error *err)
+{
+    (void)info;
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    return rrv__left_out(err, path, "OpenEXR input", "RRV_NO_EXR");
+}
+#endif
+
 /* ==== NanoVDB files: segments, grids and the validation of their trees =======
    Reads what nanovdb_convert writes: a file of segments, each a 16-byte
    header ("NanoVDB0" or the newer "NanoVDB2", version, grid count, codec)
@@ -12938,6 +13035,21 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
    every value is checked finite, after which the lookups above need no
    checks. */
 
+RRV_DEF const char *rrv_nanovdb_type_name(rrv_nanovdb_type type)
+{
+    switch (type) {
+    case RRV_NANOVDB_FLOAT: return "float";
+    case RRV_NANOVDB_FP4: return "fp4";
+    case RRV_NANOVDB_FP8: return "fp8";
+    case RRV_NANOVDB_FP16: return "fp16";
+    case RRV_NANOVDB_FPN: return "fpN";
+    default: return "unknown";
+    }
+}
+
+/* Without the reader (RRV_NO_NANOVDB) no grid can be validated, so the
+   lookups above stay but a NANOVDB field is refused (rrv__field_check). */
+#ifndef RRV_NO_NANOVDB
 static int32_t rrv__nv_s32(uint32_t u)
 {
     return u <= 0x7fffffffu ? (int32_t)u : (int32_t)(u - 0x80000000u) - 0x7fffffff - 1;
@@ -13080,18 +13192,6 @@ static uint64_t rrv__nv_leaf_size(rrv_nanovdb_type type)
     case RRV_NANOVDB_FP8: return 608;
     case RRV_NANOVDB_FP16: return 1120;
     default: return 0;
-    }
-}
-
-RRV_DEF const char *rrv_nanovdb_type_name(rrv_nanovdb_type type)
-{
-    switch (type) {
-    case RRV_NANOVDB_FLOAT: return "float";
-    case RRV_NANOVDB_FP4: return "fp4";
-    case RRV_NANOVDB_FP8: return "fp8";
-    case RRV_NANOVDB_FP16: return "fp16";
-    case RRV_NANOVDB_FPN: return "fpN";
-    default: return "unknown";
     }
 }
 
@@ -13495,6 +13595,37 @@ RRV_DEF rrv_result rrv_nanovdb_read(const char *path, const char *grid_name,
     return rrv__nv_read_file(path, path, grid_name, opt, grid, err, &why);
 }
 
+#else /* RRV_NO_NANOVDB */
+
+RRV_DEF rrv_result rrv_nanovdb_read_memory(const void *data, size_t size, const char *name,
+                                           const char *grid_name, size_t max_grid_bytes,
+                                           rrv_nanovdb *grid, rrv_error *err)
+{
+    (void)data; (void)size; (void)grid_name; (void)max_grid_bytes;
+    if (grid) memset(grid, 0, sizeof *grid);
+    return rrv__left_out(err, name, "reading NanoVDB grids", "RRV_NO_NANOVDB");
+}
+
+/* The parser's `nanovdb` statement meets the refusal here. */
+static rrv_result rrv__nv_read_file(const char *path, const char *name, const char *grid_name,
+                                    const rrv_load_options *opt, rrv_nanovdb *grid, rrv_error *err,
+                                    const char **why)
+{
+    (void)path; (void)grid_name; (void)opt;
+    *why = "";
+    memset(grid, 0, sizeof *grid);
+    return rrv__left_out(err, name, "reading NanoVDB grids", "RRV_NO_NANOVDB");
+}
+
+RRV_DEF rrv_result rrv_nanovdb_read(const char *path, const char *grid_name,
+                                    const rrv_load_options *opt, rrv_nanovdb *grid, rrv_error *err)
+{
+    (void)grid_name; (void)opt;
+    if (grid) memset(grid, 0, sizeof *grid);
+    return rrv__left_out(err, path, "reading NanoVDB grids", "RRV_NO_NANOVDB");
+}
+#endif /* RRV_NO_NANOVDB */
+
 RRV_DEF void rrv_nanovdb_cell_centered(rrv_nanovdb *grid)
 {
     double o[3];
@@ -13610,10 +13741,12 @@ static void rrv__sf_release_whole(const rrv_load_options *opt, void *data)
 
 /* 1 when a buffer of rrv__sf_read_whole may be kept and later freed with
    RRV_FREE (a NanoVDB grid keeps its file's bytes). */
+#ifndef RRV_NO_NANOVDB
 static int rrv__sf_whole_is_ours(const rrv_load_options *opt)
 {
     return !(opt && opt->read_file && opt->release_file);
 }
+#endif
 
 static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, int text,
                                      size_t max_bytes, void **data, size_t *size, const char **why)
@@ -15176,6 +15309,9 @@ static rrv_result rrv__field_check(const rrv__ck *ck, rrv_medium_field which, co
         return RRV_OK;
     }
     case RRV_FIELD_NANOVDB:
+#ifdef RRV_NO_NANOVDB
+        return rrv__ck_fail(ck, RRV_ERROR_UNSUPPORTED, "NanoVDB grids are disabled (RRV_NO_NANOVDB)");
+#endif
         if (!f->nanovdb.buffer) return rrv__ck_fail(ck, RRV_OK, "the NanoVDB grid has no data");
         return RRV_OK;
     case RRV_FIELD_LUNEBURG:
