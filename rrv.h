@@ -1195,8 +1195,8 @@ static rrv_result rrv__fail(rrv_error *err, rrv_result code, const char *file, i
 
 /* The refusal of a call that needs a part the build leaves out
    (CONFIGURATION): the part and the switch named, as RRV_NO_STDIO's are. */
-#define rrv__left_out(err, file, part, name) \
-    rrv__fail((err), RRV_ERROR_UNSUPPORTED, (file), 0, "%s is disabled (%s)", (part), (name))
+#define rrv__left_out(err, file, part, name, hint) \
+    rrv__fail((err), RRV_ERROR_UNSUPPORTED, (file), 0, "%s is disabled (%s)%s", (part), (name), (hint))
 
 static void rrv__clear_error(rrv_error *err)
 {
@@ -1972,6 +1972,7 @@ static rrv_vec3 rrv__nv_gradient(const rrv_nanovdb *g, rrv_vec3 p)
                    g->inverse[2] * d[0] + g->inverse[5] * d[1] + g->inverse[8] * d[2]);
 }
 
+#ifndef RRV_NO_CURVED_NEE /* derivatives of the gradient: the solvers' alone */
 /* The Jacobian of rrv__nv_gradient (see the derivatives of the refractivity
    gradient below for why it is not symmetrised). In index space the
    gradient is d_a(u) = (T(u + e_a) - T(u - e_a)) / 2 of the trilinear T,
@@ -2014,6 +2015,7 @@ static void rrv__nv_gradient_jacobian(const rrv_nanovdb *g, rrv_vec3 p, double J
             J[3 * i + j] = s;
         }
 }
+#endif
 
 /* Tile extents by level: a root tile spans 4096 index points an axis, an
    upper node's entry 128, a lower node's entry 8 (one leaf). */
@@ -2744,6 +2746,7 @@ static inline void rrv__prefetch_refraction(const struct rrv__majorant_grid *mg,
    smooth field, 5 % at 33^3, test/test_hessian.c). The trilinear value's
    own Hessian, zero inside every cell, would miss it entirely. */
 
+#ifndef RRV_NO_CURVED_NEE /* derivatives of the gradient: the solvers' alone */
 /* The refraction grid's value, gradient and the gradient's Jacobian at p,
    from one location of its cell: the value and gradient are
    rrv__refraction_lookup's bit for bit (the same blends in the same
@@ -2841,6 +2844,7 @@ static void rrv__baked_refractivity_jacobian(const rrv_medium *m, const rrv_grid
     if (m->majorant->cubic) rrv__cubic_hessian(baked, m->majorant->cubic, p, J);
     else rrv__refraction_lookup_jacobian(m->majorant, p, J);
 }
+#endif
 
 /* The baked refractivity (and gradient if grad) at p inside the baked grid. */
 static double rrv__baked_refractivity(const rrv_medium *m, const rrv_grid *baked, rrv_vec3 p, rrv_vec3 *grad)
@@ -2915,6 +2919,7 @@ static rrv_vec3 rrv__grid_gradient(const rrv_grid *g, rrv_vec3 p)
     return rrv__v3(grad[0], grad[1], grad[2]);
 }
 
+#ifndef RRV_NO_CURVED_NEE /* derivatives of the gradient: the solvers' alone */
 /* The Jacobian of rrv__grid_gradient: its eight corner differences (the
    same, one-sided at the grid's faces) with the trilinear weights
    differentiated. Not symmetric (see the derivatives of the refractivity
@@ -2949,6 +2954,7 @@ static void rrv__grid_gradient_jacobian(const rrv_grid *g, rrv_vec3 p, double J[
         }
     }
 }
+#endif
 
 /* Gradient of a scalar field: analytic where the field is, numeric else. */
 static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p)
@@ -2976,6 +2982,7 @@ static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p)
     }
 }
 
+#ifndef RRV_NO_CURVED_NEE /* derivatives of the gradient: the solvers' alone */
 /* The derivative of rrv__field_gradient (a scalar field's Hessian where the
    gradient is the value's derivative); 0 for kinds it has none for here
    (an unbaked noise field, which rrv__field_gradient does not handle
@@ -3010,6 +3017,7 @@ static int rrv__field_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
         return 0;
     }
 }
+#endif
 
 static rrv_vec3 rrv__profile_gradient(const rrv_field *f, rrv_vec3 p)
 {
@@ -3093,6 +3101,7 @@ static int rrv__profile_fused(const rrv_field *f, rrv_vec3 p, double *r, rrv_vec
     return 1;
 }
 
+#ifndef RRV_NO_CURVED_NEE /* derivatives of the gradient: the solvers' alone */
 /* The derivative of rrv__profile_gradient (unscaled); 0 where there is
    none here. The radial profiles have grad r = phi'(d) e (e = d / |d|), so
    H = phi'' e e^T + (phi' / |d|) (I - e e^T), written as a I + b d d^T. */
@@ -3137,6 +3146,7 @@ static int rrv__profile_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
         for (j = 0; j < 3; ++j) H[3 * i + j] = (i == j ? a : 0.0) + b * dd[i] * dd[j];
     return 1;
 }
+#endif
 
 /* A gas whose temperature is a sum of blobs and whose pressure is uniform
    (the fire plumes): rrv__refractivity, rrv__refractivity_gradient and
@@ -3216,6 +3226,7 @@ static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double
     return r;
 }
 
+#ifndef RRV_NO_CURVED_NEE /* derivatives of the gradient: the solvers' alone */
 /* The derivative of rrv__refractivity_gradient, 0 where there is none. For
    a gas, with u = grad P / P - grad T / T (so grad r = r u):
    H = r (u u^T + H_P / P - grad P grad P^T / P^2 - H_T / T + grad T grad T^T / T^2),
@@ -3278,6 +3289,7 @@ static double rrv__refractivity_gradient_hessian(const rrv_medium *m, rrv_vec3 p
     rrv__refractivity_hessian(m, p, ambient_r, H);
     return rrv__refractivity_gradient(m, p, ambient_r, grad);
 }
+#endif
 
 /* The refractivity of the scene at p: that of the last listed refractive
    medium whose box holds p, the ambient one elsewhere. */
@@ -7992,6 +8004,12 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
 #define RRV__WEAK_BEND 0.0
 #endif
 
+/* RRV_NO_CURVED_NEE leaves out the solvers of nee shoot and manifold and
+   the cones that go with them; nee aim, the weak-chord classes and the
+   face jumps stay. Such a build supports no scene for solving, so the
+   default integrator never picks eikonal for its shooting and the default
+   nee aims; an explicit shoot or manifold is refused (rrv__settings_check). */
+#ifndef RRV_NO_CURVED_NEE
 /* Can shooting differentiate this medium's IOR? Every kind rrv__refractivity_
    hessian has a derivative for: the closed-form profiles, blobs, and grids
    (gridvol or NanoVDB, baked or not, trilinear or cubic: the derivative of
@@ -8299,6 +8317,14 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
     return 1;
 }
 
+#else
+static int rrv__solver_supports_scene(const rrv_scene *scene)
+{
+    (void)scene;
+    return 0;
+}
+#endif /* RRV_NO_CURVED_NEE */
+
 /* Is a jump of the refractivity across a face (rrv__cross_face's
    face_jump) one that curved connections cannot solve across? */
 static int rrv__jump_counts(double jump) { return jump > RRV__SOLVE_JUMP; }
@@ -8320,6 +8346,7 @@ static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x)
     return v.inside;
 }
 
+#ifndef RRV_NO_CURVED_NEE
 enum { RRV__SHOT_REACHED, RRV__SHOT_MISSED, RRV__SHOT_INTERFACE, RRV__SHOT_BLOCKED };
 
 typedef struct rrv__shot {
@@ -8721,6 +8748,8 @@ static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, co
     return found;
 }
 
+#endif /* RRV_NO_CURVED_NEE */
+
 /* Is a straight connection from x to a light sample one of the paths
    straight NEE stands for when shooting sorts paths into classes, i.e.
    does it stay out of every refraction support? Forward paths make the
@@ -8886,6 +8915,7 @@ static double rrv__vertex_pdf(const rrv__vertex_bsdf *v, rrv_vec3 w)
     return v->surface ? fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI : rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
 }
 
+#ifndef RRV_NO_CURVED_NEE
 /* The MIS weight of curved NEE for a curved path x0 -> y on light s whose
    initial direction w0 the vertex samples with density pdf_dir, the
    endpoint moving on the light's plane as dA_y = |det| dw0: the power
@@ -8988,6 +9018,8 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
         rrv__eta_scale(ctx, y) * rrv__path_mis(path);
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
+
+#endif /* RRV_NO_CURVED_NEE */
 
 /* ---- nee AIM: bent shadow rays aimed at light samples -----------------------------
    Where the two-point problem is not solved (the comb, whose kick points
@@ -9136,6 +9168,7 @@ static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const 
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
 
+#ifndef RRV_NO_CURVED_NEE
 /* ---- rays drawn toward strong supports: the roots of weak chords ---------------------
    A connection whose straight chord passes beside a lens is straight
    NEE's (rrv__weak_chord), yet the lens may bend other rays from x0 onto
@@ -10517,6 +10550,8 @@ static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__
     return 1;
 }
 
+#endif /* RRV_NO_CURVED_NEE */
+
 /* A point y uniform on one area light (quads and triangles; the sky and
    sphere lights are left to forward paths), its normal and area pdf
    (selection included). Draws three numbers whatever it returns. */
@@ -10534,6 +10569,7 @@ static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__
     return s;
 }
 
+#ifndef RRV_NO_CURVED_NEE
 /* The seed's initial direction, from one distribution for the first solve
    and every trial: a Gaussian around the chord of 0.02 rad (half the
    time), of 0.2 rad (three times in eight) or uniform (one in eight), so
@@ -10677,6 +10713,52 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
         for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * carried[c] * s->L[c] * k;
     }
 }
+
+#else /* RRV_NO_CURVED_NEE: what the integrators call, never reached (no
+         scene is supported for solving, so ctx->shoot and ctx->manifold
+         stay 0 and no cone is set up) */
+
+static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                           const rrv__light_draw *draw, rrv__rng *rng)
+{
+    (void)ctx; (void)path; (void)x0; (void)v; (void)draw; (void)rng;
+}
+
+static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir, const rrv_shape *s,
+                                        rrv_vec3 x)
+{
+    (void)ctx; (void)x0; (void)w0; (void)pdf_dir; (void)s; (void)x;
+    return 1.0;
+}
+
+static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                              const rrv__light_draw *draw, rrv__rng *rng)
+{
+    (void)ctx; (void)path; (void)x0; (void)v; (void)draw; (void)rng;
+}
+
+/* no cones: the density of a direction no cone draws */
+static double rrv__cone_pdf(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0)
+{
+    (void)ctx; (void)x0; (void)w0;
+    return 0.0;
+}
+
+static void rrv__cone_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
+{
+    (void)ctx; (void)path; (void)x0; (void)v; (void)rng;
+}
+
+static void rrv__cone_setup(rrv__context *ctx) { ctx->cone_count = 0; }
+
+static struct rrv__chain *rrv__chain_new(int cap)
+{
+    (void)cap;
+    return NULL;
+}
+
+static void rrv__chain_delete(struct rrv__chain *ch) { (void)ch; }
+#endif /* RRV_NO_CURVED_NEE */
 
 /* ==== image I/O: PFM and PNG files, checksums =================================
    This section owns everything that turns a float RGB buffer into bytes and
@@ -12242,7 +12324,7 @@ RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user, const floa
 {
 #ifdef RRV_NO_PNG
     (void)write; (void)user; (void)rgb; (void)width; (void)height; (void)exposure;
-    return rrv__left_out(err, NULL, "PNG output", "RRV_NO_PNG");
+    return rrv__left_out(err, NULL, "PNG output", "RRV_NO_PNG", "");
 #else
     return rrv__writer_error(rrv__write_png_to(write, user, rgb, width, height, exposure),
                              "rrv_write_png_to", width, height, err);
@@ -12254,7 +12336,7 @@ RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const floa
 {
 #ifdef RRV_NO_EXR
     (void)write; (void)user; (void)rgb; (void)width; (void)height; (void)options;
-    return rrv__left_out(err, NULL, "OpenEXR output", "RRV_NO_EXR");
+    return rrv__left_out(err, NULL, "OpenEXR output", "RRV_NO_EXR", "");
 #else
     return rrv__writer_error(rrv__write_exr_to(write, user, rgb, width, height, options),
                              "rrv_write_exr_to", width, height, err);
@@ -12280,7 +12362,7 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
     if (rgb) *rgb = NULL;
     if (width) *width = 0;
     if (height) *height = 0;
-    return rrv__left_out(err, name, "OpenEXR input", "RRV_NO_EXR");
+    return rrv__left_out(err, name, "OpenEXR input", "RRV_NO_EXR", "");
 }
 #endif
 
@@ -12730,10 +12812,10 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "invalid image (%dx%d, data %s)",
                          width, height, rgb ? "given" : "NULL");
 #ifdef RRV_NO_PNG
-    if (format == RRV__IMAGE_PNG) return rrv__left_out(err, path, "PNG output", "RRV_NO_PNG");
+    if (format == RRV__IMAGE_PNG) return rrv__left_out(err, path, "PNG output", "RRV_NO_PNG", "");
 #endif
 #ifdef RRV_NO_EXR
-    if (format == RRV__IMAGE_EXR) return rrv__left_out(err, path, "OpenEXR output", "RRV_NO_EXR");
+    if (format == RRV__IMAGE_EXR) return rrv__left_out(err, path, "OpenEXR output", "RRV_NO_EXR", "");
 #endif
     if (format == RRV__IMAGE_PNG && !isfinite(exposure))
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "exposure must be finite");
@@ -13016,7 +13098,7 @@ RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *
     if (rgb) *rgb = NULL;
     if (width) *width = 0;
     if (height) *height = 0;
-    return rrv__left_out(err, path, "OpenEXR input", "RRV_NO_EXR");
+    return rrv__left_out(err, path, "OpenEXR input", "RRV_NO_EXR", "");
 }
 #endif
 
@@ -13603,9 +13685,10 @@ RRV_DEF rrv_result rrv_nanovdb_read_memory(const void *data, size_t size, const 
 {
     (void)data; (void)size; (void)grid_name; (void)max_grid_bytes;
     if (grid) memset(grid, 0, sizeof *grid);
-    return rrv__left_out(err, name, "reading NanoVDB grids", "RRV_NO_NANOVDB");
+    return rrv__left_out(err, name, "reading NanoVDB grids", "RRV_NO_NANOVDB", "");
 }
 
+#ifndef RRV_NO_SCENE_FILE
 /* The parser's `nanovdb` statement meets the refusal here. */
 static rrv_result rrv__nv_read_file(const char *path, const char *name, const char *grid_name,
                                     const rrv_load_options *opt, rrv_nanovdb *grid, rrv_error *err,
@@ -13614,15 +13697,16 @@ static rrv_result rrv__nv_read_file(const char *path, const char *name, const ch
     (void)path; (void)grid_name; (void)opt;
     *why = "";
     memset(grid, 0, sizeof *grid);
-    return rrv__left_out(err, name, "reading NanoVDB grids", "RRV_NO_NANOVDB");
+    return rrv__left_out(err, name, "reading NanoVDB grids", "RRV_NO_NANOVDB", "");
 }
+#endif
 
 RRV_DEF rrv_result rrv_nanovdb_read(const char *path, const char *grid_name,
                                     const rrv_load_options *opt, rrv_nanovdb *grid, rrv_error *err)
 {
     (void)grid_name; (void)opt;
     if (grid) memset(grid, 0, sizeof *grid);
-    return rrv__left_out(err, path, "reading NanoVDB grids", "RRV_NO_NANOVDB");
+    return rrv__left_out(err, path, "reading NanoVDB grids", "RRV_NO_NANOVDB", "");
 }
 #endif /* RRV_NO_NANOVDB */
 
@@ -13668,7 +13752,11 @@ RRV_DEF void rrv_nanovdb_free(rrv_nanovdb *grid)
 
 /* ---- file reading --------------------------------------------------------- */
 
+/* Scene files and the NanoVDB reader read through here. */
+#if !defined(RRV_NO_SCENE_FILE) || !defined(RRV_NO_NANOVDB)
+
 #ifndef RRV_NO_STDIO
+#ifndef RRV_NO_SCENE_FILE /* the gridvol reader's */
 static int rrv__sf_stdio_size(FILE *f, unsigned long long *size)
 {
     long len;
@@ -13678,6 +13766,7 @@ static int rrv__sf_stdio_size(FILE *f, unsigned long long *size)
     *size = (unsigned long long)len;
     return 1;
 }
+#endif
 
 /* A text file stops after the piece holding its first NUL byte: the parser
    refuses the file on that line anyway, and a device such as /dev/zero
@@ -13777,6 +13866,7 @@ static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *pa
 #endif
 }
 
+#ifndef RRV_NO_SCENE_FILE
 static size_t rrv__sf_max_bytes(const rrv_load_options *opt)
 {
     return opt && opt->max_grid_bytes ? opt->max_grid_bytes : RRV_DEFAULT_MAX_GRID_BYTES;
@@ -13829,7 +13919,10 @@ static int rrv__sf_join_path(const char *base_dir, const char *path, char *out, 
     }
     return 1;
 }
+#endif /* RRV_NO_SCENE_FILE */
+#endif /* file reading */
 
+#ifndef RRV_NO_SCENE_FILE
 /* ---- gridvol ---------------------------------------------------------------- */
 
 typedef struct rrv__sf_grid_header {
@@ -14335,6 +14428,7 @@ static rrv_result rrv__sf_perr(rrv__sf_parser *p, rrv_result code, const char *f
 }
 
 #define RRV__SF_OOM(p) rrv__sf_perr((p), RRV_ERROR_MEMORY, "out of memory")
+#endif /* RRV_NO_SCENE_FILE */
 
 /* Makes room for one more element; capacity doubles, counts stay ints. */
 static int rrv__sf_reserve(void **array, int *capacity, int count, size_t elem)
@@ -14564,6 +14658,7 @@ static const rrv__sf_key rrv__sf_temperature_extra_keys[] = {
 };
 
 #define RRV__SF_COUNT(a) (int)(sizeof(a) / sizeof((a)[0]))
+#ifndef RRV_NO_SCENE_FILE
 
 /* "did you mean": the candidate nearest a misspelt word, by optimal string
    alignment (Levenshtein plus a swap of neighbours, the commonest typo).
@@ -14652,6 +14747,8 @@ static int rrv__sf_find_key(const rrv__sf_key *keys, int nkeys, const rrv__sf_to
     return -1;
 }
 
+#endif /* RRV_NO_SCENE_FILE */
+
 static int rrv__sf_in_range(const rrv__sf_key *k, double v)
 {
     if (k->lo != RRV__SF_NO_LO && ((k->flags & RRV__SF_GT) ? !(v > k->lo) : !(v >= k->lo)))
@@ -14672,6 +14769,7 @@ static void rrv__sf_range_text(const rrv__sf_key *k, char *buf, size_t cap)
         snprintf(buf, cap, "in %c%.15g, %.15g%c", gt ? '(' : '[', k->lo, k->hi, lt ? ')' : ']');
 }
 
+#ifndef RRV_NO_SCENE_FILE
 static rrv_result rrv__sf_range_error(rrv__sf_parser *p, const char *stmt, const rrv__sf_key *k,
                                       const rrv__sf_tok *t)
 {
@@ -14841,6 +14939,8 @@ static int rrv__sf_tok_string(const rrv__sf_tok *t, char *out, size_t cap)
     out[t->n] = '\0';
     return 1;
 }
+
+#endif /* RRV_NO_SCENE_FILE */
 
 /* ---- building scenes in code: one home for defaults and checks -------------
    The parser is a client of this part: a statement starts from a zeroed
@@ -15022,6 +15122,13 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
                             (int)s->ior_interpolation);
     if ((unsigned)s->nee > (unsigned)RRV_NEE_AIM)
         return rrv__ck_fail(ck, RRV_OK, "nee %d is not one of rrv_nee", (int)s->nee);
+#ifdef RRV_NO_CURVED_NEE
+    /* refused, not aimed instead: a render must not quietly be another
+       estimator than the one asked for */
+    if (s->nee == RRV_NEE_SHOOT || s->nee == RRV_NEE_MANIFOLD)
+        return rrv__ck_fail(ck, RRV_ERROR_UNSUPPORTED, "nee %s is disabled (RRV_NO_CURVED_NEE); use nee aim",
+                            s->nee == RRV_NEE_SHOOT ? "shoot" : "manifold");
+#endif
     if ((unsigned)s->sampler > (unsigned)RRV_SAMPLER_SOBOL)
         return rrv__ck_fail(ck, RRV_OK, "sampler %d is not one of rrv_sampler", (int)s->sampler);
     if ((unsigned)s->emission_nee > (unsigned)RRV_EMISSION_NEE_OFF)
@@ -15756,6 +15863,7 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
     return RRV_OK;
 }
 
+#ifndef RRV_NO_SCENE_FILE
 /* ---- materials and shapes ------------------------------------------------------ */
 
 static int rrv__sf_find_material(const rrv_scene *s, const rrv__sf_tok *t)
@@ -16671,6 +16779,8 @@ static const struct rrv__sf_statement {
     {"pressure", rrv__sf_st_field},          {"ior", rrv__sf_st_field},
 };
 
+#endif /* RRV_NO_SCENE_FILE */
+
 /* ---- scene ---------------------------------------------------------------------- */
 
 static void rrv__sf_field_free(rrv_field *f)
@@ -16722,6 +16832,7 @@ static size_t rrv__sf_scene_bytes(const rrv_scene *s)
     return b;
 }
 
+#ifndef RRV_NO_SCENE_FILE
 static rrv_result rrv__sf_parse_lines(rrv__sf_parser *p, const char *text, size_t size)
 {
     size_t pos = 0;
@@ -16837,6 +16948,46 @@ RRV_DEF rrv_result rrv_scene_load(const char *path, const rrv_load_options *opt,
     rrv__sf_release_whole(opt, data);
     return r;
 }
+
+#else /* RRV_NO_SCENE_FILE: scenes come from the building calls alone */
+
+RRV_DEF rrv_result rrv_scene_parse(const char *text, size_t size, const char *name,
+                                   const char *base_dir, const rrv_load_options *opt,
+                                   rrv_scene **out, rrv_error *err)
+{
+    (void)text; (void)size; (void)base_dir; (void)opt;
+    if (out) *out = NULL;
+    return rrv__left_out(err, name, "the scene file parser", "RRV_NO_SCENE_FILE",
+                         "; build the scene with rrv_scene_create and rrv_scene_add_*");
+}
+
+RRV_DEF rrv_result rrv_scene_load(const char *path, const rrv_load_options *opt, rrv_scene **out,
+                                  rrv_error *err)
+{
+    (void)opt;
+    if (out) *out = NULL;
+    return rrv__left_out(err, path, "the scene file parser", "RRV_NO_SCENE_FILE",
+                         "; build the scene with rrv_scene_create and rrv_scene_add_*");
+}
+
+RRV_DEF rrv_result rrv_grid_read_memory(const void *data, size_t size, const char *name,
+                                        size_t max_grid_bytes, int nonnegative,
+                                        rrv_grid *grid, rrv_error *err)
+{
+    (void)data; (void)size; (void)max_grid_bytes; (void)nonnegative;
+    if (grid) memset(grid, 0, sizeof *grid);
+    return rrv__left_out(err, name, "the gridvol reader", "RRV_NO_SCENE_FILE",
+                         "; give the samples in rrv_field.grid");
+}
+
+RRV_DEF rrv_result rrv_grid_read(const char *path, const rrv_load_options *opt, int nonnegative,
+                                 rrv_grid *grid, rrv_error *err)
+{
+    (void)opt;
+    return rrv_grid_read_memory(NULL, 0, path, 0, nonnegative, grid, err);
+}
+
+#endif /* RRV_NO_SCENE_FILE */
 
 #endif /* RRV_IMPLEMENTATION_INCLUDED */
 #endif /* RRV_IMPLEMENTATION */
