@@ -1524,6 +1524,26 @@ static int has_extension(const char *path, const char *ext)
     return 1;
 }
 
+#if defined(RRV_NO_EXR) || defined(RRV_NO_PNG) || defined(RRV_NO_CURVED_NEE)
+/* What the options ask of a part this build of the library leaves out
+   (rrv.h, CONFIGURATION), said before a render rather than after it. */
+static const char *left_out_of_build(const render_options *opt)
+{
+#ifdef RRV_NO_EXR
+    if (opt->output_format == OUTPUT_EXR) return "OpenEXR output is disabled (RRV_NO_EXR): -o OUT.pfm";
+#endif
+#ifdef RRV_NO_PNG
+    if (opt->png_path) return "PNG output is disabled (RRV_NO_PNG): drop --png";
+#endif
+#ifdef RRV_NO_CURVED_NEE
+    if (opt->has_nee && (opt->nee == RRV_NEE_SHOOT || opt->nee == RRV_NEE_MANIFOLD))
+        return "--nee shoot and manifold are disabled (RRV_NO_CURVED_NEE): --nee aim";
+#endif
+    (void)opt;
+    return NULL;
+}
+#endif
+
 static int parse_render_options(int argc, char **argv, render_options *opt)
 {
     arg_cursor args;
@@ -1633,6 +1653,9 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
                                                                 : -1;
     if (opt->exr_flag && opt->output_format != OUTPUT_EXR)
         return usage_error(&args, "%s needs an .exr output, not \"%s\"", opt->exr_flag, opt->pfm_path);
+#if defined(RRV_NO_EXR) || defined(RRV_NO_PNG) || defined(RRV_NO_CURVED_NEE)
+    if (left_out_of_build(opt)) return usage_error(&args, "%s", left_out_of_build(opt));
+#endif
     if (opt->has_tile || opt->has_samples) {
         if (opt->output_format != OUTPUT_EXR)
             return usage_error(&args, "a part (--tile, --samples) is an OpenEXR file: -o PART.exr, not \"%s\"",

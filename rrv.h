@@ -273,6 +273,44 @@
                       A libc that hides more under strict C wants
                       _POSIX_C_SOURCE 200809L before its first header, as
                       rrv_impl.c defines it.
+   Parts a build can leave out, for embedded or sandboxed clients that pay
+   only for what they use (any of them, in any combination; object sizes
+   in test/bench/RESULTS.md, "Build switches"). Every declaration stays and
+   every function still links: a call that needs a part left out returns
+   RRV_ERROR_UNSUPPORTED with a message naming the switch ("PNG output is
+   disabled (RRV_NO_PNG)"), with its outputs cleared as on any failure.
+     RRV_NO_SCENE_FILE no .rrv parser, OBJ loader or gridvol reader: scenes
+                      are built with rrv_scene_create and rrv_scene_add_* /
+                      set_* (a grid field's samples given in rrv_field.grid).
+                      rrv_scene_load, rrv_scene_parse, rrv_grid_read and
+                      rrv_grid_read_memory refuse.
+     RRV_NO_NANOVDB   no NanoVDB reader: rrv_nanovdb_read and
+                      rrv_nanovdb_read_memory refuse, and so do a scene's
+                      `nanovdb` statement and a NANOVDB field (no grid can
+                      be validated without the reader). The small lookups
+                      (rrv_nanovdb_voxel, rrv_nanovdb_sample) stay.
+     RRV_NO_EXR       no OpenEXR writer or reader (nor their inflate):
+                      rrv_write_exr, rrv_write_exr_to, rrv_read_exr,
+                      rrv_read_exr_memory and rrv_exr_find_attribute refuse
+                      (the last, which has no rrv_error, by its result);
+                      rrv_half_from_float stays.
+     RRV_NO_PNG       no PNG writer: rrv_write_png and rrv_write_png_to
+                      refuse. With RRV_NO_EXR too, deflate goes as well;
+                      rrv_crc32 and rrv_adler32 stay.
+     RRV_NO_CURVED_NEE no solvers of nee shoot and manifold (and the cones
+                      that go with them; nee aim stays). NEE_SHOOT or
+                      NEE_MANIFOLD asked for is refused, not replaced: by
+                      the scene's `render` statement, rrv_scene_set_settings
+                      and rrv_scene_prepare, and by rrv_render_rect for
+                      settings edited after prepare. Unasked, the defaults
+                      follow the rules for a scene no solver supports: the
+                      default integrator is never EIKONAL for its shooting
+                      (INTEGRATORS, "default"), and NEE_DEFAULT aims, as
+                      the refractive integrator's does.
+                      main.c builds with each switch (a RRV_NO_SCENE_FILE
+                      CLI only says so, since it reads scene files); its
+                      render refuses -o .exr, --png and --nee shoot or
+                      manifold before rendering when they are left out.
 
    FILES
      Every input is untrusted and read with bounds, and only from a regular
@@ -7757,6 +7795,13 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     if (!scene->prepared)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
                          "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
+#ifdef RRV_NO_CURVED_NEE
+    /* settings edited after prepare skip its check (rrv__settings_check) */
+    if (scene->settings.nee == RRV_NEE_SHOOT || scene->settings.nee == RRV_NEE_MANIFOLD)
+        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, scene->path, 0,
+                         "rrv_render_rect: nee %s is disabled (RRV_NO_CURVED_NEE); use nee aim",
+                         scene->settings.nee == RRV_NEE_SHOOT ? "shoot" : "manifold");
+#endif
     memset(&ctx, 0, sizeof ctx);
     ctx.scene = scene;
     sobol = scene->settings.sampler != RRV_SAMPLER_PCG;
@@ -12543,6 +12588,9 @@ RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char
     rrv__pfm_header h;
     rrv_result result;
 
+    /* every field is set on success; zeroed so that gcc -O1, inlining
+       differently without stdio, sees none read uninitialised */
+    memset(&h, 0, sizeof h);
     if (rgb) *rgb = NULL;
     if (width) *width = 0;
     if (height) *height = 0;
