@@ -1524,6 +1524,26 @@ static int has_extension(const char *path, const char *ext)
     return 1;
 }
 
+#if defined(RRV_NO_EXR) || defined(RRV_NO_PNG) || defined(RRV_NO_CURVED_NEE)
+/* What the options ask of a part this build of the library leaves out
+   (rrv.h, CONFIGURATION), said before a render rather than after it. */
+static const char *left_out_of_build(const render_options *opt)
+{
+#ifdef RRV_NO_EXR
+    if (opt->output_format == OUTPUT_EXR) return "OpenEXR output is disabled (RRV_NO_EXR): -o OUT.pfm";
+#endif
+#ifdef RRV_NO_PNG
+    if (opt->png_path) return "PNG output is disabled (RRV_NO_PNG): drop --png";
+#endif
+#ifdef RRV_NO_CURVED_NEE
+    if (opt->has_nee && (opt->nee == RRV_NEE_SHOOT || opt->nee == RRV_NEE_MANIFOLD))
+        return "--nee shoot and manifold are disabled (RRV_NO_CURVED_NEE): --nee aim";
+#endif
+    (void)opt;
+    return NULL;
+}
+#endif
+
 static int parse_render_options(int argc, char **argv, render_options *opt)
 {
     arg_cursor args;
@@ -1633,6 +1653,9 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
                                                                 : -1;
     if (opt->exr_flag && opt->output_format != OUTPUT_EXR)
         return usage_error(&args, "%s needs an .exr output, not \"%s\"", opt->exr_flag, opt->pfm_path);
+#if defined(RRV_NO_EXR) || defined(RRV_NO_PNG) || defined(RRV_NO_CURVED_NEE)
+    if (left_out_of_build(opt)) return usage_error(&args, "%s", left_out_of_build(opt));
+#endif
     if (opt->has_tile || opt->has_samples) {
         if (opt->output_format != OUTPUT_EXR)
             return usage_error(&args, "a part (--tile, --samples) is an OpenEXR file: -o PART.exr, not \"%s\"",
@@ -1722,17 +1745,259 @@ static void print_render_summary(int width, int height, int spp, double seconds,
     fputc('\n', stderr);
 }
 
+/* What the steps of a command return to go on; every other value is the
+   command's exit code. */
+#define GO_ON (-2)
+
+/* rrv render, step 1: the outputs checked, the scene loaded (and its input
+   files listed) and the options applied. GO_ON with *scene, or the exit
+   code with nothing left allocated. Output problems are found before a
+   long load or render, except that only the load knows which files the
+   scene reads. */
+static int render_load(render_options *opt, const arg_cursor *args, input_list *inputs, rrv_scene **scene)
+{
+    int ok;
+    memset(inputs, 0, sizeof *inputs);
+    *scene = NULL;
+    if (opt->png_path && same_file(opt->pfm_path, opt->png_path))
+        return usage_error(args, "-o and --png name the same file \"%s\"", opt->png_path);
+    if (!check_output(opt->pfm_path) || (opt->png_path && !check_output(opt->png_path)))
+        return EXIT_IO;
+    if (!load_scene(opt->scene_path, opt->max_grid_bytes, inputs, scene, opt->threads)) {
+        free_inputs(inputs);
+        *scene = NULL;
+        return EXIT_INPUT;
+    }
+    ok = check_output_not_input(opt->pfm_path, inputs) &&
+         (!opt->png_path || check_output_not_input(opt->png_path, inputs));
+    if (ok && opt->output_format >= 0) {
+        rrv_scene *s = *scene;
+        if (opt->has_spp) s->settings.spp = opt->spp;
+        if (opt->has_seed) s->settings.seed = opt->seed;
+        if (opt->has_integrator) s->settings.integrator = opt->integrator;
+        if (opt->has_nee) s->settings.nee = opt->nee;
+        if (opt->has_sampler) s->settings.sampler = opt->sampler;
+        if (apply_refraction_options(s, &opt->refraction)) return GO_ON;
+    }
+    free_inputs(inputs);
+    rrv_scene_free(*scene);
+    *scene = NULL;
+    if (!ok) return EXIT_USAGE;
+    if (opt->output_format < 0)
+        return usage_error(args, "cannot tell the format of \"%s\": the output must end in .pfm or .exr",
+                           opt->pfm_path);
+    return EXIT_INPUT;
+}
+
+/* rrv render --resume: EXIT_OK when the output already is this very part
+   (a re-submitted array renders only what is missing), else GO_ON. */
+static int render_keep_part(const render_options *opt, const part_info *part)
+{
+    FILE *probe;
+    rrv_error probe_err;
+    part_info have;
+    /* opened as every input is: the output check refused a FIFO there,
+       and one put in its place since must not block */
+    if (rrv_open_read(opt->pfm_path, &probe, NULL, &probe_err) != RRV_OK) return GO_ON;
+    fclose(probe);
+    if (load_part(opt->pfm_path, &have, NULL, "render --resume") && memcmp(&have, part, sizeof *part) == 0) {
+        if (!opt->quiet)
+            fprintf(stderr, "rrv: \"%s\" is complete (tile %s, samples %d:%d): kept\n", opt->pfm_path, part->tile,
+                    part->sample_begin, part->sample_end);
+        return EXIT_OK;
+    }
+    if (!opt->quiet) fprintf(stderr, "rrv: \"%s\" is not this part: rendering it again\n", opt->pfm_path);
+    return GO_ON;
+}
+
+/* rrv render, step 2 for a part (--tile, --samples): its tile and sample
+   block checked against the scene, described in *part and part_text, and
+   its rectangle made the crop. GO_ON, or the exit code. */
+static int render_plan_part(render_options *opt, const arg_cursor *args, input_list *inputs,
+                            const rrv_scene *scene, part_info *part, char *part_text, size_t cap)
+{
+    int width = scene->camera.width, height = scene->camera.height, ok = scene_hash(inputs, scene, part->hash);
+    free_inputs(inputs);
+    if (!ok) {
+        fprintf(stderr, "rrv: %s: cannot read the scene's files again to hash them: %s\n", opt->scene_path,
+                strerror(errno));
+        return EXIT_INPUT;
+    }
+    if (!opt->has_tile) {
+        opt->tile_index = 0;
+        opt->tile_columns = opt->tile_rows = 1;
+    }
+    if (opt->tile_columns > width || opt->tile_rows > height)
+        return usage_error(args, "--tile %d/%dx%d: the %dx%d image has too few %s for that many tiles",
+                           opt->tile_index, opt->tile_columns, opt->tile_rows, width, height,
+                           opt->tile_columns > width ? "columns" : "rows");
+    if (!opt->has_samples) {
+        opt->sample_begin = 0;
+        opt->sample_end = scene->settings.spp;
+    }
+    if (!sample_block_ok(opt->sample_begin, opt->sample_end, scene->settings.spp)) {
+        int n = scene->settings.spp, m = sample_split(0, n);
+        if (opt->sample_end > n)
+            return usage_error(args, "--samples %d:%d: the render has only %d samples a pixel", opt->sample_begin,
+                               opt->sample_end, n);
+        return usage_error(args, "--samples %d:%d is not a block of the sample tree of %d samples "
+                           "(0:%d splits into 0:%d and %d:%d, each block of more than one sample at its "
+                           "start plus the largest power of two below its length)",
+                           opt->sample_begin, opt->sample_end, n, n, m, m, n);
+    }
+    part->width = width;
+    part->height = height;
+    tile_rect(opt->tile_index, opt->tile_columns, opt->tile_rows, width, height, part->rect);
+    if (opt->tile_columns == 1) snprintf(part->tile, sizeof part->tile, "%d/%d", opt->tile_index, opt->tile_rows);
+    else snprintf(part->tile, sizeof part->tile, "%d/%dx%d", opt->tile_index, opt->tile_columns, opt->tile_rows);
+    part->sample_begin = opt->sample_begin;
+    part->sample_end = opt->sample_end;
+    part->spp = scene->settings.spp;
+    format_part(part, part_text, cap);
+    if (opt->resume && render_keep_part(opt, part) == EXIT_OK) return EXIT_OK;
+    memcpy(opt->crop, part->rect, sizeof opt->crop);
+    return GO_ON;
+}
+
+/* rrv render, step 2 for an image: every sample, and the crop (the whole
+   frame without --crop) checked. GO_ON, or the exit code. */
+static int render_plan_image(render_options *opt, const arg_cursor *args, input_list *inputs,
+                             const rrv_scene *scene)
+{
+    int width = scene->camera.width, height = scene->camera.height;
+    free_inputs(inputs);
+    opt->sample_begin = 0;
+    opt->sample_end = scene->settings.spp;
+    if (!opt->has_crop) {
+        opt->crop[0] = opt->crop[1] = 0;
+        opt->crop[2] = width;
+        opt->crop[3] = height;
+    } else if (opt->crop[0] >= opt->crop[2] || opt->crop[1] >= opt->crop[3] || opt->crop[2] > width ||
+               opt->crop[3] > height) {
+        return usage_error(args,
+                           "--crop %d %d %d %d is not a nonempty rectangle inside the %dx%d "
+                           "image (X0 < X1 <= %d, Y0 < Y1 <= %d)",
+                           opt->crop[0], opt->crop[1], opt->crop[2], opt->crop[3], width, height, width,
+                           height);
+    }
+    return GO_ON;
+}
+
+/* rrv render, step 3: the crop's samples rendered on the threads into a
+   new *image, the sums for a part, else their mean. GO_ON, or the exit
+   code with *image NULL. */
+static int render_run(const render_options *opt, const rrv_scene *scene, int is_part, render_job *job,
+                      float **image, double *seconds)
+{
+    int crop_width = opt->crop[2] - opt->crop[0], crop_height = opt->crop[3] - opt->crop[1], x, y, c;
+    int thread_count;
+    size_t sum_count = (size_t)crop_width * (size_t)crop_height * 3;
+    float *sum = (float *)calloc(sum_count, sizeof *sum);
+    *image = (float *)malloc(sum_count * sizeof **image);
+    if (!sum || !*image) {
+        fprintf(stderr, "rrv: out of memory for a %dx%d framebuffer\n", crop_width, crop_height);
+        free(sum);
+        free(*image);
+        *image = NULL;
+        return EXIT_INPUT;
+    }
+    memset(job, 0, sizeof *job);
+    job->scene = scene;
+    job->x0 = opt->crop[0];
+    job->y0 = opt->crop[1];
+    job->x1 = opt->crop[2];
+    job->y1 = opt->crop[3];
+    job->sample_begin = opt->sample_begin;
+    job->sample_end = opt->sample_end;
+    job->sum = sum;
+    job->stride = crop_width;
+    job->tiles_x = (crop_width + TILE_SIZE - 1) / TILE_SIZE;
+    job->tile_count = job->tiles_x * ((crop_height + TILE_SIZE - 1) / TILE_SIZE);
+    job->tile_stride = tile_stride(job->tiles_x, job->tile_count / job->tiles_x);
+    job->failure = RRV_OK;
+    job->show_progress = !opt->quiet && isatty(2);
+    if (job->show_progress) {
+        job->tile_seconds = (double *)malloc((size_t)job->tile_count * sizeof *job->tile_seconds);
+        for (x = 0; job->tile_seconds && x < job->tile_count; ++x) job->tile_seconds[x] = -1;
+    }
+    thread_count = opt->threads > 0 ? opt->threads : default_thread_count();
+    if (thread_count > job->tile_count) thread_count = job->tile_count;
+
+    job->start_time = seconds_now();
+    job->last_progress_time = job->start_time;
+    run_render_job(job, thread_count);
+    *seconds = seconds_now() - job->start_time;
+    if (job->show_progress) {
+        draw_progress(job, 1);
+        /* The summary line takes the bar's place. */
+        fprintf(stderr, "\r%*s\r", PROGRESS_BAR_WIDTH + 48, "");
+    }
+    free(job->tile_seconds);
+    job->tile_seconds = NULL;
+
+    if (job->failure != RRV_OK) {
+        fprintf(stderr, "rrv: %s: render failed: %s\n", opt->scene_path, rrv_result_string(job->failure));
+        free(sum);
+        free(*image);
+        *image = NULL;
+        return EXIT_INPUT;
+    }
+    /* A part keeps its sums; an image is their mean. */
+    for (y = 0; y < crop_height; ++y)
+        for (x = 0; x < crop_width; ++x)
+            for (c = 0; c < 3; ++c) {
+                size_t i = 3 * ((size_t)y * crop_width + x) + c;
+                (*image)[i] = is_part ? sum[i] : sum[i] / (float)scene->settings.spp;
+            }
+    free(sum);
+    return GO_ON;
+}
+
+/* rrv render, step 4: the outputs written (a crop in its place in the
+   frame, a part with its description) and the summary printed. */
+static int render_write(render_options *opt, const rrv_scene *scene, const part_info *part,
+                        const char *part_text, const float *image, const render_job *job, double seconds)
+{
+    pending_output outputs[2];
+    int is_part = opt->has_tile || opt->has_samples, code;
+    int crop_width = opt->crop[2] - opt->crop[0], crop_height = opt->crop[3] - opt->crop[1];
+    memset(outputs, 0, sizeof outputs);
+    outputs[0].path = opt->pfm_path;
+    outputs[0].format = opt->output_format;
+    outputs[0].exr = &opt->exr;
+    outputs[1].path = opt->png_path;
+    outputs[1].format = OUTPUT_PNG;
+    opt->exr.display_width = scene->camera.width;
+    opt->exr.display_height = scene->camera.height;
+    opt->exr.x = opt->crop[0];
+    opt->exr.y = opt->crop[1];
+    if (is_part) {
+        opt->exr.text_name = PART_ATTRIBUTE;
+        opt->exr.text = part_text;
+    }
+    code = write_outputs(outputs, opt->png_path ? 2 : 1, image, crop_width, crop_height, opt->exposure) ? EXIT_OK
+                                                                                                      : EXIT_IO;
+    if (code == EXIT_OK && !opt->quiet) {
+        if (is_part)
+            fprintf(stderr, "part %s: tile %s, samples %d:%d of %d: ", opt->pfm_path, part->tile,
+                    part->sample_begin, part->sample_end, part->spp);
+        print_render_summary(crop_width, crop_height, opt->sample_end - opt->sample_begin, seconds, &job->stats);
+        print_face_jump_summary(scene);
+    }
+    return code;
+}
+
+/* rrv render: parse the options, load and check (steps 1 and 2), render
+   and write (3 and 4). */
 static int command_render(int argc, char **argv)
 {
     render_options opt;
     rrv_scene *scene = NULL;
     render_job job;
     input_list inputs;
-    pending_output outputs[2];
-    float *sum = NULL, *image = NULL;
-    int code, width, height, crop_width, crop_height, x, y, c, thread_count, is_part;
-    size_t sum_count, image_count;
-    double seconds;
+    float *image = NULL;
+    int code;
+    double seconds = 0;
     part_info part;
     char part_text[1024];
     arg_cursor args;
@@ -1742,223 +2007,15 @@ static int command_render(int argc, char **argv)
     if (code != EXIT_OK) return code;
     memset(&args, 0, sizeof args);
     args.command = "render";
-    is_part = opt.has_tile || opt.has_samples;
-
-    /* Output problems are found before a long load or render, except that
-       only the load knows which files the scene reads. */
-    if (opt.png_path && same_file(opt.pfm_path, opt.png_path))
-        return usage_error(&args, "-o and --png name the same file \"%s\"", opt.png_path);
-    if (!check_output(opt.pfm_path) || (opt.png_path && !check_output(opt.png_path)))
-        return EXIT_IO;
-    memset(&inputs, 0, sizeof inputs);
-    if (!load_scene(opt.scene_path, opt.max_grid_bytes, &inputs, &scene, opt.threads)) {
-        free_inputs(&inputs);
-        return EXIT_INPUT;
-    }
-    code = check_output_not_input(opt.pfm_path, &inputs) &&
-           (!opt.png_path || check_output_not_input(opt.png_path, &inputs));
-    if (!code) {
-        free_inputs(&inputs);
-        rrv_scene_free(scene);
-        return EXIT_USAGE;
-    }
-    if (opt.output_format < 0) {
-        free_inputs(&inputs);
-        rrv_scene_free(scene);
-        return usage_error(&args, "cannot tell the format of \"%s\": the output must end in .pfm or .exr",
-                           opt.pfm_path);
-    }
-    if (opt.has_spp) scene->settings.spp = opt.spp;
-    if (opt.has_seed) scene->settings.seed = opt.seed;
-    if (opt.has_integrator) scene->settings.integrator = opt.integrator;
-    if (opt.has_nee) scene->settings.nee = opt.nee;
-    if (opt.has_sampler) scene->settings.sampler = opt.sampler;
-    if (!apply_refraction_options(scene, &opt.refraction)) {
-        free_inputs(&inputs);
-        rrv_scene_free(scene);
-        return EXIT_INPUT;
-    }
-    width = scene->camera.width;
-    height = scene->camera.height;
-
+    code = render_load(&opt, &args, &inputs, &scene);
+    if (code != GO_ON) return code;
     memset(&part, 0, sizeof part);
-    if (is_part) {
-        int ok = scene_hash(&inputs, scene, part.hash);
-        free_inputs(&inputs);
-        if (!ok) {
-            fprintf(stderr, "rrv: %s: cannot read the scene's files again to hash them: %s\n", opt.scene_path,
-                    strerror(errno));
-            rrv_scene_free(scene);
-            return EXIT_INPUT;
-        }
-        if (!opt.has_tile) {
-            opt.tile_index = 0;
-            opt.tile_columns = opt.tile_rows = 1;
-        }
-        if (opt.tile_columns > width || opt.tile_rows > height) {
-            rrv_scene_free(scene);
-            return usage_error(&args, "--tile %d/%dx%d: the %dx%d image has too few %s for that many tiles",
-                               opt.tile_index, opt.tile_columns, opt.tile_rows, width, height,
-                               opt.tile_columns > width ? "columns" : "rows");
-        }
-        if (!opt.has_samples) {
-            opt.sample_begin = 0;
-            opt.sample_end = scene->settings.spp;
-        }
-        if (!sample_block_ok(opt.sample_begin, opt.sample_end, scene->settings.spp)) {
-            int n = scene->settings.spp, m = sample_split(0, n);
-            rrv_scene_free(scene);
-            if (opt.sample_end > n)
-                return usage_error(&args, "--samples %d:%d: the render has only %d samples a pixel",
-                                   opt.sample_begin, opt.sample_end, n);
-            return usage_error(&args, "--samples %d:%d is not a block of the sample tree of %d samples "
-                               "(0:%d splits into 0:%d and %d:%d, each block of more than one sample at its "
-                               "start plus the largest power of two below its length)",
-                               opt.sample_begin, opt.sample_end, n, n, m, m, n);
-        }
-        part.width = width;
-        part.height = height;
-        tile_rect(opt.tile_index, opt.tile_columns, opt.tile_rows, width, height, part.rect);
-        if (opt.tile_columns == 1) snprintf(part.tile, sizeof part.tile, "%d/%d", opt.tile_index, opt.tile_rows);
-        else snprintf(part.tile, sizeof part.tile, "%d/%dx%d", opt.tile_index, opt.tile_columns, opt.tile_rows);
-        part.sample_begin = opt.sample_begin;
-        part.sample_end = opt.sample_end;
-        part.spp = scene->settings.spp;
-        format_part(&part, part_text, sizeof part_text);
-        if (opt.resume) {
-            /* A part already complete for this very scene and block is kept,
-               so a re-submitted array only renders what is missing. */
-            FILE *probe;
-            rrv_error probe_err;
-            part_info have;
-            /* opened as every input is: the output check above refused a
-               FIFO there, and one put in its place since must not block */
-            if (rrv_open_read(opt.pfm_path, &probe, NULL, &probe_err) == RRV_OK) {
-                fclose(probe);
-                if (load_part(opt.pfm_path, &have, NULL, "render --resume") &&
-                    memcmp(&have, &part, sizeof part) == 0) {
-                    if (!opt.quiet) fprintf(stderr, "rrv: \"%s\" is complete (tile %s, samples %d:%d): kept\n",
-                                            opt.pfm_path, part.tile, part.sample_begin, part.sample_end);
-                    rrv_scene_free(scene);
-                    return EXIT_OK;
-                }
-                if (!opt.quiet) fprintf(stderr, "rrv: \"%s\" is not this part: rendering it again\n", opt.pfm_path);
-            }
-        }
-        opt.crop[0] = part.rect[0];
-        opt.crop[1] = part.rect[1];
-        opt.crop[2] = part.rect[2];
-        opt.crop[3] = part.rect[3];
-    } else {
-        free_inputs(&inputs);
-        opt.sample_begin = 0;
-        opt.sample_end = scene->settings.spp;
-        if (!opt.has_crop) {
-            opt.crop[0] = opt.crop[1] = 0;
-            opt.crop[2] = width;
-            opt.crop[3] = height;
-        } else if (opt.crop[0] >= opt.crop[2] || opt.crop[1] >= opt.crop[3] ||
-                   opt.crop[2] > width || opt.crop[3] > height) {
-            rrv_scene_free(scene);
-            return usage_error(&args,
-                               "--crop %d %d %d %d is not a nonempty rectangle inside the %dx%d "
-                               "image (X0 < X1 <= %d, Y0 < Y1 <= %d)",
-                               opt.crop[0], opt.crop[1], opt.crop[2], opt.crop[3], width, height,
-                               width, height);
-        }
-    }
-    crop_width = opt.crop[2] - opt.crop[0];
-    crop_height = opt.crop[3] - opt.crop[1];
-
-    sum_count = (size_t)crop_width * (size_t)crop_height * 3;
-    image_count = sum_count;
-    sum = (float *)calloc(sum_count, sizeof *sum);
-    image = (float *)malloc(image_count * sizeof *image);
-    if (!sum || !image) {
-        fprintf(stderr, "rrv: out of memory for a %dx%d framebuffer\n", crop_width, crop_height);
-        free(sum);
-        free(image);
-        rrv_scene_free(scene);
-        return EXIT_INPUT;
-    }
-
-    memset(&job, 0, sizeof job);
-    job.scene = scene;
-    job.x0 = opt.crop[0];
-    job.y0 = opt.crop[1];
-    job.x1 = opt.crop[2];
-    job.y1 = opt.crop[3];
-    job.sample_begin = opt.sample_begin;
-    job.sample_end = opt.sample_end;
-    job.sum = sum;
-    job.stride = crop_width;
-    job.tiles_x = (crop_width + TILE_SIZE - 1) / TILE_SIZE;
-    job.tile_count = job.tiles_x * ((crop_height + TILE_SIZE - 1) / TILE_SIZE);
-    job.tile_stride = tile_stride(job.tiles_x, job.tile_count / job.tiles_x);
-    job.failure = RRV_OK;
-    job.show_progress = !opt.quiet && isatty(2);
-    if (job.show_progress) {
-        job.tile_seconds = (double *)malloc((size_t)job.tile_count * sizeof *job.tile_seconds);
-        for (x = 0; job.tile_seconds && x < job.tile_count; ++x) job.tile_seconds[x] = -1;
-    }
-    thread_count = opt.threads > 0 ? opt.threads : default_thread_count();
-    if (thread_count > job.tile_count) thread_count = job.tile_count;
-
-    job.start_time = seconds_now();
-    job.last_progress_time = job.start_time;
-    run_render_job(&job, thread_count);
-    seconds = seconds_now() - job.start_time;
-    if (job.show_progress) {
-        draw_progress(&job, 1);
-        /* The summary line takes the bar's place. */
-        fprintf(stderr, "\r%*s\r", PROGRESS_BAR_WIDTH + 48, "");
-    }
-    free(job.tile_seconds);
-
-    if (job.failure != RRV_OK) {
-        fprintf(stderr, "rrv: %s: render failed: %s\n", opt.scene_path,
-                rrv_result_string(job.failure));
-        free(sum);
-        free(image);
-        rrv_scene_free(scene);
-        return EXIT_INPUT;
-    }
-
-    /* A part keeps its sums; an image is their mean. */
-    for (y = 0; y < crop_height; ++y)
-        for (x = 0; x < crop_width; ++x)
-            for (c = 0; c < 3; ++c) {
-                size_t i = 3 * ((size_t)y * crop_width + x) + c;
-                image[i] = is_part ? sum[i] : sum[i] / (float)scene->settings.spp;
-            }
-    free(sum);
-
-    memset(outputs, 0, sizeof outputs);
-    outputs[0].path = opt.pfm_path;
-    outputs[0].format = opt.output_format;
-    outputs[0].exr = &opt.exr;
-    outputs[1].path = opt.png_path;
-    outputs[1].format = OUTPUT_PNG;
-    /* A crop keeps its place in the frame, as an EXR can say. */
-    opt.exr.display_width = width;
-    opt.exr.display_height = height;
-    opt.exr.x = opt.crop[0];
-    opt.exr.y = opt.crop[1];
-    if (is_part) {
-        opt.exr.text_name = PART_ATTRIBUTE;
-        opt.exr.text = part_text;
-    }
-    code = write_outputs(outputs, opt.png_path ? 2 : 1, image, crop_width, crop_height,
-                         opt.exposure)
-               ? EXIT_OK
-               : EXIT_IO;
-    if (code == EXIT_OK && !opt.quiet) {
-        if (is_part)
-            fprintf(stderr, "part %s: tile %s, samples %d:%d of %d: ", opt.pfm_path, part.tile,
-                    part.sample_begin, part.sample_end, part.spp);
-        print_render_summary(crop_width, crop_height, opt.sample_end - opt.sample_begin, seconds, &job.stats);
-        print_face_jump_summary(scene);
-    }
+    if (opt.has_tile || opt.has_samples)
+        code = render_plan_part(&opt, &args, &inputs, scene, &part, part_text, sizeof part_text);
+    else
+        code = render_plan_image(&opt, &args, &inputs, scene);
+    if (code == GO_ON) code = render_run(&opt, scene, opt.has_tile || opt.has_samples, &job, &image, &seconds);
+    if (code == GO_ON) code = render_write(&opt, scene, &part, part_text, image, &job, seconds);
     free(image);
     rrv_scene_free(scene);
     return code;

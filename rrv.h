@@ -275,6 +275,44 @@
                       A libc that hides more under strict C wants
                       _POSIX_C_SOURCE 200809L before its first header, as
                       rrv_impl.c defines it.
+   Parts a build can leave out, for embedded or sandboxed clients that pay
+   only for what they use (any of them, in any combination; object sizes
+   in test/bench/RESULTS.md, "Build switches"). Every declaration stays and
+   every function still links: a call that needs a part left out returns
+   RRV_ERROR_UNSUPPORTED with a message naming the switch ("PNG output is
+   disabled (RRV_NO_PNG)"), with its outputs cleared as on any failure.
+     RRV_NO_SCENE_FILE no .rrv parser, OBJ loader or gridvol reader: scenes
+                      are built with rrv_scene_create and rrv_scene_add_* /
+                      set_* (a grid field's samples given in rrv_field.grid).
+                      rrv_scene_load, rrv_scene_parse, rrv_grid_read and
+                      rrv_grid_read_memory refuse.
+     RRV_NO_NANOVDB   no NanoVDB reader: rrv_nanovdb_read and
+                      rrv_nanovdb_read_memory refuse, and so do a scene's
+                      `nanovdb` statement and a NANOVDB field (no grid can
+                      be validated without the reader). The small lookups
+                      (rrv_nanovdb_voxel, rrv_nanovdb_sample) stay.
+     RRV_NO_EXR       no OpenEXR writer or reader (nor their inflate):
+                      rrv_write_exr, rrv_write_exr_to, rrv_read_exr,
+                      rrv_read_exr_memory and rrv_exr_find_attribute refuse
+                      (the last, which has no rrv_error, by its result);
+                      rrv_half_from_float stays.
+     RRV_NO_PNG       no PNG writer: rrv_write_png and rrv_write_png_to
+                      refuse. With RRV_NO_EXR too, deflate goes as well;
+                      rrv_crc32 and rrv_adler32 stay.
+     RRV_NO_CURVED_NEE no solvers of nee shoot and manifold (and the cones
+                      that go with them; nee aim stays). NEE_SHOOT or
+                      NEE_MANIFOLD asked for is refused, not replaced: by
+                      the scene's `render` statement, rrv_scene_set_settings
+                      and rrv_scene_prepare, and by rrv_render_rect for
+                      settings edited after prepare. Unasked, the defaults
+                      follow the rules for a scene no solver supports: the
+                      default integrator is never EIKONAL for its shooting
+                      (INTEGRATORS, "default"), and NEE_DEFAULT aims, as
+                      the refractive integrator's does.
+                      main.c builds with each switch (a RRV_NO_SCENE_FILE
+                      CLI only says so, since it reads scene files); its
+                      render refuses -o .exr, --png and --nee shoot or
+                      manifold before rendering when they are left out.
 
    FILES
      Every input is untrusted and read with bounds, and only from a regular
@@ -1195,6 +1233,11 @@ static rrv_result rrv__fail(rrv_error *err, rrv_result code, const char *file, i
     return code;
 }
 
+/* The refusal of a call that needs a part the build leaves out
+   (CONFIGURATION): the part and the switch named, as RRV_NO_STDIO's are. */
+#define rrv__left_out(err, file, part, name, hint) \
+    rrv__fail((err), RRV_ERROR_UNSUPPORTED, (file), 0, "%s is disabled (%s)%s", (part), (name), (hint))
+
 static void rrv__clear_error(rrv_error *err)
 {
     if (err) {
@@ -1969,6 +2012,7 @@ static rrv_vec3 rrv__nv_gradient(const rrv_nanovdb *g, rrv_vec3 p)
                    g->inverse[2] * d[0] + g->inverse[5] * d[1] + g->inverse[8] * d[2]);
 }
 
+#ifndef RRV_NO_CURVED_NEE /* derivatives of the gradient: the solvers' alone */
 /* The Jacobian of rrv__nv_gradient (see the derivatives of the refractivity
    gradient below for why it is not symmetrised). In index space the
    gradient is d_a(u) = (T(u + e_a) - T(u - e_a)) / 2 of the trilinear T,
@@ -2011,6 +2055,7 @@ static void rrv__nv_gradient_jacobian(const rrv_nanovdb *g, rrv_vec3 p, double J
             J[3 * i + j] = s;
         }
 }
+#endif
 
 /* Tile extents by level: a root tile spans 4096 index points an axis, an
    upper node's entry 128, a lower node's entry 8 (one leaf). */
@@ -2741,6 +2786,7 @@ static inline void rrv__prefetch_refraction(const struct rrv__majorant_grid *mg,
    smooth field, 5 % at 33^3, test/test_hessian.c). The trilinear value's
    own Hessian, zero inside every cell, would miss it entirely. */
 
+#ifndef RRV_NO_CURVED_NEE /* derivatives of the gradient: the solvers' alone */
 /* The refraction grid's value, gradient and the gradient's Jacobian at p,
    from one location of its cell: the value and gradient are
    rrv__refraction_lookup's bit for bit (the same blends in the same
@@ -2838,6 +2884,7 @@ static void rrv__baked_refractivity_jacobian(const rrv_medium *m, const rrv_grid
     if (m->majorant->cubic) rrv__cubic_hessian(baked, m->majorant->cubic, p, J);
     else rrv__refraction_lookup_jacobian(m->majorant, p, J);
 }
+#endif
 
 /* The baked refractivity (and gradient if grad) at p inside the baked grid. */
 static double rrv__baked_refractivity(const rrv_medium *m, const rrv_grid *baked, rrv_vec3 p, rrv_vec3 *grad)
@@ -2912,6 +2959,7 @@ static rrv_vec3 rrv__grid_gradient(const rrv_grid *g, rrv_vec3 p)
     return rrv__v3(grad[0], grad[1], grad[2]);
 }
 
+#ifndef RRV_NO_CURVED_NEE /* derivatives of the gradient: the solvers' alone */
 /* The Jacobian of rrv__grid_gradient: its eight corner differences (the
    same, one-sided at the grid's faces) with the trilinear weights
    differentiated. Not symmetric (see the derivatives of the refractivity
@@ -2946,6 +2994,7 @@ static void rrv__grid_gradient_jacobian(const rrv_grid *g, rrv_vec3 p, double J[
         }
     }
 }
+#endif
 
 /* Gradient of a scalar field: analytic where the field is, numeric else. */
 static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p)
@@ -2973,6 +3022,7 @@ static rrv_vec3 rrv__field_gradient(const rrv_field *f, rrv_vec3 p)
     }
 }
 
+#ifndef RRV_NO_CURVED_NEE /* derivatives of the gradient: the solvers' alone */
 /* The derivative of rrv__field_gradient (a scalar field's Hessian where the
    gradient is the value's derivative); 0 for kinds it has none for here
    (an unbaked noise field, which rrv__field_gradient does not handle
@@ -3007,6 +3057,7 @@ static int rrv__field_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
         return 0;
     }
 }
+#endif
 
 static rrv_vec3 rrv__profile_gradient(const rrv_field *f, rrv_vec3 p)
 {
@@ -3090,6 +3141,7 @@ static int rrv__profile_fused(const rrv_field *f, rrv_vec3 p, double *r, rrv_vec
     return 1;
 }
 
+#ifndef RRV_NO_CURVED_NEE /* derivatives of the gradient: the solvers' alone */
 /* The derivative of rrv__profile_gradient (unscaled); 0 where there is
    none here. The radial profiles have grad r = phi'(d) e (e = d / |d|), so
    H = phi'' e e^T + (phi' / |d|) (I - e e^T), written as a I + b d d^T. */
@@ -3134,6 +3186,7 @@ static int rrv__profile_hessian(const rrv_field *f, rrv_vec3 p, double H[9])
         for (j = 0; j < 3; ++j) H[3 * i + j] = (i == j ? a : 0.0) + b * dd[i] * dd[j];
     return 1;
 }
+#endif
 
 /* A gas whose temperature is a sum of blobs and whose pressure is uniform
    (the fire plumes): rrv__refractivity, rrv__refractivity_gradient and
@@ -3213,6 +3266,7 @@ static double rrv__refractivity_gradient(const rrv_medium *m, rrv_vec3 p, double
     return r;
 }
 
+#ifndef RRV_NO_CURVED_NEE /* derivatives of the gradient: the solvers' alone */
 /* The derivative of rrv__refractivity_gradient, 0 where there is none. For
    a gas, with u = grad P / P - grad T / T (so grad r = r u):
    H = r (u u^T + H_P / P - grad P grad P^T / P^2 - H_T / T + grad T grad T^T / T^2),
@@ -3275,6 +3329,7 @@ static double rrv__refractivity_gradient_hessian(const rrv_medium *m, rrv_vec3 p
     rrv__refractivity_hessian(m, p, ambient_r, H);
     return rrv__refractivity_gradient(m, p, ambient_r, grad);
 }
+#endif
 
 /* The refractivity of the scene at p: that of the last listed refractive
    medium whose box holds p, the ambient one elsewhere. */
@@ -7750,6 +7805,13 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
     if (!scene->prepared)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
                          "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
+#ifdef RRV_NO_CURVED_NEE
+    /* settings edited after prepare skip its check (rrv__settings_check) */
+    if (scene->settings.nee == RRV_NEE_SHOOT || scene->settings.nee == RRV_NEE_MANIFOLD)
+        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, scene->path, 0,
+                         "rrv_render_rect: nee %s is disabled (RRV_NO_CURVED_NEE); use nee aim",
+                         scene->settings.nee == RRV_NEE_SHOOT ? "shoot" : "manifold");
+#endif
     memset(&ctx, 0, sizeof ctx);
     ctx.scene = scene;
     sobol = scene->settings.sampler != RRV_SAMPLER_PCG;
@@ -7997,6 +8059,12 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
 #define RRV__WEAK_BEND 0.0
 #endif
 
+/* RRV_NO_CURVED_NEE leaves out the solvers of nee shoot and manifold and
+   the cones that go with them; nee aim, the weak-chord classes and the
+   face jumps stay. Such a build supports no scene for solving, so the
+   default integrator never picks eikonal for its shooting and the default
+   nee aims; an explicit shoot or manifold is refused (rrv__settings_check). */
+#ifndef RRV_NO_CURVED_NEE
 /* Can shooting differentiate this medium's IOR? Every kind rrv__refractivity_
    hessian has a derivative for: the closed-form profiles, blobs, and grids
    (gridvol or NanoVDB, baked or not, trilinear or cubic: the derivative of
@@ -8304,6 +8372,14 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
     return 1;
 }
 
+#else
+static int rrv__solver_supports_scene(const rrv_scene *scene)
+{
+    (void)scene;
+    return 0;
+}
+#endif /* RRV_NO_CURVED_NEE */
+
 /* Is a jump of the refractivity across a face (rrv__cross_face's
    face_jump) one that curved connections cannot solve across? */
 static int rrv__jump_counts(double jump) { return jump > RRV__SOLVE_JUMP; }
@@ -8325,6 +8401,7 @@ static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x)
     return v.inside;
 }
 
+#ifndef RRV_NO_CURVED_NEE
 enum { RRV__SHOT_REACHED, RRV__SHOT_MISSED, RRV__SHOT_INTERFACE, RRV__SHOT_BLOCKED };
 
 typedef struct rrv__shot {
@@ -8726,6 +8803,8 @@ static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, co
     return found;
 }
 
+#endif /* RRV_NO_CURVED_NEE */
+
 /* Is a straight connection from x to a light sample one of the paths
    straight NEE stands for when shooting sorts paths into classes, i.e.
    does it stay out of every refraction support? Forward paths make the
@@ -8891,6 +8970,22 @@ static double rrv__vertex_pdf(const rrv__vertex_bsdf *v, rrv_vec3 w)
     return v->surface ? fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI : rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
 }
 
+/* The area density with which rrv__pick_area_light names the point y of
+   light s from x0, selection included: uniform on a quad or triangle; on
+   a sphere the cone's solid-angle density turned into area at y, on the
+   cap x0 sees (0 elsewhere: no draw names a point x0 does not see). */
+static double rrv__light_area_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 y)
+{
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv_vec3 to_x0 = rrv__sub(x0, y), n = rrv__sub(y, s->center);
+        double dist2 = rrv__dot(to_x0, to_x0), facing = rrv__dot(n, to_x0) / s->radius;
+        if (!(facing > 0) || !(dist2 > 0)) return 0.0;
+        return rrv__emitter_pdf(s, x0, y, n) * facing / (sqrt(dist2) * dist2) / rrv__light_choices(scene);
+    }
+    return 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
+}
+
+#ifndef RRV_NO_CURVED_NEE
 /* The plane a shot toward light point y (normal ny) is solved in: a quad's
    or triangle's own, where the ray first crosses it from its front; for a
    sphere none (NULL), the solve aims the ray through y across its arriving
@@ -8914,21 +9009,6 @@ static double rrv__root_det_on_light(const rrv__root *root, const rrv_vec3 *plan
     if (plane) return root->det;
     cos_y = -rrv__dot(root->dir, ny);
     return cos_y > 0 ? root->det / cos_y : 0.0;
-}
-
-/* The area density with which rrv__pick_area_light names the point y of
-   light s from x0, selection included: uniform on a quad or triangle; on
-   a sphere the cone's solid-angle density turned into area at y, on the
-   cap x0 sees (0 elsewhere: no draw names a point x0 does not see). */
-static double rrv__light_area_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 y)
-{
-    if (s->kind == RRV_SHAPE_SPHERE) {
-        rrv_vec3 to_x0 = rrv__sub(x0, y), n = rrv__sub(y, s->center);
-        double dist2 = rrv__dot(to_x0, to_x0), facing = rrv__dot(n, to_x0) / s->radius;
-        if (!(facing > 0) || !(dist2 > 0)) return 0.0;
-        return rrv__emitter_pdf(s, x0, y, n) * facing / (sqrt(dist2) * dist2) / rrv__light_choices(scene);
-    }
-    return 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
 }
 
 /* The MIS weight of curved NEE for a curved path x0 -> y on light s whose
@@ -9108,6 +9188,8 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
 
+#endif /* RRV_NO_CURVED_NEE */
+
 /* ---- nee AIM: bent shadow rays aimed at light samples -----------------------------
    Where the two-point problem is not solved (the comb, whose kick points
    move with the ray and have no Jacobi field; or by choice), light is still
@@ -9269,6 +9351,7 @@ static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const 
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
 
+#ifndef RRV_NO_CURVED_NEE
 /* ---- rays drawn toward strong supports: the roots of weak chords ---------------------
    A connection whose straight chord passes beside a lens is straight
    NEE's (rrv__weak_chord), yet the lens may bend other rays from x0 onto
@@ -10650,6 +10733,8 @@ static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__
     return 1;
 }
 
+#endif /* RRV_NO_CURVED_NEE */
+
 /* The light point y the draw names from x0 for a curved connection, its
    normal and its area pdf (selection included); NULL for the sky, and for
    sphere lights unless spheres is set. A quad's or triangle's point is
@@ -10679,6 +10764,7 @@ static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__
     return s;
 }
 
+#ifndef RRV_NO_CURVED_NEE
 /* The seed's initial direction, from one distribution for the first solve
    and every trial: a Gaussian around the chord of 0.02 rad (half the
    time), of 0.2 rad (three times in eight) or uniform (one in eight), so
@@ -10785,6 +10871,52 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
     }
 }
 
+#else /* RRV_NO_CURVED_NEE: what the integrators call, never reached (no
+         scene is supported for solving, so ctx->shoot and ctx->manifold
+         stay 0 and no cone is set up) */
+
+static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                           const rrv__light_draw *draw, rrv__rng *rng)
+{
+    (void)ctx; (void)path; (void)x0; (void)v; (void)draw; (void)rng;
+}
+
+static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir, const rrv_shape *s,
+                                        rrv_vec3 x)
+{
+    (void)ctx; (void)x0; (void)w0; (void)pdf_dir; (void)s; (void)x;
+    return 1.0;
+}
+
+static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                              const rrv__light_draw *draw, rrv__rng *rng)
+{
+    (void)ctx; (void)path; (void)x0; (void)v; (void)draw; (void)rng;
+}
+
+/* no cones: the density of a direction no cone draws */
+static double rrv__cone_pdf(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0)
+{
+    (void)ctx; (void)x0; (void)w0;
+    return 0.0;
+}
+
+static void rrv__cone_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
+{
+    (void)ctx; (void)path; (void)x0; (void)v; (void)rng;
+}
+
+static void rrv__cone_setup(rrv__context *ctx) { ctx->cone_count = 0; }
+
+static struct rrv__chain *rrv__chain_new(int cap)
+{
+    (void)cap;
+    return NULL;
+}
+
+static void rrv__chain_delete(struct rrv__chain *ch) { (void)ch; }
+#endif /* RRV_NO_CURVED_NEE */
+
 /* >> 12 image I/O (module): PFM, PNG and OpenEXR files, checksums ===========
    This section owns everything that turns a float RGB buffer into bytes and
    back: the PFM writer and reader, the PNG preview writer (with its own
@@ -10843,6 +10975,7 @@ RRV_DEF uint32_t rrv_adler32(uint32_t adler, const void *data, size_t size)
 
 /* ---- shared helpers ----------------------------------------------------------- */
 
+#if !defined(RRV_NO_PNG) || !defined(RRV_NO_EXR)
 static void rrv__put_u32_be(unsigned char *out, uint32_t v)
 {
     out[0] = (unsigned char)(v >> 24);
@@ -10850,6 +10983,7 @@ static void rrv__put_u32_be(unsigned char *out, uint32_t v)
     out[2] = (unsigned char)(v >> 8);
     out[3] = (unsigned char)v;
 }
+#endif
 
 /* Returns RRV_OK when rgb can hold width x height pixels whose byte count
    fits in size_t, so later index arithmetic cannot overflow. */
@@ -10936,6 +11070,8 @@ static rrv_result rrv__write_pfm_to(rrv_write_func write, void *user,
     return w.failed ? RRV_ERROR_IO : RRV_OK;
 }
 
+/* Deflate serves PNG and the EXR writer: a build without both leaves it out. */
+#if !defined(RRV_NO_PNG) || !defined(RRV_NO_EXR)
 /* ---- deflate (zlib), for PNG's IDAT and EXR's ZIP chunks ---------------------
    Greedy LZ77 over a 32 KiB window with hash chains, then blocks with
    Huffman codes made for their tokens. rrv__zlib_compress writes one block
@@ -11233,6 +11369,7 @@ static void rrv__deflate_block(rrv__bit_writer *b, const uint32_t *token_list, s
     rrv__bits_put_code(b, lit_code[256], lit_len[256]);
 }
 
+#ifndef RRV_NO_EXR /* PNG streams its blocks itself */
 /* Compresses data into out as a zlib stream of one block; returns its size,
    or 0 when it would not fit in capacity. */
 static size_t rrv__zlib_compress(rrv__deflater *z, const unsigned char *data, size_t size,
@@ -11256,8 +11393,10 @@ static size_t rrv__zlib_compress(rrv__deflater *z, const unsigned char *data, si
     rrv__put_u32_be(out + b.size, rrv_adler32(1, data, size));
     return b.size + 4;
 }
+#endif /* RRV_NO_EXR */
+#endif /* deflate */
 
-
+#ifndef RRV_NO_PNG
 /* ---- PNG writer ------------------------------------------------------------------
    Each row takes the filter (None, Sub, Up, Average, Paeth) whose output has
    the smallest sum of absolute values as signed bytes, libpng's default
@@ -11494,6 +11633,8 @@ done:
     return result;
 }
 
+#endif /* RRV_NO_PNG */
+
 /* ---- OpenEXR writer ---------------------------------------------------------------
    Layout: magic, version 2 (single-part scanline), the header's attributes
    and a NUL, one 64-bit offset per chunk, then chunks of (int32 y, int32
@@ -11533,6 +11674,7 @@ RRV_DEF uint16_t rrv_half_from_float(float value)
     }
 }
 
+#ifndef RRV_NO_EXR
 /* -- the file ------------------------------------------------------------------ */
 
 #define RRV__EXR_ZIP_LINES 16
@@ -12310,6 +12452,8 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
     return RRV_OK;
 }
 
+#endif /* RRV_NO_EXR */
+
 /* ---- the callback writers' public forms: the result as an rrv_error ---- */
 
 static rrv_result rrv__writer_error(rrv_result r, const char *writer, int width, int height,
@@ -12335,16 +12479,49 @@ RRV_DEF rrv_result rrv_write_pfm_to(rrv_write_func write, void *user, const floa
 RRV_DEF rrv_result rrv_write_png_to(rrv_write_func write, void *user, const float *rgb, int width,
                                     int height, double exposure, rrv_error *err)
 {
+#ifdef RRV_NO_PNG
+    (void)write; (void)user; (void)rgb; (void)width; (void)height; (void)exposure;
+    return rrv__left_out(err, NULL, "PNG output", "RRV_NO_PNG", "");
+#else
     return rrv__writer_error(rrv__write_png_to(write, user, rgb, width, height, exposure),
                              "rrv_write_png_to", width, height, err);
+#endif
 }
 
 RRV_DEF rrv_result rrv_write_exr_to(rrv_write_func write, void *user, const float *rgb, int width,
                                     int height, const rrv_exr_options *options, rrv_error *err)
 {
+#ifdef RRV_NO_EXR
+    (void)write; (void)user; (void)rgb; (void)width; (void)height; (void)options;
+    return rrv__left_out(err, NULL, "OpenEXR output", "RRV_NO_EXR", "");
+#else
     return rrv__writer_error(rrv__write_exr_to(write, user, rgb, width, height, options),
                              "rrv_write_exr_to", width, height, err);
+#endif
 }
+
+#ifdef RRV_NO_EXR
+/* The reader's public forms without it: refused, outputs cleared. */
+RRV_DEF rrv_result rrv_exr_find_attribute(const void *data, size_t size, const char *attr_name,
+                                          const char **type, const void **value, size_t *value_size)
+{
+    (void)data; (void)size; (void)attr_name;
+    if (type) *type = NULL;
+    if (value) *value = NULL;
+    if (value_size) *value_size = 0;
+    return RRV_ERROR_UNSUPPORTED;
+}
+
+RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char *name, float **rgb,
+                                       int *width, int *height, rrv_exr_options *info, rrv_error *err)
+{
+    (void)data; (void)size; (void)info;
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    return rrv__left_out(err, name, "OpenEXR input", "RRV_NO_EXR", "");
+}
+#endif
 
 /* ---- PFM reader ------------------------------------------------------------------ */
 
@@ -12523,6 +12700,9 @@ RRV_DEF rrv_result rrv_read_pfm_memory(const void *data, size_t size, const char
     rrv__pfm_header h;
     rrv_result result;
 
+    /* every field is set on success; zeroed so that gcc -O1, inlining
+       differently without stdio, sees none read uninitialised */
+    memset(&h, 0, sizeof h);
     if (rgb) *rgb = NULL;
     if (width) *width = 0;
     if (height) *height = 0;
@@ -12784,10 +12964,19 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
     rrv_result result;
     int closed;
 
+#ifdef RRV_NO_EXR
+    (void)exr;
+#endif
     if (!path) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "no output path");
     if (rrv__check_image_args(rgb, width, height) != RRV_OK)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "invalid image (%dx%d, data %s)",
                          width, height, rgb ? "given" : "NULL");
+#ifdef RRV_NO_PNG
+    if (format == RRV__IMAGE_PNG) return rrv__left_out(err, path, "PNG output", "RRV_NO_PNG", "");
+#endif
+#ifdef RRV_NO_EXR
+    if (format == RRV__IMAGE_EXR) return rrv__left_out(err, path, "OpenEXR output", "RRV_NO_EXR", "");
+#endif
     if (format == RRV__IMAGE_PNG && !isfinite(exposure))
         return rrv__fail(err, RRV_ERROR_ARGUMENT, path, 0, "exposure must be finite");
 
@@ -12812,11 +13001,16 @@ static rrv_result rrv__write_image_file(const char *path, const float *rgb, int 
         return rrv__fail(err, RRV_ERROR_IO, path, 0, "cannot write: cannot create a temporary file%s%s",
                          why[0] ? ": " : "", why);
     }
+#ifndef RRV_NO_PNG
     if (format == RRV__IMAGE_PNG)
         result = rrv__write_png_to(rrv__fwrite_callback, file, rgb, width, height, exposure);
-    else if (format == RRV__IMAGE_EXR)
+    else
+#endif
+#ifndef RRV_NO_EXR
+    if (format == RRV__IMAGE_EXR)
         result = rrv__write_exr_to(rrv__fwrite_callback, file, rgb, width, height, exr);
     else
+#endif
         result = rrv__write_pfm_to(rrv__fwrite_callback, file, rgb, width, height);
     closed = fclose(file) == 0;
     if (result != RRV_OK || !closed) {
@@ -12954,6 +13148,7 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
     return RRV_OK;
 }
 
+#ifndef RRV_NO_EXR
 /* A file can be no larger than this to be read whole. */
 #define RRV__EXR_FILE_MAX ((size_t)1 << 31)
 
@@ -13004,8 +13199,28 @@ RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *
     RRV_FREE(data);
     return result;
 }
+#endif /* RRV_NO_EXR */
 
 #else /* RRV_NO_STDIO */
+
+RRV_DEF rrv_result rrv_write_exr(const char *path, const float *rgb, int width, int height,
+                                 const rrv_exr_options *options, rrv_error *err)
+{
+    (void)rgb; (void)width; (void)height; (void)options;
+    return rrv__fail(err, RRV_ERROR_UNSUPPORTED, path, 0,
+                     "file output is disabled (RRV_NO_STDIO); use rrv_write_exr_to");
+}
+
+RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *height,
+                                rrv_exr_options *info, rrv_error *err)
+{
+    (void)info;
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    return rrv__fail(err, RRV_ERROR_UNSUPPORTED, path, 0,
+                     "file input is disabled (RRV_NO_STDIO); use rrv_read_exr_memory");
+}
 
 RRV_DEF rrv_result rrv_write_pfm(const char *path, const float *rgb, int width, int height,
                                  rrv_error *err)
@@ -13035,6 +13250,18 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
 
 #endif /* RRV_NO_STDIO */
 
+#if defined(RRV_NO_EXR) && !defined(RRV_NO_STDIO)
+RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *height,
+                                rrv_exr_options *info, rrv_error *err)
+{
+    (void)info;
+    if (rgb) *rgb = NULL;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    return rrv__left_out(err, path, "OpenEXR input", "RRV_NO_EXR", "");
+}
+#endif
+
 /* >> 13 NanoVDB files (module): segments, grids and the validation of trees ==
    Reads what nanovdb_convert writes: a file of segments, each a 16-byte
    header ("NanoVDB0" or the newer "NanoVDB2", version, grid count, codec)
@@ -13050,6 +13277,21 @@ RRV_DEF rrv_result rrv_read_pfm(const char *path, float **rgb, int *width, int *
    every value is checked finite, after which the lookups above need no
    checks. */
 
+RRV_DEF const char *rrv_nanovdb_type_name(rrv_nanovdb_type type)
+{
+    switch (type) {
+    case RRV_NANOVDB_FLOAT: return "float";
+    case RRV_NANOVDB_FP4: return "fp4";
+    case RRV_NANOVDB_FP8: return "fp8";
+    case RRV_NANOVDB_FP16: return "fp16";
+    case RRV_NANOVDB_FPN: return "fpN";
+    default: return "unknown";
+    }
+}
+
+/* Without the reader (RRV_NO_NANOVDB) no grid can be validated, so the
+   lookups above stay but a NANOVDB field is refused (rrv__field_check). */
+#ifndef RRV_NO_NANOVDB
 static int32_t rrv__nv_s32(uint32_t u)
 {
     return u <= 0x7fffffffu ? (int32_t)u : (int32_t)(u - 0x80000000u) - 0x7fffffff - 1;
@@ -13192,18 +13434,6 @@ static uint64_t rrv__nv_leaf_size(rrv_nanovdb_type type)
     case RRV_NANOVDB_FP8: return 608;
     case RRV_NANOVDB_FP16: return 1120;
     default: return 0;
-    }
-}
-
-RRV_DEF const char *rrv_nanovdb_type_name(rrv_nanovdb_type type)
-{
-    switch (type) {
-    case RRV_NANOVDB_FLOAT: return "float";
-    case RRV_NANOVDB_FP4: return "fp4";
-    case RRV_NANOVDB_FP8: return "fp8";
-    case RRV_NANOVDB_FP16: return "fp16";
-    case RRV_NANOVDB_FPN: return "fpN";
-    default: return "unknown";
     }
 }
 
@@ -13640,6 +13870,39 @@ RRV_DEF rrv_result rrv_nanovdb_read(const char *path, const char *grid_name,
     return rrv__nv_read_file(path, path, grid_name, opt, grid, err, &why);
 }
 
+#else /* RRV_NO_NANOVDB */
+
+RRV_DEF rrv_result rrv_nanovdb_read_memory(const void *data, size_t size, const char *name,
+                                           const char *grid_name, size_t max_grid_bytes,
+                                           rrv_nanovdb *grid, rrv_error *err)
+{
+    (void)data; (void)size; (void)grid_name; (void)max_grid_bytes;
+    if (grid) memset(grid, 0, sizeof *grid);
+    return rrv__left_out(err, name, "reading NanoVDB grids", "RRV_NO_NANOVDB", "");
+}
+
+#ifndef RRV_NO_SCENE_FILE
+/* The parser's `nanovdb` statement meets the refusal here. */
+static rrv_result rrv__nv_read_file(const char *path, const char *name, const char *grid_name,
+                                    const rrv_load_options *opt, rrv_nanovdb *grid, rrv_error *err,
+                                    const char **why)
+{
+    (void)path; (void)grid_name; (void)opt;
+    *why = "";
+    memset(grid, 0, sizeof *grid);
+    return rrv__left_out(err, name, "reading NanoVDB grids", "RRV_NO_NANOVDB", "");
+}
+#endif
+
+RRV_DEF rrv_result rrv_nanovdb_read(const char *path, const char *grid_name,
+                                    const rrv_load_options *opt, rrv_nanovdb *grid, rrv_error *err)
+{
+    (void)grid_name; (void)opt;
+    if (grid) memset(grid, 0, sizeof *grid);
+    return rrv__left_out(err, path, "reading NanoVDB grids", "RRV_NO_NANOVDB", "");
+}
+#endif /* RRV_NO_NANOVDB */
+
 RRV_DEF void rrv_nanovdb_cell_centered(rrv_nanovdb *grid)
 {
     double o[3];
@@ -13682,7 +13945,11 @@ RRV_DEF void rrv_nanovdb_free(rrv_nanovdb *grid)
 
 /* ---- file reading --------------------------------------------------------- */
 
+/* Scene files and the NanoVDB reader read through here. */
+#if !defined(RRV_NO_SCENE_FILE) || !defined(RRV_NO_NANOVDB)
+
 #ifndef RRV_NO_STDIO
+#ifndef RRV_NO_SCENE_FILE /* the gridvol reader's */
 static int rrv__sf_stdio_size(FILE *f, unsigned long long *size)
 {
     long len;
@@ -13692,6 +13959,7 @@ static int rrv__sf_stdio_size(FILE *f, unsigned long long *size)
     *size = (unsigned long long)len;
     return 1;
 }
+#endif
 
 /* A text file stops after the piece holding its first NUL byte: the parser
    refuses the file on that line anyway, and a device such as /dev/zero
@@ -13755,10 +14023,12 @@ static void rrv__sf_release_whole(const rrv_load_options *opt, void *data)
 
 /* 1 when a buffer of rrv__sf_read_whole may be kept and later freed with
    RRV_FREE (a NanoVDB grid keeps its file's bytes). */
+#ifndef RRV_NO_NANOVDB
 static int rrv__sf_whole_is_ours(const rrv_load_options *opt)
 {
     return !(opt && opt->read_file && opt->release_file);
 }
+#endif
 
 static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, int text,
                                      size_t max_bytes, void **data, size_t *size, const char **why)
@@ -13789,6 +14059,7 @@ static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *pa
 #endif
 }
 
+#ifndef RRV_NO_SCENE_FILE
 static size_t rrv__sf_max_bytes(const rrv_load_options *opt)
 {
     return opt && opt->max_grid_bytes ? opt->max_grid_bytes : RRV_DEFAULT_MAX_GRID_BYTES;
@@ -13841,7 +14112,10 @@ static int rrv__sf_join_path(const char *base_dir, const char *path, char *out, 
     }
     return 1;
 }
+#endif /* RRV_NO_SCENE_FILE */
+#endif /* file reading */
 
+#ifndef RRV_NO_SCENE_FILE
 /* ---- gridvol ---------------------------------------------------------------- */
 
 typedef struct rrv__sf_grid_header {
@@ -14347,6 +14621,7 @@ static rrv_result rrv__sf_perr(rrv__sf_parser *p, rrv_result code, const char *f
 }
 
 #define RRV__SF_OOM(p) rrv__sf_perr((p), RRV_ERROR_MEMORY, "out of memory")
+#endif /* RRV_NO_SCENE_FILE */
 
 /* Makes room for one more element; capacity doubles, counts stay ints. */
 static int rrv__sf_reserve(void **array, int *capacity, int count, size_t elem)
@@ -14576,6 +14851,7 @@ static const rrv__sf_key rrv__sf_temperature_extra_keys[] = {
 };
 
 #define RRV__SF_COUNT(a) (int)(sizeof(a) / sizeof((a)[0]))
+#ifndef RRV_NO_SCENE_FILE
 
 /* "did you mean": the candidate nearest a misspelt word, by optimal string
    alignment (Levenshtein plus a swap of neighbours, the commonest typo).
@@ -14664,6 +14940,8 @@ static int rrv__sf_find_key(const rrv__sf_key *keys, int nkeys, const rrv__sf_to
     return -1;
 }
 
+#endif /* RRV_NO_SCENE_FILE */
+
 static int rrv__sf_in_range(const rrv__sf_key *k, double v)
 {
     if (k->lo != RRV__SF_NO_LO && ((k->flags & RRV__SF_GT) ? !(v > k->lo) : !(v >= k->lo)))
@@ -14684,6 +14962,7 @@ static void rrv__sf_range_text(const rrv__sf_key *k, char *buf, size_t cap)
         snprintf(buf, cap, "in %c%.15g, %.15g%c", gt ? '(' : '[', k->lo, k->hi, lt ? ')' : ']');
 }
 
+#ifndef RRV_NO_SCENE_FILE
 static rrv_result rrv__sf_range_error(rrv__sf_parser *p, const char *stmt, const rrv__sf_key *k,
                                       const rrv__sf_tok *t)
 {
@@ -14853,6 +15132,8 @@ static int rrv__sf_tok_string(const rrv__sf_tok *t, char *out, size_t cap)
     out[t->n] = '\0';
     return 1;
 }
+
+#endif /* RRV_NO_SCENE_FILE */
 
 /* ---- building scenes in code: one home for defaults and checks -------------
    The parser is a client of this part: a statement starts from a zeroed
@@ -15034,6 +15315,13 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
                             (int)s->ior_interpolation);
     if ((unsigned)s->nee > (unsigned)RRV_NEE_AIM)
         return rrv__ck_fail(ck, RRV_OK, "nee %d is not one of rrv_nee", (int)s->nee);
+#ifdef RRV_NO_CURVED_NEE
+    /* refused, not aimed instead: a render must not quietly be another
+       estimator than the one asked for */
+    if (s->nee == RRV_NEE_SHOOT || s->nee == RRV_NEE_MANIFOLD)
+        return rrv__ck_fail(ck, RRV_ERROR_UNSUPPORTED, "nee %s is disabled (RRV_NO_CURVED_NEE); use nee aim",
+                            s->nee == RRV_NEE_SHOOT ? "shoot" : "manifold");
+#endif
     if ((unsigned)s->sampler > (unsigned)RRV_SAMPLER_SOBOL)
         return rrv__ck_fail(ck, RRV_OK, "sampler %d is not one of rrv_sampler", (int)s->sampler);
     if ((unsigned)s->emission_nee > (unsigned)RRV_EMISSION_NEE_OFF)
@@ -15321,6 +15609,9 @@ static rrv_result rrv__field_check(const rrv__ck *ck, rrv_medium_field which, co
         return RRV_OK;
     }
     case RRV_FIELD_NANOVDB:
+#ifdef RRV_NO_NANOVDB
+        return rrv__ck_fail(ck, RRV_ERROR_UNSUPPORTED, "NanoVDB grids are disabled (RRV_NO_NANOVDB)");
+#endif
         if (!f->nanovdb.buffer) return rrv__ck_fail(ck, RRV_OK, "the NanoVDB grid has no data");
         return RRV_OK;
     case RRV_FIELD_LUNEBURG:
@@ -15765,6 +16056,7 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
     return RRV_OK;
 }
 
+#ifndef RRV_NO_SCENE_FILE
 /* ---- materials and shapes ------------------------------------------------------ */
 
 static int rrv__sf_find_material(const rrv_scene *s, const rrv__sf_tok *t)
@@ -16680,6 +16972,8 @@ static const struct rrv__sf_statement {
     {"pressure", rrv__sf_st_field},          {"ior", rrv__sf_st_field},
 };
 
+#endif /* RRV_NO_SCENE_FILE */
+
 /* ---- scene ---------------------------------------------------------------------- */
 
 static void rrv__sf_field_free(rrv_field *f)
@@ -16731,6 +17025,7 @@ static size_t rrv__sf_scene_bytes(const rrv_scene *s)
     return b;
 }
 
+#ifndef RRV_NO_SCENE_FILE
 static rrv_result rrv__sf_parse_lines(rrv__sf_parser *p, const char *text, size_t size)
 {
     size_t pos = 0;
@@ -16846,6 +17141,46 @@ RRV_DEF rrv_result rrv_scene_load(const char *path, const rrv_load_options *opt,
     rrv__sf_release_whole(opt, data);
     return r;
 }
+
+#else /* RRV_NO_SCENE_FILE: scenes come from the building calls alone */
+
+RRV_DEF rrv_result rrv_scene_parse(const char *text, size_t size, const char *name,
+                                   const char *base_dir, const rrv_load_options *opt,
+                                   rrv_scene **out, rrv_error *err)
+{
+    (void)text; (void)size; (void)base_dir; (void)opt;
+    if (out) *out = NULL;
+    return rrv__left_out(err, name, "the scene file parser", "RRV_NO_SCENE_FILE",
+                         "; build the scene with rrv_scene_create and rrv_scene_add_*");
+}
+
+RRV_DEF rrv_result rrv_scene_load(const char *path, const rrv_load_options *opt, rrv_scene **out,
+                                  rrv_error *err)
+{
+    (void)opt;
+    if (out) *out = NULL;
+    return rrv__left_out(err, path, "the scene file parser", "RRV_NO_SCENE_FILE",
+                         "; build the scene with rrv_scene_create and rrv_scene_add_*");
+}
+
+RRV_DEF rrv_result rrv_grid_read_memory(const void *data, size_t size, const char *name,
+                                        size_t max_grid_bytes, int nonnegative,
+                                        rrv_grid *grid, rrv_error *err)
+{
+    (void)data; (void)size; (void)max_grid_bytes; (void)nonnegative;
+    if (grid) memset(grid, 0, sizeof *grid);
+    return rrv__left_out(err, name, "the gridvol reader", "RRV_NO_SCENE_FILE",
+                         "; give the samples in rrv_field.grid");
+}
+
+RRV_DEF rrv_result rrv_grid_read(const char *path, const rrv_load_options *opt, int nonnegative,
+                                 rrv_grid *grid, rrv_error *err)
+{
+    (void)opt;
+    return rrv_grid_read_memory(NULL, 0, path, 0, nonnegative, grid, err);
+}
+
+#endif /* RRV_NO_SCENE_FILE */
 
 #endif /* RRV_IMPLEMENTATION_INCLUDED */
 #endif /* RRV_IMPLEMENTATION */

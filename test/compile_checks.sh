@@ -32,6 +32,32 @@ if out=$(${CC:-cc} -std=c99 -Wall -Wextra -pedantic -Werror -I. -c "$build/nostd
 then echo "PASS header_compiles_without_stdio"
 else printf '%s\n' "$out" | head -20; echo "FAIL header_compiles_without_stdio"
 fi
+# The parts a build can leave out (rrv.h, CONFIGURATION): each switch
+# alone, all five together (also without stdio) and none, warning-free with
+# both compilers, each linking test/switches.c, which renders a scene built
+# through the API and checks that every call needing a part left out
+# refuses naming its switch, and that the default build does not. The
+# combinations with every stub are built by gcc at -O1, for the warnings
+# that need its flow analysis (one showed only there); the rest at -O0, so
+# the sixteen compiles of the implementation stay cheap.
+all_switches="-DRRV_NO_SCENE_FILE -DRRV_NO_NANOVDB -DRRV_NO_EXR -DRRV_NO_PNG -DRRV_NO_CURVED_NEE"
+ok=1; count=0
+for c in gcc clang; do
+    command -v "$c" >/dev/null 2>&1 || { echo "  $c not found"; ok=0; continue; }
+    for flags in "" -DRRV_NO_SCENE_FILE -DRRV_NO_NANOVDB -DRRV_NO_EXR -DRRV_NO_PNG -DRRV_NO_CURVED_NEE \
+                 "$all_switches" "$all_switches -DRRV_NO_STDIO"; do
+        count=$((count + 1))
+        opt=-O0
+        case "$c $flags" in "gcc $all_switches"*) opt=-O1 ;; esac
+        if ! out=$("$c" -std=c99 -Wall -Wextra -pedantic -Werror $opt $flags -I. -o "$build/switches_check" test/switches.c -lm 2>&1)
+        then printf '%s\n' "$out" | head -10; echo "  $c $flags: does not build"; ok=0; continue
+        fi
+        if ! out=$("$build/switches_check" 2>&1)
+        then printf '%s\n' "$out" | head -10; echo "  $c $flags: test/switches.c failed"; ok=0
+        fi
+    done
+done
+if [ $ok = 1 ]; then echo "PASS build_switches_compile_and_refuse ($count builds)"; else echo "FAIL build_switches_compile_and_refuse"; fi
 # The implementation after the user's own system headers under strict C99
 # (glibc then declares no fdopen: rrv.h must declare it itself), and the
 # plain-C file I/O of RRV_NO_POSIX, with both compilers.
