@@ -2477,6 +2477,7 @@ struct rrv__majorant_grid {
                               is known (the comb's chords there keep RRV__COMB_MAX_CELLS) */
     float density_peak;    /* max of density_max: sizes the work bounds */
     float grad_peak;       /* max of grad_max, 0 if the medium does not refract */
+    int flat_cells;        /* some cell has grad_max 0 (rrv__skip_grid) */
     size_t bytes;          /* heap bytes built for this medium (grids, bakes) */
     int empty;             /* no extinction anywhere: density tracking can skip it */
     int surface_free;      /* no surface reaches into the box: chords inside need no ray cast */
@@ -4209,9 +4210,11 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
         job.ambient_r = rrv__ambient_ior(scene) - 1.0;
         rrv__parallel_for(scene, g->n[2], rrv__majorant_slice, &job);
     }
+    g->flat_cells = 0;
     for (c = 0; c < cells; ++c) {
         g->density_peak = g->density_max[c] > g->density_peak ? g->density_max[c] : g->density_peak;
         if (refracts) g->grad_peak = g->grad_max[c] > g->grad_peak ? g->grad_max[c] : g->grad_peak;
+        if (refracts && !(g->grad_max[c] > 0)) g->flat_cells = 1;
     }
     g->empty = 1;
     for (c = 0; c < cells; ++c)
@@ -5560,6 +5563,9 @@ typedef struct rrv__bender {
                           it, at face_at: the comb's first half kick there */
     rrv_vec3 face_at, face_grad;
     double face_jump;  /* the last face crossed: |r past - r behind| */
+    int cell_face;     /* eikonal: the planned segment's face is one between
+                          majorant cells with and without a gradient
+                          (rrv__eikonal_view), where the IOR is continuous */
     int support_in_extinction; /* the sole support's box lies in the box of a
                                   medium with extinction: every chord in it
                                   meets extinction (rrv__chord_meets_extinction) */
@@ -5594,6 +5600,7 @@ static void rrv__bender_restart(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     b->face_known = 0;
     b->face_jump = 0;
     b->behind_split = 0;
+    b->cell_face = 0;
 }
 
 static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikonal, rrv_vec3 o)
@@ -6098,6 +6105,142 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
     if (b->ahead.t_face < DBL_MAX) b->ahead.t_face -= b->segment;
 }
 
+/* ---- eikonal: cells without a gradient crossed straight ----------------------
+   A majorant cell whose bound on |grad r| is 0 holds a constant IOR, where
+   the ray equation's solution is a straight line and every RK4 or leapfrog
+   step of it is exactly the chord: marching it at the scene's step buys
+   nothing but lookups. In a box support (the bender's sole support), the
+   eikonal march therefore treats the faces between cells with and without
+   a gradient as faces of the support: a run of cells without one is one
+   straight segment to where cells with one begin, and steps in cells with
+   a gradient are cut where those without begin, as at a support's face, so
+   that no step straddles the edge and the march stays a continuous function
+   of the ray (a step that began just inside a gradient cell would kick
+   where one just outside it would not). The decisions are made per cell,
+   so shoot's Jacobi fields cross these faces as they cross a support's
+   (the face point's saltation, rrv__shoot_kept) and its Newton sees the
+   same piecewise-smooth map camera rays take. RRV__EIKONAL_SKIP 0 (a
+   measurement build) marches every cell at the step. */
+#ifndef RRV__EIKONAL_SKIP
+#define RRV__EIKONAL_SKIP 1
+#endif
+
+/* Does the eikonal march of this bender cross cells without a gradient
+   straight? Only in a sole box support whose grid has such cells. */
+static const struct rrv__majorant_grid *rrv__skip_grid(const rrv__bender *b)
+{
+    const struct rrv__majorant_grid *g;
+    if (!RRV__EIKONAL_SKIP || !b->eikonal || !b->sole_support) return NULL;
+    g = b->sole_support->majorant;
+    return g && g->grad_max && g->flat_cells ? g : NULL;
+}
+
+/* The distance from x along unit d to the first face between majorant
+   cells where having a gradient changes from what x's cell has (*flat: x's
+   cell has none), looked for up to limit; DBL_MAX if none comes first or
+   the line leaves the grid. *normal gets that face's axis. Distances are
+   quotients, as rrv__look_axis takes them, so that the march is the same
+   bit for bit whoever asks. */
+static double rrv__gradient_edge(const struct rrv__majorant_grid *g, rrv_vec3 x, rrv_vec3 d, double limit_with,
+                                 double limit_flat, int *flat, rrv_vec3 *normal)
+{
+    const double xs[3] = {x.x, x.y, x.z}, ds[3] = {d.x, d.y, d.z};
+    const double lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
+    double t_next[3];
+    double limit;
+    ptrdiff_t stride[3], idx = 0;
+    int cell[3], step[3], a, with;
+    stride[0] = 1;
+    stride[1] = g->n[0];
+    stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
+    for (a = 0; a < 3; ++a) {
+        double c = (xs[a] - lo[a]) / cs[a];
+        cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+        idx += stride[a] * cell[a];
+        if (ds[a] != 0) {
+            step[a] = ds[a] > 0 ? 1 : -1;
+            t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) / ds[a];
+            if (t_next[a] < 0) t_next[a] = 0;
+            stride[a] *= step[a];
+        } else {
+            step[a] = 0;
+            t_next[a] = DBL_MAX;
+        }
+    }
+    with = g->grad_max[idx] > 0;
+    *flat = !with;
+    limit = with ? limit_with : limit_flat;
+    for (;;) {
+        double t;
+        a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+        t = t_next[a];
+        if (!(t <= limit)) return DBL_MAX;
+        cell[a] += step[a];
+        if (cell[a] < 0 || cell[a] >= g->n[a]) return DBL_MAX;
+        idx += stride[a];
+        if ((g->grad_max[idx] > 0) != with) {
+            *normal = rrv__v3(a == 0, a == 1, a == 2);
+            return t;
+        }
+        /* the next face of this axis, from the cell's own plane (no sum
+           of increments, which would drift from the quotient) */
+        t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) / ds[a];
+    }
+}
+
+/* The support view from x along unit d for the eikonal march, with the
+   faces between cells with and without a gradient (rrv__skip_grid) as
+   faces: from a cell without one the ray is outside every support up to
+   the first cell with one (a straight segment), from a cell with one the
+   nearest face may be where those without begin; that one is looked for
+   only up to limit (what the caller uses of a nearer t_face: a step's
+   reach), the straight run up to the view's own face. *cell_face: the
+   view's face is such a face. */
+static void rrv__eikonal_view(const rrv__bender *b, rrv_vec3 x, rrv_vec3 d, double limit, rrv__support_view *v,
+                              int *cell_face)
+{
+    const struct rrv__majorant_grid *g = rrv__skip_grid(b);
+    rrv_vec3 normal;
+    double t;
+    int flat;
+    *cell_face = 0;
+    if (!g || !v->inside || !rrv__inside_box(x, g->lo, g->hi)) return;
+    t = rrv__gradient_edge(g, x, d, fmin(limit, v->t_face), v->t_face, &flat, &normal);
+    if (flat) {
+        /* the straight run goes to the first cell with a gradient, or to
+           the support's face when none comes before it */
+        if (t < v->t_face) {
+            v->t_face = t;
+            v->normal = normal;
+            *cell_face = 1;
+        }
+        v->inside = 0;
+        return;
+    }
+    if (t < v->t_face) {
+        v->t_face = t;
+        v->normal = normal;
+        *cell_face = 1;
+    }
+}
+
+/* The nearest face between cells with and without a gradient from x along
+   the unit chord direction c within limit (x's cell has a gradient), into
+   *along where it is nearer than along's face. */
+static void rrv__chord_edge(const rrv__bender *b, rrv_vec3 x, rrv_vec3 c, double limit, rrv__support_view *along)
+{
+    const struct rrv__majorant_grid *g = rrv__skip_grid(b);
+    rrv_vec3 normal;
+    int flat;
+    double t;
+    if (!g || !rrv__inside_box(x, g->lo, g->hi)) return;
+    t = rrv__gradient_edge(g, x, c, limit, limit, &flat, &normal);
+    if (t < along->t_face) {
+        along->t_face = t;
+        along->normal = normal;
+    }
+}
+
 /* One eikonal step of at most h from x that stops short of the next face
    (a step ending past it would take its closing kick from the other side's
    gradient); the curved step is shortened if its chord would cross a face.
@@ -6114,6 +6257,7 @@ static void rrv__eikonal_plan(rrv__bender *b, const rrv_scene *scene, rrv_steppe
     len = rrv__length(chord);
     if (reach < len + nudge) rrv__look_along(scene, x, rrv__scale(chord, 1.0 / len), &along);
     else along.t_face = DBL_MAX;
+    rrv__chord_edge(b, x, rrv__scale(chord, 1.0 / len), len + nudge, &along);
     if (along.t_face < len + nudge && along.t_face > 2 * nudge) {
         h = rrv__eikonal_step_controlled(scene, stepper, h * (along.t_face - nudge) / len, x, *d, &x1, &b->next_d);
         chord = rrv__sub(x1, x);
@@ -6137,6 +6281,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     rrv__reciprocals(*d, b->line_inv);
     if (b->eikonal && rrv__safe_for_step(scene, reach)) rrv__safe_view(b, reach, &view);
     else rrv__look_along(scene, o, *d, &view);
+    if (b->eikonal) rrv__eikonal_view(b, o, *d, scene->settings.step + 2 * RRV__EDGE_NUDGE, &view, &b->cell_face);
     b->pending = 1;
     b->chord_inside = 0;
     b->segment = view.t_face;
@@ -6189,7 +6334,17 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
         }
         break;
     case RRV__END_FACE:
-        if (b->combing) {
+        if (b->cell_face) {
+            /* between cells with and without a gradient: the IOR is
+               continuous, nothing to refract; past the face by the gap a
+               support's face is crossed by */
+            *o = rrv__madd(*o, *d, rrv__face_gap(*o));
+            b->last = *o;
+            b->pending = 0;
+            b->cell_face = 0;
+            b->reflected = 0;
+            b->face_jump = 0;
+        } else if (b->combing) {
             /* the comb's last half kick, gradient just behind the face, where
                the refractivity looked up with it is the face's r_before */
             rrv_vec3 at = rrv__madd(*o, *d, -rrv__face_gap(*o)), grad;
@@ -8232,6 +8387,7 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
     rrv__reciprocals(*d, b->line_inv);
     if (seen) rrv__look_along(scene, o, *d, &view);
     else rrv__safe_view(b, reach, &view);
+    rrv__eikonal_view(b, o, *d, step + 2 * nudge, &view, &b->cell_face);
     b->pending = 1;
     b->segment = view.t_face;
     b->end = view.t_face < DBL_MAX ? RRV__END_FACE : RRV__END_NONE;
@@ -8245,10 +8401,15 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
     len = rrv__length(chord);
     if (reach < len + nudge) rrv__look_along(scene, o, rrv__scale(chord, 1.0 / len), &along);
     else along.t_face = DBL_MAX;
+    rrv__chord_edge(b, o, rrv__scale(chord, 1.0 / len), len + nudge, &along);
     if (along.t_face < len + nudge && along.t_face > 2 * nudge) {
         /* which cut made the step is told below by the view's own t_face
            (the slack) and normal, which the bound does not give */
-        if (!seen) rrv__look_along(scene, o, d_start, &view);
+        if (!seen) {
+            int cell_face;
+            rrv__look_along(scene, o, d_start, &view);
+            rrv__eikonal_view(b, o, d_start, step + 2 * nudge, &view, &cell_face);
+        }
         h = rrv__eikonal_step_controlled_staged(scene, stepper, h * (along.t_face - nudge) / len, o, d_start, &x1,
                                                 &b->next_d, &st, &again);
         chord = rrv__sub(x1, o);
@@ -8279,7 +8440,11 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
         for (j = 0; j < 2; ++j)
             dh[j] = -scale * rrv__dot(view.normal, rrv__madd(J->x[j], J->d[j], view.t_face)) / nd;
     } else {
-        rrv__look_along(scene, o, *d, &view);
+        {
+            int cell_face;
+            rrv__look_along(scene, o, *d, &view);
+            rrv__eikonal_view(b, o, *d, 1.5 * len, &view, &cell_face);
+        }
         if (!(view.t_face < 1.5 * len)) return 0; /* the second step halved */
         nd = rrv__dot(view.normal, b->next_d);
         if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
@@ -8434,7 +8599,7 @@ static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec
             rrv__ratio_tracking_transmittance(ctx, x, d, len, rng, Ts);
             for (c = 0; c < 3; ++c) T[c] *= Ts[c];
         }
-        if (b.end == RRV__END_FACE && rrv__face_jumps(scene, rrv__madd(x, d, len), d)) {
+        if (b.end == RRV__END_FACE && !b.cell_face && rrv__face_jumps(scene, rrv__madd(x, d, len), d)) {
             out->status = RRV__SHOT_INTERFACE;
             return;
         }
