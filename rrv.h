@@ -5312,6 +5312,12 @@ static int rrv__sphere_interval(const rrv_field *f, rrv_vec3 o, rrv_vec3 d, doub
    gradient is taken inside the support; the rest is a straight segment. */
 #define RRV__EDGE_NUDGE 1e-9
 
+/* Eikonal: cross majorant cells without a gradient straight (below,
+   rrv__skip_grid); 0 in a measurement build marches them at the step. */
+#ifndef RRV__EIKONAL_SKIP
+#define RRV__EIKONAL_SKIP 1
+#endif
+
 /* The longest comb chord, in majorant cells (rrv__rate_distance); a
    measurement build may set another. */
 #ifndef RRV__COMB_MAX_CELLS
@@ -5563,6 +5569,8 @@ typedef struct rrv__bender {
                           it, at face_at: the comb's first half kick there */
     rrv_vec3 face_at, face_grad;
     double face_jump;  /* the last face crossed: |r past - r behind| */
+    int skip_flat;     /* eikonal: cross cells without a gradient straight
+                          (RRV__EIKONAL_SKIP; a test turns it off to compare) */
     int cell_face;     /* eikonal: the planned segment's face is one between
                           majorant cells with and without a gradient
                           (rrv__eikonal_view), where the IOR is continuous */
@@ -5619,6 +5627,7 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikona
     b->support_in_extinction = 0;
     b->holds_support = 0;
     b->inv_tolerance = 1.0 / scene->settings.bend_tolerance;
+    b->skip_flat = RRV__EIKONAL_SKIP;
     b->chord_inside = 0;
     b->safe_at = o;
     b->safe_inner2 = 0;
@@ -5671,9 +5680,9 @@ static inline double rrv__safe_reach(rrv__bender *b, const rrv_scene *scene, rrv
 }
 
 /* Does the bound let a step from o skip planning's look? */
-static int rrv__safe_for_step(const rrv_scene *scene, double reach)
+static int rrv__safe_for_step(double step, double reach)
 {
-    return reach - RRV__EDGE_NUDGE >= scene->settings.step;
+    return reach - RRV__EDGE_NUDGE >= step;
 }
 
 /* The view every look from o would give within reach: inside, no face
@@ -6120,17 +6129,15 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
    so shoot's Jacobi fields cross these faces as they cross a support's
    (the face point's saltation, rrv__shoot_kept) and its Newton sees the
    same piecewise-smooth map camera rays take. RRV__EIKONAL_SKIP 0 (a
-   measurement build) marches every cell at the step. */
-#ifndef RRV__EIKONAL_SKIP
-#define RRV__EIKONAL_SKIP 1
-#endif
+   measurement build, defined above the bender) marches every cell at the
+   step. */
 
 /* Does the eikonal march of this bender cross cells without a gradient
    straight? Only in a sole box support whose grid has such cells. */
 static const struct rrv__majorant_grid *rrv__skip_grid(const rrv__bender *b)
 {
     const struct rrv__majorant_grid *g;
-    if (!RRV__EIKONAL_SKIP || !b->eikonal || !b->sole_support) return NULL;
+    if (!b->skip_flat || !b->eikonal || !b->sole_support) return NULL;
     g = b->sole_support->majorant;
     return g && g->grad_max && g->flat_cells ? g : NULL;
 }
@@ -6224,6 +6231,71 @@ static void rrv__eikonal_view(const rrv__bender *b, rrv_vec3 x, rrv_vec3 d, doub
     }
 }
 
+/* Bend-bounded eikonal steps (a measurement build; 0, fixed steps, by
+   default): with RRV__EIKONAL_STEP_BEND = K > 0, a step in a box support
+   with a gradient bound runs until the integral along its line of the
+   cells' bounds on |grad r| reaches K bend tolerances (the bound on how far
+   it turns the ray), at most RRV__EIKONAL_STEP_CAP times the scene's step.
+   The length is a continuous function of the ray (the integral of a
+   piecewise constant bound along a line moves continuously with the line),
+   so the march stays a continuous map for shoot's Newton; its derivative
+   is left out of the Jacobi field, as moving a step's end along the curve
+   leaves the curve as it was to the order of the stepper's error. */
+#ifndef RRV__EIKONAL_STEP_BEND
+#define RRV__EIKONAL_STEP_BEND 0.0
+#endif
+#ifndef RRV__EIKONAL_STEP_CAP
+#define RRV__EIKONAL_STEP_CAP 64.0
+#endif
+
+static double rrv__eikonal_step_length(const rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
+{
+    const struct rrv__majorant_grid *g;
+    const double step = scene->settings.step;
+    double budget, cap, xs[3], ds[3], lo[3], cs[3], t_next[3], t = 0;
+    ptrdiff_t stride[3], idx = 0;
+    int cell[3], dir[3], a;
+    if (!(RRV__EIKONAL_STEP_BEND > 0) || !b->eikonal || !b->sole_support) return step;
+    g = b->sole_support->majorant;
+    if (!g || !g->grad_max || !rrv__inside_box(x, g->lo, g->hi)) return step;
+    budget = RRV__EIKONAL_STEP_BEND * scene->settings.bend_tolerance;
+    cap = RRV__EIKONAL_STEP_CAP * step;
+    xs[0] = x.x; xs[1] = x.y; xs[2] = x.z;
+    ds[0] = d.x; ds[1] = d.y; ds[2] = d.z;
+    lo[0] = g->lo.x; lo[1] = g->lo.y; lo[2] = g->lo.z;
+    cs[0] = g->cell.x; cs[1] = g->cell.y; cs[2] = g->cell.z;
+    stride[0] = 1;
+    stride[1] = g->n[0];
+    stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
+    for (a = 0; a < 3; ++a) {
+        double c = (xs[a] - lo[a]) / cs[a];
+        cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+        idx += stride[a] * cell[a];
+        if (ds[a] != 0) {
+            dir[a] = ds[a] > 0 ? 1 : -1;
+            t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) / ds[a];
+            if (t_next[a] < 0) t_next[a] = 0;
+            stride[a] *= dir[a];
+        } else {
+            dir[a] = 0;
+            t_next[a] = DBL_MAX;
+        }
+    }
+    for (;;) {
+        double face, rate = g->grad_max[idx];
+        a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+        face = t_next[a];
+        if (rate > 0 && rate * (face - t) >= budget) return fmin(cap, t + budget / rate);
+        budget -= rate * (face - t);
+        if (!(face < cap)) return cap;
+        t = face;
+        cell[a] += dir[a];
+        if (cell[a] < 0 || cell[a] >= g->n[a]) return cap;
+        idx += stride[a];
+        t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) / ds[a];
+    }
+}
+
 /* The nearest face between cells with and without a gradient from x along
    the unit chord direction c within limit (x's cell has a gradient), into
    *along where it is nearer than along's face. */
@@ -6277,11 +6349,12 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
 {
     rrv__support_view view;
     double reach = b->eikonal ? rrv__safe_reach(b, scene, o) : 0;
+    double step = b->eikonal ? rrv__eikonal_step_length(b, scene, o, *d) : 0;
     b->line_d = *d;
     rrv__reciprocals(*d, b->line_inv);
-    if (b->eikonal && rrv__safe_for_step(scene, reach)) rrv__safe_view(b, reach, &view);
+    if (b->eikonal && rrv__safe_for_step(step, reach)) rrv__safe_view(b, reach, &view);
     else rrv__look_along(scene, o, *d, &view);
-    if (b->eikonal) rrv__eikonal_view(b, o, *d, scene->settings.step + 2 * RRV__EDGE_NUDGE, &view, &b->cell_face);
+    if (b->eikonal) rrv__eikonal_view(b, o, *d, step + 2 * RRV__EDGE_NUDGE, &view, &b->cell_face);
     b->pending = 1;
     b->chord_inside = 0;
     b->segment = view.t_face;
@@ -6294,7 +6367,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     }
     if (b->eikonal) {
         if (view.t_face > 2 * RRV__EDGE_NUDGE)
-            rrv__eikonal_plan(b, scene, scene->settings.stepper, scene->settings.step, o, d, &view, reach);
+            rrv__eikonal_plan(b, scene, scene->settings.stepper, step, o, d, &view, reach);
     } else if (b->scheme == RRV_REFRACTION_COMB) {
         /* the first point a uniformly random fraction of a spacing ahead, so
            the comb does not alias with pixels */
@@ -8376,13 +8449,13 @@ static double rrv__eikonal_step_controlled_staged(const rrv_scene *scene, rrv_st
 static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, rrv_vec3 *d, const rrv__jacobi *J,
                            rrv__jacobi *J1)
 {
-    const double nudge = RRV__EDGE_NUDGE, step = scene->settings.step;
+    const double nudge = RRV__EDGE_NUDGE, step = rrv__eikonal_step_length(b, scene, o, *d);
     const rrv_stepper stepper = scene->settings.stepper;
     rrv__support_view view, along;
     rrv__step_stages st;
     rrv_vec3 d_start = *d, x1, chord, g1, kappa;
     double h, first, len, eta1, dh[2], nd, asked, scale = 1.0, slack, reach = rrv__safe_reach(b, scene, o);
-    int j, halvings, again = 0, seen = !rrv__safe_for_step(scene, reach);
+    int j, halvings, again = 0, seen = !rrv__safe_for_step(step, reach);
     b->line_d = *d;
     rrv__reciprocals(*d, b->line_inv);
     if (seen) rrv__look_along(scene, o, *d, &view);
