@@ -2477,7 +2477,10 @@ struct rrv__majorant_grid {
                               is known (the comb's chords there keep RRV__COMB_MAX_CELLS) */
     float density_peak;    /* max of density_max: sizes the work bounds */
     float grad_peak;       /* max of grad_max, 0 if the medium does not refract */
-    int flat_cells;        /* some cell has grad_max 0 (rrv__skip_grid) */
+    int flat_cells;        /* some cell has grad_max 0 */
+    unsigned char *near_flat; /* with flat_cells, per cell: it or one of its 26
+                              neighbours has grad_max 0 (rrv__eikonal_view), else NULL */
+    double cell_min;       /* the shortest side of a cell */
     size_t bytes;          /* heap bytes built for this medium (grids, bakes) */
     int empty;             /* no extinction anywhere: density tracking can skip it */
     int surface_free;      /* no surface reaches into the box: chords inside need no ray cast */
@@ -4216,6 +4219,29 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
         if (refracts) g->grad_peak = g->grad_max[c] > g->grad_peak ? g->grad_max[c] : g->grad_peak;
         if (refracts && !(g->grad_max[c] > 0)) g->flat_cells = 1;
     }
+    g->near_flat = NULL;
+    g->cell_min = rrv__mind(g->cell.x, rrv__mind(g->cell.y, g->cell.z));
+    /* (only a box support's march crosses flat cells, rrv__skip_grid: the
+       test is rrv__has_sphere_support's) */
+    if (g->flat_cells && (m->ior_from_gas || (m->ior.kind != RRV_FIELD_LUNEBURG && m->ior.kind != RRV_FIELD_FISHEYE))) {
+        /* a segment no longer than a cell from a cell none of whose
+           neighbours is flat meets no flat cell: the eikonal march skips
+           its walk there, a tenth of a weak haze's instructions */
+        int i, j, k, n0 = g->n[0], n1 = g->n[1], n2 = g->n[2];
+        g->near_flat = (unsigned char *)RRV_MALLOC(cells);
+        if (!g->near_flat) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
+        memset(g->near_flat, 0, cells);
+        for (k = 0; k < n2; ++k)
+            for (j = 0; j < n1; ++j)
+                for (i = 0; i < n0; ++i) {
+                    int a, b2, c2;
+                    if (g->grad_max[i + (size_t)n0 * (j + (size_t)n1 * k)] > 0) continue;
+                    for (c2 = k > 0 ? k - 1 : 0; c2 <= k + 1 && c2 < n2; ++c2)
+                        for (b2 = j > 0 ? j - 1 : 0; b2 <= j + 1 && b2 < n1; ++b2)
+                            for (a = i > 0 ? i - 1 : 0; a <= i + 1 && a < n0; ++a)
+                                g->near_flat[a + (size_t)n0 * (b2 + (size_t)n1 * c2)] = 1;
+                }
+    }
     g->empty = 1;
     for (c = 0; c < cells; ++c)
         if (g->density_max[c] > 0 && g->sigma_t_max > 0) { g->empty = 0; break; }
@@ -5571,6 +5597,8 @@ typedef struct rrv__bender {
     double face_jump;  /* the last face crossed: |r past - r behind| */
     int skip_flat;     /* eikonal: cross cells without a gradient straight
                           (RRV__EIKONAL_SKIP; a test turns it off to compare) */
+    rrv_vec3 clear_at; /* eikonal: no flat cell lies within clear_r of clear_at */
+    double clear_r;    /* (rrv__may_meet_edge); <= 0: no such ball */
     int cell_face;     /* eikonal: the planned segment's face is one between
                           majorant cells with and without a gradient
                           (rrv__eikonal_view), where the IOR is continuous */
@@ -5628,6 +5656,7 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikona
     b->holds_support = 0;
     b->inv_tolerance = 1.0 / scene->settings.bend_tolerance;
     b->skip_flat = RRV__EIKONAL_SKIP;
+    b->clear_r = 0;
     b->chord_inside = 0;
     b->safe_at = o;
     b->safe_inner2 = 0;
@@ -6139,7 +6168,37 @@ static const struct rrv__majorant_grid *rrv__skip_grid(const rrv__bender *b)
     const struct rrv__majorant_grid *g;
     if (!b->skip_flat || !b->eikonal || !b->sole_support) return NULL;
     g = b->sole_support->majorant;
-    return g && g->grad_max && g->flat_cells ? g : NULL;
+    return g && g->grad_max && g->near_flat ? g : NULL;
+}
+
+/* Can a segment from x no longer than limit meet a face between cells with
+   and without a gradient? Not when it stays in a ball that holds no flat
+   cell: around a point of a cell none of whose 26 neighbours is flat, one
+   of radius a cell's shortest side plus the point's distance to its own
+   cell's nearest face. The bender keeps the last such ball, so that the
+   steps of a ray through a field with a gradient look at the grid once a
+   cell or so. Conservative only: the walk it spares would have found no
+   face, so the march is the same whatever the ball. */
+static int rrv__may_meet_edge(rrv__bender *b, const struct rrv__majorant_grid *g, rrv_vec3 x, double limit)
+{
+    const double xs[3] = {x.x, x.y, x.z}, lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
+    double inner = DBL_MAX, room = b->clear_r - limit;
+    rrv_vec3 off = rrv__sub(x, b->clear_at);
+    int k[3], a;
+    if (room > 0 && rrv__dot(off, off) < room * room) return 0;
+    for (a = 0; a < 3; ++a) {
+        /* the cell as rrv__gradient_edge finds it (quotients, not products
+           by the reciprocals, which may round a point on a face across it) */
+        double c = (xs[a] - lo[a]) / cs[a], f;
+        k[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+        f = c - k[a];
+        inner = rrv__mind(inner, rrv__mind(f, 1.0 - f) * cs[a]);
+    }
+    if (g->near_flat[k[0] + (size_t)g->n[0] * (k[1] + (size_t)g->n[1] * k[2])]) return 1;
+    b->clear_at = x;
+    /* less the rounding of the quotients, with room to spare */
+    b->clear_r = g->cell_min + rrv__maxd(inner, 0.0) - 1e-9 * (1.0 + rrv__length(x));
+    return !(limit < b->clear_r);
 }
 
 /* The distance from x along unit d to the first face between majorant
@@ -6203,7 +6262,7 @@ static double rrv__gradient_edge(const struct rrv__majorant_grid *g, rrv_vec3 x,
    only up to limit (what the caller uses of a nearer t_face: a step's
    reach), the straight run up to the view's own face. *cell_face: the
    view's face is such a face. */
-static void rrv__eikonal_view(const rrv__bender *b, rrv_vec3 x, rrv_vec3 d, double limit, rrv__support_view *v,
+static void rrv__eikonal_view(rrv__bender *b, rrv_vec3 x, rrv_vec3 d, double limit, rrv__support_view *v,
                               int *cell_face)
 {
     const struct rrv__majorant_grid *g = rrv__skip_grid(b);
@@ -6211,7 +6270,9 @@ static void rrv__eikonal_view(const rrv__bender *b, rrv_vec3 x, rrv_vec3 d, doub
     double t;
     int flat;
     *cell_face = 0;
-    if (!g || !v->inside || !rrv__inside_box(x, g->lo, g->hi)) return;
+    if (!g || !v->inside || !rrv__inside_box(x, g->lo, g->hi) ||
+        !rrv__may_meet_edge(b, g, x, fmin(limit, v->t_face)))
+        return;
     t = rrv__gradient_edge(g, x, d, fmin(limit, v->t_face), v->t_face, &flat, &normal);
     if (flat) {
         /* the straight run goes to the first cell with a gradient, or to
@@ -6299,13 +6360,13 @@ static double rrv__eikonal_step_length(const rrv__bender *b, const rrv_scene *sc
 /* The nearest face between cells with and without a gradient from x along
    the unit chord direction c within limit (x's cell has a gradient), into
    *along where it is nearer than along's face. */
-static void rrv__chord_edge(const rrv__bender *b, rrv_vec3 x, rrv_vec3 c, double limit, rrv__support_view *along)
+static void rrv__chord_edge(rrv__bender *b, rrv_vec3 x, rrv_vec3 c, double limit, rrv__support_view *along)
 {
     const struct rrv__majorant_grid *g = rrv__skip_grid(b);
     rrv_vec3 normal;
     int flat;
     double t;
-    if (!g || !rrv__inside_box(x, g->lo, g->hi)) return;
+    if (!g || !rrv__inside_box(x, g->lo, g->hi) || !rrv__may_meet_edge(b, g, x, limit)) return;
     t = rrv__gradient_edge(g, x, c, limit, limit, &flat, &normal);
     if (t < along->t_face) {
         along->t_face = t;
@@ -7664,6 +7725,7 @@ static void rrv__scene_release_prepared(rrv_scene *scene)
             RRV_FREE(g->refraction.data);
             RRV_FREE(g->cubic);
             RRV_FREE(g->density_max);
+            RRV_FREE(g->near_flat);
             RRV_FREE(g);
             scene->media[i].majorant = NULL;
         }
@@ -7775,6 +7837,7 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
             if (g->density_max)
                 g->bytes += (size_t)g->n[0] * g->n[1] * g->n[2] * sizeof(float) *
                             (size_t)(1 + (g->grad_max != NULL) + (g->jacobian_wander != NULL));
+            if (g->near_flat) g->bytes += (size_t)g->n[0] * g->n[1] * g->n[2];
             scene->bytes += g->bytes;
         }
         if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
