@@ -115,6 +115,10 @@
                  (both first order).
      eikonal     marches the ray equation d/ds(eta dx/ds) = grad eta with RK4
                  (default) or a symplectic leapfrog, step rrv_settings.step.
+                 In a medium box (not a Luneburg or fish-eye sphere), the
+                 majorant cells whose bound on |grad eta| is 0 hold a
+                 constant IOR and are crossed in one straight segment, steps
+                 ending where they begin, as at a face.
    NEXT-EVENT ESTIMATION (rrv_settings.nee, scene `render nee`, CLI --nee)
      Refractive and eikonal integrators only; classic always samples lights
      with straight shadow rays, which is exact for straight rays.
