@@ -5601,8 +5601,6 @@ typedef struct rrv__bender {
     double face_jump;  /* the last face crossed: |r past - r behind| */
     int skip_flat;     /* eikonal: cross cells without a gradient straight
                           (RRV__EIKONAL_SKIP; a test turns it off to compare) */
-    rrv_vec3 clear_at; /* eikonal: no flat cell lies within clear_r of clear_at */
-    double clear_r;    /* (rrv__may_meet_edge); <= 0: no such ball */
     int cell_face;     /* eikonal: the planned segment's face is one between
                           majorant cells with and without a gradient
                           (rrv__eikonal_view), where the IOR is continuous */
@@ -5660,7 +5658,6 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikona
     b->holds_support = 0;
     b->inv_tolerance = 1.0 / scene->settings.bend_tolerance;
     b->skip_flat = RRV__EIKONAL_SKIP;
-    b->clear_r = 0;
     b->chord_inside = 0;
     b->safe_at = o;
     b->safe_inner2 = 0;
@@ -6176,33 +6173,23 @@ static const struct rrv__majorant_grid *rrv__skip_grid(const rrv__bender *b)
 }
 
 /* Can a segment from x no longer than limit meet a face between cells with
-   and without a gradient? Not when it stays in a ball that holds no flat
-   cell: around a point of a cell none of whose 26 neighbours is flat, one
-   of radius a cell's shortest side plus the point's distance to its own
-   cell's nearest face. The bender keeps the last such ball, so that the
-   steps of a ray through a field with a gradient look at the grid once a
-   cell or so. Conservative only: the walk it spares would have found no
-   face, so the march is the same whatever the ball. */
-static int rrv__may_meet_edge(rrv__bender *b, const struct rrv__majorant_grid *g, rrv_vec3 x, double limit)
+   and without a gradient? Not when it is no longer than a cell's shortest
+   side and no neighbour of x's cell is flat: it stays among those
+   neighbours. Conservative only: the walk it spares would have found no
+   face. (A ball kept from one step to the next, clear of flat cells, saved
+   no instructions on the haze: its rays pass mostly near flat cells.) */
+static int rrv__may_meet_edge(const struct rrv__majorant_grid *g, rrv_vec3 x, double limit)
 {
     const double xs[3] = {x.x, x.y, x.z}, lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
-    double inner = DBL_MAX, room = b->clear_r - limit;
-    rrv_vec3 off = rrv__sub(x, b->clear_at);
     int k[3], a;
-    if (room > 0 && rrv__dot(off, off) < room * room) return 0;
+    if (!(limit <= g->cell_min)) return 1;
     for (a = 0; a < 3; ++a) {
         /* the cell as rrv__gradient_edge finds it (quotients, not products
            by the reciprocals, which may round a point on a face across it) */
-        double c = (xs[a] - lo[a]) / cs[a], f;
+        double c = (xs[a] - lo[a]) / cs[a];
         k[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
-        f = c - k[a];
-        inner = rrv__mind(inner, rrv__mind(f, 1.0 - f) * cs[a]);
     }
-    if (g->near_flat[k[0] + (size_t)g->n[0] * (k[1] + (size_t)g->n[1] * k[2])]) return 1;
-    b->clear_at = x;
-    /* less the rounding of the quotients, with room to spare */
-    b->clear_r = g->cell_min + rrv__maxd(inner, 0.0) - 1e-9 * (1.0 + rrv__length(x));
-    return !(limit < b->clear_r);
+    return g->near_flat[k[0] + (size_t)g->n[0] * (k[1] + (size_t)g->n[1] * k[2])];
 }
 
 /* The distance from x along unit d to the first face between majorant
@@ -6266,7 +6253,7 @@ static double rrv__gradient_edge(const struct rrv__majorant_grid *g, rrv_vec3 x,
    only up to limit (what the caller uses of a nearer t_face: a step's
    reach), the straight run up to the view's own face. *cell_face: the
    view's face is such a face. */
-static void rrv__eikonal_view(rrv__bender *b, rrv_vec3 x, rrv_vec3 d, double limit, rrv__support_view *v,
+static void rrv__eikonal_view(const rrv__bender *b, rrv_vec3 x, rrv_vec3 d, double limit, rrv__support_view *v,
                               int *cell_face)
 {
     const struct rrv__majorant_grid *g = rrv__skip_grid(b);
@@ -6275,7 +6262,7 @@ static void rrv__eikonal_view(rrv__bender *b, rrv_vec3 x, rrv_vec3 d, double lim
     int flat;
     *cell_face = 0;
     if (!g || !v->inside || !rrv__inside_box(x, g->lo, g->hi) ||
-        !rrv__may_meet_edge(b, g, x, fmin(limit, v->t_face)))
+        !rrv__may_meet_edge(g, x, fmin(limit, v->t_face)))
         return;
     t = rrv__gradient_edge(g, x, d, fmin(limit, v->t_face), v->t_face, &flat, &normal);
     if (flat) {
@@ -6305,7 +6292,10 @@ static void rrv__eikonal_view(rrv__bender *b, rrv_vec3 x, rrv_vec3 d, double lim
    piecewise constant bound along a line moves continuously with the line),
    so the march stays a continuous map for shoot's Newton; its derivative
    is left out of the Jacobi field, as moving a step's end along the curve
-   leaves the curve as it was to the order of the stepper's error. */
+   leaves the curve as it was to the order of the stepper's error. Not
+   ready as a default (test/bench/RESULTS.md, "flat cells"): without a cap
+   in cells a weak field's steps span its features, and with steps that
+   long the left-out derivative shows in the Jacobi fields. */
 #ifndef RRV__EIKONAL_STEP_BEND
 #define RRV__EIKONAL_STEP_BEND 0.0
 #endif
@@ -6364,13 +6354,13 @@ static double rrv__eikonal_step_length(const rrv__bender *b, const rrv_scene *sc
 /* The nearest face between cells with and without a gradient from x along
    the unit chord direction c within limit (x's cell has a gradient), into
    *along where it is nearer than along's face. */
-static void rrv__chord_edge(rrv__bender *b, rrv_vec3 x, rrv_vec3 c, double limit, rrv__support_view *along)
+static void rrv__chord_edge(const rrv__bender *b, rrv_vec3 x, rrv_vec3 c, double limit, rrv__support_view *along)
 {
     const struct rrv__majorant_grid *g = rrv__skip_grid(b);
     rrv_vec3 normal;
     int flat;
     double t;
-    if (!g || !rrv__inside_box(x, g->lo, g->hi) || !rrv__may_meet_edge(b, g, x, limit)) return;
+    if (!g || !rrv__inside_box(x, g->lo, g->hi) || !rrv__may_meet_edge(g, x, limit)) return;
     t = rrv__gradient_edge(g, x, c, limit, limit, &flat, &normal);
     if (t < along->t_face) {
         along->t_face = t;
