@@ -115,6 +115,10 @@
                  (both first order).
      eikonal     marches the ray equation d/ds(eta dx/ds) = grad eta with RK4
                  (default) or a symplectic leapfrog, step rrv_settings.step.
+                 In a medium box (not a Luneburg or fish-eye sphere), the
+                 majorant cells whose bound on |grad eta| is 0 hold a
+                 constant IOR and are crossed in one straight segment, steps
+                 ending where they begin, as at a face.
    NEXT-EVENT ESTIMATION (rrv_settings.nee, scene `render nee`, CLI --nee)
      Refractive and eikonal integrators only; classic always samples lights
      with straight shadow rays, which is exact for straight rays.
@@ -2524,6 +2528,10 @@ struct rrv__majorant_grid {
                               is known (the comb's chords there keep RRV__COMB_MAX_CELLS) */
     float density_peak;    /* max of density_max: sizes the work bounds */
     float grad_peak;       /* max of grad_max, 0 if the medium does not refract */
+    int flat_cells;        /* some cell has grad_max 0 */
+    unsigned char *near_flat; /* with flat_cells, per cell: it or one of its 26
+                              neighbours has grad_max 0 (rrv__eikonal_view), else NULL */
+    double cell_min;       /* the shortest side of a cell */
     size_t bytes;          /* heap bytes built for this medium (grids, bakes) */
     int empty;             /* no extinction anywhere: density tracking can skip it */
     int surface_free;      /* no surface reaches into the box: chords inside need no ray cast */
@@ -4269,9 +4277,34 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
         job.ambient_r = rrv__ambient_ior(scene) - 1.0;
         rrv__parallel_for(scene, g->n[2], rrv__majorant_slice, &job);
     }
+    g->flat_cells = 0;
     for (c = 0; c < cells; ++c) {
         g->density_peak = g->density_max[c] > g->density_peak ? g->density_max[c] : g->density_peak;
         if (refracts) g->grad_peak = g->grad_max[c] > g->grad_peak ? g->grad_max[c] : g->grad_peak;
+        if (refracts && !(g->grad_max[c] > 0)) g->flat_cells = 1;
+    }
+    g->near_flat = NULL;
+    g->cell_min = rrv__mind(g->cell.x, rrv__mind(g->cell.y, g->cell.z));
+    /* (only a box support's march crosses flat cells, rrv__skip_grid: the
+       test is rrv__has_sphere_support's) */
+    if (g->flat_cells && (m->ior_from_gas || (m->ior.kind != RRV_FIELD_LUNEBURG && m->ior.kind != RRV_FIELD_FISHEYE))) {
+        /* a segment no longer than a cell from a cell none of whose
+           neighbours is flat meets no flat cell: the eikonal march skips
+           its walk there, a tenth of a weak haze's instructions */
+        int i, j, k, n0 = g->n[0], n1 = g->n[1], n2 = g->n[2];
+        g->near_flat = (unsigned char *)RRV_MALLOC(cells);
+        if (!g->near_flat) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
+        memset(g->near_flat, 0, cells);
+        for (k = 0; k < n2; ++k)
+            for (j = 0; j < n1; ++j)
+                for (i = 0; i < n0; ++i) {
+                    int a, b2, c2;
+                    if (g->grad_max[i + (size_t)n0 * (j + (size_t)n1 * k)] > 0) continue;
+                    for (c2 = k > 0 ? k - 1 : 0; c2 <= k + 1 && c2 < n2; ++c2)
+                        for (b2 = j > 0 ? j - 1 : 0; b2 <= j + 1 && b2 < n1; ++b2)
+                            for (a = i > 0 ? i - 1 : 0; a <= i + 1 && a < n0; ++a)
+                                g->near_flat[a + (size_t)n0 * (b2 + (size_t)n1 * c2)] = 1;
+                }
     }
     g->empty = 1;
     for (c = 0; c < cells; ++c)
@@ -5370,6 +5403,12 @@ static int rrv__sphere_interval(const rrv_field *f, rrv_vec3 o, rrv_vec3 d, doub
    gradient is taken inside the support; the rest is a straight segment. */
 #define RRV__EDGE_NUDGE 1e-9
 
+/* Eikonal: cross majorant cells without a gradient straight (below,
+   rrv__skip_grid); 0 in a measurement build marches them at the step. */
+#ifndef RRV__EIKONAL_SKIP
+#define RRV__EIKONAL_SKIP 1
+#endif
+
 /* The longest comb chord, in majorant cells (rrv__rate_distance); a
    measurement build may set another. */
 #ifndef RRV__COMB_MAX_CELLS
@@ -5621,6 +5660,11 @@ typedef struct rrv__bender {
                           it, at face_at: the comb's first half kick there */
     rrv_vec3 face_at, face_grad;
     double face_jump;  /* the last face crossed: |r past - r behind| */
+    int skip_flat;     /* eikonal: cross cells without a gradient straight
+                          (RRV__EIKONAL_SKIP; a test turns it off to compare) */
+    int cell_face;     /* eikonal: the planned segment's face is one between
+                          majorant cells with and without a gradient
+                          (rrv__eikonal_view), where the IOR is continuous */
     int support_in_extinction; /* the sole support's box lies in the box of a
                                   medium with extinction: every chord in it
                                   meets extinction (rrv__chord_meets_extinction) */
@@ -5655,6 +5699,7 @@ static void rrv__bender_restart(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     b->face_known = 0;
     b->face_jump = 0;
     b->behind_split = 0;
+    b->cell_face = 0;
 }
 
 static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikonal, rrv_vec3 o)
@@ -5673,6 +5718,7 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikona
     b->support_in_extinction = 0;
     b->holds_support = 0;
     b->inv_tolerance = 1.0 / scene->settings.bend_tolerance;
+    b->skip_flat = RRV__EIKONAL_SKIP;
     b->chord_inside = 0;
     b->safe_at = o;
     b->safe_inner2 = 0;
@@ -5725,9 +5771,9 @@ static inline double rrv__safe_reach(rrv__bender *b, const rrv_scene *scene, rrv
 }
 
 /* Does the bound let a step from o skip planning's look? */
-static int rrv__safe_for_step(const rrv_scene *scene, double reach)
+static int rrv__safe_for_step(double step, double reach)
 {
-    return reach - RRV__EDGE_NUDGE >= scene->settings.step;
+    return reach - RRV__EDGE_NUDGE >= step;
 }
 
 /* The view every look from o would give within reach: inside, no face
@@ -6159,6 +6205,230 @@ static void rrv__comb_step(rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, r
     if (b->ahead.t_face < DBL_MAX) b->ahead.t_face -= b->segment;
 }
 
+/* ---- eikonal: cells without a gradient crossed straight ----------------------
+   A majorant cell whose bound on |grad r| is 0 holds a constant IOR, where
+   the ray equation's solution is a straight line and every RK4 or leapfrog
+   step of it is exactly the chord: marching it at the scene's step buys
+   nothing but lookups. In a box support (the bender's sole support), the
+   eikonal march therefore treats the faces between cells with and without
+   a gradient as faces of the support: a run of cells without one is one
+   straight segment to where cells with one begin, and steps in cells with
+   a gradient are cut where those without begin, as at a support's face, so
+   that no step straddles the edge and the march stays a continuous function
+   of the ray (a step that began just inside a gradient cell would kick
+   where one just outside it would not). The decisions are made per cell,
+   so shoot's Jacobi fields cross these faces as they cross a support's
+   (the face point's saltation, rrv__shoot_kept) and its Newton sees the
+   same piecewise-smooth map camera rays take. RRV__EIKONAL_SKIP 0 (a
+   measurement build, defined above the bender) marches every cell at the
+   step. */
+
+/* Does the eikonal march of this bender cross cells without a gradient
+   straight? Only in a sole box support whose grid has such cells. */
+static const struct rrv__majorant_grid *rrv__skip_grid(const rrv__bender *b)
+{
+    const struct rrv__majorant_grid *g;
+    if (!b->skip_flat || !b->eikonal || !b->sole_support) return NULL;
+    g = b->sole_support->majorant;
+    return g && g->grad_max && g->near_flat ? g : NULL;
+}
+
+/* Can a segment from x no longer than limit meet a face between cells with
+   and without a gradient? Not when it is no longer than a cell's shortest
+   side and no neighbour of x's cell is flat: it stays among those
+   neighbours. Conservative only: the walk it spares would have found no
+   face. (A ball kept from one step to the next, clear of flat cells, saved
+   no instructions on the haze: its rays pass mostly near flat cells.) */
+static int rrv__may_meet_edge(const struct rrv__majorant_grid *g, rrv_vec3 x, double limit)
+{
+    const double xs[3] = {x.x, x.y, x.z}, lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
+    int k[3], a;
+    if (!(limit <= g->cell_min)) return 1;
+    for (a = 0; a < 3; ++a) {
+        /* the cell as rrv__gradient_edge finds it (quotients, not products
+           by the reciprocals, which may round a point on a face across it) */
+        double c = (xs[a] - lo[a]) / cs[a];
+        k[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+    }
+    return g->near_flat[k[0] + (size_t)g->n[0] * (k[1] + (size_t)g->n[1] * k[2])];
+}
+
+/* The distance from x along unit d to the first face between majorant
+   cells where having a gradient changes from what x's cell has (*flat: x's
+   cell has none), looked for up to limit; DBL_MAX if none comes first or
+   the line leaves the grid. *normal gets that face's axis. Distances are
+   quotients, as rrv__look_axis takes them, so that the march is the same
+   bit for bit whoever asks. */
+static double rrv__gradient_edge(const struct rrv__majorant_grid *g, rrv_vec3 x, rrv_vec3 d, double limit_with,
+                                 double limit_flat, int *flat, rrv_vec3 *normal)
+{
+    const double xs[3] = {x.x, x.y, x.z}, ds[3] = {d.x, d.y, d.z};
+    const double lo[3] = {g->lo.x, g->lo.y, g->lo.z}, cs[3] = {g->cell.x, g->cell.y, g->cell.z};
+    double t_next[3];
+    double limit;
+    ptrdiff_t stride[3], idx = 0;
+    int cell[3], step[3], a, with;
+    stride[0] = 1;
+    stride[1] = g->n[0];
+    stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
+    for (a = 0; a < 3; ++a) {
+        double c = (xs[a] - lo[a]) / cs[a];
+        cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+        idx += stride[a] * cell[a];
+        if (ds[a] != 0) {
+            step[a] = ds[a] > 0 ? 1 : -1;
+            t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) / ds[a];
+            if (t_next[a] < 0) t_next[a] = 0;
+            stride[a] *= step[a];
+        } else {
+            step[a] = 0;
+            t_next[a] = DBL_MAX;
+        }
+    }
+    with = g->grad_max[idx] > 0;
+    *flat = !with;
+    limit = with ? limit_with : limit_flat;
+    for (;;) {
+        double t;
+        a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+        t = t_next[a];
+        if (!(t <= limit)) return DBL_MAX;
+        cell[a] += step[a];
+        if (cell[a] < 0 || cell[a] >= g->n[a]) return DBL_MAX;
+        idx += stride[a];
+        if ((g->grad_max[idx] > 0) != with) {
+            *normal = rrv__v3(a == 0, a == 1, a == 2);
+            return t;
+        }
+        /* the next face of this axis, from the cell's own plane (no sum
+           of increments, which would drift from the quotient) */
+        t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) / ds[a];
+    }
+}
+
+/* The support view from x along unit d for the eikonal march, with the
+   faces between cells with and without a gradient (rrv__skip_grid) as
+   faces: from a cell without one the ray is outside every support up to
+   the first cell with one (a straight segment), from a cell with one the
+   nearest face may be where those without begin; that one is looked for
+   only up to limit (what the caller uses of a nearer t_face: a step's
+   reach), the straight run up to the view's own face. *cell_face: the
+   view's face is such a face. */
+static void rrv__eikonal_view(const rrv__bender *b, rrv_vec3 x, rrv_vec3 d, double limit, rrv__support_view *v,
+                              int *cell_face)
+{
+    const struct rrv__majorant_grid *g = rrv__skip_grid(b);
+    rrv_vec3 normal;
+    double t;
+    int flat;
+    *cell_face = 0;
+    if (!g || !v->inside || !rrv__inside_box(x, g->lo, g->hi) ||
+        !rrv__may_meet_edge(g, x, fmin(limit, v->t_face)))
+        return;
+    t = rrv__gradient_edge(g, x, d, fmin(limit, v->t_face), v->t_face, &flat, &normal);
+    if (flat) {
+        /* the straight run goes to the first cell with a gradient, or to
+           the support's face when none comes before it */
+        if (t < v->t_face) {
+            v->t_face = t;
+            v->normal = normal;
+            *cell_face = 1;
+        }
+        v->inside = 0;
+        return;
+    }
+    if (t < v->t_face) {
+        v->t_face = t;
+        v->normal = normal;
+        *cell_face = 1;
+    }
+}
+
+/* Bend-bounded eikonal steps (a measurement build; 0, fixed steps, by
+   default): with RRV__EIKONAL_STEP_BEND = K > 0, a step in a box support
+   with a gradient bound runs until the integral along its line of the
+   cells' bounds on |grad r| reaches K bend tolerances (the bound on how far
+   it turns the ray), at most RRV__EIKONAL_STEP_CAP times the scene's step.
+   The length is a continuous function of the ray (the integral of a
+   piecewise constant bound along a line moves continuously with the line),
+   so the march stays a continuous map for shoot's Newton; its derivative
+   is left out of the Jacobi field, as moving a step's end along the curve
+   leaves the curve as it was to the order of the stepper's error. Not
+   ready as a default (test/bench/RESULTS.md, "flat cells"): without a cap
+   in cells a weak field's steps span its features, and with steps that
+   long the left-out derivative shows in the Jacobi fields. */
+#ifndef RRV__EIKONAL_STEP_BEND
+#define RRV__EIKONAL_STEP_BEND 0.0
+#endif
+#ifndef RRV__EIKONAL_STEP_CAP
+#define RRV__EIKONAL_STEP_CAP 64.0
+#endif
+
+static double rrv__eikonal_step_length(const rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
+{
+    const struct rrv__majorant_grid *g;
+    const double step = scene->settings.step;
+    double budget, cap, xs[3], ds[3], lo[3], cs[3], t_next[3], t = 0;
+    ptrdiff_t stride[3], idx = 0;
+    int cell[3], dir[3], a;
+    if (!(RRV__EIKONAL_STEP_BEND > 0) || !b->eikonal || !b->sole_support) return step;
+    g = b->sole_support->majorant;
+    if (!g || !g->grad_max || !rrv__inside_box(x, g->lo, g->hi)) return step;
+    budget = RRV__EIKONAL_STEP_BEND * scene->settings.bend_tolerance;
+    cap = RRV__EIKONAL_STEP_CAP * step;
+    xs[0] = x.x; xs[1] = x.y; xs[2] = x.z;
+    ds[0] = d.x; ds[1] = d.y; ds[2] = d.z;
+    lo[0] = g->lo.x; lo[1] = g->lo.y; lo[2] = g->lo.z;
+    cs[0] = g->cell.x; cs[1] = g->cell.y; cs[2] = g->cell.z;
+    stride[0] = 1;
+    stride[1] = g->n[0];
+    stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
+    for (a = 0; a < 3; ++a) {
+        double c = (xs[a] - lo[a]) / cs[a];
+        cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+        idx += stride[a] * cell[a];
+        if (ds[a] != 0) {
+            dir[a] = ds[a] > 0 ? 1 : -1;
+            t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) / ds[a];
+            if (t_next[a] < 0) t_next[a] = 0;
+            stride[a] *= dir[a];
+        } else {
+            dir[a] = 0;
+            t_next[a] = DBL_MAX;
+        }
+    }
+    for (;;) {
+        double face, rate = g->grad_max[idx];
+        a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+        face = t_next[a];
+        if (rate > 0 && rate * (face - t) >= budget) return fmin(cap, t + budget / rate);
+        budget -= rate * (face - t);
+        if (!(face < cap)) return cap;
+        t = face;
+        cell[a] += dir[a];
+        if (cell[a] < 0 || cell[a] >= g->n[a]) return cap;
+        idx += stride[a];
+        t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) / ds[a];
+    }
+}
+
+/* The nearest face between cells with and without a gradient from x along
+   the unit chord direction c within limit (x's cell has a gradient), into
+   *along where it is nearer than along's face. */
+static void rrv__chord_edge(const rrv__bender *b, rrv_vec3 x, rrv_vec3 c, double limit, rrv__support_view *along)
+{
+    const struct rrv__majorant_grid *g = rrv__skip_grid(b);
+    rrv_vec3 normal;
+    int flat;
+    double t;
+    if (!g || !rrv__inside_box(x, g->lo, g->hi) || !rrv__may_meet_edge(g, x, limit)) return;
+    t = rrv__gradient_edge(g, x, c, limit, limit, &flat, &normal);
+    if (t < along->t_face) {
+        along->t_face = t;
+        along->normal = normal;
+    }
+}
+
 /* One eikonal step of at most h from x that stops short of the next face
    (a step ending past it would take its closing kick from the other side's
    gradient); the curved step is shortened if its chord would cross a face.
@@ -6175,6 +6445,7 @@ static void rrv__eikonal_plan(rrv__bender *b, const rrv_scene *scene, rrv_steppe
     len = rrv__length(chord);
     if (reach < len + nudge) rrv__look_along(scene, x, rrv__scale(chord, 1.0 / len), &along);
     else along.t_face = DBL_MAX;
+    rrv__chord_edge(b, x, rrv__scale(chord, 1.0 / len), len + nudge, &along);
     if (along.t_face < len + nudge && along.t_face > 2 * nudge) {
         h = rrv__eikonal_step_controlled(scene, stepper, h * (along.t_face - nudge) / len, x, *d, &x1, &b->next_d);
         chord = rrv__sub(x1, x);
@@ -6194,10 +6465,12 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
 {
     rrv__support_view view;
     double reach = b->eikonal ? rrv__safe_reach(b, scene, o) : 0;
+    double step = b->eikonal ? rrv__eikonal_step_length(b, scene, o, *d) : 0;
     b->line_d = *d;
     rrv__reciprocals(*d, b->line_inv);
-    if (b->eikonal && rrv__safe_for_step(scene, reach)) rrv__safe_view(b, reach, &view);
+    if (b->eikonal && rrv__safe_for_step(step, reach)) rrv__safe_view(b, reach, &view);
     else rrv__look_along(scene, o, *d, &view);
+    if (b->eikonal) rrv__eikonal_view(b, o, *d, step + 2 * RRV__EDGE_NUDGE, &view, &b->cell_face);
     b->pending = 1;
     b->chord_inside = 0;
     b->segment = view.t_face;
@@ -6210,7 +6483,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
     }
     if (b->eikonal) {
         if (view.t_face > 2 * RRV__EDGE_NUDGE)
-            rrv__eikonal_plan(b, scene, scene->settings.stepper, scene->settings.step, o, d, &view, reach);
+            rrv__eikonal_plan(b, scene, scene->settings.stepper, step, o, d, &view, reach);
     } else if (b->scheme == RRV_REFRACTION_COMB) {
         /* the first point a uniformly random fraction of a spacing ahead, so
            the comb does not alias with pixels */
@@ -6250,7 +6523,17 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
         }
         break;
     case RRV__END_FACE:
-        if (b->combing) {
+        if (b->cell_face) {
+            /* between cells with and without a gradient: the IOR is
+               continuous, nothing to refract; past the face by the gap a
+               support's face is crossed by */
+            *o = rrv__madd(*o, *d, rrv__face_gap(*o));
+            b->last = *o;
+            b->pending = 0;
+            b->cell_face = 0;
+            b->reflected = 0;
+            b->face_jump = 0;
+        } else if (b->combing) {
             /* the comb's last half kick, gradient just behind the face, where
                the refractivity looked up with it is the face's r_before */
             rrv_vec3 at = rrv__madd(*o, *d, -rrv__face_gap(*o)), grad;
@@ -7500,6 +7783,7 @@ static void rrv__scene_release_prepared(rrv_scene *scene)
             RRV_FREE(g->refraction.data);
             RRV_FREE(g->cubic);
             RRV_FREE(g->density_max);
+            RRV_FREE(g->near_flat);
             RRV_FREE(g);
             scene->media[i].majorant = NULL;
         }
@@ -7611,6 +7895,7 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
             if (g->density_max)
                 g->bytes += (size_t)g->n[0] * g->n[1] * g->n[2] * sizeof(float) *
                             (size_t)(1 + (g->grad_max != NULL) + (g->jacobian_wander != NULL));
+            if (g->near_flat) g->bytes += (size_t)g->n[0] * g->n[1] * g->n[2];
             scene->bytes += g->bytes;
         }
         if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
@@ -8299,17 +8584,18 @@ static double rrv__eikonal_step_controlled_staged(const rrv_scene *scene, rrv_st
 static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, rrv_vec3 *d, const rrv__jacobi *J,
                            rrv__jacobi *J1)
 {
-    const double nudge = RRV__EDGE_NUDGE, step = scene->settings.step;
+    const double nudge = RRV__EDGE_NUDGE, step = rrv__eikonal_step_length(b, scene, o, *d);
     const rrv_stepper stepper = scene->settings.stepper;
     rrv__support_view view, along;
     rrv__step_stages st;
     rrv_vec3 d_start = *d, x1, chord, g1, kappa;
     double h, first, len, eta1, dh[2], nd, asked, scale = 1.0, slack, reach = rrv__safe_reach(b, scene, o);
-    int j, halvings, again = 0, seen = !rrv__safe_for_step(scene, reach);
+    int j, halvings, again = 0, seen = !rrv__safe_for_step(step, reach);
     b->line_d = *d;
     rrv__reciprocals(*d, b->line_inv);
     if (seen) rrv__look_along(scene, o, *d, &view);
     else rrv__safe_view(b, reach, &view);
+    rrv__eikonal_view(b, o, *d, step + 2 * nudge, &view, &b->cell_face);
     b->pending = 1;
     b->segment = view.t_face;
     b->end = view.t_face < DBL_MAX ? RRV__END_FACE : RRV__END_NONE;
@@ -8323,10 +8609,15 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
     len = rrv__length(chord);
     if (reach < len + nudge) rrv__look_along(scene, o, rrv__scale(chord, 1.0 / len), &along);
     else along.t_face = DBL_MAX;
+    rrv__chord_edge(b, o, rrv__scale(chord, 1.0 / len), len + nudge, &along);
     if (along.t_face < len + nudge && along.t_face > 2 * nudge) {
         /* which cut made the step is told below by the view's own t_face
            (the slack) and normal, which the bound does not give */
-        if (!seen) rrv__look_along(scene, o, d_start, &view);
+        if (!seen) {
+            int cell_face;
+            rrv__look_along(scene, o, d_start, &view);
+            rrv__eikonal_view(b, o, d_start, step + 2 * nudge, &view, &cell_face);
+        }
         h = rrv__eikonal_step_controlled_staged(scene, stepper, h * (along.t_face - nudge) / len, o, d_start, &x1,
                                                 &b->next_d, &st, &again);
         chord = rrv__sub(x1, o);
@@ -8357,7 +8648,11 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
         for (j = 0; j < 2; ++j)
             dh[j] = -scale * rrv__dot(view.normal, rrv__madd(J->x[j], J->d[j], view.t_face)) / nd;
     } else {
-        rrv__look_along(scene, o, *d, &view);
+        {
+            int cell_face;
+            rrv__look_along(scene, o, *d, &view);
+            rrv__eikonal_view(b, o, *d, 1.5 * len, &view, &cell_face);
+        }
         if (!(view.t_face < 1.5 * len)) return 0; /* the second step halved */
         nd = rrv__dot(view.normal, b->next_d);
         if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
@@ -8521,7 +8816,7 @@ static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec
             rrv__ratio_tracking_transmittance(ctx, x, d, len, rng, Ts);
             for (c = 0; c < 3; ++c) T[c] *= Ts[c];
         }
-        if (b.end == RRV__END_FACE && rrv__face_jumps(scene, rrv__madd(x, d, len), d)) {
+        if (b.end == RRV__END_FACE && !b.cell_face && rrv__face_jumps(scene, rrv__madd(x, d, len), d)) {
             out->status = RRV__SHOT_INTERFACE;
             return;
         }

@@ -1194,7 +1194,7 @@ static void safety_walk_pair(const rrv_scene *s, rrv_vec3 o, rrv_vec3 d0, int sh
     for (n = 0; n < 5000; ++n) {
         rrv__bender peek = ball;
         rrv__jacobi J1b = Jb, J1p = Jp;
-        int okb = 1, okp = 1, skip = rrv__safe_for_step(s, rrv__safe_reach(&peek, s, xb));
+        int okb = 1, okp = 1, skip = rrv__safe_for_step(s->settings.step, rrv__safe_reach(&peek, s, xb));
         if (shoot) {
             okb = rrv__shoot_plan(&ball, s, xb, &db, &Jb, &J1b);
             okp = rrv__shoot_plan(&plain, s, xp, &dp, &Jp, &J1p);
