@@ -98,9 +98,10 @@ static const char render_help[] =
     "                         rays: fast, biased near refracting media)\n"
     "  --sampler NAME         pcg or sobol (Owen-scrambled, per pixel); default:\n"
     "                         the scene's, else sobol\n"
-    "  --transmittance NAME   shadow rays' estimator: residual (ratio tracking\n"
-    "                         of the density above the majorant grid's minorant)\n"
-    "                         or ratio; default: the scene's, else residual\n"
+    "  --transmittance NAME   shadow rays' estimator: march (unbiased ray\n"
+    "                         marching), residual (ratio tracking above the\n"
+    "                         majorant grid's minorant) or ratio; default: the\n"
+    "                         scene's, else march\n"
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop (an EXR\n"
@@ -1586,10 +1587,11 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
             opt->has_sampler = 1;
         } else if (strcmp(arg, "--transmittance") == 0) {
             const char *name;
-            if (!take_value(&args, arg, "ratio or residual", &name)) return EXIT_USAGE;
+            if (!take_value(&args, arg, "ratio, residual or march", &name)) return EXIT_USAGE;
             if (strcmp(name, "ratio") == 0) opt->transmittance = RRV_TRANSMITTANCE_RATIO;
             else if (strcmp(name, "residual") == 0) opt->transmittance = RRV_TRANSMITTANCE_RESIDUAL;
-            else return usage_error(&args, "--transmittance needs ratio or residual, got \"%s\"", name);
+            else if (strcmp(name, "march") == 0) opt->transmittance = RRV_TRANSMITTANCE_MARCH;
+            else return usage_error(&args, "--transmittance needs ratio, residual or march, got \"%s\"", name);
             opt->has_transmittance = 1;
         } else if (strcmp(arg, "--threads") == 0) {
             if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer",

@@ -631,9 +631,11 @@ typedef enum rrv_sampler {
 typedef enum rrv_transmittance {
     RRV_TRANSMITTANCE_DEFAULT = 0, /* RESIDUAL */
     RRV_TRANSMITTANCE_RATIO,       /* ratio tracking against the majorant grid */
-    RRV_TRANSMITTANCE_RESIDUAL     /* residual ratio tracking: the majorant grid's
+    RRV_TRANSMITTANCE_RESIDUAL,    /* residual ratio tracking: the majorant grid's
                                       minorant integrated exactly, ratio tracking of
                                       what lies above it (manual, TRANSMITTANCE) */
+    RRV_TRANSMITTANCE_MARCH        /* unbiased ray marching: a jittered march
+                                      corrected by a randomly truncated power series */
 } rrv_transmittance;
 
 typedef struct rrv_settings {
@@ -6676,13 +6678,144 @@ static void rrv__residual_tracking_transmittance(rrv__context *ctx, rrv_vec3 o, 
     }
 }
 
+/* Samples a unit of the residual majorant's optical depth takes in one
+   march of rrv__march_transmittance (a measurement build may set another). */
+#ifndef RRV__MARCH_RATE
+#define RRV__MARCH_RATE 2.0
+#endif
+/* The series' terms a march estimate may take before it is cut. */
+#define RRV__MARCH_TERMS 64
+
+/* One jittered march along o + t d, t in [0, tmax), through medium m: an
+   unbiased estimate of each channel's optical depth. The minorant's depth
+   is exact (rrv__majorant_iterator's control); the residual above it is
+   sampled at points evenly spaced in the residual majorant's optical depth
+   s, 1 / RRV__MARCH_RATE apart, from one random offset: a point at s stands
+   for the stretch of s around it, whose residual depth is
+   integral (sigma - sigma_c) / mu ds, so each adds
+   (sigma - sigma_c) / (mu RRV__MARCH_RATE), unbiased since the offset
+   makes every s equally likely. The points fall where the majorant says
+   the density may be (none where it is known), and each weight lies in
+   [0, 1 / RATE] as a ratio-tracking factor's complement does; regular
+   spacing instead of Poisson collisions is what takes the variance. */
+static int rrv__march_depth(rrv__context *ctx, const rrv_medium *m, const double k[3], rrv_vec3 o, rrv_vec3 d,
+                            double tmax, rrv__rng *rng, double tau[3], double *weight)
+{
+    rrv__majorant_iterator it;
+    rrv__majorant_segment seg;
+    double step = 1.0 / RRV__MARCH_RATE, next = step * rrv__uniform(rng), at = 0;
+    long left = RRV_MAX_SEGMENT_EVENTS;
+    int ch;
+    tau[0] = tau[1] = tau[2] = 0;
+    if (!rrv__majorant_iterator_start(&it, m, 0, &ctx->scene->settings, &o, &d, NULL, tmax, 0)) return 1;
+    it.residual = 1;
+    while (rrv__majorant_iterator_next(&it, &seg)) {
+        double span = seg.majorant * (seg.t1 - seg.t0);
+        if (weight) {
+            /* the pivot's march: roulette once what it has gathered so far
+               (its depth only grows) leaves under a tenth */
+            double most = 0;
+            for (ch = 0; ch < 3; ++ch) most = rrv__maxd(most, exp(-(tau[ch] + it.control * k[ch])));
+            if (*weight * most < 0.1) {
+                if (rrv__uniform(rng) < 0.5) return 0;
+                *weight *= 2.0;
+            }
+        }
+        if (!(span > 0)) continue;
+        for (; next < at + span && left > 0; next += step, --left) {
+            rrv__coeffs c;
+            double w = step / seg.majorant;
+            rrv__medium_coeffs(m, rrv__madd(o, d, seg.t0 + (next - at) / seg.majorant), &c);
+            for (ch = 0; ch < 3; ++ch) tau[ch] += w * (c.sigma_a[ch] + c.sigma_s[ch] - seg.density_min * k[ch]);
+            ++ctx->stats.events;
+        }
+        at += span;
+    }
+    for (ch = 0; ch < 3; ++ch) tau[ch] += it.control * k[ch];
+    return 1;
+}
+
+/* The unbiased ray-marching estimator of transmittance: a jittered march
+   gives the pivot p (an estimate of the optical depth tau), and
+   exp(-tau) = exp(-p) exp(p - tau) = exp(-p) sum_j (p - tau)^j / j!,
+   the series taken term by term. Term j's (p - tau)^j is estimated without
+   bias by the product of j independent X_i = p - tau_i, tau_i further
+   marches independent of p (conditioned on p, each X_i has mean p - tau
+   and they are independent, so their product has mean (p - tau)^j). The
+   series is truncated at random: after term j (j >= 1) the next is taken
+   with probability q_j = min(1, 2 |X_j| / (j + 1)) (a function of draws
+   already made, the size of the next term relative to this one), and
+   each term is divided by the probability of reaching it, which keeps the
+   sum unbiased. The first correction (j = 1) is always taken: without it
+   exp(-p) alone is biased low by Jensen. A march varies far less than a
+   ratio-tracking walk of as many lookups where the density is smooth, and
+   every X_i is then small, so the series stops after a term or two; where
+   the density is constant in a cell the march is exact there. The estimate
+   is signed: a term's product may be negative, and the sum can be too
+   (rarely, where X is large); callers must add it, never clamp it.
+   Channels share the marches (their depths are k_c times the density's
+   where the density grid is grey), so no channel groups are needed; each
+   medium is estimated on its own, the product of independent estimates. */
+static void rrv__march_transmittance(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, double tmax, rrv__rng *rng,
+                                     double T[3])
+{
+    const rrv_scene *scene = ctx->scene;
+    int i, ch;
+    T[0] = T[1] = T[2] = 1.0;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        double k[3], pivot[3], term[3], sum[3], x[3], so_far, weight;
+        int j;
+        if (m->density.kind == RRV_FIELD_NONE || m->majorant->empty) continue;
+        /* the roulette weighs the whole estimate, earlier media's part too */
+        so_far = rrv__maxd(fabs(T[0]), rrv__maxd(fabs(T[1]), fabs(T[2])));
+        if (!(so_far > 0)) return;
+        weight = so_far;
+        rrv__channel_extinction(m, k);
+        if (!rrv__march_depth(ctx, m, k, o, d, tmax, rng, pivot, &weight)) {
+            T[0] = T[1] = T[2] = 0;
+            return;
+        }
+        weight /= so_far;
+        for (ch = 0; ch < 3; ++ch) sum[ch] = term[ch] = 1.0;
+        for (j = 1;; ++j) {
+            double tau[3], big = 0, q;
+            if (j > RRV__MARCH_TERMS) {
+                ++ctx->stats.paths_cut;
+                ++ctx->stats.cut_tracking;
+                T[0] = T[1] = T[2] = 0;
+                return;
+            }
+            rrv__march_depth(ctx, m, k, o, d, tmax, rng, tau, NULL);
+            for (ch = 0; ch < 3; ++ch) {
+                x[ch] = pivot[ch] - tau[ch];
+                term[ch] *= x[ch] / j;
+                sum[ch] += term[ch];
+                big = rrv__maxd(big, fabs(x[ch]));
+            }
+            q = 2.0 * big / (j + 1);
+            if (q < 1.0) {
+                if (!(rrv__uniform(rng) < q)) break;
+                for (ch = 0; ch < 3; ++ch) term[ch] /= q;
+            }
+        }
+        for (ch = 0; ch < 3; ++ch) T[ch] *= weight * exp(-pivot[ch]) * sum[ch];
+    }
+}
+
+/* Whether a transmittance estimate adds anything: march's are signed, and
+   a negative one must be added as it is, never dropped (dropping it biases
+   the sum up); ratio tracking's are never negative, where this is T > 0. */
+static int rrv__nonzero3(const double T[3]) { return T[0] != 0 || T[1] != 0 || T[2] != 0; }
+
 /* Every transmittance estimate: the scene's choice of estimator. */
 static void rrv__transmittance(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, double tmax, rrv__rng *rng, double T[3])
 {
-    if (ctx->scene->settings.transmittance == RRV_TRANSMITTANCE_RATIO)
-        rrv__ratio_tracking_transmittance(ctx, o, d, tmax, rng, T);
-    else
-        rrv__residual_tracking_transmittance(ctx, o, d, tmax, rng, T);
+    switch (ctx->scene->settings.transmittance) {
+    case RRV_TRANSMITTANCE_RATIO: rrv__ratio_tracking_transmittance(ctx, o, d, tmax, rng, T); break;
+    case RRV_TRANSMITTANCE_RESIDUAL: rrv__residual_tracking_transmittance(ctx, o, d, tmax, rng, T); break;
+    default: rrv__march_transmittance(ctx, o, d, tmax, rng, T); break;
+    }
 }
 
 enum { RRV__FLIGHT_PASSED, RRV__FLIGHT_SCATTERED, RRV__FLIGHT_ABSORBED, RRV__FLIGHT_BENT, RRV__FLIGHT_CUT };
@@ -7368,7 +7501,7 @@ static void rrv__sample_direct_light(rrv__context *ctx, rrv__path *path, rrv_vec
         pdf = rrv__hg_eval(v->g, rrv__dot(v->d_in, ls.wi));
     }
     rrv__light_transmittance(ctx, x, &ls, rng, T);
-    if (!(T[0] > 0 || T[1] > 0 || T[2] > 0)) return;
+    if (!rrv__nonzero3(T)) return;
     k = pdf * rrv__power_heuristic(ls.pdf, pdf) / ls.pdf * rrv__eta_scale(ctx, ls.point) * rrv__path_mis(path);
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * tint[c] * T[c] * ls.L[c] * k;
 }
@@ -7430,7 +7563,7 @@ static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, co
     ls.wi = rrv__scale(rrv__sub(y, x), 1.0 / r);
     ls.dist = r;
     rrv__light_transmittance(ctx, x, &ls, rng, T);
-    if (!(T[0] > 0 || T[1] > 0 || T[2] > 0)) return;
+    if (!rrv__nonzero3(T)) return;
     if (ctx->bends) {
         double eta = 1.0 + rrv__scene_refractivity(scene, y, NULL);
         given = ctx->eta_camera2 / (eta * eta);
@@ -9257,12 +9390,12 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     if (!(rrv__max3(f) > 0)) return;
     if (kept.n > 0) {
         /* the root's own chords: its last shot in the solve */
-        if (!rrv__kept_transmittance(ctx, &kept, rng, T) || !(rrv__max3(T) > 0)) return;
+        if (!rrv__kept_transmittance(ctx, &kept, rng, T) || !rrv__nonzero3(T)) return;
     } else {
         rrv__shot shot;
         rrv__frame(root.w0, &e1, &e2);
         rrv__shoot(ctx, x0, root.w0, e1, e2, y, &ny, rng, T, &shot);
-        if (shot.status != RRV__SHOT_REACHED || !(rrv__max3(T) > 0)) return;
+        if (shot.status != RRV__SHOT_REACHED || !rrv__nonzero3(T)) return;
     }
     for (count = 1; count < RRV__SOLVE_TRIALS; ++count) {
         int found;
@@ -9385,7 +9518,7 @@ static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *
         if (rrv__chord_meets_extinction(scene, o, *d, reach)) {
             rrv__transmittance(ctx, o, *d, reach, rng, Ts);
             for (c = 0; c < 3; ++c) T[c] *= Ts[c];
-            if (!(T[0] > 0 || T[1] > 0 || T[2] > 0)) return -1;
+            if (!rrv__nonzero3(T)) return -1;
         }
         if (has_hit) return hit->shape;
         end = b.end;
@@ -10803,7 +10936,7 @@ static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__
         if (rrv__intersect_scene(scene, x, d, len * (1.0 - 1e-6), &hit)) return 0;
         rrv__transmittance(ctx, x, d, len * (1.0 - 1e-6), rng, Ts);
         for (c = 0; c < 3; ++c) T[c] *= Ts[c];
-        if (!(rrv__max3(T) > 0)) return 0;
+        if (!rrv__nonzero3(T)) return 0;
     }
     if (!touched) return 0;
     for (c = 0; c < 3; ++c) out[c] = f[c] * T[c];
@@ -14590,7 +14723,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"sampler", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "pcg|sobol"},
     {"emissionnee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "on|off"},
     {"manifoldsolver", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "lm|dogleg"},
-    {"transmittance", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "ratio|residual"},
+    {"transmittance", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "ratio|residual|march"},
 };
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
@@ -15195,7 +15328,7 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
     if ((unsigned)s->manifold_gauge > (unsigned)RRV_GAUGE_ISO)
         return rrv__ck_fail(ck, RRV_OK, "manifold_gauge %d is not one of rrv_manifold_gauge",
                             (int)s->manifold_gauge);
-    if ((unsigned)s->transmittance > (unsigned)RRV_TRANSMITTANCE_RESIDUAL)
+    if ((unsigned)s->transmittance > (unsigned)RRV_TRANSMITTANCE_MARCH)
         return rrv__ck_fail(ck, RRV_OK, "transmittance %d is not one of rrv_transmittance", (int)s->transmittance);
     if ((unsigned)s->manifold_solver > (unsigned)RRV_MANIFOLD_SOLVER_DOGLEG)
         return rrv__ck_fail(ck, RRV_OK, "manifold_solver %d is not one of rrv_manifold_solver",
@@ -16155,7 +16288,11 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[15].given) s->sampler = sl[15].choice == 0 ? RRV_SAMPLER_PCG : RRV_SAMPLER_SOBOL;
     if (sl[16].given) s->emission_nee = sl[16].choice == 0 ? RRV_EMISSION_NEE_ON : RRV_EMISSION_NEE_OFF;
     if (sl[17].given) s->manifold_solver = sl[17].choice ? RRV_MANIFOLD_SOLVER_DOGLEG : RRV_MANIFOLD_SOLVER_LM;
-    if (sl[18].given) s->transmittance = sl[18].choice ? RRV_TRANSMITTANCE_RESIDUAL : RRV_TRANSMITTANCE_RATIO;
+    if (sl[18].given) {
+        static const rrv_transmittance kinds[] = {RRV_TRANSMITTANCE_RATIO, RRV_TRANSMITTANCE_RESIDUAL,
+                                                  RRV_TRANSMITTANCE_MARCH};
+        s->transmittance = kinds[sl[18].choice];
+    }
     rrv__sf_ck(p, &ck, "render");
     rrv__sf_ck(p, &ambient, "ambient");
     return rrv__settings_check(&ck, &ambient, s);

@@ -36,6 +36,9 @@ static double median(double *v, int n)
 }
 
 #define MAX_ROUNDS 64
+#define NE 3
+static const rrv_transmittance kinds[NE] = {RRV_TRANSMITTANCE_RATIO, RRV_TRANSMITTANCE_RESIDUAL, RRV_TRANSMITTANCE_MARCH};
+static const char *names[NE] = {"ratio", "residual", "march"};
 
 int main(int argc, char **argv)
 {
@@ -48,7 +51,7 @@ int main(int argc, char **argv)
     const rrv_medium *m;
     rrv__context ctx;
     rrv__rng rng;
-    double eff[2][MAX_ROUNDS], var_r[2][MAX_ROUNDS], cpu_r[2][MAX_ROUNDS], ev_r[2][MAX_ROUNDS], mean_r[2][MAX_ROUNDS];
+    double eff[NE][MAX_ROUNDS], var_r[NE][MAX_ROUNDS], cpu_r[NE][MAX_ROUNDS], ev_r[NE][MAX_ROUNDS], mean_r[NE][MAX_ROUNDS];
     if (rounds < 1 || rounds > MAX_ROUNDS || rays < 1 || estimates < 2) {
         fprintf(stderr, "usage: measure_transmittance SCENE [RAYS [ESTIMATES [ROUNDS <= %d]]]\n", MAX_ROUNDS);
         return 2;
@@ -69,8 +72,8 @@ int main(int argc, char **argv)
     ctx.eta_camera2 = 1;
     rrv__rng_seed(&rng, 2026, 12, 3);
     for (round = 0; round < rounds; ++round) {
-        double sum_var[2] = {0, 0}, cpu[2] = {0, 0}, sum_mean[2] = {0, 0};
-        uint64_t events[2] = {0, 0};
+        double sum_var[NE] = {0, 0, 0}, cpu[NE] = {0, 0, 0}, sum_mean[NE] = {0, 0, 0};
+        uint64_t events[NE] = {0, 0, 0};
         int r;
         for (r = 0; r < rays; ++r) {
             rrv_vec3 o, y, d;
@@ -91,12 +94,12 @@ int main(int argc, char **argv)
             len = rrv__length(d);
             d = rrv__scale(d, 1.0 / len);
             /* alternate which estimator goes first, so neither owns the warm cache */
-            for (e = 0; e < 2; ++e) {
-                int which = (r + e) & 1;
+            for (e = 0; e < NE; ++e) {
+                int which = (r + e) % NE;
                 double s1 = 0, s2 = 0, t0;
                 uint64_t ev0 = ctx.stats.events;
                 int k;
-                scene->settings.transmittance = which ? RRV_TRANSMITTANCE_RESIDUAL : RRV_TRANSMITTANCE_RATIO;
+                scene->settings.transmittance = kinds[which];
                 t0 = seconds();
                 for (k = 0; k < estimates; ++k) {
                     double T[3];
@@ -110,7 +113,7 @@ int main(int argc, char **argv)
                 sum_var[which] += (s2 - s1 * s1 / estimates) / (estimates - 1);
             }
         }
-        for (e = 0; e < 2; ++e) {
+        for (e = 0; e < NE; ++e) {
             double n = (double)rays * estimates;
             var_r[e][round] = sum_var[e] / rays;
             cpu_r[e][round] = cpu[e] / n;
@@ -118,20 +121,20 @@ int main(int argc, char **argv)
             mean_r[e][round] = sum_mean[e] / rays;
             eff[e][round] = var_r[e][round] * cpu_r[e][round];
         }
-        printf("round %d: ratio var %.5g cpu %.4g us events %.3g mean %.5f | residual var %.5g cpu %.4g us events %.3g "
-               "mean %.5f | varxcost residual/ratio %.4f\n",
-               round, var_r[0][round], 1e6 * cpu_r[0][round], ev_r[0][round], mean_r[0][round], var_r[1][round],
-               1e6 * cpu_r[1][round], ev_r[1][round], mean_r[1][round], eff[1][round] / eff[0][round]);
+        printf("round %d:", round);
+        for (e = 0; e < NE; ++e)
+            printf(" %s var %.5g cpu %.4g us lookups %.3g mean %.5f (%.4f) |", names[e], var_r[e][round],
+                   1e6 * cpu_r[e][round], ev_r[e][round], mean_r[e][round], eff[e][round] / eff[0][round]);
+        printf("\n");
     }
-    {
+    printf("%s: medians of %d rounds, %d rays x %d estimates:\n", path, rounds, rays, estimates);
+    for (e = 0; e < NE; ++e) {
         double q[MAX_ROUNDS];
-        for (i = 0; i < rounds; ++i) q[i] = eff[1][i] / eff[0][i];
-        printf("%s: medians of %d rounds, %d rays x %d estimates:\n", path, rounds, rays, estimates);
-        for (e = 0; e < 2; ++e)
-            printf("  %-8s variance %.5g  cpu/estimate %.4g us  events/estimate %.4g  var x cpu %.5g\n",
-                   e ? "residual" : "ratio", median(var_r[e], rounds), 1e6 * median(cpu_r[e], rounds),
-                   median(ev_r[e], rounds), median(eff[e], rounds));
-        printf("  var x cpu, residual / ratio: %.4f\n", median(q, rounds));
+        for (i = 0; i < rounds; ++i) q[i] = eff[e][i] / eff[0][i];
+        printf("  %-8s mean %.5f  variance %.5g  cpu/estimate %.4g us  lookups/estimate %.4g  var x cpu %.5g"
+               "  / ratio's %.4f\n",
+               names[e], median(mean_r[e], rounds), median(var_r[e], rounds), 1e6 * median(cpu_r[e], rounds),
+               median(ev_r[e], rounds), median(eff[e], rounds), median(q, rounds));
     }
     rrv_scene_free(scene);
     return 0;
