@@ -101,7 +101,7 @@ static const char render_help[] =
     "  --transmittance NAME   shadow rays' estimator: march (unbiased ray\n"
     "                         marching), residual (ratio tracking above the\n"
     "                         majorant grid's minorant) or ratio; default: the\n"
-    "                         scene's, else march\n"
+    "                         scene's, else ratio\n"
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop (an EXR\n"

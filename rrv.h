@@ -629,7 +629,8 @@ typedef enum rrv_sampler {
 /* How shadow rays (and every other transmittance estimate) are tracked.
    Both are unbiased; they differ in variance per unit of work. */
 typedef enum rrv_transmittance {
-    RRV_TRANSMITTANCE_DEFAULT = 0, /* RESIDUAL */
+    RRV_TRANSMITTANCE_DEFAULT = 0, /* RATIO (test/bench/RESULTS.md, "Transmittance":
+                                      MARCH wins per shadow ray, not per render) */
     RRV_TRANSMITTANCE_RATIO,       /* ratio tracking against the majorant grid */
     RRV_TRANSMITTANCE_RESIDUAL,    /* residual ratio tracking: the majorant grid's
                                       minorant integrated exactly, ratio tracking of
@@ -6711,9 +6712,10 @@ static int rrv__march_depth(rrv__context *ctx, const rrv_medium *m, const double
     it.residual = 1;
     while (rrv__majorant_iterator_next(&it, &seg)) {
         double span = seg.majorant * (seg.t1 - seg.t0);
-        if (weight) {
+        if (weight && span > 0) {
             /* the pivot's march: roulette once what it has gathered so far
-               (its depth only grows) leaves under a tenth */
+               (its depth only grows) leaves under a tenth, where work is
+               left (a march through known density stays exact) */
             double most = 0;
             for (ch = 0; ch < 3; ++ch) most = rrv__maxd(most, exp(-(tau[ch] + it.control * k[ch])));
             if (*weight * most < 0.1) {
@@ -6812,9 +6814,9 @@ static int rrv__nonzero3(const double T[3]) { return T[0] != 0 || T[1] != 0 || T
 static void rrv__transmittance(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, double tmax, rrv__rng *rng, double T[3])
 {
     switch (ctx->scene->settings.transmittance) {
-    case RRV_TRANSMITTANCE_RATIO: rrv__ratio_tracking_transmittance(ctx, o, d, tmax, rng, T); break;
+    case RRV_TRANSMITTANCE_MARCH: rrv__march_transmittance(ctx, o, d, tmax, rng, T); break;
     case RRV_TRANSMITTANCE_RESIDUAL: rrv__residual_tracking_transmittance(ctx, o, d, tmax, rng, T); break;
-    default: rrv__march_transmittance(ctx, o, d, tmax, rng, T); break;
+    default: rrv__ratio_tracking_transmittance(ctx, o, d, tmax, rng, T); break;
     }
 }
 
