@@ -159,6 +159,25 @@
    by the power heuristic against the emission paths collect; only where
    no refracting medium lies between. Details: NOTES at the end.
 
+   TRANSMITTANCE (rrv_settings.transmittance, scene `render transmittance
+   ratio|residual|march`, `--transmittance`): how every shadow ray's
+   transmittance is estimated, all unbiased. `ratio` (the default) is
+   ratio tracking against the majorant grid. The majorant grid also keeps a
+   per-cell minorant (a true lower bound of the density, rounded down);
+   `residual` integrates it exactly and ratio-tracks only what lies above
+   it; `march` is unbiased ray marching: a jittered march (2 points a unit
+   of the residual majorant's optical depth, the minorant exact) gives a
+   pivot optical depth p, and exp(-tau) = exp(-p) sum_j (p - tau)^j / j!
+   is estimated term by term from independent marches, truncated by
+   roulette. Per shadow ray march has 1/6 to 1/9 of ratio tracking's variance x
+   cost on plume, pyro and haze, but in whole renders shadow rays are a
+   small part of the noise and march's extra work about cancels its gain,
+   so ratio stays the default (test/bench/RESULTS.md, "Transmittance").
+   Where a cell's density is constant, residual and march are exact
+   there. March's estimates are signed (rarely negative); they are added
+   as they are. Refracting media: every straight chord of a bent shadow
+   ray is estimated the same way.
+
 
    READING MAP (the paper's terms and the functions that implement them;
    `grep -n "^/\* [-=][-=][-=][-=]" rrv.h` lists the sections quoted)
@@ -177,7 +196,9 @@
        rrv__aim_nee; rrv__cone_nee ("solver", "nee AIM")
      the eikonal reference (Ament et al.): rrv__eikonal_step,
        rrv__eikonal_step_controlled, rrv__eikonal_plan ("eikonal")
-     ratio tracking of shadow rays: rrv__ratio_tracking_transmittance;
+     ratio tracking of shadow rays: rrv__ratio_tracking_transmittance (and
+       its alternatives, rrv__transmittance: rrv__residual_tracking_transmittance,
+       rrv__march_transmittance);
        the path tracer: rrv__trace_path; a rectangle: rrv_render_rect
 
    USAGE
