@@ -98,6 +98,10 @@ static const char render_help[] =
     "                         rays: fast, biased near refracting media)\n"
     "  --sampler NAME         pcg or sobol (Owen-scrambled, per pixel); default:\n"
     "                         the scene's, else sobol\n"
+    "  --transmittance NAME   shadow rays' estimator: march (unbiased ray\n"
+    "                         marching), residual (ratio tracking above the\n"
+    "                         majorant grid's minorant) or ratio; default: the\n"
+    "                         scene's, else ratio\n"
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop (an EXR\n"
@@ -1500,6 +1504,8 @@ typedef struct render_options {
     int has_nee;
     rrv_sampler sampler;
     int has_sampler;
+    rrv_transmittance transmittance;
+    int has_transmittance;
     int threads;
     double exposure;
     int crop[4], has_crop;
@@ -1599,6 +1605,14 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
             else if (strcmp(name, "sobol") == 0) opt->sampler = RRV_SAMPLER_SOBOL;
             else return usage_error(&args, "--sampler needs pcg or sobol, got \"%s\"", name);
             opt->has_sampler = 1;
+        } else if (strcmp(arg, "--transmittance") == 0) {
+            const char *name;
+            if (!take_value(&args, arg, "ratio, residual or march", &name)) return EXIT_USAGE;
+            if (strcmp(name, "ratio") == 0) opt->transmittance = RRV_TRANSMITTANCE_RATIO;
+            else if (strcmp(name, "residual") == 0) opt->transmittance = RRV_TRANSMITTANCE_RESIDUAL;
+            else if (strcmp(name, "march") == 0) opt->transmittance = RRV_TRANSMITTANCE_MARCH;
+            else return usage_error(&args, "--transmittance needs ratio, residual or march, got \"%s\"", name);
+            opt->has_transmittance = 1;
         } else if (strcmp(arg, "--threads") == 0) {
             if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer",
                           &opt->threads))
@@ -1777,6 +1791,7 @@ static int render_load(render_options *opt, const arg_cursor *args, input_list *
         if (opt->has_integrator) s->settings.integrator = opt->integrator;
         if (opt->has_nee) s->settings.nee = opt->nee;
         if (opt->has_sampler) s->settings.sampler = opt->sampler;
+        if (opt->has_transmittance) s->settings.transmittance = opt->transmittance;
         if (apply_refraction_options(s, &opt->refraction)) return GO_ON;
     }
     free_inputs(inputs);

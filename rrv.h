@@ -164,6 +164,25 @@
    by the power heuristic against the emission paths collect; only where
    no refracting medium lies between. Details: NOTES at the end.
 
+   TRANSMITTANCE (rrv_settings.transmittance, scene `render transmittance
+   ratio|residual|march`, `--transmittance`): how every shadow ray's
+   transmittance is estimated, all unbiased. `ratio` (the default) is
+   ratio tracking against the majorant grid. The majorant grid also keeps a
+   per-cell minorant (a true lower bound of the density, rounded down);
+   `residual` integrates it exactly and ratio-tracks only what lies above
+   it; `march` is unbiased ray marching: a jittered march (2 points a unit
+   of the residual majorant's optical depth, the minorant exact) gives a
+   pivot optical depth p, and exp(-tau) = exp(-p) sum_j (p - tau)^j / j!
+   is estimated term by term from independent marches, truncated by
+   roulette. Per shadow ray march has 1/6 to 1/9 of ratio tracking's variance x
+   cost on plume, pyro and haze, but in whole renders shadow rays are a
+   small part of the noise and march's extra work about cancels its gain,
+   so ratio stays the default (test/bench/RESULTS.md, "Transmittance").
+   Where a cell's density is constant, residual and march are exact
+   there. March's estimates are signed (rarely negative); they are added
+   as they are. Refracting media: every straight chord of a bent shadow
+   ray is estimated the same way.
+
 
    READING MAP (the paper's terms and the functions that implement them;
    `grep -n '/\* >>' rrv.h` is the table of contents, in the order a ray
@@ -183,7 +202,9 @@
        rrv__aim_nee; rrv__cone_nee (>> 11, "nee AIM")
      the eikonal reference (Ament et al.): rrv__eikonal_step,
        rrv__eikonal_step_controlled, rrv__eikonal_plan ("eikonal")
-     ratio tracking of shadow rays: rrv__ratio_tracking_transmittance;
+     ratio tracking of shadow rays: rrv__ratio_tracking_transmittance (and
+       its alternatives, rrv__transmittance: rrv__residual_tracking_transmittance,
+       rrv__march_transmittance);
        the path tracer: rrv__trace_path; a rectangle: rrv_render_rect
 
    USAGE
@@ -670,6 +691,19 @@ typedef enum rrv_sampler {
                                 rest from the PCG32 stream */
 } rrv_sampler;
 
+/* How shadow rays (and every other transmittance estimate) are tracked.
+   Both are unbiased; they differ in variance per unit of work. */
+typedef enum rrv_transmittance {
+    RRV_TRANSMITTANCE_DEFAULT = 0, /* RATIO (test/bench/RESULTS.md, "Transmittance":
+                                      MARCH wins per shadow ray, not per render) */
+    RRV_TRANSMITTANCE_RATIO,       /* ratio tracking against the majorant grid */
+    RRV_TRANSMITTANCE_RESIDUAL,    /* residual ratio tracking: the majorant grid's
+                                      minorant integrated exactly, ratio tracking of
+                                      what lies above it (manual, TRANSMITTANCE) */
+    RRV_TRANSMITTANCE_MARCH        /* unbiased ray marching: a jittered march
+                                      corrected by a randomly truncated power series */
+} rrv_transmittance;
+
 typedef struct rrv_settings {
     int spp;              /* samples per pixel, >= 1 */
     int max_depth;        /* scattering/bounce vertices per path, >= 1 */
@@ -696,6 +730,7 @@ typedef struct rrv_settings {
     rrv_sampler sampler;
     rrv_emission_nee emission_nee;
     rrv_manifold_solver manifold_solver; /* nee manifold */
+    rrv_transmittance transmittance;
 } rrv_settings;
 
 struct rrv__majorant_grid;
@@ -2159,6 +2194,106 @@ static double rrv__nv_bound(const rrv_nanovdb *g, rrv_vec3 lo, rrv_vec3 hi)
     return best;
 }
 
+/* The least value any index point in [lo, hi] holds below the node: its
+   tile values and leaf values (a node's table leaves no index point out). */
+static double rrv__nv_node_min(const rrv_nanovdb *g, const unsigned char *node, int level, const int64_t o[3],
+                               const int64_t lo[3], const int64_t hi[3])
+{
+    double least = DBL_MAX;
+    int64_t a[3], b[3], x, y, z;
+    int s = rrv__nv_extent_log2[level], dim = level == 1 ? 32 : 16, log2dim = level == 1 ? 5 : 4, c;
+    size_t table = level == 1 ? RRV__NV_UPPER_TABLE : RRV__NV_LOWER_TABLE;
+    size_t mask = level == 1 ? 32 + 4096 : 32 + 512;
+    for (c = 0; c < 3; ++c) {
+        a[c] = lo[c] > o[c] ? (lo[c] - o[c]) >> s : 0;
+        b[c] = (hi[c] - o[c]) >> s;
+        if (b[c] > dim - 1) b[c] = dim - 1;
+    }
+    for (x = a[0]; x <= b[0]; ++x)
+        for (y = a[1]; y <= b[1]; ++y)
+            for (z = a[2]; z <= b[2]; ++z) {
+                unsigned n = (unsigned)((x << (2 * log2dim)) | (y << log2dim) | z);
+                const unsigned char *entry = node + table + 8 * (size_t)n;
+                if ((node[mask + (n >> 3)] >> (n & 7)) & 1) {
+                    const unsigned char *child = node + (int64_t)rrv__nv_u64(entry);
+                    int64_t co[3];
+                    co[0] = o[0] + (x << s);
+                    co[1] = o[1] + (y << s);
+                    co[2] = o[2] + (z << s);
+                    if (level == 1) {
+                        least = fmin(least, rrv__nv_node_min(g, child, 2, co, lo, hi));
+                    } else {
+                        int64_t i, j, k, l[3], h[3];
+                        for (c = 0; c < 3; ++c) {
+                            l[c] = lo[c] > co[c] ? lo[c] - co[c] : 0;
+                            h[c] = hi[c] - co[c] < 7 ? hi[c] - co[c] : 7;
+                        }
+                        for (i = l[0]; i <= h[0]; ++i)
+                            for (j = l[1]; j <= h[1]; ++j)
+                                for (k = l[2]; k <= h[2]; ++k)
+                                    least = fmin(least, rrv__nv_leaf_value(g->type, child, (unsigned)((i << 6) | (j << 3) | k)));
+                    }
+                } else {
+                    least = fmin(least, rrv__nv_f32(entry));
+                }
+            }
+    return least;
+}
+
+/* A lower bound of the field over the world box [lo, hi]: the least value
+   of the index points trilinear may read there, and the background wherever
+   the box may reach beyond the data, beyond the grid's box, or into a root
+   tile the tree does not hold (rrv__nv_bound's rules, the other way). */
+static double rrv__nv_lower(const rrv_nanovdb *g, rrv_vec3 lo, rrv_vec3 hi)
+{
+    double ulo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, uhi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX}, least = DBL_MAX;
+    int64_t ilo[3], ihi[3], blocks = 1, tiles = 0;
+    const unsigned char *root = g->buffer + g->root;
+    uint32_t t;
+    int corner, a;
+    if (!g->buffer) return 0;
+    if (!rrv__inside_box(lo, g->lo, g->hi) || !rrv__inside_box(hi, g->lo, g->hi)) least = g->background;
+    for (corner = 0; corner < 8; ++corner) {
+        double u[3];
+        rrv__nv_to_index(g, rrv__v3(corner & 1 ? hi.x : lo.x, corner & 2 ? hi.y : lo.y, corner & 4 ? hi.z : lo.z), u);
+        for (a = 0; a < 3; ++a) {
+            ulo[a] = fmin(ulo[a], u[a]);
+            uhi[a] = fmax(uhi[a], u[a]);
+        }
+    }
+    for (a = 0; a < 3; ++a) {
+        double l = floor(ulo[a]), h = floor(uhi[a]) + 1.0;
+        if (l < (double)g->data_lo[a] || h > (double)g->data_hi[a]) least = fmin(least, g->background);
+        l = fmax(l, (double)g->data_lo[a]);
+        h = fmin(h, (double)g->data_hi[a]);
+        if (!(l <= h)) return fmin(least, g->background);
+        ilo[a] = (int64_t)l;
+        ihi[a] = (int64_t)h;
+        /* root tiles (4096 points an axis) the box spans */
+        blocks *= (ihi[a] >> 12) - (ilo[a] >> 12) + 1;
+    }
+    for (t = 0; t < g->root_tiles; ++t) {
+        const unsigned char *tile = root + RRV__NV_ROOT + (size_t)t * RRV__NV_TILE;
+        uint64_t key = rrv__nv_u64(tile);
+        int64_t o[3], child = (int64_t)rrv__nv_u64(tile + 8);
+        int overlaps = 1;
+        o[0] = (int64_t)(int32_t)(uint32_t)(((key >> 42) & 0x1fffffu) << 12);
+        o[1] = (int64_t)(int32_t)(uint32_t)(((key >> 21) & 0x1fffffu) << 12);
+        o[2] = (int64_t)(int32_t)(uint32_t)((key & 0x1fffffu) << 12);
+        for (a = 0; a < 3; ++a)
+            if (o[a] > ihi[a] || o[a] + 4095 < ilo[a]) overlaps = 0;
+        if (!overlaps) continue;
+        ++tiles;
+        if (child == 0)
+            least = fmin(least, rrv__nv_f32(tile + 20));
+        else
+            least = fmin(least, rrv__nv_node_min(g, root + child, 1, o, ilo, ihi));
+    }
+    /* keys are distinct, so fewer tiles than blocks leaves a block to the background */
+    if (tiles < blocks) least = fmin(least, g->background);
+    return least < DBL_MAX ? fmax(0.0, least) : 0.0;
+}
+
 /* Value noise on an integer lattice hashed from the seed: cheap, bounded in
    [0,1] by construction, which is what lets the majorant be a true bound. */
 static double rrv__lattice(uint32_t x, uint32_t y, uint32_t z, uint32_t seed)
@@ -2464,6 +2599,67 @@ static double rrv__field_bound(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
     }
 }
 
+static void rrv__grid_range(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, double *low, double *high);
+
+/* A lower bound of a one-channel grid's trilinear field over a box inside
+   the grid's box (0 where any of it lies outside, where lookups give 0):
+   the exact range of rrv__grid_range where the box spans few sample planes,
+   else the least sample of its span, since a trilinear value is a convex
+   blend of samples. */
+static double rrv__grid_lower(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi)
+{
+    int a[3], b[3], i, j, k;
+    double low, high, least = DBL_MAX;
+    if (g->channels != 1 || !rrv__inside_box(lo, g->lo, g->hi) || !rrv__inside_box(hi, g->lo, g->hi)) return 0;
+    rrv__grid_range(g, lo, hi, &low, &high);
+    if (high < DBL_MAX) return low;
+    if (!rrv__grid_span(g, lo, hi, a, b)) return 0;
+    for (k = a[2]; k <= b[2]; ++k)
+        for (j = a[1]; j <= b[1]; ++j)
+            for (i = a[0]; i <= b[0]; ++i)
+                least = fmin(least, g->data[((size_t)k * (size_t)g->ny + (size_t)j) * (size_t)g->nx + (size_t)i]);
+    /* the span skips slivers under 1e-9 of a voxel (rrv__grid_span): so
+       does this bound, by what a sliver's lookups can differ */
+    return least;
+}
+
+/* A lower bound of a non-negative field over a box: the majorant grid's
+   minorant, residual tracking's control. 0 where nothing better is known
+   (noise, 3-channel grids), which leaves that cell's walk ratio tracking. */
+static double rrv__field_lower(const rrv_field *f, rrv_vec3 lo, rrv_vec3 hi)
+{
+    if (!(lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z)) return 0;
+    switch (f->kind) {
+    case RRV_FIELD_CONSTANT: return f->value;
+    case RRV_FIELD_BLOBS: {
+        /* each blob at its farthest point of the box (lookups drop a blob
+           beyond 6 sigma, so then 0), a negative one at its nearest */
+        double sum = f->base;
+        int i;
+        for (i = 0; i < f->blob_count; ++i) {
+            const rrv_blob *b = &f->blobs[i];
+            double r2 = b->radius * b->radius, q;
+            rrv_vec3 d;
+            if (b->weight < 0) {
+                d = rrv__sub(rrv__vmax(lo, rrv__vmin(hi, b->center)), b->center);
+            } else {
+                d.x = fmax(fabs(lo.x - b->center.x), fabs(hi.x - b->center.x));
+                d.y = fmax(fabs(lo.y - b->center.y), fabs(hi.y - b->center.y));
+                d.z = fmax(fabs(lo.z - b->center.z), fabs(hi.z - b->center.z));
+            }
+            q = rrv__dot(d, d) / r2;
+            if (b->weight < 0) sum += b->weight * exp(-0.5 * q);
+            else if (q < 72.0) sum += b->weight * exp(-0.5 * q);
+        }
+        /* exp's rounding: a relative margin keeps this below every lookup */
+        return sum - 1e-12 * fabs(sum);
+    }
+    case RRV_FIELD_GRID: return rrv__grid_lower(&f->grid, lo, hi);
+    case RRV_FIELD_NANOVDB: return rrv__nv_lower(&f->nanovdb, lo, hi);
+    default: return 0;
+    }
+}
+
 /* ---- the refractive index: refractivity r = eta - 1 and its gradient ------ */
 
 /* Refractivity of the medium's own IOR profile at p (not scaled). */
@@ -2521,6 +2717,8 @@ struct rrv__majorant_grid {
     int channel_groups;    /* 1 (grey or mildly chromatic): one majorant serves all
                               channels, as before there were groups */
     float *density_max;    /* per cell */
+    float *density_min;    /* per cell, a lower bound of the density (rounded down):
+                              residual tracking's control (rrv__field_lower) */
     float *grad_max;       /* per cell max |grad r|, NULL if the medium does not refract */
     float *jacobian_wander; /* with RRV__COMB_WANDER, per cell bound on |J(p) - J(q)|, J the
                               Jacobian of grad r, p, q in the cell, where grad r is a baked
@@ -4077,6 +4275,13 @@ static void rrv__majorant_slice(void *ctx, int z)
             float df = (float)d;
             if ((double)df < d) df = nextafterf(df, FLT_MAX);
             g->density_max[c] = df > 0 ? df : 0.0f;
+            {
+                /* rounded down, so it stays below the field; never above the bound */
+                double l = rrv__field_lower(rrv__field_of(m, RRV__DENSITY), rrv__vmax(lo, m->lo), rrv__vmin(hi, m->hi));
+                float lf = (float)rrv__mind(l, FLT_MAX);
+                if ((double)lf > l) lf = nextafterf(lf, -FLT_MAX);
+                g->density_min[c] = lf > 0 ? (lf < g->density_max[c] ? lf : g->density_max[c]) : 0.0f;
+            }
             if (g->grad_max)
                 g->grad_max[c] = (float)rrv__mind(rrv__cell_gradient_bound(m, lo, hi, job->ambient_r), FLT_MAX);
             if (g->jacobian_wander) {
@@ -4251,6 +4456,7 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
     /* density bounds; gradient bounds where it refracts; Jacobian wander
        bounds where that gradient is a baked trilinear blend */
     arrays = !refracts ? 1 : RRV__COMB_WANDER && g->refraction.data && rrv__flat_beyond_bake(m) ? 3 : 2;
+    ++arrays; /* density_min, last */
     rrv__majorant_lattice(scene, m, refracts, 1, g);
     cells = (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
     {
@@ -4269,7 +4475,8 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
     g->density_max = (float *)RRV_MALLOC(cells * sizeof(float) * arrays);
     if (!g->density_max) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
     g->grad_max = refracts ? g->density_max + cells : NULL;
-    g->jacobian_wander = arrays > 2 ? g->density_max + 2 * cells : NULL;
+    g->jacobian_wander = arrays > 3 ? g->density_max + 2 * cells : NULL;
+    g->density_min = g->density_max + (size_t)(arrays - 1) * cells;
     {
         rrv__majorant_bake job;
         job.m = m;
@@ -4841,6 +5048,8 @@ typedef struct rrv__majorant_segment {
     double t0, t1;   /* the piece of the ray o + t d inside one cell */
     double majorant; /* 1/m, bounds the extinction (plus refraction rate) there */
     double density_max; /* the cell's density bound (times the density weight) */
+    double density_min; /* with residual, its lower bound (else 0), which the
+                           majorant then bounds the density above */
 } rrv__majorant_segment;
 
 typedef struct rrv__majorant_iterator {
@@ -4850,6 +5059,9 @@ typedef struct rrv__majorant_iterator {
     double sigma_t_sample;/* the extinction scale of the majorant: sigma_t_max, or
                              one channel group's (rrv__walker_sample_channel) */
     double mu_eta_fixed, inv_tolerance;
+    int residual;         /* majorants bound density - density_min (residual tracking) */
+    double control;       /* with residual: the integral of density_min over the
+                             segments handed out so far */
     double t, t_end;      /* where the next segment starts; where the ray leaves the box */
     int cell[3], step[3];
     double t_next[3], t_delta[3];
@@ -4863,6 +5075,7 @@ typedef struct rrv__majorant_iterator {
     double piece_h;            /* the last piece's length: the next one tries twice it */
     double piece_min;          /* the shortest piece (RRV__PIECE_FLOOR of the crossing) */
     double piece_cap;          /* the cell's density bound, which no piece's exceeds */
+    double piece_floor;        /* with residual, the cell's minorant, which every piece's reaches */
     double piece_rate;         /* the cell's refraction event rate, every piece's too */
 } rrv__majorant_iterator;
 
@@ -4944,6 +5157,8 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
     it->mu_eta_fixed = s->mu_eta;
     /* a division per walk, which delta tracking's walks (one a comb chord) need not pay */
     it->inv_tolerance = it->with_refraction ? 1.0 / s->bend_tolerance : 0.0;
+    it->residual = 0;
+    it->control = 0;
     it->t = t0;
     it->t_end = t1;
     it->done = 0;
@@ -5112,7 +5327,16 @@ static int rrv__majorant_piece(rrv__majorant_iterator *it, rrv__majorant_segment
     seg->t0 = t0;
     seg->t1 = last ? it->piece_end : t0 + h;
     seg->density_max = high * it->density_weight;
-    seg->majorant = high * it->sigma_t_sample * it->density_weight + it->piece_rate;
+    if (it->residual) {
+        /* the piece's own range, never below the cell's minorant nor above its bound */
+        low = rrv__mind(rrv__maxd(low, it->piece_floor), high);
+        seg->density_min = low * it->density_weight;
+        seg->majorant = (high - low) * it->sigma_t_sample * it->density_weight + it->piece_rate;
+        it->control += seg->density_min * (seg->t1 - seg->t0);
+    } else {
+        seg->density_min = 0;
+        seg->majorant = high * it->sigma_t_sample * it->density_weight + it->piece_rate;
+    }
     it->piece_t = seg->t1;
     it->piece_h = h;
     if (last) it->splitting = 0;
@@ -5132,7 +5356,13 @@ static int rrv__majorant_iterator_next(rrv__majorant_iterator *it, rrv__majorant
     seg->t0 = it->t;
     seg->t1 = rrv__mind(it->t_next[a], it->t_end);
     seg->density_max = g->density_max[c] * it->density_weight;
-    seg->majorant = g->density_max[c] * it->sigma_t_sample * it->density_weight;
+    if (it->residual) {
+        seg->density_min = g->density_min[c] * it->density_weight;
+        seg->majorant = ((double)g->density_max[c] - g->density_min[c]) * it->sigma_t_sample * it->density_weight;
+    } else {
+        seg->density_min = 0;
+        seg->majorant = g->density_max[c] * it->sigma_t_sample * it->density_weight;
+    }
     if (it->with_refraction)
         seg->majorant += rate = it->mu_eta_fixed > 0 ? it->mu_eta_fixed : g->grad_max[c] * it->inv_tolerance;
     it->t = seg->t1;
@@ -5152,10 +5382,13 @@ static int rrv__majorant_iterator_next(rrv__majorant_iterator *it, rrv__majorant
             it->piece_h = 0.5 * (seg->t1 - seg->t0);
             it->piece_min = RRV__PIECE_FLOOR * (seg->t1 - seg->t0);
             it->piece_cap = g->density_max[c];
+            it->piece_floor = g->density_min[c];
             it->piece_rate = rate;
             return rrv__majorant_piece(it, seg);
         }
     }
+    /* the pieces add their own */
+    it->control += seg->density_min * (seg->t1 - seg->t0);
     return 1;
 }
 
@@ -6733,6 +6966,227 @@ static void rrv__ratio_tracking_transmittance(rrv__context *ctx, rrv_vec3 o, rrv
     }
 }
 
+/* Residual ratio tracking (Novak et al. 2014) with the majorant grid's
+   minorant as the control: per cell the density d splits into the
+   minorant d_c, whose optical depth tau_c along the segment is integrated
+   exactly (it is constant in the cell), and the residual d - d_c, which
+   ratio tracking estimates against the majorant d_max - d_c:
+     T = exp(-k tau_c) prod_i (1 - k (d(x_i) - d_c) / (s (d_max - d_c)))
+   (k the channel's extinction per unit density, s its group's scale).
+   Each factor is 1 - k/s (d - d_c)/(d_max - d_c), which lies in [0, 1]
+   where d_c <= d <= d_max, and its expectation over the Poisson collisions
+   is exp(-k int (d - d_c)) whatever the majorant, so the product is
+   unbiased even where rounding puts d a hair below d_c (a factor a hair
+   above 1) or above d_max (one a hair below 0): a signed weight, never a
+   clamp, which would bias it. Where d_c = d_max (a constant density) a
+   cell takes no collisions and its transmittance is exact: no variance.
+   Collisions fall at the residual's rate, so the walk is cheaper, and each
+   factor is nearer 1, so the estimate varies less. Russian roulette acts
+   on the whole estimate so far, control included. Channel groups are
+   walked as in ratio tracking, each with its own majorant. */
+static void rrv__residual_tracking_transmittance(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, double tmax,
+                                                 rrv__rng *rng, double T[3])
+{
+    const rrv_scene *scene = ctx->scene;
+    int i;
+    T[0] = T[1] = T[2] = 1.0;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        double k[3];
+        int lead;
+        if (m->density.kind == RRV_FIELD_NONE) continue;
+        rrv__channel_extinction(m, k);
+        for (lead = 0; lead < 3; ++lead) {
+            rrv__walker w;
+            const double *scale = m->majorant->channel_scale;
+            double W[3] = {1, 1, 1};
+            int member[3], ch;
+            for (ch = 0; ch < 3; ++ch) member[ch] = scale[ch] == scale[lead];
+            if ((lead > 0 && member[0]) || (lead > 1 && member[1]) || !(scale[lead] > 0)) continue;
+            if (!rrv__walker_start(&w, m, 0, &scene->settings, o, d, tmax)) break;
+            if (m->majorant->channel_groups > 1) rrv__walker_sample_channel(&w, &scene->settings, lead, 0);
+            w.cells.residual = 1;
+            for (;;) {
+                rrv__coeffs c;
+                double most = 0;
+                rrv__walker_advance(&w, rng, &ctx->stats.events);
+                if (w.t_event == DBL_MAX) {
+                    if (!w.cut) break;
+                    ++ctx->stats.paths_cut;
+                    ++ctx->stats.cut_tracking;
+                    T[0] = T[1] = T[2] = 0;
+                    return;
+                }
+                rrv__medium_coeffs(m, rrv__madd(o, d, w.t_event), &c);
+                for (ch = 0; ch < 3; ++ch)
+                    if (member[ch]) {
+                        double control = w.cell.density_min * k[ch];
+                        W[ch] *= 1.0 - (c.sigma_a[ch] + c.sigma_s[ch] - control) / w.majorant;
+                        /* the control so far covers the walk's cell to its end: a
+                           deterministic function of the ray, so a fair roulette input */
+                        most = rrv__maxd(most, fabs(W[ch]) * T[ch] * exp(-w.cells.control * k[ch]));
+                    }
+                if (most < 0.1 && most > 0) {
+                    if (rrv__uniform(rng) < 0.5) {
+                        most = 0;
+                    } else {
+                        for (ch = 0; ch < 3; ++ch) W[ch] *= member[ch] ? 2.0 : 1.0;
+                    }
+                }
+                if (!(most > 0)) {
+                    for (ch = 0; ch < 3; ++ch)
+                        if (member[ch]) W[ch] = 0;
+                    break;
+                }
+            }
+            for (ch = 0; ch < 3; ++ch)
+                if (member[ch]) T[ch] *= W[ch] == 0 ? 0.0 : W[ch] * exp(-w.cells.control * k[ch]);
+            if (!(rrv__max3(T) != 0)) return;
+        }
+    }
+}
+
+/* Samples a unit of the residual majorant's optical depth takes in one
+   march of rrv__march_transmittance (a measurement build may set another). */
+#ifndef RRV__MARCH_RATE
+#define RRV__MARCH_RATE 2.0
+#endif
+/* The series' terms a march estimate may take before it is cut. */
+#define RRV__MARCH_TERMS 64
+
+/* One jittered march along o + t d, t in [0, tmax), through medium m: an
+   unbiased estimate of each channel's optical depth. The minorant's depth
+   is exact (rrv__majorant_iterator's control); the residual above it is
+   sampled at points evenly spaced in the residual majorant's optical depth
+   s, 1 / RRV__MARCH_RATE apart, from one random offset: a point at s stands
+   for the stretch of s around it, whose residual depth is
+   integral (sigma - sigma_c) / mu ds, so each adds
+   (sigma - sigma_c) / (mu RRV__MARCH_RATE), unbiased since the offset
+   makes every s equally likely. The points fall where the majorant says
+   the density may be (none where it is known), and each weight lies in
+   [0, 1 / RATE] as a ratio-tracking factor's complement does; regular
+   spacing instead of Poisson collisions is what takes the variance. */
+static int rrv__march_depth(rrv__context *ctx, const rrv_medium *m, const double k[3], rrv_vec3 o, rrv_vec3 d,
+                            double tmax, rrv__rng *rng, double tau[3], double *weight)
+{
+    rrv__majorant_iterator it;
+    rrv__majorant_segment seg;
+    double step = 1.0 / RRV__MARCH_RATE, next = step * rrv__uniform(rng), at = 0;
+    long left = RRV_MAX_SEGMENT_EVENTS;
+    int ch;
+    tau[0] = tau[1] = tau[2] = 0;
+    if (!rrv__majorant_iterator_start(&it, m, 0, &ctx->scene->settings, &o, &d, NULL, tmax, 0)) return 1;
+    it.residual = 1;
+    while (rrv__majorant_iterator_next(&it, &seg)) {
+        double span = seg.majorant * (seg.t1 - seg.t0);
+        if (weight && span > 0) {
+            /* the pivot's march: roulette once what it has gathered so far
+               (its depth only grows) leaves under a tenth, where work is
+               left (a march through known density stays exact) */
+            double most = 0;
+            for (ch = 0; ch < 3; ++ch) most = rrv__maxd(most, exp(-(tau[ch] + it.control * k[ch])));
+            if (*weight * most < 0.1) {
+                if (rrv__uniform(rng) < 0.5) return 0;
+                *weight *= 2.0;
+            }
+        }
+        if (!(span > 0)) continue;
+        for (; next < at + span && left > 0; next += step, --left) {
+            rrv__coeffs c;
+            double w = step / seg.majorant;
+            rrv__medium_coeffs(m, rrv__madd(o, d, seg.t0 + (next - at) / seg.majorant), &c);
+            for (ch = 0; ch < 3; ++ch) tau[ch] += w * (c.sigma_a[ch] + c.sigma_s[ch] - seg.density_min * k[ch]);
+            ++ctx->stats.events;
+        }
+        at += span;
+    }
+    for (ch = 0; ch < 3; ++ch) tau[ch] += it.control * k[ch];
+    return 1;
+}
+
+/* The unbiased ray-marching estimator of transmittance: a jittered march
+   gives the pivot p (an estimate of the optical depth tau), and
+   exp(-tau) = exp(-p) exp(p - tau) = exp(-p) sum_j (p - tau)^j / j!,
+   the series taken term by term. Term j's (p - tau)^j is estimated without
+   bias by the product of j independent X_i = p - tau_i, tau_i further
+   marches independent of p (conditioned on p, each X_i has mean p - tau
+   and they are independent, so their product has mean (p - tau)^j). The
+   series is truncated at random: after term j (j >= 1) the next is taken
+   with probability q_j = min(1, 2 |X_j| / (j + 1)) (a function of draws
+   already made, the size of the next term relative to this one), and
+   each term is divided by the probability of reaching it, which keeps the
+   sum unbiased. The first correction (j = 1) is always taken: without it
+   exp(-p) alone is biased low by Jensen. A march varies far less than a
+   ratio-tracking walk of as many lookups where the density is smooth, and
+   every X_i is then small, so the series stops after a term or two; where
+   the density is constant in a cell the march is exact there. The estimate
+   is signed: a term's product may be negative, and the sum can be too
+   (rarely, where X is large); callers must add it, never clamp it.
+   Channels share the marches (their depths are k_c times the density's
+   where the density grid is grey), so no channel groups are needed; each
+   medium is estimated on its own, the product of independent estimates. */
+static void rrv__march_transmittance(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, double tmax, rrv__rng *rng,
+                                     double T[3])
+{
+    const rrv_scene *scene = ctx->scene;
+    int i, ch;
+    T[0] = T[1] = T[2] = 1.0;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        double k[3], pivot[3], term[3], sum[3], x[3], so_far, weight;
+        int j;
+        if (m->density.kind == RRV_FIELD_NONE || m->majorant->empty) continue;
+        /* the roulette weighs the whole estimate, earlier media's part too */
+        so_far = rrv__maxd(fabs(T[0]), rrv__maxd(fabs(T[1]), fabs(T[2])));
+        if (!(so_far > 0)) return;
+        weight = so_far;
+        rrv__channel_extinction(m, k);
+        if (!rrv__march_depth(ctx, m, k, o, d, tmax, rng, pivot, &weight)) {
+            T[0] = T[1] = T[2] = 0;
+            return;
+        }
+        weight /= so_far;
+        for (ch = 0; ch < 3; ++ch) sum[ch] = term[ch] = 1.0;
+        for (j = 1;; ++j) {
+            double tau[3], big = 0, q;
+            if (j > RRV__MARCH_TERMS) {
+                ++ctx->stats.paths_cut;
+                ++ctx->stats.cut_tracking;
+                T[0] = T[1] = T[2] = 0;
+                return;
+            }
+            rrv__march_depth(ctx, m, k, o, d, tmax, rng, tau, NULL);
+            for (ch = 0; ch < 3; ++ch) {
+                x[ch] = pivot[ch] - tau[ch];
+                term[ch] *= x[ch] / j;
+                sum[ch] += term[ch];
+                big = rrv__maxd(big, fabs(x[ch]));
+            }
+            q = 2.0 * big / (j + 1);
+            if (q < 1.0) {
+                if (!(rrv__uniform(rng) < q)) break;
+                for (ch = 0; ch < 3; ++ch) term[ch] /= q;
+            }
+        }
+        for (ch = 0; ch < 3; ++ch) T[ch] *= weight * exp(-pivot[ch]) * sum[ch];
+    }
+}
+
+/* Whether a transmittance estimate adds anything: march's are signed, and
+   a negative one must be added as it is, never dropped (dropping it biases
+   the sum up); ratio tracking's are never negative, where this is T > 0. */
+static int rrv__nonzero3(const double T[3]) { return T[0] != 0 || T[1] != 0 || T[2] != 0; }
+
+/* Every transmittance estimate: the scene's choice of estimator. */
+static void rrv__transmittance(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, double tmax, rrv__rng *rng, double T[3])
+{
+    switch (ctx->scene->settings.transmittance) {
+    case RRV_TRANSMITTANCE_MARCH: rrv__march_transmittance(ctx, o, d, tmax, rng, T); break;
+    case RRV_TRANSMITTANCE_RESIDUAL: rrv__residual_tracking_transmittance(ctx, o, d, tmax, rng, T); break;
+    default: rrv__ratio_tracking_transmittance(ctx, o, d, tmax, rng, T); break;
+    }
+}
+
 enum { RRV__FLIGHT_PASSED, RRV__FLIGHT_SCATTERED, RRV__FLIGHT_ABSORBED, RRV__FLIGHT_BENT, RRV__FLIGHT_CUT };
 
 typedef struct rrv__flight {
@@ -7194,7 +7648,7 @@ static void rrv__light_transmittance(rrv__context *ctx, rrv_vec3 p, const rrv__l
         T[0] = T[1] = T[2] = 0;
         return;
     }
-    rrv__ratio_tracking_transmittance(ctx, p, ls->wi, tmax, rng, T);
+    rrv__transmittance(ctx, p, ls->wi, tmax, rng, T);
 }
 
 static void rrv__material_albedo(const rrv_material *mat, rrv_vec3 p, rrv_vec3 n, double albedo[3])
@@ -7416,7 +7870,7 @@ static void rrv__sample_direct_light(rrv__context *ctx, rrv__path *path, rrv_vec
         pdf = rrv__hg_eval(v->g, rrv__dot(v->d_in, ls.wi));
     }
     rrv__light_transmittance(ctx, x, &ls, rng, T);
-    if (!(T[0] > 0 || T[1] > 0 || T[2] > 0)) return;
+    if (!rrv__nonzero3(T)) return;
     k = pdf * rrv__power_heuristic(ls.pdf, pdf) / ls.pdf * rrv__eta_scale(ctx, ls.point) * rrv__path_mis(path);
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * tint[c] * T[c] * ls.L[c] * k;
 }
@@ -7478,7 +7932,7 @@ static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, co
     ls.wi = rrv__scale(rrv__sub(y, x), 1.0 / r);
     ls.dist = r;
     rrv__light_transmittance(ctx, x, &ls, rng, T);
-    if (!(T[0] > 0 || T[1] > 0 || T[2] > 0)) return;
+    if (!rrv__nonzero3(T)) return;
     if (ctx->bends) {
         double eta = 1.0 + rrv__scene_refractivity(scene, y, NULL);
         given = ctx->eta_camera2 / (eta * eta);
@@ -7894,7 +8348,7 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
             g->bytes = baked + sizeof *g;
             if (g->density_max)
                 g->bytes += (size_t)g->n[0] * g->n[1] * g->n[2] * sizeof(float) *
-                            (size_t)(1 + (g->grad_max != NULL) + (g->jacobian_wander != NULL));
+                            (size_t)(2 + (g->grad_max != NULL) + (g->jacobian_wander != NULL));
             if (g->near_flat) g->bytes += (size_t)g->n[0] * g->n[1] * g->n[2];
             scene->bytes += g->bytes;
         }
@@ -8802,7 +9256,7 @@ static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec
                 double Ts[3], tmax = s * (1.0 - 1e-6);
                 ++ctx->stats.paths;
                 if (rrv__intersect_scene(scene, x, d, tmax, &hit)) { out->status = RRV__SHOT_BLOCKED; return; }
-                rrv__ratio_tracking_transmittance(ctx, x, d, tmax, rng, Ts);
+                rrv__transmittance(ctx, x, d, tmax, rng, Ts);
                 for (c = 0; c < 3; ++c) T[c] *= Ts[c];
             }
             return;
@@ -8813,7 +9267,7 @@ static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec
             rrv__hit hit;
             double Ts[3];
             if (rrv__intersect_scene(scene, x, d, len, &hit)) { out->status = RRV__SHOT_BLOCKED; return; }
-            rrv__ratio_tracking_transmittance(ctx, x, d, len, rng, Ts);
+            rrv__transmittance(ctx, x, d, len, rng, Ts);
             for (c = 0; c < 3; ++c) T[c] *= Ts[c];
         }
         if (b.end == RRV__END_FACE && !b.cell_face && rrv__face_jumps(scene, rrv__madd(x, d, len), d)) {
@@ -8861,7 +9315,7 @@ static int rrv__kept_transmittance(rrv__context *ctx, const rrv__chords *kept, r
             len *= 1.0 - 1e-6;
         }
         if (rrv__intersect_scene(ctx->scene, kept->x[i], kept->d[i], len, &hit)) return 0;
-        rrv__ratio_tracking_transmittance(ctx, kept->x[i], kept->d[i], len, rng, Ts);
+        rrv__transmittance(ctx, kept->x[i], kept->d[i], len, rng, Ts);
         for (c = 0; c < 3; ++c) T[c] *= Ts[c];
     }
     return 1;
@@ -9458,12 +9912,12 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     if (!(rrv__max3(f) > 0)) return;
     if (kept.n > 0) {
         /* the root's own chords: its last shot in the solve */
-        if (!rrv__kept_transmittance(ctx, &kept, rng, T) || !(rrv__max3(T) > 0)) return;
+        if (!rrv__kept_transmittance(ctx, &kept, rng, T) || !rrv__nonzero3(T)) return;
     } else {
         rrv__shot shot;
         rrv__frame(root.w0, &e1, &e2);
         rrv__shoot(ctx, x0, root.w0, e1, e2, y, plane, rng, T, &shot);
-        if (shot.status != RRV__SHOT_REACHED || !(rrv__max3(T) > 0)) return;
+        if (shot.status != RRV__SHOT_REACHED || !rrv__nonzero3(T)) return;
     }
     {
         rrv__shot_recurrence t;
@@ -9600,9 +10054,9 @@ static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *
         if (!has_hit && !(segment < DBL_MAX)) return -2;
         reach = has_hit ? hit->t : segment;
         if (rrv__chord_meets_extinction(scene, o, *d, reach)) {
-            rrv__ratio_tracking_transmittance(ctx, o, *d, reach, rng, Ts);
+            rrv__transmittance(ctx, o, *d, reach, rng, Ts);
             for (c = 0; c < 3; ++c) T[c] *= Ts[c];
-            if (!(T[0] > 0 || T[1] > 0 || T[2] > 0)) return -1;
+            if (!rrv__nonzero3(T)) return -1;
         }
         if (has_hit) return hit->shape;
         end = b.end;
@@ -11019,9 +11473,9 @@ static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__
             touched = view.inside || view.t_face < len;
         }
         if (rrv__intersect_scene(scene, x, d, len * (1.0 - 1e-6), &hit)) return 0;
-        rrv__ratio_tracking_transmittance(ctx, x, d, len * (1.0 - 1e-6), rng, Ts);
+        rrv__transmittance(ctx, x, d, len * (1.0 - 1e-6), rng, Ts);
         for (c = 0; c < 3; ++c) T[c] *= Ts[c];
-        if (!(rrv__max3(T) > 0)) return 0;
+        if (!rrv__nonzero3(T)) return 0;
     }
     if (!touched) return 0;
     for (c = 0; c < 3; ++c) out[c] = f[c] * T[c];
@@ -15007,6 +15461,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"sampler", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "pcg|sobol"},
     {"emissionnee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "on|off"},
     {"manifoldsolver", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "lm|dogleg"},
+    {"transmittance", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "ratio|residual|march"},
 };
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
@@ -15624,6 +16079,8 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
     if ((unsigned)s->manifold_gauge > (unsigned)RRV_GAUGE_ISO)
         return rrv__ck_fail(ck, RRV_OK, "manifold_gauge %d is not one of rrv_manifold_gauge",
                             (int)s->manifold_gauge);
+    if ((unsigned)s->transmittance > (unsigned)RRV_TRANSMITTANCE_MARCH)
+        return rrv__ck_fail(ck, RRV_OK, "transmittance %d is not one of rrv_transmittance", (int)s->transmittance);
     if ((unsigned)s->manifold_solver > (unsigned)RRV_MANIFOLD_SOLVER_DOGLEG)
         return rrv__ck_fail(ck, RRV_OK, "manifold_solver %d is not one of rrv_manifold_solver",
                             (int)s->manifold_solver);
@@ -16586,6 +17043,11 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
     if (sl[15].given) s->sampler = sl[15].choice == 0 ? RRV_SAMPLER_PCG : RRV_SAMPLER_SOBOL;
     if (sl[16].given) s->emission_nee = sl[16].choice == 0 ? RRV_EMISSION_NEE_ON : RRV_EMISSION_NEE_OFF;
     if (sl[17].given) s->manifold_solver = sl[17].choice ? RRV_MANIFOLD_SOLVER_DOGLEG : RRV_MANIFOLD_SOLVER_LM;
+    if (sl[18].given) {
+        static const rrv_transmittance kinds[] = {RRV_TRANSMITTANCE_RATIO, RRV_TRANSMITTANCE_RESIDUAL,
+                                                  RRV_TRANSMITTANCE_MARCH};
+        s->transmittance = kinds[sl[18].choice];
+    }
     rrv__sf_ck(p, &ck, "render");
     rrv__sf_ck(p, &ambient, "ambient");
     return rrv__settings_check(&ck, &ambient, s);

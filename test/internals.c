@@ -77,6 +77,10 @@
 #undef solver_context
 #undef blob_scene
 
+#define main test_transmittance_main
+#include "test_transmittance.c"
+#undef main
+
 #define main test_parser_main
 #define put32 parser_put32
 #include "test_parser.c"
@@ -95,5 +99,6 @@ int main(int argc, char **argv)
     failed |= test_render_main(argc, argv);
     failed |= test_nee_main();
     failed |= test_parser_main(argc, argv);
+    failed |= test_transmittance_main();
     return failed ? 1 : 0;
 }
