@@ -686,9 +686,10 @@ typedef enum rrv_sampler {
     RRV_SAMPLER_DEFAULT = 0, /* Sobol (test/bench/RESULTS.md, "Samplers": never more than a few
                                 per cent worse than PCG, up to 6x better) */
     RRV_SAMPLER_PCG,         /* an independent PCG32 stream per (pixel, sample) */
-    RRV_SAMPLER_SOBOL        /* the first RRV_SOBOL_DIMENSIONS numbers of a sample
-                                from Owen-scrambled Sobol pairs per pixel, the
-                                rest from the PCG32 stream */
+    RRV_SAMPLER_SOBOL        /* Owen-scrambled Sobol pairs per pixel, each
+                                decision of a bounce at its own dimensions
+                                (rrv__sobol_next); draws past a budget per
+                                bounce from the PCG32 stream */
 } rrv_sampler;
 
 /* How shadow rays (and every other transmittance estimate) are tracked.
@@ -1349,11 +1350,17 @@ static rrv_vec3 rrv__from_frame(rrv_vec3 n, double x, double y, double z)
    how the work is split between threads. */
 typedef struct rrv__rng {
     uint64_t state, inc;
-    /* Sobol sampler (rrv__sobol_start): the sample's index in its pixel, the
-       pixel's scramble seed, the next dimension, how many come from Sobol,
-       and the second coordinate of the pair last drawn */
-    uint32_t sobol_index, sobol_seed, sobol_y;
-    int dim, sobol_dims;
+    /* Sobol sampler (rrv__sobol_start, rrv__sampler_bounce): the pixel's
+       scramble key, the sample's index in its pixel, whether Sobol is on,
+       the bounce, the stream decisions come from (rrv__uniform_walk adds
+       RRV__STREAM_WALK to it), the next dimension of every stream, and the
+       second coordinate of each stream's pair last drawn, with the number
+       of that pair plus one (0: none) */
+    uint64_t sobol_key;
+    uint32_t sobol_index;
+    int sobol, bounce, stream;
+    int next[4], paired[4];
+    uint32_t sobol_y[4];
 } rrv__rng;
 
 static uint32_t rrv__next_u32(rrv__rng *rng)
@@ -1382,18 +1389,32 @@ static void rrv__rng_seed(rrv__rng *rng, uint64_t seed, uint64_t stream_a, uint6
     rrv__next_u32(rng);
     rng->state += key;
     rrv__next_u32(rng);
-    rng->dim = rng->sobol_dims = 0;
+    rng->sobol = rng->bounce = rng->stream = 0;
 }
 
 /* ---- the Sobol sampler: Owen-scrambled Sobol pairs (Burley 2020) ----------
-   Sample s of a pixel takes its dimensions two at a time from the first two
-   Sobol dimensions, a (0,2)-sequence, at index s shuffled by a nested
+   Sample s of a pixel takes its random numbers two at a time from the first
+   two Sobol dimensions, a (0,2)-sequence, at index s shuffled by a nested
    uniform (Owen) scramble of its own per pair, each coordinate Owen-scrambled
    too. Every single sample is then uniform in the unit square and pairs are
    independent, so estimates stay unbiased; across a pixel's samples each
    pair is stratified. Everything is a hash of (seed, pixel, s): images are
-   the same for any split into tiles, sample ranges and threads. */
-#define RRV_SOBOL_DIMENSIONS 16
+   the same for any split into tiles, sample ranges and threads.
+
+   Stratification only helps where the same dimension serves the same
+   decision in every sample. A path in dense smoke draws a varying number of
+   free flights, so numbering the draws of a path in order would give sample
+   A's phase direction the dimension sample B spends on its fifth null
+   collision. Dimensions are therefore named, not counted: (bounce, stream,
+   k), bounce 0 the camera's and bounce b the walk to the b-th vertex and
+   the choices made there, and each bounce's draws split into four streams
+   numbered on their own: the vertex's direction and roulette, its light
+   sample, the walk of the path (free flights, collision events, comb
+   kicks, faces) and the walks of its shadow rays. A stream's first
+   RRV__SOBOL_BUDGET numbers of a bounce are Sobol, the rest PCG32: they are
+   the draws that vary in count, where alignment is lost anyway. */
+#define RRV__SOBOL_BUDGET 32
+enum { RRV__STREAM_DIRECTION, RRV__STREAM_LIGHT, RRV__STREAM_WALK };
 
 static uint32_t rrv__reverse_bits(uint32_t x)
 {
@@ -1432,46 +1453,70 @@ static uint32_t rrv__sobol_1_reversed(uint32_t i)
     return i;
 }
 
-/* Makes the next RRV_SOBOL_DIMENSIONS numbers drawn from rng those of
-   sample `index` of the pixel whose scramble seed is `seed`. */
-static void rrv__sobol_start(rrv__rng *rng, uint32_t seed, uint32_t index)
+/* Makes the numbers drawn from rng those of sample `index` of the pixel
+   whose scramble key is `key`, at bounce 0 (the camera's). */
+static void rrv__sobol_start(rrv__rng *rng, uint64_t key, uint32_t index)
 {
-    rng->sobol_seed = seed;
+    rng->sobol_key = key;
     rng->sobol_index = index;
-    rng->dim = 0;
-    rng->sobol_dims = RRV_SOBOL_DIMENSIONS;
+    rng->sobol = 1;
+    rng->bounce = 0;
+    rng->stream = RRV__STREAM_DIRECTION;
+    rng->next[0] = rng->next[1] = rng->next[2] = rng->next[3] = 0;
+    rng->paired[0] = rng->paired[1] = rng->paired[2] = rng->paired[3] = 0;
 }
 
-/* Dimension 0 of Sobol is the index with its bits reversed, so in reversed
-   form the shuffled index i is its own first coordinate. */
-static double rrv__sobol_next(rrv__rng *rng)
+/* The path reaches its next vertex: every stream starts over at the
+   bounce's own dimensions. No-op for PCG. */
+static void rrv__sampler_bounce(rrv__rng *rng)
 {
-    int d = rng->dim++;
+    ++rng->bounce;
+    rng->next[0] = rng->next[1] = rng->next[2] = rng->next[3] = 0;
+    rng->paired[0] = rng->paired[1] = rng->paired[2] = rng->paired[3] = 0;
+}
+
+/* Dimension k of a stream in this bounce. Dimension 0 of Sobol is the index
+   with its bits reversed, so in reversed form the shuffled index i is its
+   own first coordinate. The pair's scramble is a hash of its name, so no
+   two dimensions of a sample share one. */
+static double rrv__sobol_next(rrv__rng *rng, int stream)
+{
+    int k = rng->next[stream]++;
     uint64_t h;
     uint32_t i, x;
-    if (d & 1) return rng->sobol_y * (1.0 / 4294967296.0);
-    h = rrv__mix64(((uint64_t)rng->sobol_seed << 32) | (uint32_t)d);
+    if ((k & 1) && rng->paired[stream] == (k >> 1) + 1) return rng->sobol_y[stream] * (1.0 / 4294967296.0);
+    rng->paired[stream] = (k >> 1) + 1;
+    h = rrv__mix64(rng->sobol_key ^ rrv__mix64(((uint64_t)(uint32_t)rng->bounce << 32) |
+                                                ((uint64_t)stream << 16) | (uint64_t)(k >> 1)));
     i = rrv__reverse_bits(rrv__owen_reversed(rrv__reverse_bits(rng->sobol_index), (uint32_t)h));
     x = rrv__reverse_bits(rrv__owen_reversed(i, (uint32_t)(h >> 32)));
-    rng->sobol_y = rrv__reverse_bits(rrv__owen_reversed(rrv__sobol_1_reversed(i), (uint32_t)(h >> 16) * 0x9E3779B9u));
-    return x * (1.0 / 4294967296.0);
+    rng->sobol_y[stream] =
+        rrv__reverse_bits(rrv__owen_reversed(rrv__sobol_1_reversed(i), (uint32_t)(h >> 16) * 0x9E3779B9u));
+    return (k & 1 ? rng->sobol_y[stream] : x) * (1.0 / 4294967296.0);
 }
 
 /* Uniform in [0,1): 53 random bits, so that -log(1-u) never sees 1. */
-static double rrv__uniform(rrv__rng *rng)
+static double rrv__uniform_in(rrv__rng *rng, int stream)
 {
     uint64_t hi, lo;
-    if (rng->dim < rng->sobol_dims) return rrv__sobol_next(rng);
+    if (rng->sobol && rng->next[stream] < RRV__SOBOL_BUDGET) return rrv__sobol_next(rng, stream);
     hi = rrv__next_u32(rng) >> 5;
     lo = rrv__next_u32(rng) >> 6;
     return (double)(hi * 67108864.0 + lo) * (1.0 / 9007199254740992.0);
 }
 
+/* A decision of the vertex (or of its light sample, in rrv__vertex_nee). */
+static double rrv__uniform(rrv__rng *rng) { return rrv__uniform_in(rng, rng->stream); }
+
+/* A draw of a walk: of the path's own, or of a shadow ray's while a light
+   is sampled. */
+static double rrv__uniform_walk(rrv__rng *rng) { return rrv__uniform_in(rng, rng->stream + RRV__STREAM_WALK); }
+
 /* >> 3 sampling: free flights, directions, phase function, MIS ============== */
 
 static double rrv__sample_free_flight(double majorant, rrv__rng *rng)
 {
-    return -log(1.0 - rrv__uniform(rng)) / majorant;
+    return -log(1.0 - rrv__uniform_walk(rng)) / majorant;
 }
 
 static rrv_vec3 rrv__sample_uniform_sphere(double u1, double u2)
@@ -6084,7 +6129,7 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
         nd = rrv__refract_at_null_event(d, r_before, r_after, n, &reflected);
         if (!reflected) {
             double cos_i = fabs(rrv__dot(n, d)), cos_t = fabs(rrv__dot(n, nd));
-            if (rrv__uniform(rng) < rrv__fresnel(1.0 + r_before, 1.0 + r_after, cos_i, cos_t)) reflected = 1;
+            if (rrv__uniform_walk(rng) < rrv__fresnel(1.0 + r_before, 1.0 + r_after, cos_i, cos_t)) reflected = 1;
         }
         if (reflected) {
             nd = rrv__normalize(rrv__madd(d, n, -2.0 * rrv__dot(n, d)));
@@ -6325,7 +6370,7 @@ static double rrv__comb_run_on(rrv__bender *b, const rrv_medium *medium, rrv_vec
     const double inv_tolerance = b->inv_tolerance;
     while (edge) {
         rrv_vec3 p = rrv__madd(x, d, reach);
-        double tau = edge > 0 ? 1.0 - rrv__uniform(rng) : 1.0, t;
+        double tau = edge > 0 ? 1.0 - rrv__uniform_walk(rng) : 1.0, t;
         int next = 0;
         if (edge > 0) *from = reach;
         t = rrv__rate_distance(medium->majorant, &p, &d, b->line_inv, tau, inv_tolerance, &next);
@@ -6721,7 +6766,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
         /* the first point a uniformly random fraction of a spacing ahead, so
            the comb does not alias with pixels */
         const rrv_medium *medium;
-        double h = rrv__comb_spacing(scene, b, &o, d, b->line_inv, 1.0 - rrv__uniform(rng), &b->entering, &medium);
+        double h = rrv__comb_spacing(scene, b, &o, d, b->line_inv, 1.0 - rrv__uniform_walk(rng), &b->entering, &medium);
         rrv__comb_step(b, scene, o, d, h, &view, medium, rng);
     }
     b->face_known = 0;
@@ -6744,7 +6789,7 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
             /* entering cells with a gradient from a stretch without: the
                first point a random fraction of a spacing in, as at a
                segment's start, so the comb does not alias with pixels */
-            double tau = b->entering > 0 ? 1.0 - rrv__uniform(rng) : 1.0;
+            double tau = b->entering > 0 ? 1.0 - rrv__uniform_walk(rng) : 1.0;
             const rrv_medium *medium;
             double h = rrv__comb_spacing(scene, b, o, d, b->line_inv, tau, &b->entering, &medium);
             rrv__comb_step(b, scene, *o, d, h, &b->ahead, medium, rng);
@@ -6949,7 +6994,7 @@ static void rrv__ratio_tracking_transmittance(rrv__context *ctx, rrv_vec3 o, rrv
                         tmaxc = rrv__maxd(tmaxc, T[ch]);
                     }
                 if (tmaxc < 0.1 && tmaxc > 0) {
-                    if (rrv__uniform(rng) < 0.5) {
+                    if (rrv__uniform_walk(rng) < 0.5) {
                         tmaxc = 0;
                     } else {
                         for (ch = 0; ch < 3; ++ch) T[ch] *= member[ch] ? 2.0 : 1.0;
@@ -7027,7 +7072,7 @@ static void rrv__residual_tracking_transmittance(rrv__context *ctx, rrv_vec3 o, 
                         most = rrv__maxd(most, fabs(W[ch]) * T[ch] * exp(-w.cells.control * k[ch]));
                     }
                 if (most < 0.1 && most > 0) {
-                    if (rrv__uniform(rng) < 0.5) {
+                    if (rrv__uniform_walk(rng) < 0.5) {
                         most = 0;
                     } else {
                         for (ch = 0; ch < 3; ++ch) W[ch] *= member[ch] ? 2.0 : 1.0;
@@ -7071,7 +7116,7 @@ static int rrv__march_depth(rrv__context *ctx, const rrv_medium *m, const double
 {
     rrv__majorant_iterator it;
     rrv__majorant_segment seg;
-    double step = 1.0 / RRV__MARCH_RATE, next = step * rrv__uniform(rng), at = 0;
+    double step = 1.0 / RRV__MARCH_RATE, next = step * rrv__uniform_walk(rng), at = 0;
     long left = RRV_MAX_SEGMENT_EVENTS;
     int ch;
     tau[0] = tau[1] = tau[2] = 0;
@@ -7086,7 +7131,7 @@ static int rrv__march_depth(rrv__context *ctx, const rrv_medium *m, const double
             double most = 0;
             for (ch = 0; ch < 3; ++ch) most = rrv__maxd(most, exp(-(tau[ch] + it.control * k[ch])));
             if (*weight * most < 0.1) {
-                if (rrv__uniform(rng) < 0.5) return 0;
+                if (rrv__uniform_walk(rng) < 0.5) return 0;
                 *weight *= 2.0;
             }
         }
@@ -7164,7 +7209,7 @@ static void rrv__march_transmittance(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, 
             }
             q = 2.0 * big / (j + 1);
             if (q < 1.0) {
-                if (!(rrv__uniform(rng) < q)) break;
+                if (!(rrv__uniform_walk(rng) < q)) break;
                 for (ch = 0; ch < 3; ++ch) term[ch] /= q;
             }
         }
@@ -7466,7 +7511,7 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
               sigma_s / mu and sigma_n / mu */
         pa = c.sigma_a[path->hero] / mu;
         ps = c.sigma_s[path->hero] / mu;
-        u = rrv__uniform(rng);
+        u = rrv__uniform_walk(rng);
         if (u < pa) return RRV__FLIGHT_ABSORBED;
         if (u < pa + ps) {
             /* scatter: the path tracer samples the phase function here */
@@ -7952,10 +7997,17 @@ static void rrv__vertex_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, cons
 {
     rrv__light_draw draw;
     if (!ctx->sample_lights) return;
+    /* the light sample's draws vary in count (shadow walks, solver trials):
+       streams of their own keep the vertex's direction at fixed dimensions */
+    rng->stream = RRV__STREAM_LIGHT;
+    /* the light's choice takes the second coordinate of the first pair, so
+       that the point on it gets the second pair whole */
+    rng->next[RRV__STREAM_LIGHT] = 1;
     rrv__draw_light(rng, &draw);
     rrv__sample_direct_light(ctx, path, x, v, &draw, rng);
     if (ctx->partition) rrv__curved_nee(ctx, path, x, v, &draw, rng);
     if (ctx->emission) rrv__emission_nee(ctx, path, x, v, rng);
+    rng->stream = RRV__STREAM_DIRECTION;
 }
 
 /* What every real vertex does once its light is sampled and its next
@@ -8117,6 +8169,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
     cp.work = 0;
     cp.work_end = ctx->stats.events + ctx->sample_bound;
     rrv__path_start(&cp.path, rng);
+    rrv__sampler_bounce(rng); /* the camera's numbers are bounce 0's */
     cp.path.bender.run = 0; /* the trap bound's test reads it without a bender too */
     if (ctx->bends) rrv__bender_start(&cp.path.bender, scene, ctx->eikonal, o);
     ++ctx->stats.paths;
@@ -8209,6 +8262,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             if (!rrv__hit_surface(ctx, &cp, &hit, rng)) break;
         }
         if (!rrv__russian_roulette(&cp, rng)) break;
+        rrv__sampler_bounce(rng);
     }
     for (c = 0; c < 3; ++c) L[c] = cp.path.L[c];
 }
@@ -8638,8 +8692,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
                 double L[3];
                 rrv_vec3 d;
                 rrv__rng_seed(&rng, scene->settings.seed, pixel, (uint64_t)s);
-                if (sobol) rrv__sobol_start(&rng, (uint32_t)(rrv__mix64(scene->settings.seed ^ rrv__mix64(pixel)) >> 32),
-                                            (uint32_t)s);
+                if (sobol) rrv__sobol_start(&rng, rrv__mix64(scene->settings.seed ^ rrv__mix64(pixel)), (uint32_t)s);
                 double jy = rrv__uniform(&rng), jx = rrv__uniform(&rng); /* in this order on every compiler */
                 d = rrv__camera_ray(&frame, &scene->camera, x + jx, y + jy);
                 rrv__trace_path(&ctx, frame.eye, d, &rng, L);

@@ -598,6 +598,37 @@ static void farm_refusals_write_nothing(void)
     }
 }
 
+/* Every command-line option that changes pixels enters a part's hash: a
+   part rendered with one of them does not merge with parts rendered
+   without it (--sampler once did). --threads, which changes nothing, still
+   merges, so the refusals are the options' doing. */
+static void render_options_enter_the_hash(void)
+{
+    static const char *const options[] = {
+        "--sampler pcg", "--seed 9", "--integrator refractive", "--integrator eikonal", "--nee aim",
+        "--bend-tolerance 0.02", "--mu-eta 3", "--step 0.02", "--refraction poisson", "--stepper leapfrog",
+        "--majorant-cells 2", "--ior-interp cubic",
+    };
+    char args[2 * PATH_SIZE];
+    int i;
+    CHECKF(sh("\"$RRV\" render tiny.rrv -q -o h0.exr --tile 0/2 && \"$RRV\" render tiny.rrv -q -o h1a.exr "
+              "--tile 1/2 --samples 0:2 && \"$RRV\" render tiny.rrv -q -o h1b.exr --tile 1/2 --samples 2:4 "
+              "--threads 1 && \"$RRV\" merge -q h.exr h0.exr h1a.exr h1b.exr", NULL, NULL) == 0,
+           "%s", last_err);
+    for (i = 0; i < (int)(sizeof options / sizeof options[0]); ++i) {
+        snprintf(args, sizeof args, "\"$RRV\" render tiny.rrv -q -o h1b_opt.exr --tile 1/2 --samples 2:4 %s",
+                 options[i]);
+        CHECKF(sh("%s", args, NULL) == 0, "%s: %s", options[i], last_err);
+        CHECKF(sh("\"$RRV\" merge -q h_opt.exr h0.exr h1a.exr h1b_opt.exr", NULL, NULL) == 2 &&
+               strstr(last_err, "their hashes differ"), "%s: the merge did not refuse the part: %s", options[i],
+               last_err);
+    }
+    /* naming the default sampler changes nothing */
+    CHECKF(sh("\"$RRV\" render tiny.rrv -q -o h1b_opt.exr --tile 1/2 --samples 2:4 --sampler sobol && "
+              "\"$RRV\" merge -q h_opt.exr h0.exr h1a.exr h1b_opt.exr", NULL, NULL) == 0,
+           "--sampler sobol: %s", last_err);
+}
+
 typedef struct byte_sink { unsigned char data[8192]; size_t size; } byte_sink;
 static int sink_write(void *user, const void *data, size_t size)
 {
@@ -661,6 +692,7 @@ int main(int argc, char **argv)
     RUN(layouts_merge_to_the_single_render);
     RUN(part_options_are_checked);
     RUN(merge_errors_match_the_corpus);
+    RUN(render_options_enter_the_hash);
     RUN(status_reports_parts);
     RUN(farm_scripts_render_and_resume);
     RUN(farm_scripts_take_hostile_names);

@@ -421,57 +421,116 @@ static void test_white_furnace(void) { furnace(2.0, 2.0, 2.0, 64, 0.01); }
    error of the mean: the bound is conservative, and still catches a bias. */
 static void test_white_furnace_sobol(void) { furnace_with(2.0, 2.0, 2.0, 64, 0.01, RRV_SAMPLER_SOBOL); }
 
-/* Owen-scrambled Sobol pairs: the first 2^m samples of any pixel form a
-   (0,m,2)-net in every pair of dimensions (each of the 2^m elementary
-   intervals of every shape holds one point), and one sample, over pixels,
-   is uniform with its coordinates uncorrelated (within 4 standard errors). */
-static void test_sobol_sampler(void)
+/* The numbers sample `index` of the pixel with scramble key `key` draws
+   from one stream at one bounce: the first n of it, into u. */
+static void sobol_stream(uint64_t key, uint32_t index, int bounce, int stream, int n, double *u)
 {
-    enum { M = 8, N = 1 << M, DIMS = RRV_SOBOL_DIMENSIONS };
-    static double pts[N][DIMS];
-    int pixel, i, d, a, bad = 0;
-    for (pixel = 0; pixel < 3; ++pixel) {
-        for (i = 0; i < N; ++i) {
-            rrv__rng rng;
-            rrv__rng_seed(&rng, 1, (uint64_t)pixel, (uint64_t)i);
-            rrv__sobol_start(&rng, 0x9e3779b9u * (uint32_t)(pixel + 1), (uint32_t)i);
-            for (d = 0; d < DIMS; ++d) pts[i][d] = rrv__uniform(&rng);
-        }
-        for (d = 0; d < DIMS; d += 2)
-            for (a = 0; a <= M; ++a) {
-                static int count[N];
-                memset(count, 0, sizeof count);
-                for (i = 0; i < N; ++i) {
-                    int cx = (int)(pts[i][d] * (1 << a)), cy = (int)(pts[i][d + 1] * (1 << (M - a)));
-                    ++count[(cx << (M - a)) | cy];
-                }
-                for (i = 0; i < N; ++i) bad += count[i] != 1;
+    rrv__rng rng;
+    int b, k;
+    rrv__rng_seed(&rng, 1, key, index);
+    rrv__sobol_start(&rng, key, index);
+    for (b = 0; b < bounce; ++b) rrv__sampler_bounce(&rng);
+    rng.stream = stream & 1;
+    for (k = 0; k < n; ++k) u[k] = stream & RRV__STREAM_WALK ? rrv__uniform_walk(&rng) : rrv__uniform(&rng);
+}
+
+/* Owen-scrambled Sobol pairs named (bounce, stream, k): the first 2^m
+   samples of any pixel form a (0,m,2)-net in the pair of dimensions 2j,
+   2j+1 of every stream at every bounce, the 40th as well as the camera's
+   (each of the 2^m elementary intervals of every shape holds one point),
+   so each dimension alone has exactly one point in every interval of
+   length 1/2^a, a <= m. */
+static void test_sobol_sampler_nets(void)
+{
+    enum { M = 8, N = 1 << M, K = RRV__SOBOL_BUDGET };
+    static const int bounces[] = { 0, 1, 7, 40 };
+    static double pts[N][K];
+    int pixel, bi, stream, i, k, a, bad = 0;
+    for (pixel = 0; pixel < 2; ++pixel)
+        for (bi = 0; bi < 4; ++bi)
+            for (stream = 0; stream < 4; ++stream) {
+                for (i = 0; i < N; ++i)
+                    sobol_stream(rrv__mix64(0x5eed + (uint64_t)pixel), (uint32_t)i, bounces[bi], stream, K, pts[i]);
+                for (k = 0; k < K; k += 2)
+                    for (a = 0; a <= M; ++a) {
+                        static int count[N];
+                        memset(count, 0, sizeof count);
+                        for (i = 0; i < N; ++i) {
+                            int cx = (int)(pts[i][k] * (1 << a)), cy = (int)(pts[i][k + 1] * (1 << (M - a)));
+                            ++count[(cx << (M - a)) | cy];
+                        }
+                        for (i = 0; i < N; ++i) bad += count[i] != 1;
+                    }
             }
-    }
     CHECKF(bad == 0, "%d elementary intervals without exactly one point", bad);
-    {
-        int n = 200000;
-        double sum[DIMS], prod[DIMS];
-        memset(sum, 0, sizeof sum);
-        memset(prod, 0, sizeof prod);
-        for (pixel = 0; pixel < n; ++pixel) {
-            rrv__rng rng;
-            double u[DIMS + 1];
-            rrv__rng_seed(&rng, 1, (uint64_t)pixel, 5);
-            rrv__sobol_start(&rng, (uint32_t)(rrv__mix64((uint64_t)pixel) >> 32), 5);
-            for (d = 0; d <= DIMS; ++d) u[d] = rrv__uniform(&rng); /* the last from PCG */
-            for (d = 0; d < DIMS; ++d) {
-                CHECK(u[d] >= 0 && u[d] < 1);
-                sum[d] += u[d];
-                prod[d] += u[d] * u[d + 1];
-            }
+}
+
+/* What a dimension holds depends on its name alone: a stream's numbers are
+   the same whatever the other streams drew before or between them (so a
+   sample with more free flights does not shift its phase direction), and
+   a sample's numbers do not depend on the samples drawn before it. */
+static void test_sobol_sampler_names_align(void)
+{
+    enum { K = 12 };
+    double alone[K], mixed[K];
+    int k, bounce, differ = 0;
+    uint64_t key = rrv__mix64(77);
+    for (bounce = 0; bounce < 3; ++bounce) {
+        rrv__rng rng;
+        int b;
+        sobol_stream(key, 13, bounce, RRV__STREAM_DIRECTION, K, alone);
+        rrv__rng_seed(&rng, 1, key, 13);
+        rrv__sobol_start(&rng, key, 13);
+        for (b = 0; b < bounce; ++b) {
+            /* earlier bounces draw any number of anything */
+            for (k = 0; k < 5 + 3 * b; ++k) rrv__uniform_walk(&rng);
+            rrv__uniform(&rng);
+            rrv__sampler_bounce(&rng);
         }
-        for (d = 0; d < DIMS; ++d) {
-            /* mean 1/2 (sd sqrt(1/12)); E[u_d u_{d+1}] = 1/4 (sd sqrt(7/144)) */
-            CHECKF(fabs(sum[d] / n - 0.5) < 4 * sqrt(1.0 / 12 / n), "dimension %d: mean %g", d, sum[d] / n);
-            CHECKF(fabs(prod[d] / n - 0.25) < 4 * sqrt(7.0 / 144 / n), "dimensions %d, %d: E[uv] %g", d, d + 1,
+        for (k = 0; k < K; ++k) {
+            int j;
+            for (j = 0; j < k % 4; ++j) rrv__uniform_walk(&rng); /* a walk of k % 4 flights */
+            rng.stream = RRV__STREAM_LIGHT;
+            for (j = 0; j < k % 3; ++j) rrv__uniform(&rng), rrv__uniform_walk(&rng); /* a light sample */
+            rng.stream = RRV__STREAM_DIRECTION;
+            mixed[k] = rrv__uniform(&rng);
+        }
+        for (k = 0; k < K; ++k) differ += alone[k] != mixed[k];
+    }
+    CHECKF(differ == 0, "%d direction numbers moved with the draws of other streams", differ);
+}
+
+/* One sample, over pixels, is uniform, and numbers of different names
+   (another bounce, stream, pair, or the pair's other coordinate) are
+   uncorrelated: E[uv] = 1/4 within 4 standard errors. Past a stream's
+   budget the numbers are PCG32's, uniform too. */
+static void test_sobol_sampler_independent(void)
+{
+    enum { NAMES = 8 };
+    /* bounce, stream, k: neighbours in this list differ in one part */
+    static const int names[NAMES][3] = { { 0, 0, 0 }, { 0, 0, 1 }, { 0, 1, 1 }, { 1, 1, 1 }, { 1, 2, 1 },
+                                         { 1, 3, 1 }, { 1, 3, 3 }, { 1, 3, RRV__SOBOL_BUDGET } };
+    int n = 200000, pixel, d;
+    double sum[NAMES], prod[NAMES];
+    memset(sum, 0, sizeof sum);
+    memset(prod, 0, sizeof prod);
+    for (pixel = 0; pixel < n; ++pixel) {
+        double u[NAMES], v[RRV__SOBOL_BUDGET + 1];
+        uint64_t key = rrv__mix64((uint64_t)pixel);
+        for (d = 0; d < NAMES; ++d) {
+            sobol_stream(key, 5, names[d][0], names[d][1], names[d][2] + 1, v);
+            u[d] = v[names[d][2]];
+            CHECK(u[d] >= 0 && u[d] < 1);
+            sum[d] += u[d];
+        }
+        for (d = 0; d + 1 < NAMES; ++d) prod[d] += u[d] * u[d + 1];
+    }
+    for (d = 0; d < NAMES; ++d) {
+        /* mean 1/2 (sd sqrt(1/12)); E[u_d u_{d+1}] = 1/4 (sd sqrt(7/144)) */
+        CHECKF(fabs(sum[d] / n - 0.5) < 4 * sqrt(1.0 / 12 / n), "name %d: mean %g", d, sum[d] / n);
+        if (d + 1 < NAMES)
+            CHECKF(fabs(prod[d] / n - 0.25) < 4 * sqrt(7.0 / 144 / n), "names %d, %d: E[uv] %g", d, d + 1,
                    prod[d] / n);
-        }
     }
 }
 
@@ -502,6 +561,23 @@ static void tiles_are_bit_identical(rrv_sampler sampler)
             rrv_render_rect(s, x, y, x + 7 > w ? w : x + 7, y + 5 > h ? h : y + 5, 0, 8,
                             tiled + 3 * (y * w + x), w, NULL, NULL);
     CHECK(memcmp(full, tiled, (size_t)w * h * 3 * sizeof(float)) == 0);
+    {
+        /* Samples [0,3) then [3,8) are samples 0..7 too: the sums agree to
+           float rounding (two roundings of the parts' sums, one of the
+           whole's). A sampler that numbered a range's samples from its
+           start would render samples 0..4 twice. */
+        int worst = -1;
+        double worst_err = 0;
+        memset(tiled, 0, (size_t)w * h * 3 * sizeof(float));
+        rrv_render_rect(s, 0, 0, w, h, 0, 3, tiled, w, NULL, NULL);
+        rrv_render_rect(s, 0, 0, w, h, 3, 8, tiled, w, NULL, NULL);
+        for (x = 0; x < w * h * 3; ++x) {
+            double e = fabs((double)full[x] - tiled[x]) / (fabs(full[x]) + 1e-30);
+            if (e > worst_err) { worst_err = e; worst = x; }
+        }
+        CHECKF(worst_err < 4 * FLT_EPSILON, "value %d: the ranges' sum %g, the whole's %g", worst,
+               worst >= 0 ? tiled[worst] : 0.0, worst >= 0 ? full[worst] : 0.0);
+    }
     {
         double total = 0;
         for (x = 0; x < w * h * 3; ++x) total += full[x];
@@ -954,7 +1030,9 @@ int main(int argc, char **argv)
     RUN(test_white_furnace);
     RUN(test_white_furnace_chromatic);
     RUN(test_white_furnace_sobol);
-    RUN(test_sobol_sampler);
+    RUN(test_sobol_sampler_nets);
+    RUN(test_sobol_sampler_names_align);
+    RUN(test_sobol_sampler_independent);
     RUN(test_tiles_are_bit_identical);
     RUN(test_grid_gradient_stencil);
     RUN(test_blackbody);
