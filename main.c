@@ -2184,25 +2184,165 @@ static int merge_status(char **paths, int count)
     return present == count ? EXIT_OK : EXIT_INPUT;
 }
 
+/* rrv merge, loading: every part read, none the output or another part's
+   file, all of one scene and settings. 1, or 0 once a message is printed. */
+static int merge_load_parts(const char *out_path, char **paths, int count, merge_part *parts, merge_part **order)
+{
+    int i, j;
+    for (i = 0; i < count; ++i) {
+        parts[i].path = paths[i];
+        order[i] = &parts[i];
+        if (same_file(out_path, paths[i])) {
+            fprintf(stderr, "rrv: merge: refusing to write \"%s\": it is one of the parts\n", out_path);
+            return 0;
+        }
+        for (j = 0; j < i; ++j)
+            if (same_file(paths[i], paths[j])) {
+                fprintf(stderr, "rrv: merge: \"%s\" and \"%s\" are the same file\n", paths[j], paths[i]);
+                return 0;
+            }
+        if (!load_part(paths[i], &parts[i].info, &parts[i].sums, "merge")) return 0;
+        if (i > 0 && (strcmp(parts[i].info.hash, parts[0].info.hash) != 0 ||
+                      parts[i].info.width != parts[0].info.width || parts[i].info.height != parts[0].info.height ||
+                      parts[i].info.spp != parts[0].info.spp)) {
+            fprintf(stderr, "rrv: merge: \"%s\" is from another scene or settings than \"%s\" (%dx%d, %d spp "
+                    "and %dx%d, %d spp; their hashes differ)\n", paths[i], paths[0],
+                    parts[i].info.width, parts[i].info.height, parts[i].info.spp,
+                    parts[0].info.width, parts[0].info.height, parts[0].info.spp);
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* rrv merge, checking the parts in order (by rectangle, then samples):
+   equal rectangles form one tile and different ones do not meet, each
+   tile's sample ranges run 0..spp unbroken, and the tiles cover the
+   frame. 1, or 0 once a message is printed. */
+static int merge_check_layout(merge_part **order, int count, int width, int height, int spp)
+{
+    long long area = 0;
+    int i, j;
+    for (i = 0; i < count; ++i)
+        for (j = i + 1; j < count; ++j) {
+            const part_info *a = &order[i]->info, *b = &order[j]->info;
+            int same_rect = memcmp(a->rect, b->rect, sizeof a->rect) == 0;
+            if (!rects_intersect(a->rect, b->rect)) continue;
+            if (!same_rect) {
+                fprintf(stderr, "rrv: merge: \"%s\" (tile %s) and \"%s\" (tile %s) overlap: tiles of different "
+                        "layouts share pixels; merge the parts of one layout\n", order[i]->path, a->tile,
+                        order[j]->path, b->tile);
+                return 0;
+            }
+            if (a->sample_begin < b->sample_end && b->sample_begin < a->sample_end) {
+                fprintf(stderr, "rrv: merge: \"%s\" and \"%s\" overlap: both hold samples %d:%d of tile %s\n",
+                        order[i]->path, order[j]->path,
+                        a->sample_begin > b->sample_begin ? a->sample_begin : b->sample_begin,
+                        a->sample_end < b->sample_end ? a->sample_end : b->sample_end, a->tile);
+                return 0;
+            }
+        }
+    for (i = 0; i < count; i = j) {
+        int next = 0;
+        for (j = i; j < count && memcmp(order[j]->info.rect, order[i]->info.rect, sizeof order[i]->info.rect) == 0; ++j) {
+            if (order[j]->info.sample_begin != next) break;
+            next = order[j]->info.sample_end;
+        }
+        if (next != spp || (j < count && memcmp(order[j]->info.rect, order[i]->info.rect,
+                                                sizeof order[i]->info.rect) == 0)) {
+            int gap_end = j < count && memcmp(order[j]->info.rect, order[i]->info.rect,
+                                              sizeof order[i]->info.rect) == 0 ? order[j]->info.sample_begin : spp;
+            fprintf(stderr, "rrv: merge: samples %d:%d of tile %s (pixels %d,%d-%d,%d) are in no part: a sample "
+                    "range is missing\n", next, gap_end, order[i]->info.tile, order[i]->info.rect[0],
+                    order[i]->info.rect[1], order[i]->info.rect[2], order[i]->info.rect[3]);
+            return 0;
+        }
+        area += (long long)(order[i]->info.rect[2] - order[i]->info.rect[0]) *
+                (order[i]->info.rect[3] - order[i]->info.rect[1]);
+    }
+    if (area != (long long)width * height) {
+        /* Tiles do not overlap, so less area means a hole: find a pixel in it. */
+        int x, y;
+        if (!find_hole(order, count, width, height, &x, &y)) {
+            fprintf(stderr, "rrv: out of memory\n");
+            return 0;
+        }
+        fprintf(stderr, "rrv: merge: pixel %d,%d is in no part: a tile is missing (the parts cover %lld of %dx%d "
+                "pixels)\n", x, y, area, width, height);
+        return 0;
+    }
+    return 1;
+}
+
+/* rrv merge, summing: each tile's parts added in the sample tree (as one
+   render adds them) and divided by spp into a new image, or NULL once a
+   message is printed. */
+static float *merge_sum(merge_part **order, int count, int width, int height, int spp)
+{
+    float *image = NULL, *tile_sum = NULL, *tmp[32];
+    int i, j, k, levels, ok = 0;
+    memset(tmp, 0, sizeof tmp);
+    if ((uint64_t)width * (uint64_t)height > SIZE_MAX / (3 * sizeof *image)) {
+        fprintf(stderr, "rrv: out of memory for a %dx%d image\n", width, height);
+        return NULL;
+    }
+    image = (float *)malloc((size_t)width * (size_t)height * 3 * sizeof *image);
+    tile_sum = (float *)malloc((size_t)width * (size_t)height * 3 * sizeof *tile_sum);
+    levels = sample_tree_depth(spp);
+    if (!image || !tile_sum) {
+        fprintf(stderr, "rrv: out of memory for a %dx%d image\n", width, height);
+        goto done;
+    }
+    for (i = 0; i < count; i = j) {
+        const int *r = order[i]->info.rect;
+        int w = r[2] - r[0], h = r[3] - r[1], x, y, c;
+        size_t values = (size_t)w * (size_t)h * 3;
+        for (j = i; j < count && memcmp(order[j]->info.rect, r, 4 * sizeof *r) == 0; ++j) {}
+        for (k = 0; k < levels; ++k) {
+            free(tmp[k]);
+            tmp[k] = (float *)malloc(values * sizeof *tmp[k]);
+            if (!tmp[k]) {
+                fprintf(stderr, "rrv: out of memory\n");
+                goto done;
+            }
+        }
+        merge_block(order + i, j - i, 0, spp, tile_sum, tmp, values);
+        for (y = 0; y < h; ++y)
+            for (x = 0; x < w; ++x)
+                for (c = 0; c < 3; ++c)
+                    image[3 * ((size_t)(r[1] + y) * width + (size_t)(r[0] + x)) + c] =
+                        tile_sum[3 * ((size_t)y * w + x) + c] / (float)spp;
+    }
+    ok = 1;
+done:
+    for (k = 0; k < 32; ++k) free(tmp[k]);
+    free(tile_sum);
+    if (!ok) {
+        free(image);
+        image = NULL;
+    }
+    return image;
+}
+
+/* rrv merge: parse the options (--status reports and stops), check the
+   output, then load, check and sum the parts and write the image. */
 static int command_merge(int argc, char **argv)
 {
     arg_cursor args;
     const char *out_path = NULL;
     char **paths;
     merge_part *parts = NULL, **order = NULL;
-    float *image = NULL, *tile_sum = NULL, *tmp[32];
-    int path_count = 0, status = 0, quiet = 0, i, j, code = EXIT_INPUT, format, levels = 0;
+    float *image = NULL;
+    int path_count = 0, status = 0, quiet = 0, i, code = EXIT_INPUT, format;
     rrv_exr_options exr;
     pending_output output;
     int width, height, spp;
-    long long area = 0;
 
     memset(&args, 0, sizeof args);
     args.argc = argc;
     args.argv = argv;
     args.command = "merge";
     memset(&exr, 0, sizeof exr);
-    memset(tmp, 0, sizeof tmp);
     paths = (char **)malloc((size_t)(argc > 0 ? argc : 1) * sizeof *paths);
     if (!paths) {
         fprintf(stderr, "rrv: out of memory\n");
@@ -2265,116 +2405,14 @@ static int command_merge(int argc, char **argv)
         fprintf(stderr, "rrv: out of memory\n");
         goto done;
     }
-    for (i = 0; i < path_count; ++i) {
-        parts[i].path = paths[i];
-        order[i] = &parts[i];
-        if (same_file(out_path, paths[i])) {
-            fprintf(stderr, "rrv: merge: refusing to write \"%s\": it is one of the parts\n", out_path);
-            goto done;
-        }
-        for (j = 0; j < i; ++j)
-            if (same_file(paths[i], paths[j])) {
-                fprintf(stderr, "rrv: merge: \"%s\" and \"%s\" are the same file\n", paths[j], paths[i]);
-                goto done;
-            }
-        if (!load_part(paths[i], &parts[i].info, &parts[i].sums, "merge")) goto done;
-        if (i > 0 && (strcmp(parts[i].info.hash, parts[0].info.hash) != 0 ||
-                      parts[i].info.width != parts[0].info.width || parts[i].info.height != parts[0].info.height ||
-                      parts[i].info.spp != parts[0].info.spp)) {
-            fprintf(stderr, "rrv: merge: \"%s\" is from another scene or settings than \"%s\" (%dx%d, %d spp "
-                    "and %dx%d, %d spp; their hashes differ)\n", paths[i], paths[0],
-                    parts[i].info.width, parts[i].info.height, parts[i].info.spp,
-                    parts[0].info.width, parts[0].info.height, parts[0].info.spp);
-            goto done;
-        }
-    }
+    if (!merge_load_parts(out_path, paths, path_count, parts, order)) goto done;
     width = parts[0].info.width;
     height = parts[0].info.height;
     spp = parts[0].info.spp;
-
-    /* Tiles: equal rectangles form one tile; different ones must not meet. */
     qsort(order, (size_t)path_count, sizeof *order, compare_by_rect_then_samples);
-    for (i = 0; i < path_count; ++i)
-        for (j = i + 1; j < path_count; ++j) {
-            const part_info *a = &order[i]->info, *b = &order[j]->info;
-            int same_rect = memcmp(a->rect, b->rect, sizeof a->rect) == 0;
-            if (!rects_intersect(a->rect, b->rect)) continue;
-            if (!same_rect) {
-                fprintf(stderr, "rrv: merge: \"%s\" (tile %s) and \"%s\" (tile %s) overlap: tiles of different "
-                        "layouts share pixels; merge the parts of one layout\n", order[i]->path, a->tile,
-                        order[j]->path, b->tile);
-                goto done;
-            }
-            if (a->sample_begin < b->sample_end && b->sample_begin < a->sample_end) {
-                fprintf(stderr, "rrv: merge: \"%s\" and \"%s\" overlap: both hold samples %d:%d of tile %s\n",
-                        order[i]->path, order[j]->path,
-                        a->sample_begin > b->sample_begin ? a->sample_begin : b->sample_begin,
-                        a->sample_end < b->sample_end ? a->sample_end : b->sample_end, a->tile);
-                goto done;
-            }
-        }
-    /* Sample ranges: sorted by start, each tile's must run 0..spp unbroken. */
-    for (i = 0; i < path_count; i = j) {
-        int next = 0;
-        for (j = i; j < path_count && memcmp(order[j]->info.rect, order[i]->info.rect, sizeof order[i]->info.rect) == 0; ++j) {
-            if (order[j]->info.sample_begin != next) break;
-            next = order[j]->info.sample_end;
-        }
-        if (next != spp || (j < path_count && memcmp(order[j]->info.rect, order[i]->info.rect,
-                                                     sizeof order[i]->info.rect) == 0)) {
-            int gap_end = j < path_count && memcmp(order[j]->info.rect, order[i]->info.rect,
-                                                   sizeof order[i]->info.rect) == 0 ? order[j]->info.sample_begin : spp;
-            fprintf(stderr, "rrv: merge: samples %d:%d of tile %s (pixels %d,%d-%d,%d) are in no part: a sample "
-                    "range is missing\n", next, gap_end, order[i]->info.tile, order[i]->info.rect[0],
-                    order[i]->info.rect[1], order[i]->info.rect[2], order[i]->info.rect[3]);
-            goto done;
-        }
-        area += (long long)(order[i]->info.rect[2] - order[i]->info.rect[0]) *
-                (order[i]->info.rect[3] - order[i]->info.rect[1]);
-    }
-    if (area != (long long)width * height) {
-        /* Tiles do not overlap, so less area means a hole: find a pixel in it. */
-        int x, y;
-        if (!find_hole(order, path_count, width, height, &x, &y)) {
-            fprintf(stderr, "rrv: out of memory\n");
-            goto done;
-        }
-        fprintf(stderr, "rrv: merge: pixel %d,%d is in no part: a tile is missing (the parts cover %lld of %dx%d "
-                "pixels)\n", x, y, area, width, height);
+    if (!merge_check_layout(order, path_count, width, height, spp) ||
+        !(image = merge_sum(order, path_count, width, height, spp)))
         goto done;
-    }
-    if ((uint64_t)width * (uint64_t)height > SIZE_MAX / (3 * sizeof *image)) {
-        fprintf(stderr, "rrv: out of memory for a %dx%d image\n", width, height);
-        goto done;
-    }
-
-    image = (float *)malloc((size_t)width * (size_t)height * 3 * sizeof *image);
-    tile_sum = (float *)malloc((size_t)width * (size_t)height * 3 * sizeof *tile_sum);
-    levels = sample_tree_depth(spp);
-    if (!image || !tile_sum) {
-        fprintf(stderr, "rrv: out of memory for a %dx%d image\n", width, height);
-        goto done;
-    }
-    for (i = 0; i < path_count; i = j) {
-        const int *r = order[i]->info.rect;
-        int w = r[2] - r[0], h = r[3] - r[1], k, x, y, c;
-        size_t values = (size_t)w * (size_t)h * 3;
-        for (j = i; j < path_count && memcmp(order[j]->info.rect, r, 4 * sizeof *r) == 0; ++j) {}
-        for (k = 0; k < levels; ++k) {
-            free(tmp[k]);
-            tmp[k] = (float *)malloc(values * sizeof *tmp[k]);
-            if (!tmp[k]) {
-                fprintf(stderr, "rrv: out of memory\n");
-                goto done;
-            }
-        }
-        merge_block(order + i, j - i, 0, spp, tile_sum, tmp, values);
-        for (y = 0; y < h; ++y)
-            for (x = 0; x < w; ++x)
-                for (c = 0; c < 3; ++c)
-                    image[3 * ((size_t)(r[1] + y) * width + (size_t)(r[0] + x)) + c] =
-                        tile_sum[3 * ((size_t)y * w + x) + c] / (float)spp;
-    }
 
     memset(&output, 0, sizeof output);
     output.path = out_path;
@@ -2384,13 +2422,11 @@ static int command_merge(int argc, char **argv)
     if (code == EXIT_OK && !quiet)
         fprintf(stderr, "merged %d parts into %s: %dx%d, %d spp\n", path_count, out_path, width, height, spp);
 done:
-    for (i = 0; i < 32; ++i) free(tmp[i]);
     if (parts)
         for (i = 0; i < path_count; ++i) rrv_free(parts[i].sums);
     free(parts);
     free(order);
     free(image);
-    free(tile_sum);
     free(paths);
     return code;
 }
@@ -2639,216 +2675,235 @@ static int make_folder(const char *path)
     return 0;
 }
 
-static int command_farm(int argc, char **argv)
-{
-    arg_cursor args;
-    const char *scene_path = NULL, *out_path = NULL, *tiles_text = NULL, *dir_arg = NULL;
-    const char *rrv_arg = NULL;
-    int index, i, extra = argc, created = 0, width, height;
-    long long count;
-    char *scene = NULL, *out = NULL, *dir = NULL, *real_dir = NULL, *rrv_path = NULL, *dir_copy = NULL;
-    char *paths[FARM_SCRIPTS + 2], *text[FARM_SCRIPTS], default_dir[4200];
-    char **render_argv = NULL;
+/* What rrv farm slurm asks for and, as it goes, what it resolved and
+   built; farm_job_free releases what it owns. */
+typedef struct farm_job {
     farm_plan plan;
-    render_options ropt;
+    const char *scene_path, *out_path, *tiles_text, *dir_arg, *rrv_arg;
+    long long count;          /* tiles */
+    size_t max_grid_bytes;    /* of the render options */
+    char *scene, *out, *dir, *real_dir, *rrv_path, *dir_copy;
+    char *paths[FARM_SCRIPTS + 2]; /* the scripts, then parts/ and logs/ */
+    char *text[FARM_SCRIPTS];
+    char default_dir[4200];
     input_list inputs;
-    rrv_scene *loaded = NULL;
-    pending_output outputs[FARM_SCRIPTS];
-    int code = EXIT_USAGE;
+} farm_job;
 
-    memset(&args, 0, sizeof args);
-    memset(&plan, 0, sizeof plan);
-    memset(&inputs, 0, sizeof inputs);
-    memset(paths, 0, sizeof paths);
-    memset(text, 0, sizeof text);
-    plan.columns = 1;
-    args.argc = argc;
-    args.argv = argv;
-    args.command = "farm";
+static void farm_job_free(farm_job *f)
+{
+    int i;
+    for (i = 0; i < FARM_SCRIPTS; ++i) free(f->text[i]);
+    for (i = 0; i < FARM_SCRIPTS + 2; ++i) free(f->paths[i]);
+    free_inputs(&f->inputs);
+    free(f->scene);
+    free(f->out);
+    free(f->dir);
+    free(f->real_dir);
+    free(f->dir_copy);
+    free(f->rrv_path);
+}
+
+/* rrv farm slurm, step 1: the options parsed and checked, the render
+   options after -- too (here, not on every node; they also say how large
+   a grid the scene may load). GO_ON, or the exit code. */
+static int farm_parse(int argc, char **argv, arg_cursor *args, farm_job *f)
+{
+    int index, i, code, extra = argc;
+    char **render_argv;
+    render_options ropt;
     if (argc > 0 && is_help_flag(argv[0])) {
         fputs(farm_help, stdout);
         return EXIT_OK;
     }
     if (argc == 0 || strcmp(argv[0], "slurm") != 0)
-        return usage_error(&args, "farm needs a scheduler: rrv farm slurm SCENE -o OUT --tiles N");
-    for (args.index = 1; args.index < argc; ++args.index) {
-        const char *arg = argv[args.index];
+        return usage_error(args, "farm needs a scheduler: rrv farm slurm SCENE -o OUT --tiles N");
+    for (args->index = 1; args->index < argc; ++args->index) {
+        const char *arg = argv[args->index];
         if (is_help_flag(arg)) {
             fputs(farm_help, stdout);
             return EXIT_OK;
         } else if (strcmp(arg, "--") == 0) {
-            extra = args.index + 1;
+            extra = args->index + 1;
             break;
         } else if (strcmp(arg, "-o") == 0 || strcmp(arg, "--output") == 0) {
-            if (!take_value(&args, arg, "an output path", &out_path)) return EXIT_USAGE;
+            if (!take_value(args, arg, "an output path", &f->out_path)) return EXIT_USAGE;
         } else if (strcmp(arg, "--tiles") == 0) {
-            if (!take_value(&args, arg, "N or CxR", &tiles_text)) return EXIT_USAGE;
+            if (!take_value(args, arg, "N or CxR", &f->tiles_text)) return EXIT_USAGE;
         } else if (strcmp(arg, "--dir") == 0) {
-            if (!take_value(&args, arg, "a folder", &dir_arg)) return EXIT_USAGE;
+            if (!take_value(args, arg, "a folder", &f->dir_arg)) return EXIT_USAGE;
         } else if (strcmp(arg, "--partition") == 0) {
-            if (!take_value(&args, arg, "a partition name", &plan.partition)) return EXIT_USAGE;
+            if (!take_value(args, arg, "a partition name", &f->plan.partition)) return EXIT_USAGE;
         } else if (strcmp(arg, "--time") == 0) {
-            if (!take_value(&args, arg, "a time limit", &plan.time_limit)) return EXIT_USAGE;
+            if (!take_value(args, arg, "a time limit", &f->plan.time_limit)) return EXIT_USAGE;
         } else if (strcmp(arg, "--rrv") == 0) {
-            if (!take_value(&args, arg, "a path to rrv", &rrv_arg)) return EXIT_USAGE;
+            if (!take_value(args, arg, "a path to rrv", &f->rrv_arg)) return EXIT_USAGE;
         } else if (strcmp(arg, "--cpus-per-task") == 0) {
-            if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer", &plan.cpus)) return EXIT_USAGE;
+            if (!take_int(args, arg, 1, MAX_THREADS, "a positive integer", &f->plan.cpus)) return EXIT_USAGE;
         } else if (is_flag(arg)) {
             char hint[80];
-            return usage_error(&args, "farm: unknown option \"%s\"%s (render options go after --)", arg,
+            return usage_error(args, "farm: unknown option \"%s\"%s (render options go after --)", arg,
                                flag_hint(arg, farm_help, NULL, hint));
-        } else if (scene_path) {
-            return usage_error(&args, "farm: unexpected argument \"%s\"", arg);
+        } else if (f->scene_path) {
+            return usage_error(args, "farm: unexpected argument \"%s\"", arg);
         } else {
-            scene_path = arg;
+            f->scene_path = arg;
         }
     }
-    args.index = argc;
-    if (!scene_path) return usage_error(&args, "farm slurm needs a scene file");
-    if (!out_path) return usage_error(&args, "farm slurm needs the merged image: -o OUT.exr");
-    if (!tiles_text) return usage_error(&args, "farm slurm needs --tiles N or --tiles CxR");
+    args->index = argc;
+    if (!f->scene_path) return usage_error(args, "farm slurm needs a scene file");
+    if (!f->out_path) return usage_error(args, "farm slurm needs the merged image: -o OUT.exr");
+    if (!f->tiles_text) return usage_error(args, "farm slurm needs --tiles N or --tiles CxR");
     {
         char tile_text[64];
-        snprintf(tile_text, sizeof tile_text, "0/%s", tiles_text);
-        if (strlen(tiles_text) > 40 || !parse_tile(tile_text, &index, &plan.columns, &plan.rows))
-            return usage_error(&args, "--tiles needs N or CxR, positive integers, got \"%s\"", tiles_text);
+        snprintf(tile_text, sizeof tile_text, "0/%s", f->tiles_text);
+        if (strlen(f->tiles_text) > 40 || !parse_tile(tile_text, &index, &f->plan.columns, &f->plan.rows))
+            return usage_error(args, "--tiles needs N or CxR, positive integers, got \"%s\"", f->tiles_text);
     }
-    count = (long long)plan.columns * plan.rows;
-    if (count > FARM_MAX_TILES)
-        return usage_error(&args, "--tiles %s makes %lld tiles; a farm has at most %d", tiles_text, count,
+    f->count = (long long)f->plan.columns * f->plan.rows;
+    if (f->count > FARM_MAX_TILES)
+        return usage_error(args, "--tiles %s makes %lld tiles; a farm has at most %d", f->tiles_text, f->count,
                            FARM_MAX_TILES);
-    if (!has_extension(out_path, ".exr") && !has_extension(out_path, ".pfm"))
-        return usage_error(&args, "cannot tell the format of \"%s\": the output must end in .pfm or .exr", out_path);
+    if (!has_extension(f->out_path, ".exr") && !has_extension(f->out_path, ".pfm"))
+        return usage_error(args, "cannot tell the format of \"%s\": the output must end in .pfm or .exr",
+                           f->out_path);
     for (i = extra; i < argc; ++i)
         if (strcmp(argv[i], "-o") == 0 || strcmp(argv[i], "--output") == 0 || strcmp(argv[i], "--tile") == 0 ||
             strcmp(argv[i], "--samples") == 0 || strcmp(argv[i], "--resume") == 0 ||
             strcmp(argv[i], "--png") == 0 || strcmp(argv[i], "--crop") == 0)
-            return usage_error(&args, "farm: %s is set by the farm, not a render option to pass", argv[i]);
-    plan.extra = argv + extra;
-    plan.extra_count = argc - extra;
-    /* The render options are checked here, not on every node, and say how
-       large a grid the scene may load. */
-    render_argv = (char **)malloc((size_t)(plan.extra_count + 3) * sizeof *render_argv);
+            return usage_error(args, "farm: %s is set by the farm, not a render option to pass", argv[i]);
+    f->plan.extra = argv + extra;
+    f->plan.extra_count = argc - extra;
+    render_argv = (char **)malloc((size_t)(f->plan.extra_count + 3) * sizeof *render_argv);
     if (!render_argv) {
         fprintf(stderr, "rrv: out of memory\n");
         return EXIT_IO;
     }
-    render_argv[0] = (char *)scene_path;
+    render_argv[0] = (char *)f->scene_path;
     render_argv[1] = (char *)"-o";
     render_argv[2] = (char *)"farm.exr";
-    for (i = 0; i < plan.extra_count; ++i) render_argv[3 + i] = plan.extra[i];
-    code = parse_render_options(plan.extra_count + 3, render_argv, &ropt);
+    for (i = 0; i < f->plan.extra_count; ++i) render_argv[3 + i] = f->plan.extra[i];
+    code = parse_render_options(f->plan.extra_count + 3, render_argv, &ropt);
     free(render_argv);
     if (code == HELP_SHOWN) return EXIT_OK;
     if (code != EXIT_OK) return code;
+    f->max_grid_bytes = ropt.max_grid_bytes;
+    return GO_ON;
+}
 
-    /* Every path is resolved and every value checked before anything is
-       written. */
-    code = EXIT_IO;
-    snprintf(default_dir, sizeof default_dir, "%s.farm", out_path);
-    plan.dir_label = dir_arg ? "--dir" : "the farm folder (-o OUT.farm)";
-    if (!dir_arg) dir_arg = default_dir;
-    dir_copy = (char *)malloc(strlen(dir_arg) + 1);
-    if (!dir_copy) goto done;
-    strcpy(dir_copy, dir_arg);
-    for (i = (int)strlen(dir_copy) - 1; i > 0 && dir_copy[i] == '/'; --i) dir_copy[i] = '\0';
-    scene = realpath(scene_path, NULL);
-    if (!scene) {
-        fprintf(stderr, "rrv: %s: cannot read scene file: %s\n", scene_path, strerror(errno));
-        code = EXIT_INPUT;
-        goto done;
+/* rrv farm slurm, step 2: every path resolved and every value checked
+   before anything is written; as rrv render does, the scene's camera
+   bounds the tiles and an output that is one of the scene's files is
+   refused. GO_ON, or the exit code. */
+static int farm_check(const arg_cursor *args, farm_job *f)
+{
+    rrv_scene *loaded = NULL;
+    int i, width, height;
+    snprintf(f->default_dir, sizeof f->default_dir, "%s.farm", f->out_path);
+    f->plan.dir_label = f->dir_arg ? "--dir" : "the farm folder (-o OUT.farm)";
+    if (!f->dir_arg) f->dir_arg = f->default_dir;
+    f->dir_copy = (char *)malloc(strlen(f->dir_arg) + 1);
+    if (!f->dir_copy) return EXIT_IO;
+    strcpy(f->dir_copy, f->dir_arg);
+    for (i = (int)strlen(f->dir_copy) - 1; i > 0 && f->dir_copy[i] == '/'; --i) f->dir_copy[i] = '\0';
+    f->scene = realpath(f->scene_path, NULL);
+    if (!f->scene) {
+        fprintf(stderr, "rrv: %s: cannot read scene file: %s\n", f->scene_path, strerror(errno));
+        return EXIT_INPUT;
     }
-    out = absolute_path(out_path);
-    dir = realpath(dir_copy, NULL);
-    if (!dir) dir = absolute_path(dir_copy);
-    rrv_path = rrv_arg ? realpath(rrv_arg, NULL) : realpath("/proc/self/exe", NULL);
-    if (!out || !dir || !rrv_path) {
-        fprintf(stderr, "rrv: farm: cannot resolve %s: %s\n", !out ? out_path : !dir ? dir_arg : "the rrv program",
-                strerror(errno));
-        goto done;
+    f->out = absolute_path(f->out_path);
+    f->dir = realpath(f->dir_copy, NULL);
+    if (!f->dir) f->dir = absolute_path(f->dir_copy);
+    f->rrv_path = f->rrv_arg ? realpath(f->rrv_arg, NULL) : realpath("/proc/self/exe", NULL);
+    if (!f->out || !f->dir || !f->rrv_path) {
+        fprintf(stderr, "rrv: farm: cannot resolve %s: %s\n",
+                !f->out ? f->out_path : !f->dir ? f->dir_arg : "the rrv program", strerror(errno));
+        return EXIT_IO;
     }
-    plan.dir = dir;
-    plan.rrv = rrv_path;
-    plan.scene = scene;
-    plan.output = out;
-    if (!farm_plan_ok(&plan)) {
-        code = EXIT_USAGE;
-        goto done;
-    }
-    if (!check_output_target(out_path)) goto done;
-    /* As rrv render does: the scene's camera bounds the tiles, and an output
-       that is one of the scene's files is refused. */
-    if (!load_scene(scene_path, ropt.max_grid_bytes, &inputs, &loaded, 0)) {
-        code = EXIT_INPUT;
-        goto done;
-    }
+    f->plan.dir = f->dir;
+    f->plan.rrv = f->rrv_path;
+    f->plan.scene = f->scene;
+    f->plan.output = f->out;
+    if (!farm_plan_ok(&f->plan)) return EXIT_USAGE;
+    if (!check_output_target(f->out_path)) return EXIT_IO;
+    if (!load_scene(f->scene_path, f->max_grid_bytes, &f->inputs, &loaded, 0)) return EXIT_INPUT;
     width = loaded->camera.width;
     height = loaded->camera.height;
     rrv_scene_free(loaded);
-    if (!check_output_not_input(out_path, &inputs)) {
-        code = EXIT_USAGE;
-        goto done;
-    }
-    if (plan.columns > width || plan.rows > height) {
-        code = usage_error(&args, "--tiles %s: the %dx%d image has too few %s for that many tiles", tiles_text,
-                           width, height, plan.columns > width ? "columns" : "rows");
-        goto done;
-    }
-    if (count * (long long)(strlen(dir) + 32) + (long long)strlen(out) > FARM_MAX_MERGE_ARGS) {
-        code = usage_error(&args, "--tiles %s: the merge of %lld parts in \"%s\" would take more than %ld bytes "
-                           "of arguments: fewer tiles or a shorter --dir", tiles_text, count, dir,
+    if (!check_output_not_input(f->out_path, &f->inputs)) return EXIT_USAGE;
+    if (f->plan.columns > width || f->plan.rows > height)
+        return usage_error(args, "--tiles %s: the %dx%d image has too few %s for that many tiles", f->tiles_text,
+                           width, height, f->plan.columns > width ? "columns" : "rows");
+    if (f->count * (long long)(strlen(f->dir) + 32) + (long long)strlen(f->out) > FARM_MAX_MERGE_ARGS)
+        return usage_error(args, "--tiles %s: the merge of %lld parts in \"%s\" would take more than %ld bytes "
+                           "of arguments: fewer tiles or a shorter --dir", f->tiles_text, f->count, f->dir,
                            FARM_MAX_MERGE_ARGS);
-        goto done;
-    }
+    return GO_ON;
+}
+
+/* rrv farm slurm, step 3: the scripts made, their folder with parts/ and
+   logs/ created, the scripts written (each through a temporary file) and
+   the submit command printed. EXIT_OK or EXIT_IO. */
+static int farm_write(farm_job *f)
+{
+    pending_output outputs[FARM_SCRIPTS];
+    int i, created = 0;
     for (i = 0; i < FARM_SCRIPTS; ++i)
-        if (!(paths[i] = join_path(dir, farm_script_name[i]))) goto done;
-    if (!(paths[FARM_SCRIPTS] = join_path(dir, "parts")) || !(paths[FARM_SCRIPTS + 1] = join_path(dir, "logs")))
-        goto done;
+        if (!(f->paths[i] = join_path(f->dir, farm_script_name[i]))) return EXIT_IO;
+    if (!(f->paths[FARM_SCRIPTS] = join_path(f->dir, "parts")) || !(f->paths[FARM_SCRIPTS + 1] = join_path(f->dir, "logs")))
+        return EXIT_IO;
     for (i = 0; i < FARM_SCRIPTS; ++i)
-        if (!check_script_target(paths[i])) goto done;
+        if (!check_script_target(f->paths[i])) return EXIT_IO;
     for (i = 0; i < FARM_SCRIPTS; ++i)
-        if (!(text[i] = farm_script(&plan, i))) {
+        if (!(f->text[i] = farm_script(&f->plan, i))) {
             fprintf(stderr, "rrv: out of memory\n");
-            goto done;
+            return EXIT_IO;
         }
 
-    if (mkdir(dir, 0777) == 0) created = 1;
+    if (mkdir(f->dir, 0777) == 0) created = 1;
     else if (errno != EEXIST) {
-        fprintf(stderr, "rrv: farm: cannot create \"%s\": %s\n", dir, strerror(errno));
-        goto done;
+        fprintf(stderr, "rrv: farm: cannot create \"%s\": %s\n", f->dir, strerror(errno));
+        return EXIT_IO;
     }
     /* The folder may have been a link (or became one): its real path must be
        the one the scripts name. */
-    real_dir = realpath(dir, NULL);
-    if (!real_dir || strcmp(real_dir, dir) != 0) {
-        fprintf(stderr, "rrv: farm: \"%s\" changed while the scripts were written (now \"%s\")\n", dir,
-                real_dir ? real_dir : strerror(errno));
-        if (created) rmdir(dir);
-        goto done;
+    f->real_dir = realpath(f->dir, NULL);
+    if (!f->real_dir || strcmp(f->real_dir, f->dir) != 0) {
+        fprintf(stderr, "rrv: farm: \"%s\" changed while the scripts were written (now \"%s\")\n", f->dir,
+                f->real_dir ? f->real_dir : strerror(errno));
+        if (created) rmdir(f->dir);
+        return EXIT_IO;
     }
-    if (!make_folder(paths[FARM_SCRIPTS]) || !make_folder(paths[FARM_SCRIPTS + 1])) goto done;
+    if (!make_folder(f->paths[FARM_SCRIPTS]) || !make_folder(f->paths[FARM_SCRIPTS + 1])) return EXIT_IO;
     memset(outputs, 0, sizeof outputs);
     for (i = 0; i < FARM_SCRIPTS; ++i) {
-        outputs[i].path = paths[i];
+        outputs[i].path = f->paths[i];
         outputs[i].format = OUTPUT_SCRIPT;
-        outputs[i].script = text[i];
+        outputs[i].script = f->text[i];
     }
-    if (!write_outputs(outputs, FARM_SCRIPTS, NULL, 0, 0, 0)) goto done;
-    printf("wrote %s/render.sbatch (%lld tasks), %s/merge.sbatch, %s/submit.sh\nsubmit with: sh ", dir, count, dir,
-           dir);
-    put_quoted(stdout, paths[FARM_SUBMIT]);
+    if (!write_outputs(outputs, FARM_SCRIPTS, NULL, 0, 0, 0)) return EXIT_IO;
+    printf("wrote %s/render.sbatch (%lld tasks), %s/merge.sbatch, %s/submit.sh\nsubmit with: sh ", f->dir,
+           f->count, f->dir, f->dir);
+    put_quoted(stdout, f->paths[FARM_SUBMIT]);
     putchar('\n');
-    code = EXIT_OK;
-done:
-    for (i = 0; i < FARM_SCRIPTS; ++i) free(text[i]);
-    for (i = 0; i < FARM_SCRIPTS + 2; ++i) free(paths[i]);
-    free_inputs(&inputs);
-    free(scene);
-    free(out);
-    free(dir);
-    free(real_dir);
-    free(dir_copy);
-    free(rrv_path);
+    return EXIT_OK;
+}
+
+/* rrv farm slurm: parse (step 1), check (2), write the scripts (3). */
+static int command_farm(int argc, char **argv)
+{
+    arg_cursor args;
+    farm_job f;
+    int code;
+    memset(&args, 0, sizeof args);
+    memset(&f, 0, sizeof f);
+    f.plan.columns = 1;
+    args.argc = argc;
+    args.argv = argv;
+    args.command = "farm";
+    code = farm_parse(argc, argv, &args, &f);
+    if (code == GO_ON) code = farm_check(&args, &f);
+    if (code == GO_ON) code = farm_write(&f);
+    farm_job_free(&f);
     return code;
 }
 
