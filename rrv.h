@@ -13024,20 +13024,194 @@ RRV_DEF rrv_result rrv_exr_find_attribute(const void *data, size_t size, const c
     return RRV_ERROR_FORMAT;
 }
 
-RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char *name, float **rgb,
-                                       int *width, int *height, rrv_exr_options *info, rrv_error *err)
+/* What rrv's reader keeps of an OpenEXR header. */
+typedef struct rrv__exr_scan {
+    rrv__exr_channel channels[RRV__EXR_MAX_CHANNELS];
+    int channel_count, compression, rgb_type[3];
+    int have[4];           /* channels, compression, dataWindow, displayWindow seen */
+    int32_t dw[4], disp[4];
+    size_t line_bytes;     /* bytes of one pixel, all channels */
+} rrv__exr_scan;
+
+/* Reads the header's attributes from *pos (after the magic and version)
+   up to and past its closing NUL, and checks what the reader needs. */
+static rrv_result rrv__exr_read_header(const unsigned char *p, size_t size, size_t *pos, const char *name,
+                                       rrv__exr_scan *h, rrv_error *err)
 {
     static const char *const compression_names[10] = {
         "NONE", "RLE", "ZIPS", "ZIP", "PIZ", "PXR24", "B44", "B44A", "DWAA", "DWAB" };
+    int i;
+    memset(h, 0, sizeof *h);
+    h->rgb_type[0] = h->rgb_type[1] = h->rgb_type[2] = -1;
+    /* The header: name, type, int32 size and value per attribute, then a NUL. */
+    for (;;) {
+        const char *attr_name, *type;
+        size_t name_len, type_len;
+        uint32_t value_size;
+        const unsigned char *v;
+        if (*pos >= size) return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR header");
+        if (p[*pos] == 0) break;
+        attr_name = (const char *)p + *pos;
+        for (name_len = 0; *pos + name_len < size && p[*pos + name_len] != 0 && name_len < 256; ++name_len) {}
+        if (*pos + name_len >= size || name_len == 256)
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR header");
+        *pos += name_len + 1;
+        type = (const char *)p + *pos;
+        for (type_len = 0; *pos + type_len < size && p[*pos + type_len] != 0 && type_len < 256; ++type_len) {}
+        if (*pos + type_len >= size || type_len == 256 || size - (*pos + type_len + 1) < 4)
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR header");
+        *pos += type_len + 1;
+        value_size = rrv__get_u32_le(p + *pos);
+        *pos += 4;
+        if (value_size > size - *pos)
+            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR attribute %s runs past the end of the file",
+                             attr_name);
+        v = p + *pos;
+        *pos += value_size;
+        if (strcmp(attr_name, "channels") == 0 && strcmp(type, "chlist") == 0) {
+            size_t k = 0, run = 0;
+            h->have[0] = 1;
+            while (k < value_size && v[k] != 0) {
+                size_t n = 0;
+                int ctype, c = -1;
+                while (k + n < value_size && v[k + n] != 0) ++n;
+                if (k + n + 1 + 16 > value_size)
+                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "malformed OpenEXR channel list");
+                if (n == 1 && (v[k] == 'R' || v[k] == 'G' || v[k] == 'B')) c = v[k] == 'R' ? 0 : v[k] == 'G' ? 1 : 2;
+                ctype = rrv__get_i32_le(v + k + n + 1);
+                if (ctype < 0 || ctype > 2)
+                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR channel of unknown type %d", ctype);
+                if (rrv__get_i32_le(v + k + n + 1 + 8) != 1 || rrv__get_i32_le(v + k + n + 1 + 12) != 1)
+                    return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
+                                     "subsampled OpenEXR channels are not supported");
+                if (h->channel_count == RRV__EXR_MAX_CHANNELS)
+                    return rrv__fail(err, RRV_ERROR_LIMIT, name, 0, "more than %d OpenEXR channels",
+                                     RRV__EXR_MAX_CHANNELS);
+                if (c >= 0) {
+                    if (ctype == 0)
+                        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
+                                         "OpenEXR channel %c is UINT; rrv reads HALF or FLOAT", v[k]);
+                    h->rgb_type[c] = ctype;
+                }
+                h->channels[h->channel_count].rgb = c;
+                h->channels[h->channel_count].type = ctype;
+                h->channels[h->channel_count].offset = run; /* per pixel for now */
+                run += ctype == 1 ? 2 : 4;
+                ++h->channel_count;
+                k += n + 1 + 16;
+            }
+            h->line_bytes = run;
+        } else if (strcmp(attr_name, "compression") == 0 && value_size == 1) {
+            h->compression = v[0];
+            h->have[1] = 1;
+        } else if ((strcmp(attr_name, "dataWindow") == 0 || strcmp(attr_name, "displayWindow") == 0) &&
+                   value_size == 16) {
+            int32_t *box = attr_name[1] == 'a' ? h->dw : h->disp;
+            for (i = 0; i < 4; ++i) box[i] = rrv__get_i32_le(v + 4 * i);
+            if (attr_name[1] == 'a') h->have[2] = 1;
+            else h->have[3] = 1;
+        }
+    }
+    ++*pos; /* the header's NUL */
+    if (!h->have[0] || !h->have[1] || !h->have[2] || !h->have[3])
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR header lacks %s",
+                         !h->have[0] ? "channels" : !h->have[1] ? "compression"
+                         : !h->have[2] ? "dataWindow" : "displayWindow");
+    if (h->rgb_type[0] < 0 || h->rgb_type[1] < 0 || h->rgb_type[2] < 0)
+        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0, "OpenEXR file without R, G and B channels");
+    if (h->compression != 0 && h->compression != 1 && h->compression != 2 && h->compression != 3)
+        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
+                         "OpenEXR compression %s is not supported; rrv reads NONE, RLE, ZIPS and ZIP",
+                         h->compression < 10 ? compression_names[h->compression] : "(unknown)");
+    if (h->dw[2] < h->dw[0] || h->dw[3] < h->dw[1] || (int64_t)h->dw[2] - h->dw[0] >= INT_MAX || (int64_t)h->dw[3] - h->dw[1] >= INT_MAX ||
+        h->disp[2] < h->disp[0] || h->disp[3] < h->disp[1] || (int64_t)h->disp[2] - h->disp[0] >= INT_MAX ||
+        (int64_t)h->disp[3] - h->disp[1] >= INT_MAX)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR window (%ld %ld)-(%ld %ld) is empty or too large",
+                         (long)h->dw[0], (long)h->dw[1], (long)h->dw[2], (long)h->dw[3]);
+    if ((int64_t)h->dw[0] - h->disp[0] > INT_MAX || (int64_t)h->dw[0] - h->disp[0] < INT_MIN ||
+        (int64_t)h->dw[1] - h->disp[1] > INT_MAX || (int64_t)h->dw[1] - h->disp[1] < INT_MIN)
+        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR data window too far from the display window");
+    return RRV_OK;
+}
+
+/* Decodes chunk number `chunk` of the offset table at pos into out (w x h
+   pixels, lines_per_chunk scanlines a chunk); NULL, or what is wrong with it. */
+static const char *rrv__exr_read_chunk(const unsigned char *p, size_t size, size_t pos, size_t chunk,
+                                       const rrv__exr_scan *hd, size_t w, size_t h, int lines_per_chunk,
+                                       size_t line_bytes, unsigned char *raw, unsigned char *tmp,
+                                       unsigned char *seen, float *out)
+{
+    const rrv__exr_channel *channels = hd->channels;
+    const int channel_count = hd->channel_count, compression = hd->compression;
+    const int32_t *dw = hd->dw;
+    int i;
+    const unsigned char *entry = p + pos + 8 * chunk;
+    uint64_t offset = (uint64_t)rrv__get_u32_le(entry) | (uint64_t)rrv__get_u32_le(entry + 4) << 32;
+    int64_t y;
+    size_t index, lines, expected, packed, line;
+    const char *problem = NULL;
+    if (offset > size || size - offset < 8) {
+        problem = "chunk offset outside the file";
+    } else {
+        y = (int64_t)rrv__get_i32_le(p + offset) - dw[1];
+        packed = rrv__get_u32_le(p + offset + 4);
+        if (y < 0 || (uint64_t)y >= h || y % lines_per_chunk != 0) {
+            problem = "chunk for a scanline outside the data window";
+        } else if (seen[index = (size_t)y / (size_t)lines_per_chunk]) {
+            problem = "two chunks for the same scanlines";
+        } else if (packed > size - offset - 8) {
+            problem = "chunk runs past the end of the file";
+        } else {
+            const unsigned char *src = p + offset + 8;
+            seen[index] = 1;
+            lines = h - (size_t)y < (size_t)lines_per_chunk ? h - (size_t)y : (size_t)lines_per_chunk;
+            expected = line_bytes * lines;
+            if (packed == expected) {
+                memcpy(raw, src, expected);
+            } else if (packed > expected || compression == 0) {
+                problem = "chunk of the wrong size";
+            } else if (compression == 1 ? !rrv__exr_rle_decode(src, packed, tmp, expected)
+                                        : !rrv__zlib_inflate(src, packed, tmp, expected)) {
+                problem = compression == 1 ? "corrupt RLE data" : "corrupt ZIP data";
+            } else {
+                rrv__exr_unpredict(tmp, expected, raw);
+            }
+            for (line = 0; !problem && line < lines; ++line) {
+                float *row = out + ((size_t)y + line) * w * 3;
+                const unsigned char *base = raw + line * line_bytes;
+                for (i = 0; i < channel_count; ++i) {
+                    const unsigned char *q = base + channels[i].offset;
+                    size_t x;
+                    int c = channels[i].rgb;
+                    if (c < 0) continue;
+                    if (channels[i].type == 1) {
+                        for (x = 0; x < w; ++x, q += 2)
+                            row[3 * x + (size_t)c] = rrv__float_from_half((uint16_t)(q[0] | q[1] << 8));
+                    } else {
+                        for (x = 0; x < w; ++x, q += 4) {
+                            uint32_t bits = rrv__get_u32_le(q);
+                            memcpy(&row[3 * x + (size_t)c], &bits, sizeof bits);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    return problem;
+}
+
+RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char *name, float **rgb,
+                                       int *width, int *height, rrv_exr_options *info, rrv_error *err)
+{
     const unsigned char *p = (const unsigned char *)data;
-    rrv__exr_channel channels[RRV__EXR_MAX_CHANNELS];
-    int channel_count = 0, have_channels = 0, have_compression = 0, have_data = 0, have_display = 0;
-    int compression = 0, rgb_type[3] = { -1, -1, -1 }, i, lines_per_chunk;
-    int32_t dw[4] = { 0, 0, 0, 0 }, disp[4] = { 0, 0, 0, 0 };
-    size_t pos = 8, line_bytes = 0, w, h, chunk_count, chunk;
+    rrv__exr_scan hd;
+    int i, lines_per_chunk;
+    const int32_t *dw = hd.dw, *disp = hd.disp;
+    size_t pos = 8, line_bytes, w, h, chunk_count, chunk;
     unsigned char *raw = NULL, *tmp = NULL, *seen = NULL;
     float *out = NULL;
     uint32_t version;
+    rrv_result r;
 
     if (rgb) *rgb = NULL;
     if (width) *width = 0;
@@ -13053,98 +13227,11 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
         return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
                          "unsupported OpenEXR file: only single-part scanline images are read (%s)",
                          (version & 0x1000u) ? "multi-part" : (version & 0x800u) ? "deep" : "tiled");
-
-    /* The header: name, type, int32 size and value per attribute, then a NUL. */
-    for (;;) {
-        const char *attr_name, *type;
-        size_t name_len, type_len;
-        uint32_t value_size;
-        const unsigned char *v;
-        if (pos >= size) return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR header");
-        if (p[pos] == 0) break;
-        attr_name = (const char *)p + pos;
-        for (name_len = 0; pos + name_len < size && p[pos + name_len] != 0 && name_len < 256; ++name_len) {}
-        if (pos + name_len >= size || name_len == 256)
-            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR header");
-        pos += name_len + 1;
-        type = (const char *)p + pos;
-        for (type_len = 0; pos + type_len < size && p[pos + type_len] != 0 && type_len < 256; ++type_len) {}
-        if (pos + type_len >= size || type_len == 256 || size - (pos + type_len + 1) < 4)
-            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "truncated OpenEXR header");
-        pos += type_len + 1;
-        value_size = rrv__get_u32_le(p + pos);
-        pos += 4;
-        if (value_size > size - pos)
-            return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR attribute %s runs past the end of the file",
-                             attr_name);
-        v = p + pos;
-        pos += value_size;
-        if (strcmp(attr_name, "channels") == 0 && strcmp(type, "chlist") == 0) {
-            size_t k = 0, run = 0;
-            have_channels = 1;
-            while (k < value_size && v[k] != 0) {
-                size_t n = 0;
-                int ctype, c = -1;
-                while (k + n < value_size && v[k + n] != 0) ++n;
-                if (k + n + 1 + 16 > value_size)
-                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "malformed OpenEXR channel list");
-                if (n == 1 && (v[k] == 'R' || v[k] == 'G' || v[k] == 'B')) c = v[k] == 'R' ? 0 : v[k] == 'G' ? 1 : 2;
-                ctype = rrv__get_i32_le(v + k + n + 1);
-                if (ctype < 0 || ctype > 2)
-                    return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR channel of unknown type %d", ctype);
-                if (rrv__get_i32_le(v + k + n + 1 + 8) != 1 || rrv__get_i32_le(v + k + n + 1 + 12) != 1)
-                    return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
-                                     "subsampled OpenEXR channels are not supported");
-                if (channel_count == RRV__EXR_MAX_CHANNELS)
-                    return rrv__fail(err, RRV_ERROR_LIMIT, name, 0, "more than %d OpenEXR channels",
-                                     RRV__EXR_MAX_CHANNELS);
-                if (c >= 0) {
-                    if (ctype == 0)
-                        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
-                                         "OpenEXR channel %c is UINT; rrv reads HALF or FLOAT", v[k]);
-                    rgb_type[c] = ctype;
-                }
-                channels[channel_count].rgb = c;
-                channels[channel_count].type = ctype;
-                channels[channel_count].offset = run; /* per pixel for now */
-                run += ctype == 1 ? 2 : 4;
-                ++channel_count;
-                k += n + 1 + 16;
-            }
-            line_bytes = run;
-        } else if (strcmp(attr_name, "compression") == 0 && value_size == 1) {
-            compression = v[0];
-            have_compression = 1;
-        } else if ((strcmp(attr_name, "dataWindow") == 0 || strcmp(attr_name, "displayWindow") == 0) &&
-                   value_size == 16) {
-            int32_t *box = attr_name[1] == 'a' ? dw : disp;
-            for (i = 0; i < 4; ++i) box[i] = rrv__get_i32_le(v + 4 * i);
-            if (attr_name[1] == 'a') have_data = 1;
-            else have_display = 1;
-        }
-    }
-    ++pos; /* the header's NUL */
-    if (!have_channels || !have_compression || !have_data || !have_display)
-        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR header lacks %s",
-                         !have_channels ? "channels" : !have_compression ? "compression"
-                         : !have_data ? "dataWindow" : "displayWindow");
-    if (rgb_type[0] < 0 || rgb_type[1] < 0 || rgb_type[2] < 0)
-        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0, "OpenEXR file without R, G and B channels");
-    if (compression != 0 && compression != 1 && compression != 2 && compression != 3)
-        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, name, 0,
-                         "OpenEXR compression %s is not supported; rrv reads NONE, RLE, ZIPS and ZIP",
-                         compression < 10 ? compression_names[compression] : "(unknown)");
-    if (dw[2] < dw[0] || dw[3] < dw[1] || (int64_t)dw[2] - dw[0] >= INT_MAX || (int64_t)dw[3] - dw[1] >= INT_MAX ||
-        disp[2] < disp[0] || disp[3] < disp[1] || (int64_t)disp[2] - disp[0] >= INT_MAX ||
-        (int64_t)disp[3] - disp[1] >= INT_MAX)
-        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR window (%ld %ld)-(%ld %ld) is empty or too large",
-                         (long)dw[0], (long)dw[1], (long)dw[2], (long)dw[3]);
-    if ((int64_t)dw[0] - disp[0] > INT_MAX || (int64_t)dw[0] - disp[0] < INT_MIN ||
-        (int64_t)dw[1] - disp[1] > INT_MAX || (int64_t)dw[1] - disp[1] < INT_MIN)
-        return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR data window too far from the display window");
+    if ((r = rrv__exr_read_header(p, size, &pos, name, &hd, err)) != RRV_OK) return r;
+    line_bytes = hd.line_bytes;
     w = (size_t)((int64_t)dw[2] - dw[0] + 1);
     h = (size_t)((int64_t)dw[3] - dw[1] + 1);
-    lines_per_chunk = compression == 3 ? 16 : 1;
+    lines_per_chunk = hd.compression == 3 ? 16 : 1;
     chunk_count = (h + (size_t)lines_per_chunk - 1) / (size_t)lines_per_chunk;
     /* Every size below is bounded by what the file could hold. */
     if (chunk_count > (size - pos) / 8)
@@ -13156,7 +13243,7 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
         (uint64_t)w * line_bytes * h / RRV__EXR_MAX_RATIO > (uint64_t)size || w > SIZE_MAX / 12 / h)
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR data window of %llux%llu pixels is larger "
                          "than this file could hold", (unsigned long long)w, (unsigned long long)h);
-    for (i = 0; i < channel_count; ++i) channels[i].offset *= w; /* per scanline */
+    for (i = 0; i < hd.channel_count; ++i) hd.channels[i].offset *= w; /* per scanline */
     line_bytes *= w;
 
     out = (float *)RRV_MALLOC(w * h * 3 * sizeof *out);
@@ -13173,58 +13260,8 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
     }
     memset(seen, 0, chunk_count);
     for (chunk = 0; chunk < chunk_count; ++chunk) {
-        const unsigned char *entry = p + pos + 8 * chunk;
-        uint64_t offset = (uint64_t)rrv__get_u32_le(entry) | (uint64_t)rrv__get_u32_le(entry + 4) << 32;
-        int64_t y;
-        size_t index, lines, expected, packed, line;
-        const char *problem = NULL;
-        if (offset > size || size - offset < 8) {
-            problem = "chunk offset outside the file";
-        } else {
-            y = (int64_t)rrv__get_i32_le(p + offset) - dw[1];
-            packed = rrv__get_u32_le(p + offset + 4);
-            if (y < 0 || (uint64_t)y >= h || y % lines_per_chunk != 0) {
-                problem = "chunk for a scanline outside the data window";
-            } else if (seen[index = (size_t)y / (size_t)lines_per_chunk]) {
-                problem = "two chunks for the same scanlines";
-            } else if (packed > size - offset - 8) {
-                problem = "chunk runs past the end of the file";
-            } else {
-                const unsigned char *src = p + offset + 8;
-                seen[index] = 1;
-                lines = h - (size_t)y < (size_t)lines_per_chunk ? h - (size_t)y : (size_t)lines_per_chunk;
-                expected = line_bytes * lines;
-                if (packed == expected) {
-                    memcpy(raw, src, expected);
-                } else if (packed > expected || compression == 0) {
-                    problem = "chunk of the wrong size";
-                } else if (compression == 1 ? !rrv__exr_rle_decode(src, packed, tmp, expected)
-                                            : !rrv__zlib_inflate(src, packed, tmp, expected)) {
-                    problem = compression == 1 ? "corrupt RLE data" : "corrupt ZIP data";
-                } else {
-                    rrv__exr_unpredict(tmp, expected, raw);
-                }
-                for (line = 0; !problem && line < lines; ++line) {
-                    float *row = out + ((size_t)y + line) * w * 3;
-                    const unsigned char *base = raw + line * line_bytes;
-                    for (i = 0; i < channel_count; ++i) {
-                        const unsigned char *q = base + channels[i].offset;
-                        size_t x;
-                        int c = channels[i].rgb;
-                        if (c < 0) continue;
-                        if (channels[i].type == 1) {
-                            for (x = 0; x < w; ++x, q += 2)
-                                row[3 * x + (size_t)c] = rrv__float_from_half((uint16_t)(q[0] | q[1] << 8));
-                        } else {
-                            for (x = 0; x < w; ++x, q += 4) {
-                                uint32_t bits = rrv__get_u32_le(q);
-                                memcpy(&row[3 * x + (size_t)c], &bits, sizeof bits);
-                            }
-                        }
-                    }
-                }
-            }
-        }
+        const char *problem =
+            rrv__exr_read_chunk(p, size, pos, chunk, &hd, w, h, lines_per_chunk, line_bytes, raw, tmp, seen, out);
         if (problem) {
             RRV_FREE(out);
             RRV_FREE(raw);
@@ -13242,8 +13279,8 @@ RRV_DEF rrv_result rrv_read_exr_memory(const void *data, size_t size, const char
     *height = (int)h;
     if (info) {
         memset(info, 0, sizeof *info);
-        info->pixel = rgb_type[0] == 2 && rgb_type[1] == 2 && rgb_type[2] == 2 ? RRV_EXR_FLOAT : RRV_EXR_HALF;
-        info->compression = compression == 0 ? RRV_EXR_NO_COMPRESSION : RRV_EXR_ZIP;
+        info->pixel = hd.rgb_type[0] == 2 && hd.rgb_type[1] == 2 && hd.rgb_type[2] == 2 ? RRV_EXR_FLOAT : RRV_EXR_HALF;
+        info->compression = hd.compression == 0 ? RRV_EXR_NO_COMPRESSION : RRV_EXR_ZIP;
         info->display_width = (int)((int64_t)disp[2] - disp[0] + 1);
         info->display_height = (int)((int64_t)disp[3] - disp[1] + 1);
         info->x = (int)((int64_t)dw[0] - disp[0]);
