@@ -138,9 +138,10 @@ refs: $(BUILD)/rrv $(BUILD)/ref_compare
 	python3 test/bench/refs.py $(BUILD)/rrv $(BUILD)/ref_compare $(REFS)
 
 # README.md's pictures, with the commands README shows (scenes/tools/pictures.sh);
-# `make pictures PICTURES="fire_classic luneburg"` renders only those.
+# `make pictures PICTURES="fire_classic luneburg"` renders only those;
+# RRV_PICTURE_FLAGS adds rrv render options (e.g. "--threads 2").
 pictures: rrv
-	sh scenes/tools/pictures.sh $(PICTURES)
+	RRV_PICTURE_FLAGS='$(RRV_PICTURE_FLAGS)' sh scenes/tools/pictures.sh $(PICTURES)
 
 bench: $(BUILD)/rrv $(BUILD)/ref_compare $(BUILD)/measure_grin $(BUILD)/measure_tracking
 	RRV_BENCH_CC='$(CC)' RRV_BENCH_FLAGS='$(CFLAGS_ALL) $(THREAD_FLAGS)' python3 test/bench/bench.py $(BUILD)

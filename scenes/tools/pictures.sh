@@ -4,7 +4,8 @@
 # commands README shows under each picture; `make pictures` runs it. Each
 # picture takes a few CPU minutes, so CI does not. Give picture names to
 # render only those: sh scenes/tools/pictures.sh fire_classic luneburg
-# Run from the repository root; RRV (default ./rrv) is the binary.
+# Run from the repository root; RRV (default ./rrv) is the binary and
+# RRV_PICTURE_FLAGS adds options to every render (e.g. --threads 2).
 set -e
 RRV=${RRV:-./rrv}
 mkdir -p build/pictures
