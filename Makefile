@@ -4,7 +4,8 @@
 # `make THREADS=0` builds without POSIX threads; `make fuzz` builds the
 # libFuzzer harnesses (clang) and `make fuzz-run` runs each for a while;
 # `make bench` runs the benchmarks (`make bench-quick` a short version);
-# `make refs` renders the reference images in test/ref/.
+# `make refs` renders the reference images in test/ref/; `make pictures`
+# renders README.md's pictures (scenes/pictures/, minutes each; not in CI).
 CC      ?= cc
 OPT     ?= -O2 -g
 WARN    := -std=c99 -Wall -Wextra -pedantic
@@ -36,7 +37,7 @@ TEST_BINS  := $(patsubst test/%.c,$(BUILD)/%,$(TEST_SRCS))
 # test_lm runs a solve on a thread with a small stack
 TEST_LIBS_lm := -pthread
 
-.PHONY: all test fuzz fuzz-run bench bench-quick refs clean
+.PHONY: all test fuzz fuzz-run bench bench-quick refs pictures clean
 all: rrv
 
 rrv: $(BUILD)/rrv
@@ -135,6 +136,12 @@ fuzz-run: fuzz
 # REFS="plume smoke"` renders only those.
 refs: $(BUILD)/rrv $(BUILD)/ref_compare
 	python3 test/bench/refs.py $(BUILD)/rrv $(BUILD)/ref_compare $(REFS)
+
+# README.md's pictures, with the commands README shows (scenes/tools/pictures.sh);
+# `make pictures PICTURES="fire_classic luneburg"` renders only those;
+# RRV_PICTURE_FLAGS adds rrv render options (e.g. "--threads 2").
+pictures: rrv
+	RRV_PICTURE_FLAGS='$(RRV_PICTURE_FLAGS)' sh scenes/tools/pictures.sh $(PICTURES)
 
 bench: $(BUILD)/rrv $(BUILD)/ref_compare $(BUILD)/measure_grin $(BUILD)/measure_tracking
 	RRV_BENCH_CC='$(CC)' RRV_BENCH_FLAGS='$(CFLAGS_ALL) $(THREAD_FLAGS)' python3 test/bench/bench.py $(BUILD)

@@ -1,4 +1,5 @@
-/* Smoke test of every example scene: each .rrv file in scenes/ is loaded,
+/* Smoke test of every example scene: each .rrv file in scenes/ and in
+   scenes/pictures/ (README's pictures, which make pictures renders) is loaded,
    shrunk to a tiny image at 2 spp, and rendered with every integrator
    (classic, refractive, eikonal). Each render must succeed, give only finite
    pixels (and discard no nonfinite sample), not be all black, and take no
@@ -17,6 +18,10 @@
 #include <time.h>
 
 #define SCENE_DIR "scenes"
+/* The picture scenes are checked here, cheaply, so that they cannot rot
+   between the (minutes long, not in CI) renders of make pictures; they have
+   no references in test/ref (test_refs scans scenes/ alone). */
+#define PICTURE_DIR "scenes/pictures"
 #define MAX_SCENES 256
 #define MIN_SCENES 4
 #define TEST_WIDTH 24
@@ -24,7 +29,7 @@
 #define TEST_SPP 2
 #define MAX_EVENTS_PER_SAMPLE 20000
 
-static char scene_names[MAX_SCENES][256]; /* "scenes/NAME.rrv" */
+static char scene_names[MAX_SCENES][256]; /* "scenes/NAME.rrv", "scenes/pictures/NAME.rrv" */
 static int scene_count;
 
 static int compare_names(const void *a, const void *b)
@@ -32,26 +37,38 @@ static int compare_names(const void *a, const void *b)
     return strcmp((const char *)a, (const char *)b);
 }
 
-/* Fills scene_names with the *.rrv files of SCENE_DIR, sorted; hidden files
-   (a leading dot) are skipped. Returns 0 if the folder cannot be read. */
-static int find_scenes(void)
+/* Adds the *.rrv files of folder to scene_names; hidden files (a leading
+   dot) are skipped. Returns 0 if the folder cannot be read. */
+static int add_scenes(const char *folder)
 {
-    DIR *dir = opendir(SCENE_DIR);
+    DIR *dir = opendir(folder);
     struct dirent *e;
+    size_t prefix = strlen(folder) + 1;
     if (!dir) return 0;
-    scene_count = 0;
     while ((e = readdir(dir)) != NULL) {
-        size_t n = strlen(e->d_name), prefix = strlen(SCENE_DIR "/");
+        size_t n = strlen(e->d_name);
         if (e->d_name[0] == '.' || n < 5 || prefix + n >= sizeof scene_names[0]) continue;
         if (strcmp(e->d_name + n - 4, ".rrv") != 0) continue;
         if (scene_count == MAX_SCENES) break;
-        memcpy(scene_names[scene_count], SCENE_DIR "/", prefix);
+        memcpy(scene_names[scene_count], folder, prefix - 1);
+        scene_names[scene_count][prefix - 1] = '/';
         memcpy(scene_names[scene_count] + prefix, e->d_name, n + 1);
         ++scene_count;
     }
     closedir(dir);
-    qsort(scene_names, (size_t)scene_count, sizeof scene_names[0], compare_names);
     return 1;
+}
+
+/* Fills scene_names with the scenes of SCENE_DIR and PICTURE_DIR, sorted.
+   Returns 0 if either folder cannot be read. */
+static int find_scenes(void)
+{
+    int ok;
+    scene_count = 0;
+    ok = add_scenes(SCENE_DIR);
+    ok = add_scenes(PICTURE_DIR) && ok;
+    qsort(scene_names, (size_t)scene_count, sizeof scene_names[0], compare_names);
+    return ok;
 }
 
 static const char *integrator_name(rrv_integrator integrator)
@@ -79,7 +96,7 @@ static void check_render(rrv_scene *scene, const char *name, rrv_integrator inte
     scene->settings.integrator = integrator;
     start = clock();
     res = rrv_render_rect(scene, 0, 0, w, h, 0, TEST_SPP, sum, w, &stats, NULL);
-    printf("  %-24s %-10s %7.2f s  %10lu events\n", name, integrator_name(integrator),
+    printf("  %-32s %-10s %7.2f s  %10lu events\n", name, integrator_name(integrator),
            (double)(clock() - start) / CLOCKS_PER_SEC, (unsigned long)stats.events);
     CHECKF(res == RRV_OK, "%s, %s: rrv_render_rect returned %s", name, integrator_name(integrator),
            rrv_result_string(res));
@@ -115,7 +132,7 @@ static void test_every_scene_renders(void)
     static const rrv_integrator integrators[] = {RRV_INTEGRATOR_CLASSIC, RRV_INTEGRATOR_REFRACTIVE,
                                                  RRV_INTEGRATOR_EIKONAL};
     int s, k;
-    CHECKF(find_scenes(), "cannot open the folder %s (run from the repository root)", SCENE_DIR);
+    CHECKF(find_scenes(), "cannot open the folder %s or %s (run from the repository root)", SCENE_DIR, PICTURE_DIR);
     CHECKF(scene_count >= MIN_SCENES, "found %d scenes in %s, expected at least %d", scene_count, SCENE_DIR,
            MIN_SCENES);
     for (s = 0; s < scene_count; ++s) {
