@@ -12556,16 +12556,67 @@ static void rrv__exr_zip_predict(const unsigned char *raw, size_t size, unsigned
     }
 }
 
+/* The header of rrv's scanline files: magic and version, the B, G, R
+   channel list, the windows, the attributes every reader requires, the
+   optional text attribute, and the closing NUL. */
+static void rrv__exr_write_header(rrv__exr_header *h, const rrv_exr_options *opt, int width, int height, int as_float,
+                                  int zip, long display_w, long display_h)
+{
+    static const unsigned char magic_version[8] = { 0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0 };
+    unsigned char value[64];
+    int c;
+    h->size = 0;
+    memcpy(h->bytes, magic_version, 8);
+    h->size = 8;
+    {
+        /* chlist: per channel name, int32 type (1 HALF, 2 FLOAT), uint8
+           pLinear, 3 reserved bytes, int32 x and y sampling; then a NUL. */
+        size_t n = 0;
+        static const char names[3] = { 'B', 'G', 'R' };
+        for (c = 0; c < 3; ++c) {
+            value[n++] = (unsigned char)names[c];
+            value[n++] = 0;
+            rrv__put_u32_le(value + n, as_float ? 2u : 1u);
+            memset(value + n + 4, 0, 4);
+            rrv__put_u32_le(value + n + 8, 1);
+            rrv__put_u32_le(value + n + 12, 1);
+            n += 16;
+        }
+        value[n++] = 0;
+        rrv__exr_attribute(h, "channels", "chlist", value, n);
+    }
+    value[0] = (unsigned char)(zip ? 3 : 0); /* ZIP_COMPRESSION, NO_COMPRESSION */
+    rrv__exr_attribute(h, "compression", "compression", value, 1);
+    rrv__exr_box(value, opt->x, opt->y, (long)opt->x + width - 1, (long)opt->y + height - 1);
+    rrv__exr_attribute(h, "dataWindow", "box2i", value, 16);
+    rrv__exr_box(value, 0, 0, display_w - 1, display_h - 1);
+    rrv__exr_attribute(h, "displayWindow", "box2i", value, 16);
+    value[0] = 0; /* INCREASING_Y */
+    rrv__exr_attribute(h, "lineOrder", "lineOrder", value, 1);
+    {
+        float one = 1.0f;
+        uint32_t bits;
+        memcpy(&bits, &one, sizeof bits);
+        rrv__put_u32_le(value, bits);
+        rrv__exr_attribute(h, "pixelAspectRatio", "float", value, 4);
+        memset(value, 0, 8);
+        rrv__exr_attribute(h, "screenWindowCenter", "v2f", value, 8);
+        rrv__put_u32_le(value, bits);
+        rrv__exr_attribute(h, "screenWindowWidth", "float", value, 4);
+    }
+    if (opt->text_name) rrv__exr_attribute(h, opt->text_name, "string", opt->text, strlen(opt->text));
+    h->bytes[h->size++] = 0;
+}
+
 static rrv_result rrv__write_exr_to(rrv_write_func write, void *user, const float *rgb,
                                     int width, int height, const rrv_exr_options *options)
 {
-    static const unsigned char magic_version[8] = { 0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0 };
     rrv_exr_options opt;
     rrv__exr_header h;
-    unsigned char value[64], *raw = NULL, *predicted = NULL, *packed = NULL, *offsets = NULL;
+    unsigned char *raw = NULL, *predicted = NULL, *packed = NULL, *offsets = NULL;
     uint32_t *chunk_sizes = NULL;
     rrv__deflater *z = NULL;
-    int as_float, zip, lines_per_chunk, chunk_count, i, c;
+    int as_float, zip, lines_per_chunk, chunk_count, i;
     size_t value_bytes, line_bytes, chunk_bytes, packed_size = 0;
     uint64_t position;
     rrv_result result = RRV_OK;
@@ -12596,47 +12647,7 @@ static rrv_result rrv__write_exr_to(rrv_write_func write, void *user, const floa
         return RRV_ERROR_ARGUMENT;
     chunk_bytes = line_bytes * (size_t)(height < lines_per_chunk ? height : lines_per_chunk);
 
-    h.size = 0;
-    memcpy(h.bytes, magic_version, 8);
-    h.size = 8;
-    {
-        /* chlist: per channel name, int32 type (1 HALF, 2 FLOAT), uint8
-           pLinear, 3 reserved bytes, int32 x and y sampling; then a NUL. */
-        size_t n = 0;
-        static const char names[3] = { 'B', 'G', 'R' };
-        for (c = 0; c < 3; ++c) {
-            value[n++] = (unsigned char)names[c];
-            value[n++] = 0;
-            rrv__put_u32_le(value + n, as_float ? 2u : 1u);
-            memset(value + n + 4, 0, 4);
-            rrv__put_u32_le(value + n + 8, 1);
-            rrv__put_u32_le(value + n + 12, 1);
-            n += 16;
-        }
-        value[n++] = 0;
-        rrv__exr_attribute(&h, "channels", "chlist", value, n);
-    }
-    value[0] = (unsigned char)(zip ? 3 : 0); /* ZIP_COMPRESSION, NO_COMPRESSION */
-    rrv__exr_attribute(&h, "compression", "compression", value, 1);
-    rrv__exr_box(value, opt.x, opt.y, (long)opt.x + width - 1, (long)opt.y + height - 1);
-    rrv__exr_attribute(&h, "dataWindow", "box2i", value, 16);
-    rrv__exr_box(value, 0, 0, display_w - 1, display_h - 1);
-    rrv__exr_attribute(&h, "displayWindow", "box2i", value, 16);
-    value[0] = 0; /* INCREASING_Y */
-    rrv__exr_attribute(&h, "lineOrder", "lineOrder", value, 1);
-    {
-        float one = 1.0f;
-        uint32_t bits;
-        memcpy(&bits, &one, sizeof bits);
-        rrv__put_u32_le(value, bits);
-        rrv__exr_attribute(&h, "pixelAspectRatio", "float", value, 4);
-        memset(value, 0, 8);
-        rrv__exr_attribute(&h, "screenWindowCenter", "v2f", value, 8);
-        rrv__put_u32_le(value, bits);
-        rrv__exr_attribute(&h, "screenWindowWidth", "float", value, 4);
-    }
-    if (opt.text_name) rrv__exr_attribute(&h, opt.text_name, "string", opt.text, strlen(opt.text));
-    h.bytes[h.size++] = 0;
+    rrv__exr_write_header(&h, &opt, width, height, as_float, zip, display_w, display_h);
 
     raw = (unsigned char *)RRV_MALLOC(chunk_bytes);
     offsets = (unsigned char *)RRV_MALLOC((size_t)chunk_count * 8);
