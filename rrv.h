@@ -8571,18 +8571,11 @@ RRV_DEF rrv_integrator rrv_scene_integrator(const rrv_scene *scene)
     return rrv__default_integrator(scene);
 }
 
-RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
-                                   int sample_begin, int sample_end,
-                                   float *sum, int stride, rrv_render_stats *stats,
-                                   rrv_error *err)
+/* rrv_render_rect's arguments: a prepared scene, a rectangle inside its
+   image, a stride that holds it, a range of sample indices. */
+static rrv_result rrv__render_args_check(const rrv_scene *scene, int x0, int y0, int x1, int y1, int sample_begin,
+                                         int sample_end, const float *sum, int stride, rrv_error *err)
 {
-    rrv_integrator integrator;
-    rrv__context ctx;
-    rrv__camera_frame frame;
-    double r_camera;
-    int x, y, s, c, sobol, i;
-    rrv_nee nee;
-    rrv__clear_error(err);
     if (!scene || !sum) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_render_rect: NULL scene or sum");
     if (x0 < 0 || y0 < 0 || x1 > scene->camera.width || y1 > scene->camera.height || x0 > x1 || y0 > y1)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
@@ -8605,58 +8598,70 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
                          "rrv_render_rect: nee %s is disabled (RRV_NO_CURVED_NEE); use nee aim",
                          scene->settings.nee == RRV_NEE_SHOOT ? "shoot" : "manifold");
 #endif
-    memset(&ctx, 0, sizeof ctx);
-    ctx.scene = scene;
-    sobol = scene->settings.sampler != RRV_SAMPLER_PCG;
+    return RRV_OK;
+}
+
+/* The context of one rrv_render_rect call: which integrator and which
+   estimators the scene's settings name (and which of them its media
+   support), the bounds on work, and the camera. */
+static rrv_result rrv__render_context(const rrv_scene *scene, rrv__context *ctx, rrv__camera_frame *frame, rrv_error *err)
+{
+    rrv_integrator integrator;
+    rrv_nee nee;
+    double r_camera;
+    int i;
+    memset(ctx, 0, sizeof *ctx);
+    rrv__camera_setup(&scene->camera, frame);
+    ctx->scene = scene;
     integrator = rrv_scene_integrator(scene);
     if (integrator == RRV_INTEGRATOR_REFRACTIVE) {
-        ctx.comb = rrv__resolve_scheme(scene->settings.refraction) == RRV_REFRACTION_COMB;
-        ctx.refract_nulls = !ctx.comb;
+        ctx->comb = rrv__resolve_scheme(scene->settings.refraction) == RRV_REFRACTION_COMB;
+        ctx->refract_nulls = !ctx->comb;
     }
-    ctx.eikonal = integrator == RRV_INTEGRATOR_EIKONAL;
-    ctx.bends = ctx.comb || ctx.refract_nulls || ctx.eikonal;
-    ctx.step_bound = rrv__step_bound(scene, integrator);
+    ctx->eikonal = integrator == RRV_INTEGRATOR_EIKONAL;
+    ctx->bends = ctx->comb || ctx->refract_nulls || ctx->eikonal;
+    ctx->step_bound = rrv__step_bound(scene, integrator);
     /* the schemes that refract at null events keep the leg bound alone
        (BOUNDS: the midpoint scheme's orbits leak out again) */
-    ctx.trap_length = ctx.refract_nulls ? DBL_MAX : rrv__trap_length(scene);
-    ctx.sample_bound = rrv__sample_bound(scene, integrator);
+    ctx->trap_length = ctx->refract_nulls ? DBL_MAX : rrv__trap_length(scene);
+    ctx->sample_bound = rrv__sample_bound(scene, integrator);
     /* shoot by default, also where it cannot solve (the refractive
        integrator), where it aims: manifold solves there, but at 100x-1000x
        straight NEE's cost on a scene like scenes/fire.rrv (test/bench/RESULTS.md), while
        aiming stays unbiased at about straight's cost */
     nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : RRV_NEE_SHOOT;
-    ctx.sample_lights = !ctx.bends || nee != RRV_NEE_NONE;
+    ctx->sample_lights = !ctx->bends || nee != RRV_NEE_NONE;
     /* By default only where emissive media are the only lights: there it
        pays (test/bench/campfire.rrv: 9.1x the efficiency at maxdepth 1,
        3.7x at 2), while beside an area light and a sky (scenes/fire.rrv) the
        extra shadow ray a vertex cost more than the variance it saved
        (0.46x classic, 0.70x refractive; test/bench/RESULTS.md, "Fire as a light"). */
-    ctx.emission = ctx.sample_lights && scene->emitters &&
+    ctx->emission = ctx->sample_lights && scene->emitters &&
                    (scene->settings.emission_nee == RRV_EMISSION_NEE_ON ||
                     (scene->settings.emission_nee == RRV_EMISSION_NEE_DEFAULT && scene->light_count == 0 &&
                      scene->environment.kind == RRV_ENV_NONE));
-    if (ctx.emission && ctx.bends) {
+    if (ctx->emission && ctx->bends) {
         /* straight connections only reach emitters outside refracting media
            (rrv__chord_meets_refraction): none if every emitter refracts */
         for (i = 0; i < scene->emitters->count && rrv__medium_refracts(&scene->media[scene->emitters->grid[i].medium]);
              ++i) {}
-        ctx.emission = i < scene->emitters->count;
+        ctx->emission = i < scene->emitters->count;
     }
     /* without a medium that refracts every connection is straight: no
        curved NEE, so such a scene renders as classic does, draw for draw */
     for (i = 0; i < scene->medium_count && !rrv__medium_refracts(&scene->media[i]); ++i) {}
-    ctx.partition = ctx.bends && i < scene->medium_count &&
+    ctx->partition = ctx->bends && i < scene->medium_count &&
                     (nee == RRV_NEE_SHOOT || nee == RRV_NEE_MANIFOLD || nee == RRV_NEE_AIM);
-    ctx.shoot = ctx.partition && nee == RRV_NEE_SHOOT && ctx.eikonal && rrv__solver_supports_scene(scene);
-    ctx.manifold = ctx.partition && nee == RRV_NEE_MANIFOLD && rrv__solver_supports_scene(scene);
+    ctx->shoot = ctx->partition && nee == RRV_NEE_SHOOT && ctx->eikonal && rrv__solver_supports_scene(scene);
+    ctx->manifold = ctx->partition && nee == RRV_NEE_MANIFOLD && rrv__solver_supports_scene(scene);
     /* Where shoot cannot solve (the comb's kicks have no Jacobi field) it
        aims instead: the same classes, unbiased, at straight NEE's cost.
        Aiming needs ray geometry that does not hang on the density (the
        Poisson and midpoint schemes refract at null events): there the
        connections stay with forward paths. */
-    ctx.aim = ctx.partition && !ctx.refract_nulls && (nee == RRV_NEE_AIM || (nee == RRV_NEE_SHOOT && !ctx.shoot));
-    ctx.eta_floor = rrv__ambient_ior(scene);
-    if (ctx.partition) {
+    ctx->aim = ctx->partition && !ctx->refract_nulls && (nee == RRV_NEE_AIM || (nee == RRV_NEE_SHOOT && !ctx->shoot));
+    ctx->eta_floor = rrv__ambient_ior(scene);
+    if (ctx->partition) {
         for (i = 0; i < scene->medium_count; ++i) {
             const rrv_medium *m = &scene->media[i];
             double eta_lo = 1, eta_hi = 1;
@@ -8669,19 +8674,59 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
                 eta_lo = 1.0;
             else
                 rrv__medium_ior_ok(m, &eta_lo, &eta_hi);
-            ctx.eta_floor = rrv__mind(ctx.eta_floor, eta_lo);
+            ctx->eta_floor = rrv__mind(ctx->eta_floor, eta_lo);
         }
-        ctx.eta_floor = rrv__maxd(ctx.eta_floor, RRV_MIN_IOR);
+        ctx->eta_floor = rrv__maxd(ctx->eta_floor, RRV_MIN_IOR);
     }
-    if (ctx.shoot || ctx.manifold) rrv__cone_setup(&ctx);
-    if (ctx.manifold && !(ctx.chain = rrv__chain_new(RRV__CHAIN_MAX)))
+    if (ctx->shoot || ctx->manifold) rrv__cone_setup(ctx);
+    if (ctx->manifold && !(ctx->chain = rrv__chain_new(RRV__CHAIN_MAX)))
         return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "rrv_render_rect: out of memory for nee manifold's chain");
-    rrv__camera_setup(&scene->camera, &frame);
-    r_camera = ctx.bends ? rrv__scene_refractivity(scene, frame.eye, NULL) : 0.0;
-    ctx.eta_camera2 = (1.0 + r_camera) * (1.0 + r_camera);
+    r_camera = ctx->bends ? rrv__scene_refractivity(scene, frame->eye, NULL) : 0.0;
+    ctx->eta_camera2 = (1.0 + r_camera) * (1.0 + r_camera);
     /* Blackbody radiance B is taken as the ambient air's, so a classic
        render and a refractive one of a fire in air agree exactly. */
-    ctx.thermal_scale = ctx.bends ? ctx.eta_camera2 / (rrv__ambient_ior(scene) * rrv__ambient_ior(scene)) : 1.0;
+    ctx->thermal_scale = ctx->bends ? ctx->eta_camera2 / (rrv__ambient_ior(scene) * rrv__ambient_ior(scene)) : 1.0;
+    return RRV_OK;
+}
+
+/* Adds one call's counts into the caller's. */
+static void rrv__add_render_stats(rrv_render_stats *stats, const rrv_render_stats *from)
+{
+    stats->samples += from->samples;
+    stats->paths += from->paths;
+    stats->events += from->events;
+    stats->nonfinite += from->nonfinite;
+    stats->paths_cut += from->paths_cut;
+    stats->cut_tracking += from->cut_tracking;
+    stats->solves += from->solves;
+    stats->solves_converged += from->solves_converged;
+    stats->solve_iterations += from->solve_iterations;
+    stats->solve_segments += from->solve_segments;
+    stats->solve_connections += from->solve_connections;
+    stats->solve_trials += from->solve_trials;
+    stats->solves_unsupported += from->solves_unsupported;
+    stats->aim_shots += from->aim_shots;
+    stats->aim_missed += from->aim_missed;
+    stats->cone_shots += from->cone_shots;
+    stats->cone_counted += from->cone_counted;
+    stats->cut_samples += from->cut_samples;
+    stats->trapped_paths += from->trapped_paths;
+}
+
+RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x1, int y1,
+                                   int sample_begin, int sample_end,
+                                   float *sum, int stride, rrv_render_stats *stats,
+                                   rrv_error *err)
+{
+    rrv__context ctx;
+    rrv__camera_frame frame;
+    int x, y, s, c, sobol;
+    rrv_result r;
+    rrv__clear_error(err);
+    if ((r = rrv__render_args_check(scene, x0, y0, x1, y1, sample_begin, sample_end, sum, stride, err)) != RRV_OK)
+        return r;
+    if ((r = rrv__render_context(scene, &ctx, &frame, err)) != RRV_OK) return r;
+    sobol = scene->settings.sampler != RRV_SAMPLER_PCG;
     for (y = y0; y < y1; ++y) {
         for (x = x0; x < x1; ++x) {
             double acc[3] = {0, 0, 0};
@@ -8715,27 +8760,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
             }
         }
     }
-    if (stats) {
-        stats->samples += ctx.stats.samples;
-        stats->paths += ctx.stats.paths;
-        stats->events += ctx.stats.events;
-        stats->nonfinite += ctx.stats.nonfinite;
-        stats->paths_cut += ctx.stats.paths_cut;
-        stats->cut_tracking += ctx.stats.cut_tracking;
-        stats->solves += ctx.stats.solves;
-        stats->solves_converged += ctx.stats.solves_converged;
-        stats->solve_iterations += ctx.stats.solve_iterations;
-        stats->solve_segments += ctx.stats.solve_segments;
-        stats->solve_connections += ctx.stats.solve_connections;
-        stats->solve_trials += ctx.stats.solve_trials;
-        stats->solves_unsupported += ctx.stats.solves_unsupported;
-        stats->aim_shots += ctx.stats.aim_shots;
-        stats->aim_missed += ctx.stats.aim_missed;
-        stats->cone_shots += ctx.stats.cone_shots;
-        stats->cone_counted += ctx.stats.cone_counted;
-        stats->cut_samples += ctx.stats.cut_samples;
-        stats->trapped_paths += ctx.stats.trapped_paths;
-    }
+    if (stats) rrv__add_render_stats(stats, &ctx.stats);
     rrv__chain_delete(ctx.chain);
     return RRV_OK;
 }
