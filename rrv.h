@@ -1,4 +1,4 @@
-/* rrv.h 0.9.1 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.10.0 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -389,8 +389,8 @@
 #endif
 
 #define RRV_VERSION_MAJOR 0
-#define RRV_VERSION_MINOR 9
-#define RRV_VERSION_PATCH 1
+#define RRV_VERSION_MINOR 10
+#define RRV_VERSION_PATCH 0
 
 #ifndef RRV_DEF
 #ifdef RRV_STATIC
@@ -18422,6 +18422,18 @@ and BOUNDS (moved here from the manual at the top, word for word)
 ------------------------------------------------------------------------------
 VERSION HISTORY
 ------------------------------------------------------------------------------
+     0.10.0 the integrator chosen from the scene when it names none (classic
+            where nothing refracts, eikonal with nee shoot for clear media
+            under small lights, else the comb aiming), the ambient IOR from
+            the gas, face jumps reported; the paper's solver a real
+            Levenberg-Marquardt (the dogleg selectable); shoot's and
+            manifold's 1/p exact by roulette past 64 trials; curved NEE to
+            sphere lights; emissive media as lights (emissionnee); shadow
+            rays' transmittance selectable (ratio, residual, unbiased
+            ray marching); Sobol points for every dimension of a path;
+            the eikonal march crosses cells without a gradient straight;
+            build switches RRV_NO_SCENE_FILE, NANOVDB, EXR, PNG,
+            CURVED_NEE; no function over 150 lines
      0.9.1  the refraction floor measured per sample (the comb without
             kicks costs 1.40x / 1.51x classic's instructions on fire /
             haze, above the 1.25x target; test/bench/per_sample.py);
