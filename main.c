@@ -850,6 +850,7 @@ typedef struct render_job {
     /* Shared between workers; guarded by `lock` when threads run. */
     int next_tile, tiles_done;
     rrv_result failure;
+    rrv_error failure_error; /* the library's message for it (empty: none) */
     rrv_render_stats stats;
     double last_progress_time;
 #if RRV_THREADS
@@ -1063,16 +1064,16 @@ static int sample_tree_depth(int n)
 /* Sums samples [a, b) of pixels [x0,x1) x [y0,y1) into out (zero on entry)
    by the sample tree; scratch holds one TILE_SIZE^2 RGB buffer a level. */
 static rrv_result sum_samples(const rrv_scene *scene, int x0, int y0, int x1, int y1, int a, int b,
-                              float *out, int stride, float *scratch, rrv_render_stats *stats)
+                              float *out, int stride, float *scratch, rrv_render_stats *stats, rrv_error *err)
 {
     int w = x1 - x0, h = y1 - y0, mid, x, y, c;
     rrv_result result;
-    if (b - a == 1) return rrv_render_rect(scene, x0, y0, x1, y1, a, b, out, stride, stats, NULL);
+    if (b - a == 1) return rrv_render_rect(scene, x0, y0, x1, y1, a, b, out, stride, stats, err);
     mid = sample_split(a, b);
-    result = sum_samples(scene, x0, y0, x1, y1, a, mid, out, stride, scratch + 3 * TILE_SIZE * TILE_SIZE, stats);
+    result = sum_samples(scene, x0, y0, x1, y1, a, mid, out, stride, scratch + 3 * TILE_SIZE * TILE_SIZE, stats, err);
     if (result != RRV_OK) return result;
     memset(scratch, 0, (size_t)w * (size_t)h * 3 * sizeof *scratch);
-    result = sum_samples(scene, x0, y0, x1, y1, mid, b, scratch, w, scratch + 3 * TILE_SIZE * TILE_SIZE, stats);
+    result = sum_samples(scene, x0, y0, x1, y1, mid, b, scratch, w, scratch + 3 * TILE_SIZE * TILE_SIZE, stats, err);
     if (result != RRV_OK) return result;
     for (y = 0; y < h; ++y)
         for (x = 0; x < w; ++x)
@@ -1100,6 +1101,7 @@ static void *render_worker(void *arg)
         int tile, tx0, ty0, tx1, ty1;
         double started;
         rrv_result result;
+        rrv_error err;
         job_lock(job);
         tile = job->failure == RRV_OK ? job->next_tile++ : job->tile_count;
         job_unlock(job);
@@ -1113,11 +1115,14 @@ static void *render_worker(void *arg)
         started = job->tile_seconds ? seconds_now() : 0;
         result = sum_samples(job->scene, tx0, ty0, tx1, ty1, job->sample_begin, job->sample_end,
                              job->sum + 3 * ((size_t)(ty0 - job->y0) * job->stride + (size_t)(tx0 - job->x0)),
-                             job->stride, scratch, &stats);
+                             job->stride, scratch, &stats, &err);
 
         job_lock(job);
         if (result != RRV_OK) {
-            if (job->failure == RRV_OK) job->failure = result;
+            if (job->failure == RRV_OK) {
+                job->failure = result;
+                job->failure_error = err;
+            }
         } else {
             if (job->tile_seconds) job->tile_seconds[tile] = seconds_now() - started;
             job->tiles_done++;
@@ -1938,6 +1943,7 @@ static int render_run(const render_options *opt, const rrv_scene *scene, int is_
     job->tile_count = job->tiles_x * ((crop_height + TILE_SIZE - 1) / TILE_SIZE);
     job->tile_stride = tile_stride(job->tiles_x, job->tile_count / job->tiles_x);
     job->failure = RRV_OK;
+    job->failure_error.message[0] = '\0';
     job->show_progress = !opt->quiet && isatty(2);
     if (job->show_progress) {
         job->tile_seconds = (double *)malloc((size_t)job->tile_count * sizeof *job->tile_seconds);
@@ -1959,7 +1965,8 @@ static int render_run(const render_options *opt, const rrv_scene *scene, int is_
     job->tile_seconds = NULL;
 
     if (job->failure != RRV_OK) {
-        fprintf(stderr, "rrv: %s: render failed: %s\n", opt->scene_path, rrv_result_string(job->failure));
+        fprintf(stderr, "rrv: %s: render failed: %s\n", opt->scene_path,
+                job->failure_error.message[0] ? job->failure_error.message : rrv_result_string(job->failure));
         free(sum);
         free(*image);
         *image = NULL;
