@@ -90,18 +90,8 @@
                  from one (its side, the square root of its area, or a
                  sphere's disc's, under 0.5 x its distance from the
                  medium's box centre), and the IOR has the Hessian shooting needs;
-                 refractive (the comb, nee AIM) otherwise. Why: aimed
-                 shadow rays sample the light's straight cone, at about
-                 straight NEE's cost, which is right while bending is small
-                 against the light's angular size, but a caustic of a small
-                 light lies outside that cone and only forward paths find
-                 it (noise); shooting solves the bent connection, at 4x-50x
-                 the cost a sample, which pays where the receivers are
-                 surfaces seen through clear media, and not where a
-                 scattering medium makes every vertex a connection.
-                 Measured in test/bench/RESULTS.md ("Which integrator by default"):
-                 within 1.25x of the best unbiased mode on the bench scenes.
-                 An explicit `nee` other than shoot keeps the comb.
+                 refractive (the comb, nee AIM) otherwise; an explicit `nee`
+                 other than shoot keeps the comb. Why: NOTES.
      classic     IOR 1 everywhere: delta tracking, ratio-tracked NEE with MIS,
                  spectral MIS for chromatic media (channels whose extinctions
                  differ more than 4x walk with majorants of their own). The
@@ -114,11 +104,8 @@
                  MIDPOINT its variant with the normal at the chord midpoint
                  (both first order).
      eikonal     marches the ray equation d/ds(eta dx/ds) = grad eta with RK4
-                 (default) or a symplectic leapfrog, step rrv_settings.step.
-                 In a medium box (not a Luneburg or fish-eye sphere), the
-                 majorant cells whose bound on |grad eta| is 0 hold a
-                 constant IOR and are crossed in one straight segment, steps
-                 ending where they begin, as at a face.
+                 (default) or a symplectic leapfrog, step rrv_settings.step;
+                 cells without a gradient are crossed straight (NOTES).
    NEXT-EVENT ESTIMATION (rrv_settings.nee, scene `render nee`, CLI --nee)
      Refractive and eikonal integrators only; classic always samples lights
      with straight shadow rays, which is exact for straight rays.
@@ -167,22 +154,10 @@
    TRANSMITTANCE (rrv_settings.transmittance, scene `render transmittance
    ratio|residual|march`, `--transmittance`): how every shadow ray's
    transmittance is estimated, all unbiased. `ratio` (the default) is
-   ratio tracking against the majorant grid. The majorant grid also keeps a
-   per-cell minorant (a true lower bound of the density, rounded down);
-   `residual` integrates it exactly and ratio-tracks only what lies above
-   it; `march` is unbiased ray marching: a jittered march (2 points a unit
-   of the residual majorant's optical depth, the minorant exact) gives a
-   pivot optical depth p, and exp(-tau) = exp(-p) sum_j (p - tau)^j / j!
-   is estimated term by term from independent marches, truncated by
-   roulette. Per shadow ray march has 1/6 to 1/9 of ratio tracking's variance x
-   cost on plume, pyro and haze, but in whole renders shadow rays are a
-   small part of the noise and march's extra work about cancels its gain,
-   so ratio stays the default (test/bench/RESULTS.md, "Transmittance").
-   Where a cell's density is constant, residual and march are exact
-   there. March's estimates are signed (rarely negative); they are added
-   as they are. Refracting media: every straight chord of a bent shadow
-   ray is estimated the same way.
-
+   ratio tracking against the majorant grid; `residual` integrates each
+   cell's minorant exactly and ratio-tracks what lies above it; `march` is
+   unbiased ray marching, 1/6 to 1/9 of ratio's variance x cost a shadow
+   ray but no gain in whole renders (NOTES; test/bench/RESULTS.md).
 
    READING MAP (the paper's terms and the functions that implement them;
    `grep -n '/\* >>' rrv.h` is the table of contents, in the order a ray
@@ -282,82 +257,30 @@
      RRV_STATIC       make every public function static to the including file
      RRV_NO_STDIO     no FILE* I/O: load through rrv_load_options.read_file and
                       write through the callback writers
-     RRV_NO_POSIX     plain C files only. By default, where __unix__ or
-                      __APPLE__ is defined, the implementation uses POSIX's
-                      open, fstat and fcntl (and stat beside the writers'
-                      rename): every reader opens without blocking and
-                      refuses what is not a regular file (a FIFO, a device,
-                      a folder: rrv_open_read), the writers refuse such a
-                      target and create their temporary file exclusively.
-                      With RRV_NO_POSIX, or elsewhere, they use fopen alone:
-                      a FIFO given as input blocks until a writer opens it,
-                      an endless device is read up to the size limit, and
-                      a device node at a writer's target is replaced.
-                      The POSIX calls come from <fcntl.h>, <sys/stat.h> and
-                      <unistd.h>, which glibc declares under -std=c99 too,
-                      except fdopen: rrv.h declares that one itself (in C),
-                      so the header works after any includes of the user's.
-                      A libc that hides more under strict C wants
-                      _POSIX_C_SOURCE 200809L before its first header, as
-                      rrv_impl.c defines it.
+     RRV_NO_POSIX     plain C files only (fopen alone: a FIFO given as input
+                      blocks; POSIX's non-blocking, regular-files-only
+                      reading is the default on __unix__ and __APPLE__; NOTES)
    Parts a build can leave out, for embedded or sandboxed clients that pay
    only for what they use (any of them, in any combination; object sizes
    in test/bench/RESULTS.md, "Build switches"). Every declaration stays and
    every function still links: a call that needs a part left out returns
    RRV_ERROR_UNSUPPORTED with a message naming the switch ("PNG output is
    disabled (RRV_NO_PNG)"), with its outputs cleared as on any failure.
-     RRV_NO_SCENE_FILE no .rrv parser, OBJ loader or gridvol reader: scenes
-                      are built with rrv_scene_create and rrv_scene_add_* /
-                      set_* (a grid field's samples given in rrv_field.grid).
-                      rrv_scene_load, rrv_scene_parse, rrv_grid_read and
-                      rrv_grid_read_memory refuse.
-     RRV_NO_NANOVDB   no NanoVDB reader: rrv_nanovdb_read and
-                      rrv_nanovdb_read_memory refuse, and so do a scene's
-                      `nanovdb` statement and a NANOVDB field (no grid can
-                      be validated without the reader). The small lookups
-                      (rrv_nanovdb_voxel, rrv_nanovdb_sample) stay.
-     RRV_NO_EXR       no OpenEXR writer or reader (nor their inflate):
-                      rrv_write_exr, rrv_write_exr_to, rrv_read_exr,
-                      rrv_read_exr_memory and rrv_exr_find_attribute refuse
-                      (the last, which has no rrv_error, by its result);
-                      rrv_half_from_float stays.
-     RRV_NO_PNG       no PNG writer: rrv_write_png and rrv_write_png_to
-                      refuse. With RRV_NO_EXR too, deflate goes as well;
-                      rrv_crc32 and rrv_adler32 stay.
-     RRV_NO_CURVED_NEE no solvers of nee shoot and manifold (and the cones
-                      that go with them; nee aim stays). NEE_SHOOT or
-                      NEE_MANIFOLD asked for is refused, not replaced: by
-                      the scene's `render` statement, rrv_scene_set_settings
-                      and rrv_scene_prepare, and by rrv_render_rect for
-                      settings edited after prepare. Unasked, the defaults
-                      follow the rules for a scene no solver supports: the
-                      default integrator is never EIKONAL for its shooting
-                      (INTEGRATORS, "default"), and NEE_DEFAULT aims, as
-                      the refractive integrator's does.
-                      main.c builds with each switch (a RRV_NO_SCENE_FILE
-                      CLI only says so, since it reads scene files); its
-                      render refuses -o .exr, --png and --nee shoot or
-                      manifold before rendering when they are left out.
+     RRV_NO_SCENE_FILE no .rrv parser, OBJ loader or gridvol reader (scenes
+                      built with rrv_scene_create and rrv_scene_add_* / set_*)
+     RRV_NO_NANOVDB   no NanoVDB reader (a NANOVDB field is refused)
+     RRV_NO_EXR       no OpenEXR writer or reader
+     RRV_NO_PNG       no PNG writer
+     RRV_NO_CURVED_NEE no solvers of nee shoot and manifold (asked for, they
+                      are refused; the defaults aim)
+   What each leaves and refuses: NOTES.
 
    FILES
-     Every input is untrusted and read with bounds, and only from a regular
-     file (rrv_open_read; a FIFO or a device is refused at once, unread):
-     a scene, OBJ or NanoVDB file up to rrv_load_options.max_grid_bytes (a
-     larger one refused by its size before any byte is read), a gridvol's
-     48-byte header and then exactly the samples it announces, a PFM
-     header and then exactly the pixels it announces (more than the file
-     holds is refused by its size), an OpenEXR file whole (up to 2 GiB)
-     with every offset and size checked against it. Scene numbers are
-     decimal (no hexadecimal) and read the same in any locale. The file
-     writers replace their target through a new temporary file and refuse
-     a target that is no regular file; rrv_write_pfm says how links are
-     treated and what plain C cannot promise there.
-     Images out: rrv_write_pfm (float), rrv_write_exr (OpenEXR scanline, half
-     or float, ZIP or uncompressed, a crop placed in a larger display
-     window; rrv_half_from_float is its rounding), rrv_write_png (8-bit sRGB
-     preview), each also as a *_to form writing through a callback. Images
-     in: rrv_read_pfm, rrv_read_exr (scanline RGB, NONE, RLE, ZIPS or ZIP),
-     and their *_memory forms.
+     Every input is untrusted, read with bounds and only from a regular file
+     (rrv_open_read); writers replace their target through a temporary file.
+     Images out: PFM, OpenEXR (half or float, ZIP or none), an 8-bit sRGB PNG
+     preview, each also through a callback; in: PFM and scanline RGB OpenEXR.
+     The rules: NOTES.
 
    CONVENTIONS (the contract between scene files, the library and tests)
      Units: metres, kelvin, pascal; extinction in 1/m. Colour is linear RGB,
@@ -18418,6 +18341,106 @@ and BOUNDS (moved here from the manual at the top, word for word)
        grad eta| facing the incoming ray, c = -n.d, k = 1 - m^2 (1 - c^2);
        k < 0 reflects (d + 2 c n), else d' = m d + (m c - sqrt(k)) n, written
        as a change of d so that m ~ 1 does not cancel.
+
+   THE DEFAULT INTEGRATOR, why
+     Aimed shadow rays sample the light's straight cone, at about straight
+     NEE's cost, which is right while bending is small against the light's
+     angular size, but a caustic of a small light lies outside that cone and
+     only forward paths find it (noise); shooting solves the bent connection,
+     at 4x-50x the cost a sample, which pays where the receivers are surfaces
+     seen through clear media, and not where a scattering medium makes every
+     vertex a connection. Measured in test/bench/RESULTS.md ("Which integrator
+     by default"): within 1.25x of the best unbiased mode on the bench scenes.
+
+   EIKONAL MARCH, flat cells
+     In a medium box (not a Luneburg or fish-eye sphere), the majorant cells
+     whose bound on |grad eta| is 0 hold a constant IOR and are crossed in one
+     straight segment, steps ending where they begin, as at a face.
+
+   TRANSMITTANCE, in detail
+     The majorant grid also keeps a per-cell minorant (a true lower bound of
+     the density, rounded down); `residual` integrates it exactly and
+     ratio-tracks only what lies above it; `march` is unbiased ray marching: a
+     jittered march (2 points a unit of the residual majorant's optical depth,
+     the minorant exact) gives a pivot optical depth p, and exp(-tau) =
+     exp(-p) sum_j (p - tau)^j / j! is estimated term by term from independent
+     marches, truncated by roulette. Per shadow ray march has 1/6 to 1/9 of
+     ratio tracking's variance x cost on plume, pyro and haze, but in whole
+     renders shadow rays are a small part of the noise and march's extra work
+     about cancels its gain, so ratio stays the default
+     (test/bench/RESULTS.md, "Transmittance"). Where a cell's density is
+     constant, residual and march are exact there. March's estimates are
+     signed (rarely negative); they are added as they are. Refracting media:
+     every straight chord of a bent shadow ray is estimated the same way.
+
+   RRV_NO_POSIX, in detail
+     By default, where __unix__ or __APPLE__ is defined, the implementation
+     uses POSIX's open, fstat and fcntl (and stat beside the writers' rename):
+     every reader opens without blocking and refuses what is not a regular
+     file (a FIFO, a device, a folder: rrv_open_read), the writers refuse such
+     a target and create their temporary file exclusively. With RRV_NO_POSIX,
+     or elsewhere, they use fopen alone: a FIFO given as input blocks until a
+     writer opens it, an endless device is read up to the size limit, and a
+     device node at a writer's target is replaced. The POSIX calls come from
+     <fcntl.h>, <sys/stat.h> and <unistd.h>, which glibc declares under
+     -std=c99 too, except fdopen: rrv.h declares that one itself (in C), so
+     the header works after any includes of the user's. A libc that hides more
+     under strict C wants _POSIX_C_SOURCE 200809L before its first header, as
+     rrv_impl.c defines it.
+
+   BUILD SWITCHES, in detail
+     RRV_NO_SCENE_FILE no .rrv parser, OBJ loader or gridvol reader: scenes
+                       are built with rrv_scene_create and rrv_scene_add_* /
+                       set_* (a grid field's samples given in rrv_field.grid).
+                       rrv_scene_load, rrv_scene_parse, rrv_grid_read and
+                       rrv_grid_read_memory refuse.
+     RRV_NO_NANOVDB   no NanoVDB reader: rrv_nanovdb_read and
+                       rrv_nanovdb_read_memory refuse, and so do a scene's
+                       `nanovdb` statement and a NANOVDB field (no grid can
+                       be validated without the reader). The small lookups
+                       (rrv_nanovdb_voxel, rrv_nanovdb_sample) stay.
+     RRV_NO_EXR       no OpenEXR writer or reader (nor their inflate):
+                       rrv_write_exr, rrv_write_exr_to, rrv_read_exr,
+                       rrv_read_exr_memory and rrv_exr_find_attribute refuse
+                       (the last, which has no rrv_error, by its result);
+                       rrv_half_from_float stays.
+     RRV_NO_PNG       no PNG writer: rrv_write_png and rrv_write_png_to
+                       refuse. With RRV_NO_EXR too, deflate goes as well;
+                       rrv_crc32 and rrv_adler32 stay.
+     RRV_NO_CURVED_NEE no solvers of nee shoot and manifold (and the cones
+                       that go with them; nee aim stays). NEE_SHOOT or
+                       NEE_MANIFOLD asked for is refused, not replaced: by
+                       the scene's `render` statement, rrv_scene_set_settings
+                       and rrv_scene_prepare, and by rrv_render_rect for
+                       settings edited after prepare. Unasked, the defaults
+                       follow the rules for a scene no solver supports: the
+                       default integrator is never EIKONAL for its shooting
+                       (INTEGRATORS, "default"), and NEE_DEFAULT aims, as
+                       the refractive integrator's does.
+                       main.c builds with each switch (a RRV_NO_SCENE_FILE
+                       CLI only says so, since it reads scene files); its
+                       render refuses -o .exr, --png and --nee shoot or
+                       manifold before rendering when they are left out.
+
+   FILES, in detail
+     Every input is untrusted and read with bounds, and only from a regular
+     file (rrv_open_read; a FIFO or a device is refused at once, unread):
+     a scene, OBJ or NanoVDB file up to rrv_load_options.max_grid_bytes (a
+     larger one refused by its size before any byte is read), a gridvol's
+     48-byte header and then exactly the samples it announces, a PFM
+     header and then exactly the pixels it announces (more than the file
+     holds is refused by its size), an OpenEXR file whole (up to 2 GiB)
+     with every offset and size checked against it. Scene numbers are
+     decimal (no hexadecimal) and read the same in any locale. The file
+     writers replace their target through a new temporary file and refuse
+     a target that is no regular file; rrv_write_pfm says how links are
+     treated and what plain C cannot promise there.
+     Images out: rrv_write_pfm (float), rrv_write_exr (OpenEXR scanline, half
+     or float, ZIP or uncompressed, a crop placed in a larger display
+     window; rrv_half_from_float is its rounding), rrv_write_png (8-bit sRGB
+     preview), each also as a *_to form writing through a callback. Images
+     in: rrv_read_pfm, rrv_read_exr (scanline RGB, NONE, RLE, ZIPS or ZIP),
+     and their *_memory forms.
 
 ------------------------------------------------------------------------------
 VERSION HISTORY
