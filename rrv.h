@@ -2068,15 +2068,45 @@ static void rrv__nv_gradient_jacobian(const rrv_nanovdb *g, rrv_vec3 p, double J
    upper node's entry 128, a lower node's entry 8 (one leaf). */
 static const int rrv__nv_extent_log2[3] = {12, 7, 3};
 
-/* The largest value any index point in [lo, hi] (inclusive) holds, from
-   the tree: tile values where tiles cover the box, leaf values inside it,
-   and the background wherever a box may reach beyond the data. Every
+static double rrv__nv_extreme(double best, double v, int upper) { return upper ? fmax(best, v) : fmin(best, v); }
+
+/* The index box of the world box [lo, hi]: the map is affine, so its
+   corners' (unrounded). */
+static void rrv__nv_index_box(const rrv_nanovdb *g, rrv_vec3 lo, rrv_vec3 hi, double ulo[3], double uhi[3])
+{
+    int corner, a;
+    for (a = 0; a < 3; ++a) {
+        ulo[a] = DBL_MAX;
+        uhi[a] = -DBL_MAX;
+    }
+    for (corner = 0; corner < 8; ++corner) {
+        double u[3];
+        rrv__nv_to_index(g, rrv__v3(corner & 1 ? hi.x : lo.x, corner & 2 ? hi.y : lo.y, corner & 4 ? hi.z : lo.z), u);
+        for (a = 0; a < 3; ++a) {
+            ulo[a] = fmin(ulo[a], u[a]);
+            uhi[a] = fmax(uhi[a], u[a]);
+        }
+    }
+}
+
+/* A root tile's origin from its key: the top 20 bits of each coordinate,
+   two's complement. */
+static void rrv__nv_tile_origin(uint64_t key, int64_t o[3])
+{
+    o[0] = (int64_t)(int32_t)(uint32_t)(((key >> 42) & 0x1fffffu) << 12);
+    o[1] = (int64_t)(int32_t)(uint32_t)(((key >> 21) & 0x1fffffu) << 12);
+    o[2] = (int64_t)(int32_t)(uint32_t)((key & 0x1fffffu) << 12);
+}
+
+/* The largest (upper) or least value any index point in [lo, hi]
+   (inclusive) holds below the node: tile values where tiles cover the box,
+   leaf values inside it (a node's table leaves no index point out). Every
    stored value counts, active or not, since trilinear reads them all (the
    min/max NanoVDB keeps per node cover active values only). */
-static double rrv__nv_node_max(const rrv_nanovdb *g, const unsigned char *node, int level, const int64_t o[3],
-                               const int64_t lo[3], const int64_t hi[3])
+static double rrv__nv_node_extreme(const rrv_nanovdb *g, const unsigned char *node, int level, const int64_t o[3],
+                                   const int64_t lo[3], const int64_t hi[3], int upper)
 {
-    double best = -DBL_MAX;
+    double best = upper ? -DBL_MAX : DBL_MAX;
     int64_t a[3], b[3], x, y, z;
     int s = rrv__nv_extent_log2[level], dim = level == 1 ? 32 : 16, log2dim = level == 1 ? 5 : 4, c;
     size_t table = level == 1 ? RRV__NV_UPPER_TABLE : RRV__NV_LOWER_TABLE;
@@ -2098,7 +2128,7 @@ static double rrv__nv_node_max(const rrv_nanovdb *g, const unsigned char *node, 
                     co[1] = o[1] + (y << s);
                     co[2] = o[2] + (z << s);
                     if (level == 1) {
-                        best = fmax(best, rrv__nv_node_max(g, child, 2, co, lo, hi));
+                        best = rrv__nv_extreme(best, rrv__nv_node_extreme(g, child, 2, co, lo, hi, upper), upper);
                     } else {
                         int64_t i, j, k, l[3], h[3];
                         for (c = 0; c < 3; ++c) {
@@ -2108,10 +2138,11 @@ static double rrv__nv_node_max(const rrv_nanovdb *g, const unsigned char *node, 
                         for (i = l[0]; i <= h[0]; ++i)
                             for (j = l[1]; j <= h[1]; ++j)
                                 for (k = l[2]; k <= h[2]; ++k)
-                                    best = fmax(best, rrv__nv_leaf_value(g->type, child, (unsigned)((i << 6) | (j << 3) | k)));
+                                    best = rrv__nv_extreme(best, rrv__nv_leaf_value(g->type, child, (unsigned)((i << 6) | (j << 3) | k)),
+                                                          upper);
                     }
                 } else {
-                    best = fmax(best, rrv__nv_f32(entry));
+                    best = rrv__nv_extreme(best, rrv__nv_f32(entry), upper);
                 }
             }
     return best;
@@ -2120,20 +2151,12 @@ static double rrv__nv_node_max(const rrv_nanovdb *g, const unsigned char *node, 
 /* An upper bound of the field over the world box [lo, hi]. */
 static double rrv__nv_bound(const rrv_nanovdb *g, rrv_vec3 lo, rrv_vec3 hi)
 {
-    double ulo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, uhi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX}, best;
+    double ulo[3], uhi[3], best;
     int64_t ilo[3], ihi[3];
     const unsigned char *root = g->buffer + g->root;
     uint32_t t;
-    int corner, a;
-    /* the index box of the world box: the map is affine, so its corners' */
-    for (corner = 0; corner < 8; ++corner) {
-        double u[3];
-        rrv__nv_to_index(g, rrv__v3(corner & 1 ? hi.x : lo.x, corner & 2 ? hi.y : lo.y, corner & 4 ? hi.z : lo.z), u);
-        for (a = 0; a < 3; ++a) {
-            ulo[a] = fmin(ulo[a], u[a]);
-            uhi[a] = fmax(uhi[a], u[a]);
-        }
-    }
+    int a;
+    rrv__nv_index_box(g, lo, hi, ulo, uhi);
     best = g->background;
     for (a = 0; a < 3; ++a) {
         /* the index points whose cells touch the box, within the data */
@@ -2147,65 +2170,16 @@ static double rrv__nv_bound(const rrv_nanovdb *g, rrv_vec3 lo, rrv_vec3 hi)
         uint64_t key = rrv__nv_u64(tile);
         int64_t o[3], child = (int64_t)rrv__nv_u64(tile + 8);
         int overlaps = 1;
-        /* key fields are the top 20 bits of each coordinate, two's complement */
-        o[0] = (int64_t)(int32_t)(uint32_t)(((key >> 42) & 0x1fffffu) << 12);
-        o[1] = (int64_t)(int32_t)(uint32_t)(((key >> 21) & 0x1fffffu) << 12);
-        o[2] = (int64_t)(int32_t)(uint32_t)((key & 0x1fffffu) << 12);
+        rrv__nv_tile_origin(key, o);
         for (a = 0; a < 3; ++a)
             if (o[a] > ihi[a] || o[a] + 4095 < ilo[a]) overlaps = 0;
         if (!overlaps) continue;
         if (child == 0)
             best = fmax(best, rrv__nv_f32(tile + 20));
         else
-            best = fmax(best, rrv__nv_node_max(g, root + child, 1, o, ilo, ihi));
+            best = fmax(best, rrv__nv_node_extreme(g, root + child, 1, o, ilo, ihi, 1));
     }
     return best;
-}
-
-/* The least value any index point in [lo, hi] holds below the node: its
-   tile values and leaf values (a node's table leaves no index point out). */
-static double rrv__nv_node_min(const rrv_nanovdb *g, const unsigned char *node, int level, const int64_t o[3],
-                               const int64_t lo[3], const int64_t hi[3])
-{
-    double least = DBL_MAX;
-    int64_t a[3], b[3], x, y, z;
-    int s = rrv__nv_extent_log2[level], dim = level == 1 ? 32 : 16, log2dim = level == 1 ? 5 : 4, c;
-    size_t table = level == 1 ? RRV__NV_UPPER_TABLE : RRV__NV_LOWER_TABLE;
-    size_t mask = level == 1 ? 32 + 4096 : 32 + 512;
-    for (c = 0; c < 3; ++c) {
-        a[c] = lo[c] > o[c] ? (lo[c] - o[c]) >> s : 0;
-        b[c] = (hi[c] - o[c]) >> s;
-        if (b[c] > dim - 1) b[c] = dim - 1;
-    }
-    for (x = a[0]; x <= b[0]; ++x)
-        for (y = a[1]; y <= b[1]; ++y)
-            for (z = a[2]; z <= b[2]; ++z) {
-                unsigned n = (unsigned)((x << (2 * log2dim)) | (y << log2dim) | z);
-                const unsigned char *entry = node + table + 8 * (size_t)n;
-                if ((node[mask + (n >> 3)] >> (n & 7)) & 1) {
-                    const unsigned char *child = node + (int64_t)rrv__nv_u64(entry);
-                    int64_t co[3];
-                    co[0] = o[0] + (x << s);
-                    co[1] = o[1] + (y << s);
-                    co[2] = o[2] + (z << s);
-                    if (level == 1) {
-                        least = fmin(least, rrv__nv_node_min(g, child, 2, co, lo, hi));
-                    } else {
-                        int64_t i, j, k, l[3], h[3];
-                        for (c = 0; c < 3; ++c) {
-                            l[c] = lo[c] > co[c] ? lo[c] - co[c] : 0;
-                            h[c] = hi[c] - co[c] < 7 ? hi[c] - co[c] : 7;
-                        }
-                        for (i = l[0]; i <= h[0]; ++i)
-                            for (j = l[1]; j <= h[1]; ++j)
-                                for (k = l[2]; k <= h[2]; ++k)
-                                    least = fmin(least, rrv__nv_leaf_value(g->type, child, (unsigned)((i << 6) | (j << 3) | k)));
-                    }
-                } else {
-                    least = fmin(least, rrv__nv_f32(entry));
-                }
-            }
-    return least;
 }
 
 /* A lower bound of the field over the world box [lo, hi]: the least value
@@ -2214,21 +2188,14 @@ static double rrv__nv_node_min(const rrv_nanovdb *g, const unsigned char *node, 
    tile the tree does not hold (rrv__nv_bound's rules, the other way). */
 static double rrv__nv_lower(const rrv_nanovdb *g, rrv_vec3 lo, rrv_vec3 hi)
 {
-    double ulo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, uhi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX}, least = DBL_MAX;
+    double ulo[3], uhi[3], least = DBL_MAX;
     int64_t ilo[3], ihi[3], blocks = 1, tiles = 0;
     const unsigned char *root = g->buffer + g->root;
     uint32_t t;
-    int corner, a;
+    int a;
     if (!g->buffer) return 0;
     if (!rrv__inside_box(lo, g->lo, g->hi) || !rrv__inside_box(hi, g->lo, g->hi)) least = g->background;
-    for (corner = 0; corner < 8; ++corner) {
-        double u[3];
-        rrv__nv_to_index(g, rrv__v3(corner & 1 ? hi.x : lo.x, corner & 2 ? hi.y : lo.y, corner & 4 ? hi.z : lo.z), u);
-        for (a = 0; a < 3; ++a) {
-            ulo[a] = fmin(ulo[a], u[a]);
-            uhi[a] = fmax(uhi[a], u[a]);
-        }
-    }
+    rrv__nv_index_box(g, lo, hi, ulo, uhi);
     for (a = 0; a < 3; ++a) {
         double l = floor(ulo[a]), h = floor(uhi[a]) + 1.0;
         if (l < (double)g->data_lo[a] || h > (double)g->data_hi[a]) least = fmin(least, g->background);
@@ -2245,9 +2212,7 @@ static double rrv__nv_lower(const rrv_nanovdb *g, rrv_vec3 lo, rrv_vec3 hi)
         uint64_t key = rrv__nv_u64(tile);
         int64_t o[3], child = (int64_t)rrv__nv_u64(tile + 8);
         int overlaps = 1;
-        o[0] = (int64_t)(int32_t)(uint32_t)(((key >> 42) & 0x1fffffu) << 12);
-        o[1] = (int64_t)(int32_t)(uint32_t)(((key >> 21) & 0x1fffffu) << 12);
-        o[2] = (int64_t)(int32_t)(uint32_t)((key & 0x1fffffu) << 12);
+        rrv__nv_tile_origin(key, o);
         for (a = 0; a < 3; ++a)
             if (o[a] > ihi[a] || o[a] + 4095 < ilo[a]) overlaps = 0;
         if (!overlaps) continue;
@@ -2255,7 +2220,7 @@ static double rrv__nv_lower(const rrv_nanovdb *g, rrv_vec3 lo, rrv_vec3 hi)
         if (child == 0)
             least = fmin(least, rrv__nv_f32(tile + 20));
         else
-            least = fmin(least, rrv__nv_node_min(g, root + child, 1, o, ilo, ihi));
+            least = fmin(least, rrv__nv_node_extreme(g, root + child, 1, o, ilo, ihi, 0));
     }
     /* keys are distinct, so fewer tiles than blocks leaves a block to the background */
     if (tiles < blocks) least = fmin(least, g->background);
