@@ -7,19 +7,16 @@
    2023 talk), next to a classic null-scattering volume path tracer
    (Miller et al. 2019) and an eikonal ray-marching reference (Ament et al. 2014).
 
-   It does: participating media in boxes (density, temperature, pressure and
-   IOR from constants, Gaussian blobs, noise, gridvol and NanoVDB grids, the
-   gas law), diffuse and checker surfaces (spheres, quads, triangle meshes),
-   quad, triangle and sphere lights, a gradient or constant sky, blackbody
-   flames, three RGB channels, tiles and sample ranges that merge bit for bit.
-   It does not: dispersion (the IOR is achromatic), glossy or specular
-   surfaces, textures, motion, GPUs. The command-line client (main.c) and
-   the user's manual are in README.md; measurements in test/bench/RESULTS.md.
+   It does: media in boxes (density, temperature, pressure and IOR from
+   constants, blobs, noise, gridvol and NanoVDB grids, the gas law), diffuse
+   and checker spheres, quads and meshes, quad, triangle and sphere lights,
+   a sky, blackbody flames, RGB, tiles and sample ranges that merge bit for
+   bit. It does not: dispersion, glossy or specular surfaces, textures,
+   motion, GPUs. The CLI (main.c) and the user's manual: README.md.
 
-   EXAMPLE: a Luneburg lens built in code, rendered, written as PFM. Zero
-   means default in every description. test/compile_checks.sh cuts out the
-   lines between the two rulers and builds them as C99 and as C++, then
-   runs the program.
+   EXAMPLE: a Luneburg lens built in code, rendered, written as PFM (make
+   test cuts out the lines between the rulers, builds them as C99 and C++
+   and runs them).
    ---- example ---------------------------------------------------------------
     #define RRV_IMPLEMENTATION
     #include "rrv.h"
@@ -38,14 +35,13 @@
         rrv_error err;
         float *sum = NULL;
         int w = 64, h = 48, spp = 4, lens_index, i;
-        memset(&camera, 0, sizeof camera);
+        memset(&camera, 0, sizeof camera);       // zero means default
         memset(&settings, 0, sizeof settings);
         memset(&sky, 0, sizeof sky);
         memset(&lens, 0, sizeof lens);
         memset(&ior, 0, sizeof ior);
         camera.eye.z = 4;                        // looking at the origin
-        camera.width = w;
-        camera.height = h;
+        camera.width = w, camera.height = h;
         settings.integrator = RRV_INTEGRATOR_REFRACTIVE;
         settings.spp = spp;
         sky.kind = RRV_ENV_GRADIENT;             // white above, black below
@@ -80,172 +76,90 @@
     }
    ---- end of example --------------------------------------------------------
 
-   INTEGRATORS (rrv_settings.integrator)
-     default     (zero; no `integrator` key, no --integrator) chosen from
-                 the prepared scene by one rule (rrv_scene_integrator):
-                 classic where no medium's IOR differs from the ambient
-                 one (bit for bit the classic render); eikonal with nee
-                 SHOOT where every refracting medium is clear (no medium
-                 with extinction overlaps its box) and a light is small
-                 from one (its side, the square root of its area, or a
-                 sphere's disc's, under 0.5 x its distance from the
-                 medium's box centre), and the IOR has the Hessian shooting needs;
-                 refractive (the comb, nee AIM) otherwise; an explicit `nee`
-                 other than shoot keeps the comb. Why: NOTES.
-     classic     IOR 1 everywhere: delta tracking, ratio-tracked NEE with MIS,
-                 spectral MIS for chromatic media (channels whose extinctions
-                 differ more than 4x walk with majorants of their own). The
-                 production baseline.
-     refractive  the same, with rays bent inside media that carry an IOR.
-                 Scheme (rrv_settings.refraction): COMB, the default, kicks
-                 the direction at regularly spaced points with the leapfrog
-                 kick d(eta d) = grad eta h (second order); POISSON is the
-                 seed paper's Snell refraction at every null event and
-                 MIDPOINT its variant with the normal at the chord midpoint
-                 (both first order).
-     eikonal     marches the ray equation d/ds(eta dx/ds) = grad eta with RK4
-                 (default) or a symplectic leapfrog, step rrv_settings.step;
-                 cells without a gradient are crossed straight (NOTES).
-   NEXT-EVENT ESTIMATION (rrv_settings.nee, scene `render nee`, CLI --nee)
-     Refractive and eikonal integrators only; classic always samples lights
-     with straight shadow rays, which is exact for straight rays.
-     DEFAULT     SHOOT (the default integrator is eikonal where shooting
-                 pays); with the refractive integrator, which shooting
-                 cannot differentiate, it aims (AIM).
-     STRAIGHT    a straight shadow ray, ratio-tracked, MIS with the bent
-                 continuation: biased wherever either crosses a refracting
-                 medium (a lens caustic at half its radiance).
-     NONE        no light sampling: unbiased (furnaces give exactly 1), noisy
-                 for small lights.
-     SHOOT       curved NEE by shooting (eikonal integrator): Newton on the
-                 initial direction until the bent ray lands on the light point,
-                 density from the Jacobi field, 1/p by repeated trials (exact
-                 by Russian roulette past 64).
-     MANIFOLD    curved NEE by the paper's method (refractive and eikonal): a
-                 chain of comb vertices moved by the paper's solver,
-                 Levenberg-Marquardt (`manifoldsolver dogleg`: a trust-region
-                 Gauss-Newton), until every segment follows its kick; 1/p
-                 exact by Russian roulette past 64 trials; slow.
-     AIM         bent shadow rays aimed at a light point (refractive comb and
-                 eikonal): unbiased, about straight NEE's cost, no focusing.
-     How each estimator works, its classes of paths and its MIS weights:
-     NOTES at the end of this file.
-   Radiance crossing a change of IOR is scaled by (eta_camera / eta_emitter)^2;
-   blackbody emission is n^2 B where the IOR is n (Kirchhoff), so a fire does
-   not dim by 1/n^2 on leaving a dense medium.
+   INTEGRATORS (rrv_settings.integrator; zero, the default, is chosen from
+   the prepared scene by rrv_scene_integrator; the rule and why: NOTES)
+     default     classic where no medium's IOR differs from the ambient IOR
+                 (bit for bit the classic render); eikonal with nee SHOOT
+                 where the refracting media are clear and a light is small
+                 seen from them (caustics); refractive with nee AIM otherwise.
+     classic     IOR 1 everywhere: delta tracking, ratio-tracked NEE with
+                 MIS, spectral MIS for chromatic media. The production baseline.
+     refractive  the same, rays bent inside media that carry an IOR; scheme
+                 rrv_settings.refraction: COMB (default: leapfrog kicks at
+                 spaced points, second order), POISSON (the paper's Snell at
+                 every null event) or MIDPOINT (both first order).
+     eikonal     the ray equation d/ds(eta dx/ds) = grad eta marched by RK4
+                 or leapfrog, step rrv_settings.step: the reference.
+   NEXT-EVENT ESTIMATION (rrv_settings.nee; refractive and eikonal only:
+   classic's straight shadow rays are exact for straight rays)
+     DEFAULT SHOOT on eikonal, AIM on refractive. STRAIGHT: a straight shadow
+     ray, biased across refracting media. NONE: lights only where paths hit
+     them (unbiased, noisy). SHOOT: Newton on the initial direction until
+     the bent ray lands on the light point, density from Jacobi fields.
+     MANIFOLD: the paper's refractive ratio tracking, a chain of comb
+     vertices solved by Levenberg-Marquardt (slow). AIM: bent shadow rays
+     aimed at a light point (unbiased, no focusing). How each works, its
+     MIS weights and its exact 1/p: NOTES at the end of this file.
+   ALSO (rules and limits in NOTES): media's faces are sharp interfaces
+   (Snell, Fresnel); without an `ambient ior` the air around a gas medium
+   is that gas at its ambient state, so a plume whose faces are at it has
+   no jump; a jump that remains is reported (rrv_medium_face_jumps); IOR
+   grids are trilinear or tricubic (ior_interpolation); emissive media are
+   lights where they are the only ones (emission_nee); shadow rays'
+   transmittance is `ratio`, `residual` or `march` (all unbiased); runaway
+   paths are cut and counted (rrv_render_stats.paths_cut).
 
-   BOUNDARIES, IOR GRIDS, BOUNDS: the faces of refractive media are sharp
-   interfaces where the IOR jumps (Snell, Fresnel); IOR grids are baked
-   trilinear (default) or tricubic (rrv_settings.ior_interpolation); hostile
-   input is refused at load and runaway paths are cut and counted
-   (rrv_render_stats.paths_cut). Without an `ambient ior` the air around a
-   gas medium is the same gas at its ambient state, so a plume whose faces
-   are at that state has no jump; a jump that remains is reported
-   (rrv_medium_face_jumps, `rrv info`, the render summary). The rules and
-   their limits: NOTES at the end.
-
-   EMISSIVE MEDIA AS LIGHTS (rrv_settings.emission_nee, scene `render
-   emissionnee on|off`; by default on where emissive media are the only
-   lights): a point of an emissive medium is drawn from an emission grid
-   built beside the majorants, joined by a straight shadow ray and weighed
-   by the power heuristic against the emission paths collect; only where
-   no refracting medium lies between. Details: NOTES at the end.
-
-   TRANSMITTANCE (rrv_settings.transmittance, scene `render transmittance
-   ratio|residual|march`, `--transmittance`): how every shadow ray's
-   transmittance is estimated, all unbiased. `ratio` (the default) is
-   ratio tracking against the majorant grid; `residual` integrates each
-   cell's minorant exactly and ratio-tracks what lies above it; `march` is
-   unbiased ray marching, 1/6 to 1/9 of ratio's variance x cost a shadow
-   ray but no gain in whole renders (NOTES; test/bench/RESULTS.md).
-
-   READING MAP (the paper's terms and the functions that implement them;
-   `grep -n '/\* >>' rrv.h` is the table of contents, in the order a ray
-   lives; `grep -n '/\* ----' rrv.h` the subsections quoted)
+   READING MAP (the paper's terms and their functions; `grep -n '/\* >>'
+   rrv.h` is the table of contents, in the order a ray lives)
      refractive delta tracking, the paper's Algorithm 1 (Snell at every null
-       collision): rrv__refractive_delta_tracking, which bends through
-       rrv__bend_at_null_event and rrv__refract_at_null_event (scheme POISSON)
-     the comb (leapfrog kicks at spaced points, the default scheme):
-       rrv__comb_step, rrv__comb_kick, rrv__comb_spacing ("refraction along a
-       walk")
-     Hauf-Grigull (the IOR of a gas from T and P): rrv__refractivity and
-       rrv__gas_fused ("the refractive index"); CONVENTIONS below
-     refractive ratio tracking (the paper's NEE, nee MANIFOLD):
-       rrv__manifold_nee; its solver rrv__manifold_solve on the chain of
-       rrv__chain_* ("nee MANIFOLD")
-     curved NEE by shooting and aiming: rrv__shoot_nee, rrv__solve_shot_seeded;
-       rrv__aim_nee; rrv__cone_nee (>> 11, "nee AIM")
+       collision): rrv__refractive_delta_tracking, rrv__bend_at_null_event,
+       rrv__refract_at_null_event (scheme POISSON)
+     the comb: rrv__comb_step, rrv__comb_kick, rrv__comb_spacing
+     Hauf-Grigull (a gas's IOR from T and P): rrv__refractivity, rrv__gas_fused
+     refractive ratio tracking (nee MANIFOLD): rrv__manifold_nee; its
+       Levenberg-Marquardt solve rrv__manifold_solve on the rrv__chain_*
+     curved NEE by shooting and aiming: rrv__shoot_nee,
+       rrv__solve_shot_seeded; rrv__aim_nee, rrv__cone_nee
      the eikonal reference (Ament et al.): rrv__eikonal_step,
-       rrv__eikonal_step_controlled, rrv__eikonal_plan ("eikonal")
-     ratio tracking of shadow rays: rrv__ratio_tracking_transmittance (and
-       its alternatives, rrv__transmittance: rrv__residual_tracking_transmittance,
-       rrv__march_transmittance);
+       rrv__eikonal_step_controlled, rrv__eikonal_plan
+     shadow rays: rrv__ratio_tracking_transmittance (rrv__transmittance);
        the path tracer: rrv__trace_path; a rectangle: rrv_render_rect
 
    USAGE
-     In exactly one C file:
-         #define RRV_IMPLEMENTATION
-         #include "rrv.h"
-     everywhere else just #include "rrv.h".
-
-     rrv_scene *scene = NULL;
-     rrv_error err;
-     if (rrv_scene_load("scenes/smoke.rrv", NULL, &scene, &err) != RRV_OK) {
-         fprintf(stderr, "%s:%d: %s\n", err.file, err.line, err.message);
-         return 2;
-     }
-     int w = scene->camera.width, h = scene->camera.height;
-     float *sum = calloc((size_t)w * h * 3, sizeof *sum);
-     rrv_render_rect(scene, 0, 0, w, h, 0, scene->settings.spp, sum, w, NULL, &err);
-     for (size_t i = 0; i < (size_t)w * h * 3; ++i) sum[i] /= scene->settings.spp;
-     rrv_write_pfm("out.pfm", sum, w, h, &err);
-     free(sum);
-     rrv_scene_free(scene);
-
-     rrv_render_rect renders any rectangle for any range of sample indices and
-     adds the sums into the caller's buffer: split an image into tiles across
-     threads or machines and the result is bit-identical to one call.
+     #define RRV_IMPLEMENTATION before #include "rrv.h" in exactly one C or
+     C++ file, elsewhere just #include "rrv.h". Load a scene (rrv_scene_load)
+     or build one (above); rrv_render_rect adds the radiance sums of any
+     rectangle and sample range into the caller's buffer, so tiles over
+     threads or machines add up to one call's image bit for bit.
 
    FUNCTIONS (every public one; each that can fail returns rrv_result)
-     rrv_scene_load         parse and prepare a scene file
-     rrv_scene_parse        the same from text in memory
+     rrv_scene_load, rrv_scene_parse  parse and prepare a scene file or text
      rrv_scene_prepare      build BVH, lights, majorant and baked grids (again after edits)
-     rrv_scene_free         free a scene and everything it owns
-     rrv_scene_create       an empty scene to build in code (zero means default)
-     rrv_scene_set_camera   check and set the camera
-     rrv_scene_set_settings check and set the render settings
-     rrv_scene_set_environment check and set the sky
+     rrv_scene_create, rrv_scene_free  an empty scene to build in code; free one
+     rrv_scene_set_camera, rrv_scene_set_settings, rrv_scene_set_environment
+                            check and set the camera, the settings, the sky
      rrv_scene_add_material check and add a material
-     rrv_scene_add_shape    check and add a sphere, quad or triangle (a light if L > 0)
-     rrv_scene_add_triangles check and add an indexed triangle mesh
+     rrv_scene_add_shape, rrv_scene_add_triangles  check and add a sphere, quad,
+                            triangle or indexed mesh (a light if L > 0)
      rrv_scene_add_medium   check and add a medium's box and coefficients
      rrv_scene_set_field    check and set a medium's density, temperature, pressure or IOR
      rrv_medium_channel_groups which of a medium's channels share a free-flight majorant
-     rrv_medium_face_jumps  a prepared medium's IOR jump at each face (sharp interfaces)
-     rrv_scene_integrator   the integrator a prepared scene renders with (its default resolved)
+     rrv_medium_face_jumps  a prepared medium's IOR jump at each face
+     rrv_scene_integrator   the integrator a prepared scene renders with
      rrv_render_rect        add the radiance sums of a pixel rectangle and sample range
      rrv_trace_ray          walk one ray through the refractive media
-     rrv_grid_read          read and validate a gridvol file
-     rrv_grid_read_memory   the same from memory
-     rrv_nanovdb_read       read a NanoVDB file (one grid, chosen by name)
-     rrv_nanovdb_read_memory the same from memory
-     rrv_nanovdb_voxel      a grid's value at an integer index point
-     rrv_nanovdb_sample     a grid's trilinear value at a world point
-     rrv_nanovdb_cell_centered  move a grid's values to cell centres (Blender's placement)
-     rrv_nanovdb_type_name  the name of a NanoVDB grid type
-     rrv_nanovdb_free       free what rrv_nanovdb_read allocated
-     rrv_write_pfm          write a PFM file (temporary file, then rename)
-     rrv_write_pfm_to       the same through a write callback
-     rrv_write_exr          write an OpenEXR file (half or float, ZIP or none)
-     rrv_write_exr_to       the same through a write callback
-     rrv_write_png          write an 8-bit sRGB PNG preview
-     rrv_write_png_to       the same through a write callback
-     rrv_read_pfm           read a PFM file
-     rrv_read_pfm_memory    the same from memory
-     rrv_read_exr           read a scanline RGB OpenEXR file
-     rrv_read_exr_memory    the same from memory
-     rrv_open_read          open a file for reading as every reader does (regular files only)
-     rrv_exr_find_attribute an OpenEXR header attribute by name (rrv's part metadata)
+     rrv_grid_read, rrv_grid_read_memory  read and validate a gridvol file
+     rrv_nanovdb_read, rrv_nanovdb_read_memory  read a NanoVDB grid by name
+     rrv_nanovdb_voxel, rrv_nanovdb_sample  a value at an index / world point
+     rrv_nanovdb_cell_centered  move a grid's values to cell centres (Blender's)
+     rrv_nanovdb_type_name, rrv_nanovdb_free  a grid type's name; free a read
+     rrv_write_pfm, rrv_write_exr, rrv_write_png  write PFM, OpenEXR (half or
+                            float, ZIP or none), an 8-bit sRGB PNG preview
+     rrv_write_pfm_to, rrv_write_exr_to, rrv_write_png_to  the same to a callback
+     rrv_read_pfm, rrv_read_pfm_memory  read a PFM file
+     rrv_read_exr, rrv_read_exr_memory  read a scanline RGB OpenEXR file
+     rrv_open_read          open a file as every reader does (regular files only)
+     rrv_exr_find_attribute an OpenEXR header attribute by name (rrv's parts)
      rrv_half_from_float    the IEEE half nearest a float (finite values clamped)
      rrv_crc32, rrv_adler32 the checksums the PNG and EXR writers use
      rrv_result_string      a static string for a result code
@@ -255,52 +169,34 @@
      RRV_MALLOC(sz) RRV_REALLOC(p,sz) RRV_FREE(p)   all three or none
      RRV_ASSERT(x)    defaults to assert(x)
      RRV_STATIC       make every public function static to the including file
-     RRV_NO_STDIO     no FILE* I/O: load through rrv_load_options.read_file and
+     RRV_NO_STDIO     no FILE* I/O: load through rrv_load_options.read_file,
                       write through the callback writers
-     RRV_NO_POSIX     plain C files only (fopen alone: a FIFO given as input
-                      blocks; POSIX's non-blocking, regular-files-only
-                      reading is the default on __unix__ and __APPLE__; NOTES)
-   Parts a build can leave out, for embedded or sandboxed clients that pay
-   only for what they use (any of them, in any combination; object sizes
-   in test/bench/RESULTS.md, "Build switches"). Every declaration stays and
-   every function still links: a call that needs a part left out returns
-   RRV_ERROR_UNSUPPORTED with a message naming the switch ("PNG output is
-   disabled (RRV_NO_PNG)"), with its outputs cleared as on any failure.
-     RRV_NO_SCENE_FILE no .rrv parser, OBJ loader or gridvol reader (scenes
-                      built with rrv_scene_create and rrv_scene_add_* / set_*)
-     RRV_NO_NANOVDB   no NanoVDB reader (a NANOVDB field is refused)
+     RRV_NO_POSIX     plain fopen only (a FIFO given as input then blocks)
+   Parts a build can leave out, in any combination; a call that needs one
+   refuses, naming the switch (NOTES; sizes: RESULTS.md, "Build switches"):
+     RRV_NO_SCENE_FILE no .rrv parser, OBJ loader or gridvol reader
+     RRV_NO_NANOVDB   no NanoVDB reader
      RRV_NO_EXR       no OpenEXR writer or reader
      RRV_NO_PNG       no PNG writer
-     RRV_NO_CURVED_NEE no solvers of nee shoot and manifold (asked for, they
-                      are refused; the defaults aim)
-   What each leaves and refuses: NOTES.
-
-   FILES
-     Every input is untrusted, read with bounds and only from a regular file
-     (rrv_open_read); writers replace their target through a temporary file.
-     Images out: PFM, OpenEXR (half or float, ZIP or none), an 8-bit sRGB PNG
-     preview, each also through a callback; in: PFM and scanline RGB OpenEXR.
-     The rules: NOTES.
+     RRV_NO_CURVED_NEE no solvers of nee shoot and manifold (the defaults aim)
 
    CONVENTIONS (the contract between scene files, the library and tests)
-     Units: metres, kelvin, pascal; extinction in 1/m. Colour is linear RGB,
-     three channels; the IOR is achromatic.
-     Grids: gridvol (Mitsuba 0.6's format) and NanoVDB 32.x files; their
-       layout and why a file is refused: NOTES at the end of this file.
-       NanoVDB values sit at OpenVDB's placement, map * ijk + translation;
-       `nanovdb FILE cellcentered on` (rrv_nanovdb_cell_centered) takes
-       Blender's Cycles' map * (ijk + 0.5), to match a Blender render.
-     Gas IOR (Hauf-Grigull; Gladstone-Dale for an ideal gas):
-       eta - 1 = (eta_ref - 1) (P / P_ref) (T_ref / T), defaults eta_ref =
-       1.000292, P_ref = 101325 Pa, T_ref = 300 K; its gradient is
-       (eta - 1)(grad P / P - grad T / T); the artist scale k makes it
-       1 + k (eta - 1).
-     Precision: air's eta - 1 is ~3e-4 and a fire moves it by ~2e-4, about
-       2000 float ulps of 1, so rays carry the refractivity r = eta - 1 in
-       double, and IOR ratios are formed as 1 + (r_i - r_o) / (1 + r_o).
-     Radiance: L / eta^2 is invariant along a ray (Ament et al. 2014), so a
-       path from an emitter at eta_e to the camera at eta_c scales by
-       (eta_c / eta_e)^2; thermal emission follows Kirchhoff (above).
+     Units: metres, kelvin, pascal; extinction in 1/m; linear RGB; the IOR
+       is achromatic. Every input file is untrusted, read with bounds, and
+       writers replace their target through a temporary file (NOTES).
+     Grids: gridvol (Mitsuba 0.6's) and NanoVDB 32.x; NanoVDB values sit at
+       OpenVDB's map * ijk + translation (`cellcentered on` takes Blender's
+       map * (ijk + 0.5)).
+     Gas IOR (Hauf-Grigull; Gladstone-Dale for an ideal gas): eta - 1 =
+       (eta_ref - 1) (P / P_ref) (T_ref / T), defaults eta_ref = 1.000292,
+       P_ref = 101325 Pa, T_ref = 300 K; its gradient is (eta - 1)(grad P / P
+       - grad T / T); the artist scale k makes it 1 + k (eta - 1).
+     Precision: air's eta - 1 is ~3e-4, about 2000 float ulps of 1, so rays
+       carry the refractivity r = eta - 1 in double, and IOR ratios are
+       formed as 1 + (r_i - r_o) / (1 + r_o).
+     Radiance: L / eta^2 is invariant along a ray, so a path from an emitter
+       at eta_e to the camera at eta_c scales by (eta_c / eta_e)^2; thermal
+       emission is n^2 B (Kirchhoff), so a fire does not dim on leaving.
 */
 #ifndef RRV_H_INCLUDED
 #define RRV_H_INCLUDED
@@ -18306,6 +18202,17 @@ and BOUNDS (moved here from the manual at the top, word for word)
        grad eta| facing the incoming ray, c = -n.d, k = 1 - m^2 (1 - c^2);
        k < 0 reflects (d + 2 c n), else d' = m d + (m c - sqrt(k)) n, written
        as a change of d so that m ~ 1 does not cancel.
+
+   THE DEFAULT INTEGRATOR, the rule
+     rrv_scene_integrator: classic where no medium's IOR differs from the
+     ambient one; eikonal with nee SHOOT where every refracting medium is
+     clear (no medium with extinction overlaps its box), a light is small
+     from one (its side, the square root of its area, or a sphere's disc's,
+     under 0.5 x its distance from the medium's box centre) and the IOR has
+     the Hessian shooting needs; refractive (the comb, nee AIM) otherwise.
+     An explicit `nee` other than shoot keeps the comb. Classic's chromatic
+     media: channels whose extinctions differ more than 4x walk with
+     majorants of their own (spectral MIS).
 
    THE DEFAULT INTEGRATOR, why
      Aimed shadow rays sample the light's straight cone, at about straight

@@ -122,11 +122,40 @@ static void test_manual_lists_every_function(void)
     free(text);
 }
 
+/* The manual before the declarations stays one reading: at most 200
+   lines, with the sections an embedder looks for, in this order. */
+static void test_manual_fits_before_the_declarations(void)
+{
+    static const char *const sections[] = {"---- example ----", "INTEGRATORS (",
+                                           "NEXT-EVENT ESTIMATION (", "READING MAP (",
+                                           "USAGE\n", "FUNCTIONS (", "CONFIGURATION (",
+                                           "CONVENTIONS ("};
+    char *text = read_all("rrv.h"), *guard, *at;
+    int lines = 0;
+    size_t i;
+    CHECK(text != NULL);
+    if (!text) return;
+    guard = strstr(text, "\n#ifndef RRV_H_INCLUDED");
+    CHECKF(guard != NULL, "rrv.h has no include guard");
+    if (guard) {
+        for (at = text; at <= guard; ++at) lines += *at == '\n'; /* lines above the guard */
+        CHECKF(lines <= 200, "the manual is %d lines before the declarations (at most 200)", lines);
+        for (at = text, i = 0; i < sizeof sections / sizeof *sections; ++i) {
+            char *found = strstr(at, sections[i]);
+            CHECKF(found && found < guard, "the manual has no \"%s\" after the previous section",
+                   sections[i]);
+            if (found) at = found;
+        }
+    }
+    free(text);
+}
+
 int main(int argc, char **argv)
 {
     (void)argc; (void)argv;
     RUN(test_library_never_prints_or_exits);
     RUN(test_static_build_links);
     RUN(test_manual_lists_every_function);
+    RUN(test_manual_fits_before_the_declarations);
     return CHECK_EXIT_CODE();
 }
