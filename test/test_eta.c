@@ -24,8 +24,8 @@
 static const char *const scene_files[] = {
     "scenes/blast.rrv",        "scenes/fire.rrv",     "scenes/fire_caustic.rrv",
     "scenes/fisheye.rrv",      "scenes/haze.rrv",     "scenes/lens_caustic.rrv",
-    "scenes/luneburg.rrv",     "scenes/plume.rrv",    "scenes/pyro.rrv",
-    "scenes/smoke.rrv",
+    "scenes/heat_shadow.rrv",  "scenes/luneburg.rrv", "scenes/plume.rrv",
+    "scenes/pyro.rrv",         "scenes/smoke.rrv",
 };
 
 /* The work of each tile (indexed by tile, not turn) at samples [0, TRUTH_SPP). */
