@@ -9946,19 +9946,11 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
 }
 
 /* >> 12 curved NEE (module): shoot, aim, the cones, the manifold walk =========
-   nee SHOOT (eikonal integrator). A connection from a vertex x0 to a point y
-   on an area light along the bent ray is found by Newton's method on the two
-   angles of the initial direction w0, the ray traced with exactly the
-   segments a camera ray takes (rrv__plan_segment / rrv__finish_segment: RK4
-   or leapfrog steps, straight chords between them, faces). The residual is
-   the offset of y from where the path first crosses the light's plane from
-   its front (for two interior points, as in the tests: from the chord that
-   passes y, in the plane through y perpendicular to it). Its Jacobian comes from
-   the variational (Jacobi-field) equations of the very same discrete steps,
-   which need the Hessian of eta (rrv__scene_hessian). At the root
-   dw0 = dA_y |cos theta_y| / |det J_perp|, J_perp the 2x2 derivative of the
-   endpoint perpendicular to the arriving chord with respect to w0 per unit
-   solid angle (r^2 I for straight rays: cos / r^2). */
+   Connections to lights along bent rays. What every build keeps comes
+   first: the face jumps and weak-chord classes that sort paths, nee AIM and
+   the light point a curved connection aims at. The solvers of nee SHOOT
+   and MANIFOLD, with the cones, follow in the one block RRV_NO_CURVED_NEE
+   leaves out. */
 
 /* Shots a solve may take: of the solves that converged within 40, 99 % took 15 or fewer. */
 #define RRV__SOLVE_ITERATIONS 20
@@ -9994,12 +9986,418 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
 #define RRV__WEAK_BEND 0.0
 #endif
 
+/* Is a jump of the refractivity across a face (rrv__cross_face's
+   face_jump) one that curved connections cannot solve across? */
+static int rrv__jump_counts(double jump) { return jump > RRV__SOLVE_JUMP; }
+
+/* Does the refractivity jump across the face the ray along d meets at x? */
+static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
+{
+    double gap = rrv__face_gap(x);
+    double before = rrv__scene_refractivity(scene, rrv__madd(x, d, -gap), NULL);
+    double after = rrv__scene_refractivity(scene, rrv__madd(x, d, gap), NULL);
+    return fabs(after - before) > RRV__SOLVE_JUMP;
+}
+
+/* Is x inside a refraction support (where rays bend)? */
+static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x)
+{
+    rrv__support_view v;
+    rrv__look_along(scene, x, rrv__v3(0.6, 0.48, 0.64), &v);
+    return v.inside;
+}
+
+/* Is a straight connection from x to a light sample one of the paths
+   straight NEE stands for when shooting sorts paths into classes, i.e.
+   does it stay out of every refraction support? Forward paths make the
+   same test. */
+static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls)
+{
+    if (!ctx->partition) return 1;
+    return rrv__weak_chord(ctx, x, ls->wi, ls->dist);
+}
+
+/* A bound on how far the straight chord from x along unit d, length len,
+   would turn a ray: the integral along it of each majorant cell's bound
+   on |grad eta| over the lowest eta in the scene (the ray equation turns
+   the direction at |grad_perp eta| / eta per metre). Stops counting once
+   the sum passes stop. */
+static double rrv__chord_bend(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop)
+{
+    const rrv_scene *scene = ctx->scene;
+    const double xs[3] = {x.x, x.y, x.z}, ds[3] = {d.x, d.y, d.z};
+    /* a context set up by hand (tests) may leave it 0: the lowest eta allowed */
+    double eta_floor = ctx->eta_floor > 0 ? ctx->eta_floor : RRV_MIN_IOR;
+    double sum = 0, limit = stop * eta_floor;
+    int i;
+    for (i = 0; i < scene->medium_count && sum <= limit; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        const struct rrv__majorant_grid *g = m->majorant;
+        double t0 = 0, t1 = DBL_MAX, t, t_end, t_next[3], t_delta[3];
+        ptrdiff_t stride[3], idx = 0;
+        int cell[3], step[3], a, misses = 0;
+        if (!rrv__medium_refracts(m) || !g || !g->grad_max) continue;
+        for (a = 0; a < 3; ++a) { /* the grid's box clips the chord */
+            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
+            const double hi = a == 0 ? g->hi.x : a == 1 ? g->hi.y : g->hi.z;
+            if (ds[a] == 0) {
+                misses |= xs[a] < lo || xs[a] > hi;
+            } else {
+                double ta = (lo - xs[a]) / ds[a], tb = (hi - xs[a]) / ds[a];
+                if (ta > tb) { double swap = ta; ta = tb; tb = swap; }
+                if (ta > t0) t0 = ta;
+                if (tb < t1) t1 = tb;
+            }
+        }
+        if (misses) continue;
+        t = t0 > 0 ? t0 : 0;
+        t_end = t1 < len ? t1 : len;
+        if (!(t < t_end)) continue;
+        stride[0] = 1;
+        stride[1] = g->n[0];
+        stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
+        for (a = 0; a < 3; ++a) {
+            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
+            const double cs = a == 0 ? g->cell.x : a == 1 ? g->cell.y : g->cell.z;
+            double c = (xs[a] + ds[a] * t - lo) / cs;
+            cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+            idx += stride[a] * cell[a];
+            if (ds[a] != 0) {
+                step[a] = ds[a] > 0 ? 1 : -1;
+                t_next[a] = (lo + (cell[a] + (ds[a] > 0)) * cs - xs[a]) / ds[a];
+                t_delta[a] = cs / fabs(ds[a]);
+                stride[a] *= step[a];
+                if (t_next[a] < t) t_next[a] = t;
+            } else {
+                step[a] = 0;
+                t_next[a] = t_delta[a] = DBL_MAX;
+            }
+        }
+        for (;;) {
+            double t_face;
+            a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+            t_face = t_next[a] < t_end ? t_next[a] : t_end;
+            sum += (double)g->grad_max[idx] * (t_face - t);
+            if (t_face >= t_end || sum > limit) break;
+            t = t_face;
+            cell[a] += step[a];
+            if (cell[a] < 0 || cell[a] >= g->n[a]) break;
+            idx += stride[a];
+            t_next[a] += t_delta[a];
+        }
+    }
+    return sum / eta_floor;
+}
+
+/* The class of a connection from x to a point len along unit d (len
+   DBL_MAX: the sky in direction d) when the estimators share paths (nee
+   shoot and manifold): weak, and left to straight NEE with its ordinary
+   MIS, if its straight chord crosses no sharp interface and turns a ray by
+   at most RRV__WEAK_BEND bend tolerances (rrv__chord_bend); else curved.
+   A chord that touches no support is weak. It is a function of the two
+   ends alone, so a forward path between them (not jumped) is sorted the
+   same way from its end points. Treating a weak connection as straight is
+   an approximation: the path straight NEE stands for is the chord, the
+   real one turns by less than the bound, the same order as the bending
+   one comb kick leaves out. */
+/* The chord's bound on bending (rrv__chord_bend, counted until it passes
+   stop) into *bound; 0 if the chord crosses a sharp interface. */
+static int rrv__chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop, double *bound)
+{
+    const rrv_scene *scene = ctx->scene;
+    double t = 0;
+    int faces;
+    rrv__support_view v;
+    *bound = 0;
+    rrv__look_along(scene, x, d, &v);
+    if (!v.inside && !(v.t_face < len)) return 1;
+    /* each support box has at most two faces and a sphere two more along
+       a line; more crossings than that are rounding: call it curved */
+    for (faces = 0; v.t_face < len - t; ++faces) {
+        rrv_vec3 at = rrv__madd(x, d, t + v.t_face);
+        if (faces >= 4 * scene->medium_count || rrv__face_jumps(scene, at, d)) return 0;
+        t += v.t_face + rrv__face_gap(at);
+        rrv__look_along(scene, rrv__madd(x, d, t), d, &v);
+    }
+    *bound = rrv__chord_bend(ctx, x, d, len, stop);
+    return 1;
+}
+
+static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double *bound)
+{
+    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
+    return rrv__chord_bound(ctx, x, d, len, tolerance, bound) && *bound <= tolerance;
+}
+
+static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len)
+{
+    double bound;
+    return rrv__weak_chord_bound(ctx, x, d, len, &bound);
+}
+
+/* The class of a forward path from its last vertex x along w0 that ends
+   along unit d at len (DBL_MAX: the sky): 0 if its chord is curved; 1 if
+   the chord is weak and the path is the chord's near-straight root, the
+   one straight NEE stands for (a ray that turns by at most the chord's
+   bound leaves within that angle of it); 2 if the chord is weak but the
+   path left at a wider angle: another root of the same two ends (a ray
+   bent by a lens into a point whose chord only grazes it), which straight
+   NEE never samples and curved NEE skips for weak chords: the forward path
+   counts it in full, or with shoot and manifold shares it with the rays
+   drawn toward strong supports (rrv__cone_nee). */
+static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len)
+{
+    double bound;
+    if (!rrv__weak_chord_bound(ctx, x, d, len, &bound)) return 0;
+    /* the sine of the angle, well conditioned where acos of a dot product
+       near 1 is not; 1e-7 rad of slack for the nudges off faces and
+       rounding along a path that went straight */
+    return rrv__dot(w0, d) > 0 && rrv__length(rrv__cross(w0, d)) <= bound + 1e-7 ? 1 : 2;
+}
+
+static void rrv__vertex_eval(const rrv__vertex_bsdf *v, rrv_vec3 w, double f[3])
+{
+    int c;
+    if (v->surface) {
+        double cosw = fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI;
+        for (c = 0; c < 3; ++c) f[c] = v->albedo[c] * cosw;
+    } else {
+        f[0] = f[1] = f[2] = rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
+    }
+}
+
+/* The density of the vertex's own sampling of w (cosine lobe, phase function). */
+static double rrv__vertex_pdf(const rrv__vertex_bsdf *v, rrv_vec3 w)
+{
+    return v->surface ? fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI : rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
+}
+
+/* The area density with which rrv__pick_area_light names the point y of
+   light s from x0, selection included: uniform on a quad or triangle; on
+   a sphere the cone's solid-angle density turned into area at y, on the
+   cap x0 sees (0 elsewhere: no draw names a point x0 does not see). */
+static double rrv__light_area_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 y)
+{
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv_vec3 to_x0 = rrv__sub(x0, y), n = rrv__sub(y, s->center);
+        double dist2 = rrv__dot(to_x0, to_x0), facing = rrv__dot(n, to_x0) / s->radius;
+        if (!(facing > 0) || !(dist2 > 0)) return 0.0;
+        return rrv__emitter_pdf(s, x0, y, n) * facing / (sqrt(dist2) * dist2) / rrv__light_choices(scene);
+    }
+    return 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
+}
+
+/* ---- nee AIM: bent shadow rays aimed at light samples -----------------------------
+   Where the two-point problem is not solved (the comb, whose kick points
+   move with the ray and have no Jacobi field; or by choice), light is still
+   sampled: a point y on a light (rrv__pick_area_light) gives the
+   direction w0 from x0 to it, and the shadow ray leaves along w0 bent
+   exactly as a camera ray would be (the same comb kicks or eikonal steps,
+   its transmittance ratio-tracked chord by chord). If it lands on the front
+   of that light, the light's radiance counts. As an estimator this is
+   sampling w0 with the solid-angle density pdf(w0) of the straight line
+   from x0 along w0 meeting the light (rrv__aim_pdf), a function of w0 alone,
+   whatever the bent ray then does; so the power heuristic against the
+   vertex's own sampling of w0 is exact, and a forward path that reaches
+   the light from x0 along w0 takes the complementary weight (in
+   rrv__hit_surface), whether or not its end is where w0's line meets it.
+   Unbiased for the discretisation camera rays use, at about the cost of a
+   straight shadow ray plus the kicks along it. It does not focus: a ray
+   that refraction turns off the light contributes nothing, so caustics of
+   small lights come from forward paths, as with nee none; on weak heat
+   haze nearly every aimed ray lands, and the estimate is as good as
+   straight NEE's without its bias.
+   The classes are shoot's: a weak chord (rrv__weak_chord) is straight
+   NEE's, a path crossing a sharp interface (Fresnel) is the forward path's
+   alone, and the sky is not aimed at. A sphere light's w is straight
+   NEE's draw in its cone (rrv__pick_area_light). */
+
+
+/* Who carries a connection from x0 along unit w over len to a point of
+   the light s: 0, straight NEE (a weak chord,
+   rrv__weak_chord); 1, nee aim; 2, the forward path alone (the chord
+   crosses a sharp interface, or bends too much to be worth aiming:
+   RRV__AIM_REACH). A function of x0 and w alone (len and s are where w's
+   line meets the light), so a forward path computes it for itself. */
+static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double len)
+{
+    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
+    /* the light's size across: a sphere's by its disc's area */
+    double size = s->kind == RRV_SHAPE_SPHERE ? sqrt(RRV__PI) * s->radius : sqrt(rrv__shape_area(s));
+    double reach = RRV__AIM_REACH * size / len, bound;
+    if (!rrv__chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound)) return 2;
+    if (bound <= tolerance) return 0;
+    return bound <= reach ? 1 : 2;
+}
+
+/* The solid-angle density of nee aim's w toward the light s from x0,
+   light choice included: 0 where the line from x0 along unit w misses s.
+   Both faces of a quad or triangle count: the point is drawn whatever
+   side of s faces x0, and a bent ray aimed at the back may land on the
+   front. A sphere's is its cone's (rrv__pick_area_light). *len: how far
+   along w the line meets s. */
+static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double *len)
+{
+    rrv_vec3 n, rel;
+    double n2, facing, t, a, b, cos_y;
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv_vec3 to_c = rrv__sub(s->center, x0);
+        double along = rrv__dot(to_c, w), miss2 = rrv__dot(to_c, to_c) - along * along, r2 = s->radius * s->radius;
+        if (!(along > 0) || !(miss2 < r2) || !(rrv__dot(to_c, to_c) > r2)) return 0.0;
+        *len = along - sqrt(r2 - miss2);
+        return rrv__emitter_pdf(s, x0, x0, w) / rrv__light_choices(scene);
+    }
+    n = rrv__cross(s->e1, s->e2);
+    n2 = rrv__dot(n, n);
+    facing = rrv__dot(n, w);
+    if (!(facing != 0) || !(n2 > 0)) return 0.0;
+    t = rrv__dot(n, rrv__sub(s->p0, x0)) / facing;
+    if (!(t > 0) || !(t < DBL_MAX)) return 0.0;
+    rel = rrv__sub(rrv__madd(x0, w, t), s->p0);
+    a = rrv__dot(rrv__cross(rel, s->e2), n) / n2;
+    b = rrv__dot(rrv__cross(s->e1, rel), n) / n2;
+    if (a < 0 || b < 0 || (s->kind == RRV_SHAPE_TRIANGLE ? a + b > 1 : a > 1 || b > 1)) return 0.0;
+    cos_y = fabs(facing) / sqrt(n2);
+    *len = t;
+    return t * t / (rrv__shape_area(s) * cos_y * rrv__light_choices(scene));
+}
+
+/* The density nee (straight or aimed) draws w with from x0 toward the
+   light s, 0 where it leaves w to forward paths: what a
+   forward path that reached s from x0 along w weighs itself against. */
+static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w)
+{
+    double len, pdf = rrv__aim_pdf(ctx->scene, s, x0, w, &len);
+    return pdf > 0 && rrv__aim_class(ctx, s, x0, w, len) < 2 ? pdf : 0.0;
+}
+
+/* nee aim's shadow ray from o along *d, bent as camera rays are: the shape
+   index of the first surface it meets (*hit, *d its direction there) and
+   the transmittance up to it; -1 where T reaches 0 or the step bound
+   (counted as cut), -2 where it leaves the scene or meets a sharp
+   interface. */
+static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *rng, rrv__hit *hit, double T[3])
+{
+    const rrv_scene *scene = ctx->scene;
+    rrv__bender b;
+    long steps = 0;
+    ++ctx->stats.paths;
+    T[0] = T[1] = T[2] = 1.0;
+    rrv__bender_start(&b, scene, ctx->eikonal, o);
+    for (;;) {
+        double segment, reach, Ts[3];
+        int has_hit, c, end;
+        if (++steps > ctx->step_bound) {
+            ++ctx->stats.paths_cut;
+            return -1;
+        }
+        if (b.run > ctx->trap_length) {
+            ++ctx->stats.paths_cut;
+            ++ctx->stats.trapped_paths;
+            return -1;
+        }
+        if (!b.pending) rrv__plan_segment(&b, scene, o, d, rng);
+        segment = b.segment;
+        has_hit = rrv__segment_hit(ctx, &b, o, *d, segment, hit);
+        if (!has_hit && !(segment < DBL_MAX)) return -2;
+        reach = has_hit ? hit->t : segment;
+        if (rrv__chord_meets_extinction(scene, o, *d, reach)) {
+            rrv__transmittance(ctx, o, *d, reach, rng, Ts);
+            for (c = 0; c < 3; ++c) T[c] *= Ts[c];
+            if (!rrv__nonzero3(T)) return -1;
+        }
+        if (has_hit) return hit->shape;
+        end = b.end;
+        if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
+        rrv__finish_segment(&b, scene, &o, d, rng);
+        /* the jump the face's crossing looked up, as the forward path reads it */
+        if (end == RRV__END_FACE && rrv__jump_counts(b.face_jump)) return -2;
+    }
+}
+
+/* nee aim from vertex x0 (the section's comment says why it is unbiased). */
+static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                         const rrv__light_draw *draw, rrv__rng *rng)
+{
+    const rrv_scene *scene = ctx->scene;
+    rrv_vec3 y, ny, w0, d;
+    rrv__hit hit;
+    double pdf_area, to_y, pdf_aim, pdf_dir, f[3], T[3], k;
+    int c, met;
+    const rrv_shape *s = rrv__pick_area_light(scene, draw, x0, 1, &y, &ny, &pdf_area);
+    (void)pdf_area;
+    if (!s) return;
+    to_y = rrv__length(rrv__sub(y, x0));
+    if (!(to_y > 0)) return;
+    w0 = rrv__scale(rrv__sub(y, x0), 1.0 / to_y);
+    rrv__vertex_eval(v, w0, f);
+    if (!(f[0] > 0 || f[1] > 0 || f[2] > 0)) return;
+    if (rrv__aim_class(ctx, s, x0, w0, to_y) != 1) return; /* straight NEE's or the forward path's */
+    pdf_aim = rrv__aim_pdf(scene, s, x0, w0, &to_y);
+    if (!(pdf_aim > 0) || !(pdf_aim < DBL_MAX)) return; /* y on the light's rim, seen edge-on */
+    ++ctx->stats.aim_shots;
+    d = w0;
+    met = rrv__aim_trace(ctx, x0, &d, rng, &hit, T);
+    if (met == -1) return;
+    if (met == -2 || &scene->shapes[met] != s || !(rrv__dot(hit.n, d) < 0)) {
+        ++ctx->stats.aim_missed;
+        return;
+    }
+    pdf_dir = rrv__vertex_pdf(v, w0);
+    k = rrv__power_heuristic(pdf_aim, pdf_dir) / pdf_aim * rrv__eta_scale(ctx, hit.p) * rrv__path_mis(path);
+    for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
+}
+
+/* The light point y the draw names from x0 for a curved connection, its
+   normal and its area pdf (selection included); NULL for the sky, and for
+   sphere lights unless spheres is set. A quad's or triangle's point is
+   uniform in area; a sphere's is where the direction straight NEE draws
+   uniformly in the sphere's cone from x0 meets its near side, so that
+   one draw names one point whichever class routes it (straight NEE, a
+   curved estimator). The estimators divide by pdf_area, and the forward
+   paths weigh themselves with rrv__light_area_pdf, the same density. */
+static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 x0,
+                                             int spheres, rrv_vec3 *y, rrv_vec3 *ny, double *pdf_area)
+{
+    int pick = rrv__light_pick(scene, draw);
+    const rrv_shape *s;
+    if (pick < 0 || pick == scene->light_count) return NULL;
+    s = &scene->shapes[scene->lights[pick]];
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv__light_sample ls;
+        if (!spheres || !rrv__sample_light(scene, x0, draw, &ls) || !(ls.dist > 0)) return NULL;
+        *y = ls.point;
+        *ny = rrv__scale(rrv__sub(ls.point, s->center), 1.0 / s->radius);
+        *pdf_area = rrv__light_area_pdf(scene, s, x0, ls.point);
+        return *pdf_area > 0 ? s : NULL;
+    }
+    *y = rrv__area_light_point(s, draw->u1, draw->u2);
+    *ny = rrv__normalize(rrv__cross(s->e1, s->e2));
+    *pdf_area = 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
+    return s;
+}
+
 /* RRV_NO_CURVED_NEE leaves out the solvers of nee shoot and manifold and
    the cones that go with them; nee aim, the weak-chord classes and the
    face jumps stay. Such a build supports no scene for solving, so the
    default integrator never picks eikonal for its shooting and the default
    nee aims; an explicit shoot or manifold is refused (rrv__settings_check). */
 #ifndef RRV_NO_CURVED_NEE
+/* ---- nee SHOOT: a curved connection solved by Newton's method ------------
+   nee SHOOT (eikonal integrator). A connection from a vertex x0 to a point y
+   on an area light along the bent ray is found by Newton's method on the two
+   angles of the initial direction w0, the ray traced with exactly the
+   segments a camera ray takes (rrv__plan_segment / rrv__finish_segment: RK4
+   or leapfrog steps, straight chords between them, faces). The residual is
+   the offset of y from where the path first crosses the light's plane from
+   its front (for two interior points, as in the tests: from the chord that
+   passes y, in the plane through y perpendicular to it). Its Jacobian comes from
+   the variational (Jacobi-field) equations of the very same discrete steps,
+   which need the Hessian of eta (rrv__scene_hessian). At the root
+   dw0 = dA_y |cos theta_y| / |det J_perp|, J_perp the 2x2 derivative of the
+   endpoint perpendicular to the arriving chord with respect to w0 per unit
+   solid angle (r^2 I for straight rays: cos / r^2). */
+
 /* Can shooting differentiate this medium's IOR? Every kind rrv__refractivity_
    hessian has a derivative for: the closed-form profiles, blobs, and grids
    (gridvol or NanoVDB, baked or not, trilinear or cubic: the derivative of
@@ -10317,36 +10715,6 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
     return 1;
 }
 
-#else
-static int rrv__solver_supports_scene(const rrv_scene *scene)
-{
-    (void)scene;
-    return 0;
-}
-#endif /* RRV_NO_CURVED_NEE */
-
-/* Is a jump of the refractivity across a face (rrv__cross_face's
-   face_jump) one that curved connections cannot solve across? */
-static int rrv__jump_counts(double jump) { return jump > RRV__SOLVE_JUMP; }
-
-/* Does the refractivity jump across the face the ray along d meets at x? */
-static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
-{
-    double gap = rrv__face_gap(x);
-    double before = rrv__scene_refractivity(scene, rrv__madd(x, d, -gap), NULL);
-    double after = rrv__scene_refractivity(scene, rrv__madd(x, d, gap), NULL);
-    return fabs(after - before) > RRV__SOLVE_JUMP;
-}
-
-/* Is x inside a refraction support (where rays bend)? */
-static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x)
-{
-    rrv__support_view v;
-    rrv__look_along(scene, x, rrv__v3(0.6, 0.48, 0.64), &v);
-    return v.inside;
-}
-
-#ifndef RRV_NO_CURVED_NEE
 enum { RRV__SHOT_REACHED, RRV__SHOT_MISSED, RRV__SHOT_INTERFACE, RRV__SHOT_BLOCKED };
 
 typedef struct rrv__shot {
@@ -10748,189 +11116,7 @@ static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, co
     return found;
 }
 
-#endif /* RRV_NO_CURVED_NEE */
 
-/* Is a straight connection from x to a light sample one of the paths
-   straight NEE stands for when shooting sorts paths into classes, i.e.
-   does it stay out of every refraction support? Forward paths make the
-   same test. */
-static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls)
-{
-    if (!ctx->partition) return 1;
-    return rrv__weak_chord(ctx, x, ls->wi, ls->dist);
-}
-
-/* A bound on how far the straight chord from x along unit d, length len,
-   would turn a ray: the integral along it of each majorant cell's bound
-   on |grad eta| over the lowest eta in the scene (the ray equation turns
-   the direction at |grad_perp eta| / eta per metre). Stops counting once
-   the sum passes stop. */
-static double rrv__chord_bend(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop)
-{
-    const rrv_scene *scene = ctx->scene;
-    const double xs[3] = {x.x, x.y, x.z}, ds[3] = {d.x, d.y, d.z};
-    /* a context set up by hand (tests) may leave it 0: the lowest eta allowed */
-    double eta_floor = ctx->eta_floor > 0 ? ctx->eta_floor : RRV_MIN_IOR;
-    double sum = 0, limit = stop * eta_floor;
-    int i;
-    for (i = 0; i < scene->medium_count && sum <= limit; ++i) {
-        const rrv_medium *m = &scene->media[i];
-        const struct rrv__majorant_grid *g = m->majorant;
-        double t0 = 0, t1 = DBL_MAX, t, t_end, t_next[3], t_delta[3];
-        ptrdiff_t stride[3], idx = 0;
-        int cell[3], step[3], a, misses = 0;
-        if (!rrv__medium_refracts(m) || !g || !g->grad_max) continue;
-        for (a = 0; a < 3; ++a) { /* the grid's box clips the chord */
-            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
-            const double hi = a == 0 ? g->hi.x : a == 1 ? g->hi.y : g->hi.z;
-            if (ds[a] == 0) {
-                misses |= xs[a] < lo || xs[a] > hi;
-            } else {
-                double ta = (lo - xs[a]) / ds[a], tb = (hi - xs[a]) / ds[a];
-                if (ta > tb) { double swap = ta; ta = tb; tb = swap; }
-                if (ta > t0) t0 = ta;
-                if (tb < t1) t1 = tb;
-            }
-        }
-        if (misses) continue;
-        t = t0 > 0 ? t0 : 0;
-        t_end = t1 < len ? t1 : len;
-        if (!(t < t_end)) continue;
-        stride[0] = 1;
-        stride[1] = g->n[0];
-        stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
-        for (a = 0; a < 3; ++a) {
-            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
-            const double cs = a == 0 ? g->cell.x : a == 1 ? g->cell.y : g->cell.z;
-            double c = (xs[a] + ds[a] * t - lo) / cs;
-            cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
-            idx += stride[a] * cell[a];
-            if (ds[a] != 0) {
-                step[a] = ds[a] > 0 ? 1 : -1;
-                t_next[a] = (lo + (cell[a] + (ds[a] > 0)) * cs - xs[a]) / ds[a];
-                t_delta[a] = cs / fabs(ds[a]);
-                stride[a] *= step[a];
-                if (t_next[a] < t) t_next[a] = t;
-            } else {
-                step[a] = 0;
-                t_next[a] = t_delta[a] = DBL_MAX;
-            }
-        }
-        for (;;) {
-            double t_face;
-            a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
-            t_face = t_next[a] < t_end ? t_next[a] : t_end;
-            sum += (double)g->grad_max[idx] * (t_face - t);
-            if (t_face >= t_end || sum > limit) break;
-            t = t_face;
-            cell[a] += step[a];
-            if (cell[a] < 0 || cell[a] >= g->n[a]) break;
-            idx += stride[a];
-            t_next[a] += t_delta[a];
-        }
-    }
-    return sum / eta_floor;
-}
-
-/* The class of a connection from x to a point len along unit d (len
-   DBL_MAX: the sky in direction d) when the estimators share paths (nee
-   shoot and manifold): weak, and left to straight NEE with its ordinary
-   MIS, if its straight chord crosses no sharp interface and turns a ray by
-   at most RRV__WEAK_BEND bend tolerances (rrv__chord_bend); else curved.
-   A chord that touches no support is weak. It is a function of the two
-   ends alone, so a forward path between them (not jumped) is sorted the
-   same way from its end points. Treating a weak connection as straight is
-   an approximation: the path straight NEE stands for is the chord, the
-   real one turns by less than the bound, the same order as the bending
-   one comb kick leaves out. */
-/* The chord's bound on bending (rrv__chord_bend, counted until it passes
-   stop) into *bound; 0 if the chord crosses a sharp interface. */
-static int rrv__chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop, double *bound)
-{
-    const rrv_scene *scene = ctx->scene;
-    double t = 0;
-    int faces;
-    rrv__support_view v;
-    *bound = 0;
-    rrv__look_along(scene, x, d, &v);
-    if (!v.inside && !(v.t_face < len)) return 1;
-    /* each support box has at most two faces and a sphere two more along
-       a line; more crossings than that are rounding: call it curved */
-    for (faces = 0; v.t_face < len - t; ++faces) {
-        rrv_vec3 at = rrv__madd(x, d, t + v.t_face);
-        if (faces >= 4 * scene->medium_count || rrv__face_jumps(scene, at, d)) return 0;
-        t += v.t_face + rrv__face_gap(at);
-        rrv__look_along(scene, rrv__madd(x, d, t), d, &v);
-    }
-    *bound = rrv__chord_bend(ctx, x, d, len, stop);
-    return 1;
-}
-
-static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double *bound)
-{
-    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
-    return rrv__chord_bound(ctx, x, d, len, tolerance, bound) && *bound <= tolerance;
-}
-
-static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len)
-{
-    double bound;
-    return rrv__weak_chord_bound(ctx, x, d, len, &bound);
-}
-
-/* The class of a forward path from its last vertex x along w0 that ends
-   along unit d at len (DBL_MAX: the sky): 0 if its chord is curved; 1 if
-   the chord is weak and the path is the chord's near-straight root, the
-   one straight NEE stands for (a ray that turns by at most the chord's
-   bound leaves within that angle of it); 2 if the chord is weak but the
-   path left at a wider angle: another root of the same two ends (a ray
-   bent by a lens into a point whose chord only grazes it), which straight
-   NEE never samples and curved NEE skips for weak chords: the forward path
-   counts it in full, or with shoot and manifold shares it with the rays
-   drawn toward strong supports (rrv__cone_nee). */
-static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len)
-{
-    double bound;
-    if (!rrv__weak_chord_bound(ctx, x, d, len, &bound)) return 0;
-    /* the sine of the angle, well conditioned where acos of a dot product
-       near 1 is not; 1e-7 rad of slack for the nudges off faces and
-       rounding along a path that went straight */
-    return rrv__dot(w0, d) > 0 && rrv__length(rrv__cross(w0, d)) <= bound + 1e-7 ? 1 : 2;
-}
-
-static void rrv__vertex_eval(const rrv__vertex_bsdf *v, rrv_vec3 w, double f[3])
-{
-    int c;
-    if (v->surface) {
-        double cosw = fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI;
-        for (c = 0; c < 3; ++c) f[c] = v->albedo[c] * cosw;
-    } else {
-        f[0] = f[1] = f[2] = rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
-    }
-}
-
-/* The density of the vertex's own sampling of w (cosine lobe, phase function). */
-static double rrv__vertex_pdf(const rrv__vertex_bsdf *v, rrv_vec3 w)
-{
-    return v->surface ? fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI : rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
-}
-
-/* The area density with which rrv__pick_area_light names the point y of
-   light s from x0, selection included: uniform on a quad or triangle; on
-   a sphere the cone's solid-angle density turned into area at y, on the
-   cap x0 sees (0 elsewhere: no draw names a point x0 does not see). */
-static double rrv__light_area_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 y)
-{
-    if (s->kind == RRV_SHAPE_SPHERE) {
-        rrv_vec3 to_x0 = rrv__sub(x0, y), n = rrv__sub(y, s->center);
-        double dist2 = rrv__dot(to_x0, to_x0), facing = rrv__dot(n, to_x0) / s->radius;
-        if (!(facing > 0) || !(dist2 > 0)) return 0.0;
-        return rrv__emitter_pdf(s, x0, y, n) * facing / (sqrt(dist2) * dist2) / rrv__light_choices(scene);
-    }
-    return 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
-}
-
-#ifndef RRV_NO_CURVED_NEE
 /* The plane a shot toward light point y (normal ny) is solved in: a quad's
    or triangle's own, where the ray first crosses it from its front; for a
    sphere none (NULL), the solve aims the ray through y across its arriving
@@ -11133,170 +11319,7 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
 
-#endif /* RRV_NO_CURVED_NEE */
 
-/* ---- nee AIM: bent shadow rays aimed at light samples -----------------------------
-   Where the two-point problem is not solved (the comb, whose kick points
-   move with the ray and have no Jacobi field; or by choice), light is still
-   sampled: a point y on a light (rrv__pick_area_light) gives the
-   direction w0 from x0 to it, and the shadow ray leaves along w0 bent
-   exactly as a camera ray would be (the same comb kicks or eikonal steps,
-   its transmittance ratio-tracked chord by chord). If it lands on the front
-   of that light, the light's radiance counts. As an estimator this is
-   sampling w0 with the solid-angle density pdf(w0) of the straight line
-   from x0 along w0 meeting the light (rrv__aim_pdf), a function of w0 alone,
-   whatever the bent ray then does; so the power heuristic against the
-   vertex's own sampling of w0 is exact, and a forward path that reaches
-   the light from x0 along w0 takes the complementary weight (in
-   rrv__hit_surface), whether or not its end is where w0's line meets it.
-   Unbiased for the discretisation camera rays use, at about the cost of a
-   straight shadow ray plus the kicks along it. It does not focus: a ray
-   that refraction turns off the light contributes nothing, so caustics of
-   small lights come from forward paths, as with nee none; on weak heat
-   haze nearly every aimed ray lands, and the estimate is as good as
-   straight NEE's without its bias.
-   The classes are shoot's: a weak chord (rrv__weak_chord) is straight
-   NEE's, a path crossing a sharp interface (Fresnel) is the forward path's
-   alone, and the sky is not aimed at. A sphere light's w is straight
-   NEE's draw in its cone (rrv__pick_area_light). */
-
-
-/* Who carries a connection from x0 along unit w over len to a point of
-   the light s: 0, straight NEE (a weak chord,
-   rrv__weak_chord); 1, nee aim; 2, the forward path alone (the chord
-   crosses a sharp interface, or bends too much to be worth aiming:
-   RRV__AIM_REACH). A function of x0 and w alone (len and s are where w's
-   line meets the light), so a forward path computes it for itself. */
-static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double len)
-{
-    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
-    /* the light's size across: a sphere's by its disc's area */
-    double size = s->kind == RRV_SHAPE_SPHERE ? sqrt(RRV__PI) * s->radius : sqrt(rrv__shape_area(s));
-    double reach = RRV__AIM_REACH * size / len, bound;
-    if (!rrv__chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound)) return 2;
-    if (bound <= tolerance) return 0;
-    return bound <= reach ? 1 : 2;
-}
-
-/* The solid-angle density of nee aim's w toward the light s from x0,
-   light choice included: 0 where the line from x0 along unit w misses s.
-   Both faces of a quad or triangle count: the point is drawn whatever
-   side of s faces x0, and a bent ray aimed at the back may land on the
-   front. A sphere's is its cone's (rrv__pick_area_light). *len: how far
-   along w the line meets s. */
-static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double *len)
-{
-    rrv_vec3 n, rel;
-    double n2, facing, t, a, b, cos_y;
-    if (s->kind == RRV_SHAPE_SPHERE) {
-        rrv_vec3 to_c = rrv__sub(s->center, x0);
-        double along = rrv__dot(to_c, w), miss2 = rrv__dot(to_c, to_c) - along * along, r2 = s->radius * s->radius;
-        if (!(along > 0) || !(miss2 < r2) || !(rrv__dot(to_c, to_c) > r2)) return 0.0;
-        *len = along - sqrt(r2 - miss2);
-        return rrv__emitter_pdf(s, x0, x0, w) / rrv__light_choices(scene);
-    }
-    n = rrv__cross(s->e1, s->e2);
-    n2 = rrv__dot(n, n);
-    facing = rrv__dot(n, w);
-    if (!(facing != 0) || !(n2 > 0)) return 0.0;
-    t = rrv__dot(n, rrv__sub(s->p0, x0)) / facing;
-    if (!(t > 0) || !(t < DBL_MAX)) return 0.0;
-    rel = rrv__sub(rrv__madd(x0, w, t), s->p0);
-    a = rrv__dot(rrv__cross(rel, s->e2), n) / n2;
-    b = rrv__dot(rrv__cross(s->e1, rel), n) / n2;
-    if (a < 0 || b < 0 || (s->kind == RRV_SHAPE_TRIANGLE ? a + b > 1 : a > 1 || b > 1)) return 0.0;
-    cos_y = fabs(facing) / sqrt(n2);
-    *len = t;
-    return t * t / (rrv__shape_area(s) * cos_y * rrv__light_choices(scene));
-}
-
-/* The density nee (straight or aimed) draws w with from x0 toward the
-   light s, 0 where it leaves w to forward paths: what a
-   forward path that reached s from x0 along w weighs itself against. */
-static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w)
-{
-    double len, pdf = rrv__aim_pdf(ctx->scene, s, x0, w, &len);
-    return pdf > 0 && rrv__aim_class(ctx, s, x0, w, len) < 2 ? pdf : 0.0;
-}
-
-/* nee aim's shadow ray from o along *d, bent as camera rays are: the shape
-   index of the first surface it meets (*hit, *d its direction there) and
-   the transmittance up to it; -1 where T reaches 0 or the step bound
-   (counted as cut), -2 where it leaves the scene or meets a sharp
-   interface. */
-static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *rng, rrv__hit *hit, double T[3])
-{
-    const rrv_scene *scene = ctx->scene;
-    rrv__bender b;
-    long steps = 0;
-    ++ctx->stats.paths;
-    T[0] = T[1] = T[2] = 1.0;
-    rrv__bender_start(&b, scene, ctx->eikonal, o);
-    for (;;) {
-        double segment, reach, Ts[3];
-        int has_hit, c, end;
-        if (++steps > ctx->step_bound) {
-            ++ctx->stats.paths_cut;
-            return -1;
-        }
-        if (b.run > ctx->trap_length) {
-            ++ctx->stats.paths_cut;
-            ++ctx->stats.trapped_paths;
-            return -1;
-        }
-        if (!b.pending) rrv__plan_segment(&b, scene, o, d, rng);
-        segment = b.segment;
-        has_hit = rrv__segment_hit(ctx, &b, o, *d, segment, hit);
-        if (!has_hit && !(segment < DBL_MAX)) return -2;
-        reach = has_hit ? hit->t : segment;
-        if (rrv__chord_meets_extinction(scene, o, *d, reach)) {
-            rrv__transmittance(ctx, o, *d, reach, rng, Ts);
-            for (c = 0; c < 3; ++c) T[c] *= Ts[c];
-            if (!rrv__nonzero3(T)) return -1;
-        }
-        if (has_hit) return hit->shape;
-        end = b.end;
-        if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
-        rrv__finish_segment(&b, scene, &o, d, rng);
-        /* the jump the face's crossing looked up, as the forward path reads it */
-        if (end == RRV__END_FACE && rrv__jump_counts(b.face_jump)) return -2;
-    }
-}
-
-/* nee aim from vertex x0 (the section's comment says why it is unbiased). */
-static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
-                         const rrv__light_draw *draw, rrv__rng *rng)
-{
-    const rrv_scene *scene = ctx->scene;
-    rrv_vec3 y, ny, w0, d;
-    rrv__hit hit;
-    double pdf_area, to_y, pdf_aim, pdf_dir, f[3], T[3], k;
-    int c, met;
-    const rrv_shape *s = rrv__pick_area_light(scene, draw, x0, 1, &y, &ny, &pdf_area);
-    (void)pdf_area;
-    if (!s) return;
-    to_y = rrv__length(rrv__sub(y, x0));
-    if (!(to_y > 0)) return;
-    w0 = rrv__scale(rrv__sub(y, x0), 1.0 / to_y);
-    rrv__vertex_eval(v, w0, f);
-    if (!(f[0] > 0 || f[1] > 0 || f[2] > 0)) return;
-    if (rrv__aim_class(ctx, s, x0, w0, to_y) != 1) return; /* straight NEE's or the forward path's */
-    pdf_aim = rrv__aim_pdf(scene, s, x0, w0, &to_y);
-    if (!(pdf_aim > 0) || !(pdf_aim < DBL_MAX)) return; /* y on the light's rim, seen edge-on */
-    ++ctx->stats.aim_shots;
-    d = w0;
-    met = rrv__aim_trace(ctx, x0, &d, rng, &hit, T);
-    if (met == -1) return;
-    if (met == -2 || &scene->shapes[met] != s || !(rrv__dot(hit.n, d) < 0)) {
-        ++ctx->stats.aim_missed;
-        return;
-    }
-    pdf_dir = rrv__vertex_pdf(v, w0);
-    k = rrv__power_heuristic(pdf_aim, pdf_dir) / pdf_aim * rrv__eta_scale(ctx, hit.p) * rrv__path_mis(path);
-    for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
-}
-
-#ifndef RRV_NO_CURVED_NEE
 /* ---- rays drawn toward strong supports: the roots of weak chords ---------------------
    A connection whose straight chord passes beside a lens is straight
    NEE's (rrv__weak_chord), yet the lens may bend other rays from x0 onto
@@ -12678,38 +12701,7 @@ static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__
     return 1;
 }
 
-#endif /* RRV_NO_CURVED_NEE */
 
-/* The light point y the draw names from x0 for a curved connection, its
-   normal and its area pdf (selection included); NULL for the sky, and for
-   sphere lights unless spheres is set. A quad's or triangle's point is
-   uniform in area; a sphere's is where the direction straight NEE draws
-   uniformly in the sphere's cone from x0 meets its near side, so that
-   one draw names one point whichever class routes it (straight NEE, a
-   curved estimator). The estimators divide by pdf_area, and the forward
-   paths weigh themselves with rrv__light_area_pdf, the same density. */
-static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 x0,
-                                             int spheres, rrv_vec3 *y, rrv_vec3 *ny, double *pdf_area)
-{
-    int pick = rrv__light_pick(scene, draw);
-    const rrv_shape *s;
-    if (pick < 0 || pick == scene->light_count) return NULL;
-    s = &scene->shapes[scene->lights[pick]];
-    if (s->kind == RRV_SHAPE_SPHERE) {
-        rrv__light_sample ls;
-        if (!spheres || !rrv__sample_light(scene, x0, draw, &ls) || !(ls.dist > 0)) return NULL;
-        *y = ls.point;
-        *ny = rrv__scale(rrv__sub(ls.point, s->center), 1.0 / s->radius);
-        *pdf_area = rrv__light_area_pdf(scene, s, x0, ls.point);
-        return *pdf_area > 0 ? s : NULL;
-    }
-    *y = rrv__area_light_point(s, draw->u1, draw->u2);
-    *ny = rrv__normalize(rrv__cross(s->e1, s->e2));
-    *pdf_area = 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
-    return s;
-}
-
-#ifndef RRV_NO_CURVED_NEE
 /* The seed's initial direction, from one distribution for the first solve
    and every trial: a Gaussian around the chord of 0.02 rad (half the
    time), of 0.2 rad (three times in eight) or uniform (one in eight), so
@@ -12819,6 +12811,12 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
 #else /* RRV_NO_CURVED_NEE: what the integrators call, never reached (no
          scene is supported for solving, so ctx->shoot and ctx->manifold
          stay 0 and no cone is set up) */
+
+static int rrv__solver_supports_scene(const rrv_scene *scene)
+{
+    (void)scene;
+    return 0;
+}
 
 static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                            const rrv__light_draw *draw, rrv__rng *rng)
