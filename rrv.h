@@ -160,8 +160,9 @@
    ray but no gain in whole renders (NOTES; test/bench/RESULTS.md).
 
    READING MAP (the paper's terms and the functions that implement them;
-   `grep -n '/\* >>' rrv.h` is the table of contents, in the order a ray
-   lives; `grep -n '/\* ----' rrv.h` the subsections quoted)
+   `grep -n '/\* >>' rrv.h` is the table of contents: the order a ray
+   lives, then the building of scenes, then the modules the build switches
+   trim; `grep -n '/\* ----' rrv.h` the subsections quoted)
      refractive delta tracking, the paper's Algorithm 1 (Snell at every null
        collision): rrv__refractive_delta_tracking, which bends through
        rrv__bend_at_null_event and rrv__refract_at_null_event (scheme POISSON)
