@@ -110,7 +110,7 @@
    paths are cut and counted (rrv_render_stats.paths_cut).
 
    READING MAP (the paper's terms and their functions; `grep -n '/\* >>'
-   rrv.h` is the table of contents, in the order a ray lives)
+   rrv.h` lists the sections: a ray's life, building scenes, the modules)
      refractive delta tracking, the paper's Algorithm 1 (Snell at every null
        collision): rrv__refractive_delta_tracking, rrv__bend_at_null_event,
        rrv__refract_at_null_event (scheme POISSON)
@@ -7612,7 +7612,7 @@ typedef struct rrv__vertex_bsdf {
     rrv_vec3 d_in;
 } rrv__vertex_bsdf;
 
-/* In the curved NEE section (>> 11), below. */
+/* In the curved NEE section (>> 12), below. */
 static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x);
 static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d);
 static int rrv__jump_counts(double jump);
@@ -8138,7 +8138,7 @@ static rrv_result rrv__check_medium(const rrv_scene *scene, const rrv_medium *m,
     return RRV_OK;
 }
 
-static rrv_result rrv__scene_check(rrv_scene *scene, rrv_error *err); /* scene file section */
+static rrv_result rrv__scene_check(rrv_scene *scene, rrv_error *err); /* building scenes section, next */
 
 RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
 {
@@ -8151,7 +8151,7 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
         return rrv__fail(err, RRV_ERROR_LIMIT, scene->path, 0, "%d media; at most %d are supported",
                          scene->medium_count, RRV__MAX_MEDIA);
     /* The parser refused all of this with a line; scenes built or edited in
-       code get the same refusals here (scene file section: the checks). */
+       code get the same refusals here (the building scenes section: the checks). */
     res = rrv__scene_check(scene, err);
     if (res != RRV_OK) return res;
     scene->ambient_ior = rrv__resolve_ambient(scene);
@@ -8611,20 +8611,1242 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
     return RRV_OK;
 }
 
-/* >> 11 curved NEE (module): shoot, aim, the cones, the manifold walk =========
-   nee SHOOT (eikonal integrator). A connection from a vertex x0 to a point y
-   on an area light along the bent ray is found by Newton's method on the two
-   angles of the initial direction w0, the ray traced with exactly the
-   segments a camera ray takes (rrv__plan_segment / rrv__finish_segment: RK4
-   or leapfrog steps, straight chords between them, faces). The residual is
-   the offset of y from where the path first crosses the light's plane from
-   its front (for two interior points, as in the tests: from the chord that
-   passes y, in the plane through y perpendicular to it). Its Jacobian comes from
-   the variational (Jacobi-field) equations of the very same discrete steps,
-   which need the Hessian of eta (rrv__scene_hessian). At the root
-   dw0 = dA_y |cos theta_y| / |det J_perp|, J_perp the 2x2 derivative of the
-   endpoint perpendicular to the arriving chord with respect to w0 per unit
-   solid angle (r^2 I for straight rays: cos / r^2). */
+/* >> 11 building scenes: defaults, checks, the rrv_scene_* calls ============
+   This section owns rrv_scene_create, rrv_scene_set_*, rrv_scene_add_* and
+   rrv_scene_free, with the one home of every default and check. The key
+   tables the scene file's statements are read with (>> 15) are also the
+   ranges these calls check single values against, so every build keeps
+   them, with the parser or without it (RRV_NO_SCENE_FILE). */
+
+#define RRV__SF_NO_LO (-DBL_MAX)
+#define RRV__SF_NO_HI DBL_MAX
+
+/* Makes room for one more element; capacity doubles, counts stay ints. */
+static int rrv__sf_reserve(void **array, int *capacity, int count, size_t elem)
+{
+    int cap;
+    void *v;
+    if (count < *capacity) return 1;
+    if (*capacity > INT_MAX / 2) return 0;
+    cap = *capacity ? *capacity * 2 : 8;
+    if ((size_t)cap > SIZE_MAX / elem) return 0;
+    v = RRV_REALLOC(*array, (size_t)cap * elem);
+    if (!v) return 0;
+    *array = v;
+    *capacity = cap;
+    return 1;
+}
+
+/* Blob arrays have no capacity field: their capacity is a function of the
+   count (4, then powers of two), which also lets rrv__sf_scene_bytes count it. */
+static size_t rrv__sf_blob_capacity(int count)
+{
+    size_t cap = 4;
+    while (cap < (size_t)count)
+        cap *= 2;
+    return count > 0 ? cap : 0;
+}
+
+/* ---- keys: the per-statement tables ------------------------------------------ */
+
+enum {
+    RRV__SF_NUM, /* `arity` finite numbers */
+    RRV__SF_INT, /* `arity` integers */
+    RRV__SF_U64, /* one unsigned 64-bit integer */
+    RRV__SF_WORD, /* one word: a name or a path */
+    RRV__SF_CHOICE, /* one word out of `choices` ("a|b|c") */
+    RRV__SF_NUMLIST, /* any count of finite numbers */
+    RRV__SF_INTLIST /* any count of integers */
+};
+enum { RRV__SF_GT = 1, RRV__SF_LT = 2, RRV__SF_REQ = 4 };
+
+typedef struct rrv__sf_key {
+    const char *name;
+    unsigned char kind, arity, flags;
+    double lo, hi; /* RRV__SF_NO_LO / RRV__SF_NO_HI: unbounded; GT/LT make them strict */
+    const char *choices;
+} rrv__sf_key;
+
+typedef struct rrv__sf_slot {
+    int given;
+    double v[6];
+    uint64_t u;
+    int choice;
+    size_t tok; /* first value token */
+    size_t count; /* list length */
+} rrv__sf_slot;
+
+#define RRV__SF_MAX_KEYS 20
+#define RRV__SF_ANY RRV__SF_NO_LO, RRV__SF_NO_HI
+#define RRV__SF_NN 0.0, RRV__SF_NO_HI /* >= 0 (or > 0 with RRV__SF_GT) */
+#define RRV__SF_UNIT 0.0, 1.0
+
+static const rrv__sf_key rrv__sf_camera_keys[] = {
+    /* The renderer squares distances from the camera in double precision,
+       which overflows beyond about 1e154: farther cameras would see nothing. */
+    {"eye", RRV__SF_NUM, 3, RRV__SF_REQ, -1e150, 1e150, NULL},
+    {"look", RRV__SF_NUM, 3, RRV__SF_REQ, -1e150, 1e150, NULL},
+    {"up", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"fov", RRV__SF_NUM, 1, RRV__SF_GT | RRV__SF_LT, 0.0, 180.0, NULL},
+    {"resolution", RRV__SF_INT, 2, 0, 1.0, 16384.0, NULL},
+};
+static const rrv__sf_key rrv__sf_render_keys[] = {
+    {"spp", RRV__SF_INT, 1, 0, 1.0, (double)RRV_MAX_SPP, NULL},
+    {"maxdepth", RRV__SF_INT, 1, 0, 1.0, 1024.0, NULL},
+    {"seed", RRV__SF_U64, 1, 0, RRV__SF_NN, NULL},
+    {"integrator", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|classic|refractive|eikonal"},
+    /* bounded so one event or step cannot be absurdly small (BOUNDS) */
+    {"bendtolerance", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_UNIT, NULL}, /* and >= 1e-4 */
+    {"mueta", RRV__SF_NUM, 1, 0, 0.0, 1e6, NULL},
+    {"step", RRV__SF_NUM, 1, 0, 1e-6, 1e6, NULL},
+    {"stepper", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|leapfrog|rk4"},
+    {"refraction", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|poisson|midpoint|comb"},
+    {"majorantcells", RRV__SF_INT, 1, 0, 0.0, 256.0, NULL},
+    {"iorinterp", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "trilinear|cubic"},
+    {"nee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "none|straight|shoot|manifold|aim"},
+    {"manifoldgauge", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "chord|iso"},
+    {"manifoldtrials", RRV__SF_INT, 1, 0, 0.0, 1024.0, NULL},
+    {"manifolddrop", RRV__SF_NUM, 1, 0, 0.0, 1.0, NULL},
+    {"sampler", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "pcg|sobol"},
+    {"emissionnee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "on|off"},
+    {"manifoldsolver", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "lm|dogleg"},
+    {"transmittance", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "ratio|residual|march"},
+};
+/* Choice index -> enum, spelled out so reordering an enum in api.h cannot
+   silently change what a word means. */
+static const rrv_integrator rrv__sf_integrators[] = {
+    RRV_INTEGRATOR_DEFAULT, RRV_INTEGRATOR_CLASSIC, RRV_INTEGRATOR_REFRACTIVE, RRV_INTEGRATOR_EIKONAL};
+static const rrv_stepper rrv__sf_steppers[] = {RRV_STEPPER_DEFAULT, RRV_STEPPER_LEAPFROG,
+                                               RRV_STEPPER_RK4};
+static const rrv_refraction_scheme rrv__sf_schemes[] = {
+    RRV_REFRACTION_DEFAULT, RRV_REFRACTION_POISSON, RRV_REFRACTION_MIDPOINT, RRV_REFRACTION_COMB};
+static const rrv_falloff_kind rrv__sf_falloffs[] = {RRV_FALLOFF_NONE, RRV_FALLOFF_SPHERE,
+                                                    RRV_FALLOFF_PLUME};
+static const rrv__sf_key rrv__sf_ambient_keys[] = {
+    {"ior", RRV__SF_NUM, 1, RRV__SF_REQ, 1.0, RRV__SF_NO_HI, NULL},
+};
+static const rrv__sf_key rrv__sf_diffuse_keys[] = {
+    {"albedo", RRV__SF_NUM, 3, 0, RRV__SF_UNIT, NULL},
+};
+static const rrv__sf_key rrv__sf_checker_keys[] = {
+    {"albedo", RRV__SF_NUM, 3, 0, RRV__SF_UNIT, NULL},
+    {"albedo2", RRV__SF_NUM, 3, 0, RRV__SF_UNIT, NULL},
+    {"checkerscale", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+};
+/* Shapes share their last three keys: material, L, scale. */
+#define RRV__SF_SHAPE_TAIL                                                                         \
+    {"material", RRV__SF_WORD, 1, 0, RRV__SF_ANY, NULL},                                           \
+        {"L", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},                                                \
+    {                                                                                              \
+        "scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL                                               \
+    }
+static const rrv__sf_key rrv__sf_sphere_keys[] = {
+    {"center", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+    RRV__SF_SHAPE_TAIL,
+};
+static const rrv__sf_key rrv__sf_quad_keys[] = {
+    {"origin", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"u", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"v", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    RRV__SF_SHAPE_TAIL,
+};
+static const rrv__sf_key rrv__sf_triangle_keys[] = {
+    {"p0", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"p1", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"p2", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    RRV__SF_SHAPE_TAIL,
+};
+static const rrv__sf_key rrv__sf_mesh_keys[] = {
+    {"file", RRV__SF_WORD, 1, 0, RRV__SF_ANY, NULL},
+    {"points", RRV__SF_NUMLIST, 0, 0, RRV__SF_ANY, NULL},
+    {"indices", RRV__SF_INTLIST, 0, 0, 0.0, (double)INT_MAX, NULL},
+    {"translate", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"material", RRV__SF_WORD, 1, 0, RRV__SF_ANY, NULL},
+    {"L", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
+    {"scale", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL}, /* geometry, not emission */
+};
+static const rrv__sf_key rrv__sf_env_constant_keys[] = {
+    {"L", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
+    {"scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
+};
+static const rrv__sf_key rrv__sf_env_gradient_keys[] = {
+    {"top", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_NN, NULL},
+    {"bottom", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_NN, NULL},
+    {"scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
+};
+static const rrv__sf_key rrv__sf_medium_keys[] = {
+    {"box", RRV__SF_NUM, 6, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"sigma_a", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
+    {"sigma_s", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
+    {"scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
+    {"g", RRV__SF_NUM, 1, RRV__SF_GT | RRV__SF_LT, -1.0, 1.0, NULL},
+    {"albedo", RRV__SF_NUM, 3, 0, RRV__SF_UNIT, NULL},
+    {"sigma_t", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
+    {"Le", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
+    {"Lescale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
+};
+
+/* Field kinds. The `base` key sits last where a kind has one. */
+static const rrv__sf_key rrv__sf_blob_keys[] = {
+    {"center", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+    {"weight", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+    {"base", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+};
+static const rrv__sf_key rrv__sf_noise_keys[] = {
+    {"octaves", RRV__SF_INT, 1, 0, 1.0, 12.0, NULL},
+    {"frequency", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"lacunarity", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"gain", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_UNIT, NULL},
+    {"threshold", RRV__SF_NUM, 1, RRV__SF_LT, RRV__SF_UNIT, NULL},
+    {"seed", RRV__SF_INT, 1, 0, 0.0, 4294967295.0, NULL},
+    {"falloff", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "none|sphere|plume"},
+    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"amplitude", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+    {"base", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+};
+static const rrv__sf_key rrv__sf_luneburg_keys[] = {
+    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+};
+static const rrv__sf_key rrv__sf_fisheye_keys[] = {
+    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+    {"n0", RRV__SF_NUM, 1, 0, 1.0, RRV__SF_NO_HI, NULL},
+};
+static const rrv__sf_key rrv__sf_slab_keys[] = {
+    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"normal", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"gradient", RRV__SF_NUM, 1, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"base", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+};
+static const rrv__sf_key rrv__sf_shell_keys[] = {
+    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+    {"thickness", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+    {"edge", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"amplitude", RRV__SF_NUM, 1, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"base", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+};
+static const rrv__sf_key rrv__sf_gas_keys[] = {
+    {"eta_ref", RRV__SF_NUM, 1, 0, 1.0, RRV__SF_NO_HI, NULL},
+    {"P_ref", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"T_ref", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+};
+static const rrv__sf_key rrv__sf_nanovdb_keys[] = {
+    {"grid", RRV__SF_WORD, 1, 0, RRV__SF_ANY, NULL},
+    {"cellcentered", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "on|off"},
+};
+/* Keys a field statement accepts whatever its kind. */
+static const rrv__sf_key rrv__sf_ior_extra_keys[] = {
+    {"iorscale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
+};
+static const rrv__sf_key rrv__sf_temperature_extra_keys[] = {
+    {"temperatureoffset", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
+    {"temperaturescale", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
+    {"blackbody", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "on|off"},
+};
+
+#define RRV__SF_COUNT(a) (int)(sizeof(a) / sizeof((a)[0]))
+
+static int rrv__sf_in_range(const rrv__sf_key *k, double v)
+{
+    if (k->lo != RRV__SF_NO_LO && ((k->flags & RRV__SF_GT) ? !(v > k->lo) : !(v >= k->lo)))
+        return 0;
+    if (k->hi != RRV__SF_NO_HI && ((k->flags & RRV__SF_LT) ? !(v < k->hi) : !(v <= k->hi)))
+        return 0;
+    return 1;
+}
+
+static void rrv__sf_range_text(const rrv__sf_key *k, char *buf, size_t cap)
+{
+    int gt = (k->flags & RRV__SF_GT) != 0, lt = (k->flags & RRV__SF_LT) != 0;
+    if (k->hi == RRV__SF_NO_HI)
+        snprintf(buf, cap, "%s %.15g", gt ? ">" : ">=", k->lo);
+    else if (k->lo == RRV__SF_NO_LO)
+        snprintf(buf, cap, "%s %.15g", lt ? "<" : "<=", k->hi);
+    else
+        snprintf(buf, cap, "in %c%.15g, %.15g%c", gt ? '(' : '[', k->lo, k->hi, lt ? ')' : ']');
+}
+
+/* ---- building scenes in code: one home for defaults and checks -------------
+   The parser is a client of this part: a statement starts from a zeroed
+   object, lets rrv__*_def fill the defaults, writes the keys it was given
+   over them (so an explicit zero survives) and hands the object to the
+   same check and store the public rrv_scene_add_* calls use. The ranges
+   of single values are the key tables above, for files and code alike;
+   the checks here add what one key cannot say (eye against look, a box's
+   corners, a quad's area, the limits of BOUNDS). rrv_scene_prepare runs
+   every check again, so a scene edited by hand is held to the same rules. */
+
+static int rrv__finite3(const double *v)
+{
+    int i;
+    for (i = 0; i < 3; ++i)
+        if (!(v[i] == v[i]) || v[i] > DBL_MAX || v[i] < -DBL_MAX) return 0;
+    return 1;
+}
+
+static int rrv__vec_finite(rrv_vec3 v)
+{
+    double d[3];
+    d[0] = v.x;
+    d[1] = v.y;
+    d[2] = v.z;
+    return rrv__finite3(d);
+}
+
+static int rrv__vec_zero(rrv_vec3 v) { return v.x == 0.0 && v.y == 0.0 && v.z == 0.0; }
+
+
+static rrv_vec3 rrv__box_center(const rrv_medium *m)
+{
+    return rrv__v3(m->lo.x * 0.5 + m->hi.x * 0.5, m->lo.y * 0.5 + m->hi.y * 0.5,
+                   m->lo.z * 0.5 + m->hi.z * 0.5);
+}
+
+/* Who is checked, for messages: "what: problem" at file:line (line 0 and
+   RRV_ERROR_ARGUMENT for objects built in code, RRV_ERROR_PARSE for
+   statements). */
+typedef struct rrv__ck {
+    rrv_error *err;
+    const char *file;
+    int line;
+    rrv_result code;
+    char what[96];
+} rrv__ck;
+
+static void rrv__ck_init(rrv__ck *ck, rrv_error *err, const char *file, int line, rrv_result code,
+                         const char *fmt, ...)
+{
+    va_list args;
+    ck->err = err;
+    ck->file = file;
+    ck->line = line;
+    ck->code = code;
+    va_start(args, fmt);
+    vsnprintf(ck->what, sizeof ck->what, fmt, args);
+    va_end(args);
+}
+
+static rrv_result rrv__ck_fail(const rrv__ck *ck, rrv_result code, const char *fmt, ...)
+{
+    char buf[200];
+    va_list args;
+    va_start(args, fmt);
+    vsnprintf(buf, sizeof buf, fmt, args);
+    va_end(args);
+    return rrv__fail(ck->err, code ? code : ck->code, ck->file, ck->line, "%s: %s", ck->what, buf);
+}
+
+/* One value against key k of a statement's table. */
+static rrv_result rrv__ck_key(const rrv__ck *ck, const rrv__sf_key *k, double v)
+{
+    char range[96];
+    if (!(v == v) || v > DBL_MAX || v < -DBL_MAX)
+        return rrv__ck_fail(ck, RRV_OK, "%s must be finite, got %g", k->name, v);
+    if (rrv__sf_in_range(k, v)) return RRV_OK;
+    rrv__sf_range_text(k, range, sizeof range);
+    return rrv__ck_fail(ck, RRV_OK, "%s must be %s, got %.15g", k->name, range, v);
+}
+
+static rrv_result rrv__ck_key3(const rrv__ck *ck, const rrv__sf_key *k, const double *v)
+{
+    int c;
+    for (c = 0; c < 3; ++c) {
+        rrv_result r = rrv__ck_key(ck, k, v[c]);
+        if (r != RRV_OK) return r;
+    }
+    return RRV_OK;
+}
+
+static rrv_result rrv__ck_vec(const rrv__ck *ck, const rrv__sf_key *k, rrv_vec3 v)
+{
+    double d[3];
+    d[0] = v.x;
+    d[1] = v.y;
+    d[2] = v.z;
+    return rrv__ck_key3(ck, k, d);
+}
+
+#define RRV__CK(call)                                                                              \
+    do {                                                                                           \
+        rrv_result rrv__ck_r = (call);                                                             \
+        if (rrv__ck_r != RRV_OK) return rrv__ck_r;                                                 \
+    } while (0)
+
+/* -- camera -- */
+
+static void rrv__camera_def(rrv_camera *c)
+{
+    if (rrv__vec_zero(c->up)) c->up.y = 1.0;
+    if (c->fov == 0.0) c->fov = 40.0;
+    if (c->width == 0) c->width = 320;
+    if (c->height == 0) c->height = 240;
+}
+
+static rrv_result rrv__camera_check(const rrv__ck *ck, const rrv_camera *c)
+{
+    const rrv__sf_key *k = rrv__sf_camera_keys;
+    rrv_vec3 dir, d, u, x;
+    double n2, d2;
+    RRV__CK(rrv__ck_vec(ck, &k[0], c->eye));
+    RRV__CK(rrv__ck_vec(ck, &k[1], c->look));
+    RRV__CK(rrv__ck_key(ck, &k[3], c->fov));
+    RRV__CK(rrv__ck_key(ck, &k[4], (double)c->width));
+    RRV__CK(rrv__ck_key(ck, &k[4], (double)c->height));
+    dir = rrv__sub(c->look, c->eye);
+    if (rrv__vec_zero(dir) || !rrv__vec_finite(dir))
+        return rrv__ck_fail(ck, RRV_OK, "eye and look must be distinct finite points");
+    if (rrv__vec_zero(c->up) || !rrv__vec_finite(c->up))
+        return rrv__ck_fail(ck, RRV_OK, "up must be a nonzero finite vector");
+    /* Both vectors scaled to a largest component of 1 first: squaring a far
+       camera's view direction (eye at 1e200) would overflow to inf and make
+       any up look parallel. sin^2 of the angle below 1e-12 is too close to
+       parallel for a frame. */
+    d = rrv__unit_max(dir);
+    u = rrv__unit_max(c->up);
+    x = rrv__cross(d, u);
+    n2 = rrv__dot(x, x);
+    d2 = rrv__dot(d, d) * rrv__dot(u, u);
+    if (!(n2 > 1e-12 * d2)) return rrv__ck_fail(ck, RRV_OK, "up is parallel to the view direction");
+    return RRV_OK;
+}
+
+/* -- settings (`render` and `ambient`) -- */
+
+static void rrv__settings_def(rrv_settings *s)
+{
+    if (s->spp == 0) s->spp = 16;
+    if (s->max_depth == 0) s->max_depth = 32;
+    if (s->bend_tolerance == 0.0) s->bend_tolerance = 0.01;
+    if (s->step == 0.0) s->step = 0.01;
+}
+
+static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
+                                      const rrv_settings *s)
+{
+    const rrv__sf_key *k = rrv__sf_render_keys;
+    RRV__CK(rrv__ck_key(ck, &k[0], (double)s->spp));
+    RRV__CK(rrv__ck_key(ck, &k[1], (double)s->max_depth));
+    if ((unsigned)s->integrator > (unsigned)RRV_INTEGRATOR_EIKONAL)
+        return rrv__ck_fail(ck, RRV_OK, "integrator %d is not one of rrv_integrator", (int)s->integrator);
+    RRV__CK(rrv__ck_key(ck, &k[4], s->bend_tolerance));
+    /* bounded so one event or step cannot be absurdly small (BOUNDS) */
+    if (s->bend_tolerance < 1e-4)
+        return rrv__ck_fail(ck, RRV_OK, "bendtolerance must be at least 0.0001, got %g",
+                            s->bend_tolerance);
+    RRV__CK(rrv__ck_key(ck, &k[5], s->mu_eta));
+    RRV__CK(rrv__ck_key(ck, &k[6], s->step));
+    if ((unsigned)s->stepper > (unsigned)RRV_STEPPER_RK4)
+        return rrv__ck_fail(ck, RRV_OK, "stepper %d is not one of rrv_stepper", (int)s->stepper);
+    if ((unsigned)s->refraction > (unsigned)RRV_REFRACTION_COMB)
+        return rrv__ck_fail(ck, RRV_OK, "refraction %d is not one of rrv_refraction_scheme",
+                            (int)s->refraction);
+    RRV__CK(rrv__ck_key(ck, &k[9], (double)s->majorant_cells));
+    if ((unsigned)s->ior_interpolation > (unsigned)RRV_IOR_INTERP_CUBIC)
+        return rrv__ck_fail(ck, RRV_OK, "ior_interpolation %d is not one of rrv_ior_interpolation",
+                            (int)s->ior_interpolation);
+    if ((unsigned)s->nee > (unsigned)RRV_NEE_AIM)
+        return rrv__ck_fail(ck, RRV_OK, "nee %d is not one of rrv_nee", (int)s->nee);
+#ifdef RRV_NO_CURVED_NEE
+    /* refused, not aimed instead: a render must not quietly be another
+       estimator than the one asked for */
+    if (s->nee == RRV_NEE_SHOOT || s->nee == RRV_NEE_MANIFOLD)
+        return rrv__ck_fail(ck, RRV_ERROR_UNSUPPORTED, "nee %s is disabled (RRV_NO_CURVED_NEE); use nee aim",
+                            s->nee == RRV_NEE_SHOOT ? "shoot" : "manifold");
+#endif
+    if ((unsigned)s->sampler > (unsigned)RRV_SAMPLER_SOBOL)
+        return rrv__ck_fail(ck, RRV_OK, "sampler %d is not one of rrv_sampler", (int)s->sampler);
+    if ((unsigned)s->emission_nee > (unsigned)RRV_EMISSION_NEE_OFF)
+        return rrv__ck_fail(ck, RRV_OK, "emission_nee %d is not one of rrv_emission_nee", (int)s->emission_nee);
+    if ((unsigned)s->manifold_gauge > (unsigned)RRV_GAUGE_ISO)
+        return rrv__ck_fail(ck, RRV_OK, "manifold_gauge %d is not one of rrv_manifold_gauge",
+                            (int)s->manifold_gauge);
+    if ((unsigned)s->transmittance > (unsigned)RRV_TRANSMITTANCE_MARCH)
+        return rrv__ck_fail(ck, RRV_OK, "transmittance %d is not one of rrv_transmittance", (int)s->transmittance);
+    if ((unsigned)s->manifold_solver > (unsigned)RRV_MANIFOLD_SOLVER_DOGLEG)
+        return rrv__ck_fail(ck, RRV_OK, "manifold_solver %d is not one of rrv_manifold_solver",
+                            (int)s->manifold_solver);
+    RRV__CK(rrv__ck_key(ck, &k[13], (double)s->manifold_trials));
+    RRV__CK(rrv__ck_key(ck, &k[14], s->manifold_drop));
+    if (s->max_bake_samples < 0)
+        return rrv__ck_fail(ck, RRV_OK, "max_bake_samples must be >= 0, got %d", s->max_bake_samples);
+    if (s->ambient_ior != 0.0) /* 0: from the gas (rrv__resolve_ambient) */
+        RRV__CK(rrv__ck_key(ambient, &rrv__sf_ambient_keys[0], s->ambient_ior));
+    if (s->ambient_ior > RRV_MAX_IOR)
+        return rrv__ck_fail(ambient, RRV_OK, "ior must be at most %g, got %g", RRV_MAX_IOR,
+                            s->ambient_ior);
+    return RRV_OK;
+}
+
+/* -- environment -- */
+
+static void rrv__environment_def(rrv_environment *e)
+{
+    if (e->kind == RRV_ENV_CONSTANT && e->L[0] == 0.0 && e->L[1] == 0.0 && e->L[2] == 0.0)
+        e->L[0] = e->L[1] = e->L[2] = 1.0;
+}
+
+static rrv_result rrv__environment_check(const rrv__ck *ck, const rrv_environment *e)
+{
+    int c;
+    if ((unsigned)e->kind > (unsigned)RRV_ENV_GRADIENT)
+        return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_environment_kind", (int)e->kind);
+    if (!rrv__finite3(e->L) || !rrv__finite3(e->L2))
+        return rrv__ck_fail(ck, RRV_OK, "radiance times scale is not finite");
+    for (c = 0; c < 3; ++c)
+        if (e->L[c] < 0.0 || e->L2[c] < 0.0)
+            return rrv__ck_fail(ck, RRV_OK, "radiance must be >= 0, got %g",
+                                e->L[c] < 0.0 ? e->L[c] : e->L2[c]);
+    if (rrv__maxd(rrv__max3(e->L), rrv__max3(e->L2)) > RRV_MAX_RADIANCE)
+        return rrv__ck_fail(ck, RRV_OK, "radiance times scale must be at most %g", RRV_MAX_RADIANCE);
+    return RRV_OK;
+}
+
+/* -- materials -- */
+
+static void rrv__material_def(rrv_material *m)
+{
+    int c, black = m->albedo[0] == 0.0 && m->albedo[1] == 0.0 && m->albedo[2] == 0.0;
+    for (c = 0; c < 3; ++c) {
+        if (black) m->albedo[c] = m->kind == RRV_MATERIAL_CHECKER ? 0.8 : 0.5;
+    }
+    if (m->kind == RRV_MATERIAL_CHECKER) {
+        if (m->albedo2[0] == 0.0 && m->albedo2[1] == 0.0 && m->albedo2[2] == 0.0)
+            m->albedo2[0] = m->albedo2[1] = m->albedo2[2] = 0.2;
+        if (m->checker_scale == 0.0) m->checker_scale = 1.0;
+    }
+}
+
+static rrv_result rrv__material_check(const rrv__ck *ck, const rrv_material *m)
+{
+    const rrv__sf_key *k = rrv__sf_checker_keys;
+    if ((unsigned)m->kind > (unsigned)RRV_MATERIAL_CHECKER)
+        return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_material_kind", (int)m->kind);
+    RRV__CK(rrv__ck_key3(ck, &k[0], m->albedo));
+    if (m->kind == RRV_MATERIAL_CHECKER) {
+        RRV__CK(rrv__ck_key3(ck, &k[1], m->albedo2));
+        RRV__CK(rrv__ck_key(ck, &k[2], m->checker_scale));
+    }
+    return RRV_OK;
+}
+
+/* -- shapes -- */
+
+static const char *rrv__shape_name(rrv_shape_kind kind)
+{
+    return kind == RRV_SHAPE_SPHERE ? "sphere" : kind == RRV_SHAPE_QUAD ? "quad" : "triangle";
+}
+
+/* L is stored premultiplied by its scale. */
+static rrv_result rrv__emission_check(const rrv__ck *ck, const double *L)
+{
+    int c;
+    if (!rrv__finite3(L)) return rrv__ck_fail(ck, RRV_OK, "L times scale is not finite");
+    for (c = 0; c < 3; ++c)
+        if (L[c] < 0.0) return rrv__ck_fail(ck, RRV_OK, "L must be >= 0, got %g", L[c]);
+    if (rrv__max3(L) > RRV_MAX_RADIANCE)
+        return rrv__ck_fail(ck, RRV_OK, "L times scale must be at most %g, got %g", RRV_MAX_RADIANCE,
+                            rrv__max3(L));
+    return RRV_OK;
+}
+
+static rrv_result rrv__shape_check(const rrv__ck *ck, const rrv_scene *scene, const rrv_shape *s)
+{
+    static const rrv__sf_key any = {"p0", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL};
+    if ((unsigned)s->kind > (unsigned)RRV_SHAPE_TRIANGLE)
+        return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_shape_kind", (int)s->kind);
+    if (s->material < 0 || s->material >= scene->material_count)
+        return rrv__ck_fail(ck, RRV_OK, "material %d is not one of the scene's %d", s->material,
+                            scene->material_count);
+    RRV__CK(rrv__emission_check(ck, s->L));
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        RRV__CK(rrv__ck_vec(ck, &rrv__sf_sphere_keys[0], s->center));
+        return rrv__ck_key(ck, &rrv__sf_sphere_keys[1], s->radius);
+    }
+    RRV__CK(rrv__ck_vec(ck, &any, s->p0));
+    if (!rrv__vec_finite(s->e1) || !rrv__vec_finite(s->e2))
+        return rrv__ck_fail(ck, RRV_OK, "edges are not finite");
+    if (rrv__vec_zero(rrv__cross(s->e1, s->e2)))
+        return rrv__ck_fail(ck, RRV_OK, s->kind == RRV_SHAPE_QUAD
+                                            ? "u and v are parallel (zero area)"
+                                            : "the points are collinear (zero area)");
+    return RRV_OK;
+}
+
+/* -- media -- */
+
+static void rrv__medium_def(rrv_medium *m)
+{
+    int c, none = 1;
+    for (c = 0; c < 3; ++c)
+        if (m->sigma_a[c] != 0.0 || m->sigma_s[c] != 0.0) none = 0;
+    for (c = 0; c < 3 && none; ++c)
+        m->sigma_a[c] = m->sigma_s[c] = 1.0;
+    if (m->scale == 0.0) m->scale = 1.0;
+    if (m->Lescale == 0.0) m->Lescale = 1.0;
+    if (m->temperaturescale == 0.0) m->temperaturescale = 1.0;
+    if (m->eta_ref == 0.0) m->eta_ref = 1.000292;
+    if (m->P_ref == 0.0) m->P_ref = 101325.0;
+    if (m->T_ref == 0.0) m->T_ref = 300.0;
+    if (m->ior_scale == 0.0) m->ior_scale = 1.0;
+}
+
+/* What a medium statement can get wrong; the fields and the limits of
+   BOUNDS are checked by rrv__field_check and rrv__check_medium. */
+static rrv_result rrv__medium_check(const rrv__ck *ck, const rrv_medium *m)
+{
+    const rrv__sf_key *k = rrv__sf_medium_keys;
+    double lo[3], hi[3];
+    int c;
+    lo[0] = m->lo.x, lo[1] = m->lo.y, lo[2] = m->lo.z;
+    hi[0] = m->hi.x, hi[1] = m->hi.y, hi[2] = m->hi.z;
+    RRV__CK(rrv__ck_key3(ck, &k[0], lo));
+    RRV__CK(rrv__ck_key3(ck, &k[0], hi));
+    for (c = 0; c < 3; ++c)
+        if (!(lo[c] < hi[c]))
+            return rrv__ck_fail(ck, RRV_OK, "box is empty along %c (%g is not below %g)", "xyz"[c],
+                                lo[c], hi[c]);
+    RRV__CK(rrv__ck_key3(ck, &k[1], m->sigma_a));
+    RRV__CK(rrv__ck_key3(ck, &k[2], m->sigma_s));
+    RRV__CK(rrv__ck_key(ck, &k[3], m->scale));
+    RRV__CK(rrv__ck_key(ck, &k[4], m->g));
+    RRV__CK(rrv__ck_key3(ck, &k[7], m->Le));
+    RRV__CK(rrv__ck_key(ck, &k[8], m->Lescale));
+    RRV__CK(rrv__ck_key(ck, &rrv__sf_temperature_extra_keys[0], m->temperatureoffset));
+    RRV__CK(rrv__ck_key(ck, &rrv__sf_temperature_extra_keys[1], m->temperaturescale));
+    RRV__CK(rrv__ck_key(ck, &rrv__sf_gas_keys[0], m->eta_ref));
+    RRV__CK(rrv__ck_key(ck, &rrv__sf_gas_keys[1], m->P_ref));
+    RRV__CK(rrv__ck_key(ck, &rrv__sf_gas_keys[2], m->T_ref));
+    RRV__CK(rrv__ck_key(ck, &rrv__sf_ior_extra_keys[0], m->ior_scale));
+    return RRV_OK;
+}
+
+/* -- fields -- */
+
+static void rrv__blob_def(rrv_blob *b)
+{
+    if (b->weight == 0.0) b->weight = 1.0;
+}
+
+/* The value a field kind adds everywhere when it does not say: the ambient
+   state of air for temperature and pressure, nothing for density and IOR. */
+static double rrv__field_base_default(rrv_medium_field which)
+{
+    return which == RRV_MEDIUM_TEMPERATURE ? 300.0 : which == RRV_MEDIUM_PRESSURE ? 101325.0 : 0.0;
+}
+
+static void rrv__field_def(rrv_field *f, rrv_medium_field which, const rrv_medium *m)
+{
+    int i;
+    switch (f->kind) {
+    case RRV_FIELD_BLOBS:
+        for (i = 0; i < f->blob_count; ++i) rrv__blob_def(&f->blobs[i]);
+        if (f->base == 0.0) f->base = rrv__field_base_default(which);
+        break;
+    case RRV_FIELD_NOISE: {
+        rrv_noise *n = &f->noise;
+        double sx = m->hi.x * 0.5 - m->lo.x * 0.5, sy = m->hi.y * 0.5 - m->lo.y * 0.5,
+               sz = m->hi.z * 0.5 - m->lo.z * 0.5;
+        if (n->octaves == 0) n->octaves = 5;
+        if (n->frequency == 0.0) n->frequency = 1.0;
+        if (n->lacunarity == 0.0) n->lacunarity = 2.0;
+        if (n->gain == 0.0) n->gain = 0.5;
+        if (rrv__vec_zero(n->center)) n->center = rrv__box_center(m);
+        if (n->radius == 0.0) n->radius = sx < sy ? (sx < sz ? sx : sz) : (sy < sz ? sy : sz);
+        if (f->amplitude == 0.0) f->amplitude = 1.0;
+        if (f->base == 0.0) f->base = rrv__field_base_default(which);
+        break;
+    }
+    case RRV_FIELD_LUNEBURG:
+    case RRV_FIELD_FISHEYE:
+    case RRV_FIELD_SLAB:
+    case RRV_FIELD_SHELL:
+        if (rrv__vec_zero(f->center)) f->center = rrv__box_center(m);
+        if (f->kind == RRV_FIELD_FISHEYE && f->n0 == 0.0) f->n0 = 2.0;
+        if (f->kind == RRV_FIELD_SHELL && f->edge == 0.0) f->edge = f->thickness / 4.0;
+        if (f->kind == RRV_FIELD_SLAB && !rrv__vec_zero(f->normal) && rrv__vec_finite(f->normal)) {
+            /* scaled first so squaring cannot overflow */
+            rrv_vec3 n = rrv__unit_max(f->normal);
+            f->normal = rrv__scale(n, 1.0 / rrv__length(n));
+        }
+        break;
+    default:
+        break;
+    }
+}
+
+/* Blobs before first_blob were checked already (the parser adds one a line). */
+static rrv_result rrv__field_check(const rrv__ck *ck, rrv_medium_field which, const rrv_medium *m,
+                                   const rrv_field *f, int first_blob)
+{
+    int i;
+    if ((unsigned)f->kind > (unsigned)RRV_FIELD_NANOVDB)
+        return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_field_kind", (int)f->kind);
+    if (f->kind >= RRV_FIELD_LUNEBURG && f->kind <= RRV_FIELD_SHELL && which != RRV_MEDIUM_IOR)
+        return rrv__ck_fail(ck, RRV_OK, "IOR profiles belong in the ior field");
+    switch (f->kind) {
+    case RRV_FIELD_CONSTANT: {
+        double v = f->value;
+        if (!(v == v) || v > DBL_MAX || v < -DBL_MAX)
+            return rrv__ck_fail(ck, RRV_OK, "constant must be finite, got %g", v);
+        if (which == RRV_MEDIUM_DENSITY && v < 0.0)
+            return rrv__ck_fail(ck, RRV_OK, "constant must be >= 0, got %.15g", v);
+        if (which == RRV_MEDIUM_PRESSURE && !(v > 0.0))
+            return rrv__ck_fail(ck, RRV_OK, "constant must be > 0, got %.15g", v);
+        if (which == RRV_MEDIUM_IOR && !(v > -1.0))
+            return rrv__ck_fail(ck, RRV_OK,
+                                "constant (the refractivity eta - 1) must be > -1, got %.15g", v);
+        if (which == RRV_MEDIUM_TEMPERATURE) {
+            double T = (v - m->temperatureoffset) * m->temperaturescale;
+            if (!(T > 0.0) || T > DBL_MAX)
+                return rrv__ck_fail(ck, RRV_OK, "constant %.15g gives T = %g K, must be > 0 and finite",
+                                    v, T);
+        }
+        return RRV_OK;
+    }
+    case RRV_FIELD_BLOBS:
+        if (f->blob_count < 1 || !f->blobs)
+            return rrv__ck_fail(ck, RRV_OK, "blobs need at least one blob");
+        if (f->blob_count > RRV_MAX_BLOBS)
+            return rrv__ck_fail(ck, RRV_ERROR_LIMIT, "more than %d blobs in one field (a grid holds more)",
+                                RRV_MAX_BLOBS);
+        for (i = first_blob; i < f->blob_count; ++i) {
+            RRV__CK(rrv__ck_vec(ck, &rrv__sf_blob_keys[0], f->blobs[i].center));
+            RRV__CK(rrv__ck_key(ck, &rrv__sf_blob_keys[1], f->blobs[i].radius));
+            RRV__CK(rrv__ck_key(ck, &rrv__sf_blob_keys[2], f->blobs[i].weight));
+        }
+        return rrv__ck_key(ck, &rrv__sf_blob_keys[3], f->base);
+    case RRV_FIELD_NOISE: {
+        const rrv__sf_key *k = rrv__sf_noise_keys;
+        const rrv_noise *n = &f->noise;
+        RRV__CK(rrv__ck_key(ck, &k[0], (double)n->octaves));
+        RRV__CK(rrv__ck_key(ck, &k[1], n->frequency));
+        RRV__CK(rrv__ck_key(ck, &k[2], n->lacunarity));
+        RRV__CK(rrv__ck_key(ck, &k[3], n->gain));
+        RRV__CK(rrv__ck_key(ck, &k[4], n->threshold));
+        if ((unsigned)n->falloff > (unsigned)RRV_FALLOFF_PLUME)
+            return rrv__ck_fail(ck, RRV_OK, "falloff %d is not one of rrv_falloff_kind", (int)n->falloff);
+        RRV__CK(rrv__ck_vec(ck, &k[7], n->center));
+        RRV__CK(rrv__ck_key(ck, &k[8], n->radius));
+        RRV__CK(rrv__ck_key(ck, &k[9], f->amplitude));
+        return rrv__ck_key(ck, &k[10], f->base);
+    }
+    case RRV_FIELD_GRID: {
+        const rrv_grid *g = &f->grid;
+        if (!g->data || g->nx < 2 || g->ny < 2 || g->nz < 2 || (g->channels != 1 && g->channels != 3))
+            return rrv__ck_fail(ck, RRV_OK, "a grid needs data, each resolution >= 2 and 1 or 3 channels");
+        if (!rrv__vec_finite(g->lo) || !rrv__vec_finite(g->hi) || !(g->lo.x < g->hi.x) ||
+            !(g->lo.y < g->hi.y) || !(g->lo.z < g->hi.z))
+            return rrv__ck_fail(ck, RRV_OK, "the grid's box is empty or not finite");
+        if (which != RRV_MEDIUM_DENSITY && g->channels != 1)
+            return rrv__ck_fail(ck, RRV_ERROR_FORMAT, "grids need 1 channel, found %d", g->channels);
+        return RRV_OK;
+    }
+    case RRV_FIELD_NANOVDB:
+#ifdef RRV_NO_NANOVDB
+        return rrv__ck_fail(ck, RRV_ERROR_UNSUPPORTED, "NanoVDB grids are disabled (RRV_NO_NANOVDB)");
+#endif
+        if (!f->nanovdb.buffer) return rrv__ck_fail(ck, RRV_OK, "the NanoVDB grid has no data");
+        return RRV_OK;
+    case RRV_FIELD_LUNEBURG:
+    case RRV_FIELD_FISHEYE:
+        RRV__CK(rrv__ck_vec(ck, &rrv__sf_luneburg_keys[0], f->center));
+        RRV__CK(rrv__ck_key(ck, &rrv__sf_luneburg_keys[1], f->radius));
+        return f->kind == RRV_FIELD_FISHEYE ? rrv__ck_key(ck, &rrv__sf_fisheye_keys[2], f->n0) : RRV_OK;
+    case RRV_FIELD_SLAB:
+        RRV__CK(rrv__ck_vec(ck, &rrv__sf_slab_keys[0], f->center));
+        if (rrv__vec_zero(f->normal) || !rrv__vec_finite(f->normal))
+            return rrv__ck_fail(ck, RRV_OK, "slab normal must be nonzero");
+        RRV__CK(rrv__ck_key(ck, &rrv__sf_slab_keys[2], f->gradient));
+        return rrv__ck_key(ck, &rrv__sf_slab_keys[3], f->base);
+    case RRV_FIELD_SHELL: {
+        const rrv__sf_key *k = rrv__sf_shell_keys;
+        RRV__CK(rrv__ck_vec(ck, &k[0], f->center));
+        RRV__CK(rrv__ck_key(ck, &k[1], f->radius));
+        RRV__CK(rrv__ck_key(ck, &k[2], f->thickness));
+        RRV__CK(rrv__ck_key(ck, &k[3], f->edge));
+        RRV__CK(rrv__ck_key(ck, &k[4], f->amplitude));
+        return rrv__ck_key(ck, &k[5], f->base);
+    }
+    default:
+        return RRV_OK;
+    }
+}
+
+static rrv_field *rrv__medium_field_of(rrv_medium *m, rrv_medium_field which)
+{
+    return which == RRV_MEDIUM_DENSITY       ? &m->density
+           : which == RRV_MEDIUM_TEMPERATURE ? &m->temperature
+           : which == RRV_MEDIUM_PRESSURE    ? &m->pressure
+                                             : &m->ior;
+}
+
+static const char *const rrv__medium_field_names[4] = {"density", "temperature", "pressure", "ior"};
+
+/* -- the store: checks, then appends; shared by the parser and the API -- */
+
+static rrv_scene *rrv__scene_new(const char *name)
+{
+    rrv_scene *s = (rrv_scene *)RRV_MALLOC(sizeof *s);
+    size_t n = strlen(name);
+    if (!s) return NULL;
+    memset(s, 0, sizeof *s);
+    if (n >= sizeof s->path) name += n - (sizeof s->path - 1); /* keep the file name's end */
+    memcpy(s->path, name, strlen(name) + 1);
+    rrv__camera_def(&s->camera);
+    rrv__settings_def(&s->settings);
+    return s;
+}
+
+static int rrv__name_taken(const rrv_scene *s, const char *name, int media)
+{
+    int i, n = media ? s->medium_count : s->material_count;
+    for (i = 0; i < n; ++i)
+        if (strcmp(media ? s->media[i].name : s->materials[i].name, name) == 0) return 1;
+    return 0;
+}
+
+/* An empty material or medium name becomes "material N" or "medium N". */
+static void rrv__name_default(const rrv_scene *s, char *name, int media)
+{
+    if (name[0] == '\0')
+        snprintf(name, 64, "%s %d", media ? "medium" : "material",
+                 media ? s->medium_count : s->material_count);
+}
+
+/* The name of a material or medium: printable, 1 to 63 bytes, new. */
+static rrv_result rrv__name_check(const rrv__ck *ck, const rrv_scene *s, char *name, int media)
+{
+    size_t i;
+    rrv__name_default(s, name, media);
+    for (i = 0; name[i]; ++i)
+        if ((unsigned char)name[i] < 32)
+            return rrv__ck_fail(ck, RRV_OK, "the name has a control character");
+    if (rrv__name_taken(s, name, media))
+        return rrv__fail(ck->err, ck->code, ck->file, ck->line, "%s \"%s\" defined twice",
+                         media ? "medium" : "material", name);
+    return RRV_OK;
+}
+
+static rrv_result rrv__store_material(const rrv__ck *ck, rrv_scene *s, const rrv_material *m,
+                                      int *index)
+{
+    rrv_material copy = *m;
+    copy.name[sizeof copy.name - 1] = '\0';
+    RRV__CK(rrv__name_check(ck, s, copy.name, 0));
+    RRV__CK(rrv__material_check(ck, &copy));
+    if (!rrv__sf_reserve((void **)&s->materials, &s->material_capacity, s->material_count,
+                         sizeof copy))
+        return rrv__ck_fail(ck, RRV_ERROR_MEMORY, "out of memory");
+    if (index) *index = s->material_count;
+    s->materials[s->material_count++] = copy;
+    return RRV_OK;
+}
+
+/* The implicit grey "default" material, made on first use. */
+static rrv_result rrv__default_material(const rrv__ck *ck, rrv_scene *s, int *index)
+{
+    rrv_material m;
+    int i;
+    for (i = 0; i < s->material_count; ++i)
+        if (strcmp(s->materials[i].name, "default") == 0) {
+            *index = i;
+            return RRV_OK;
+        }
+    memset(&m, 0, sizeof m);
+    memcpy(m.name, "default", 8);
+    rrv__material_def(&m);
+    return rrv__store_material(ck, s, &m, index);
+}
+
+static rrv_result rrv__store_shape(const rrv__ck *ck, rrv_scene *s, const rrv_shape *shape)
+{
+    RRV__CK(rrv__shape_check(ck, s, shape));
+    if (!rrv__sf_reserve((void **)&s->shapes, &s->shape_capacity, s->shape_count, sizeof *shape))
+        return rrv__ck_fail(ck, RRV_ERROR_MEMORY, "out of memory");
+    s->shapes[s->shape_count++] = *shape;
+    return RRV_OK;
+}
+
+/* A mesh triangle (a, b, c); zero-area ones are dropped. */
+static rrv_result rrv__store_triangle(const rrv__ck *ck, rrv_scene *s, rrv_vec3 a, rrv_vec3 b,
+                                      rrv_vec3 c, const rrv_shape *proto)
+{
+    rrv_shape t = *proto;
+    t.kind = RRV_SHAPE_TRIANGLE;
+    t.p0 = a;
+    t.e1 = rrv__sub(b, a);
+    t.e2 = rrv__sub(c, a);
+    if (!rrv__vec_finite(a) || !rrv__vec_finite(t.e1) || !rrv__vec_finite(t.e2))
+        return rrv__ck_fail(ck, RRV_OK, "a vertex is not finite after scale and translate");
+    if (rrv__vec_zero(rrv__cross(t.e1, t.e2))) return RRV_OK;
+    return rrv__store_shape(ck, s, &t);
+}
+
+static rrv_result rrv__store_medium(const rrv__ck *ck, rrv_scene *s, const rrv_medium *m, int *index)
+{
+    rrv_medium copy = *m;
+    copy.name[sizeof copy.name - 1] = '\0';
+    RRV__CK(rrv__name_check(ck, s, copy.name, 1));
+    RRV__CK(rrv__medium_check(ck, &copy));
+    if (s->medium_count >= RRV__MAX_MEDIA)
+        return rrv__fail(ck->err, RRV_ERROR_LIMIT, ck->file, ck->line,
+                         "medium: at most %d media are supported", RRV__MAX_MEDIA);
+    if (!rrv__sf_reserve((void **)&s->media, &s->medium_capacity, s->medium_count, sizeof copy))
+        return rrv__ck_fail(ck, RRV_ERROR_MEMORY, "out of memory");
+    memset(&copy.density, 0, sizeof copy.density);
+    memset(&copy.temperature, 0, sizeof copy.temperature);
+    memset(&copy.pressure, 0, sizeof copy.pressure);
+    memset(&copy.ior, 0, sizeof copy.ior);
+    copy.majorant = NULL;
+    if (index) *index = s->medium_count;
+    s->media[s->medium_count++] = copy;
+    return RRV_OK;
+}
+
+/* Every check again, for rrv_scene_prepare: a scene filled or edited by hand
+   meets the rules a file meets. Media name the lines they came from. */
+static rrv_result rrv__scene_check(rrv_scene *s, rrv_error *err)
+{
+    rrv__ck ck, ambient;
+    int i, w;
+    /* settings left zero take their defaults, as they always have here; a
+       zero fov or an eye on the look point is refused instead */
+    rrv__settings_def(&s->settings);
+    rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "camera");
+    RRV__CK(rrv__camera_check(&ck, &s->camera));
+    rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "render");
+    rrv__ck_init(&ambient, err, s->path, 0, RRV_ERROR_ARGUMENT, "ambient");
+    RRV__CK(rrv__settings_check(&ck, &ambient, &s->settings));
+    rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "environment");
+    RRV__CK(rrv__environment_check(&ck, &s->environment));
+    for (i = 0; i < s->material_count; ++i) {
+        rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "material \"%s\"", s->materials[i].name);
+        RRV__CK(rrv__material_check(&ck, &s->materials[i]));
+    }
+    for (i = 0; i < s->shape_count; ++i) {
+        rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "shape %d (%s)", i,
+                     rrv__shape_name(s->shapes[i].kind));
+        RRV__CK(rrv__shape_check(&ck, s, &s->shapes[i]));
+    }
+    for (i = 0; i < s->medium_count; ++i) {
+        rrv_medium *m = &s->media[i];
+        rrv__ck_init(&ck, err, s->path, m->line[0], m->line[0] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT,
+                     "medium \"%s\"", m->name);
+        RRV__CK(rrv__medium_check(&ck, m));
+        for (w = 0; w < 4; ++w) {
+            const rrv_field *f = rrv__medium_field_of(m, (rrv_medium_field)w);
+            if (f->kind == RRV_FIELD_NONE) continue;
+            rrv__ck_init(&ck, err, s->path, m->line[1 + w],
+                         m->line[1 + w] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, "%s of medium \"%s\"",
+                         rrv__medium_field_names[w], m->name);
+            RRV__CK(rrv__field_check(&ck, (rrv_medium_field)w, m, f, 0));
+        }
+    }
+    return RRV_OK;
+}
+
+/* -- freeing a scene and counting its bytes -- */
+
+static void rrv__sf_field_free(rrv_field *f)
+{
+    RRV_FREE(f->blobs);
+    RRV_FREE(f->grid.data);
+    rrv_nanovdb_free(&f->nanovdb);
+    f->blobs = NULL;
+    f->grid.data = NULL;
+}
+
+RRV_DEF void rrv_scene_free(rrv_scene *scene)
+{
+    int i;
+    if (!scene) return;
+    rrv__scene_release_prepared(scene);
+    for (i = 0; i < scene->medium_count; ++i) {
+        rrv__sf_field_free(&scene->media[i].density);
+        rrv__sf_field_free(&scene->media[i].temperature);
+        rrv__sf_field_free(&scene->media[i].pressure);
+        rrv__sf_field_free(&scene->media[i].ior);
+    }
+    RRV_FREE(scene->materials);
+    RRV_FREE(scene->shapes);
+    RRV_FREE(scene->media);
+    RRV_FREE(scene);
+}
+
+static size_t rrv__sf_field_bytes(const rrv_field *f)
+{
+    size_t b = rrv__sf_blob_capacity(f->blob_count) * sizeof(rrv_blob);
+    if (f->grid.data)
+        b += (size_t)f->grid.nx * (size_t)f->grid.ny * (size_t)f->grid.nz *
+             (size_t)f->grid.channels * sizeof(float);
+    b += f->nanovdb.size;
+    return b;
+}
+
+static size_t rrv__sf_scene_bytes(const rrv_scene *s)
+{
+    size_t b = sizeof *s + (size_t)s->material_capacity * sizeof(rrv_material) +
+               (size_t)s->shape_capacity * sizeof(rrv_shape) +
+               (size_t)s->medium_capacity * sizeof(rrv_medium);
+    int i;
+    for (i = 0; i < s->medium_count; ++i)
+        b += rrv__sf_field_bytes(&s->media[i].density) +
+             rrv__sf_field_bytes(&s->media[i].temperature) +
+             rrv__sf_field_bytes(&s->media[i].pressure) + rrv__sf_field_bytes(&s->media[i].ior);
+    return b;
+}
+
+/* -- the public calls -- */
+
+/* An edit invalidates what prepare built, and the bytes are counted anew. */
+static void rrv__api_edited(rrv_scene *s)
+{
+    int i, w;
+    rrv__scene_release_prepared(s);
+    s->grid_bytes = 0;
+    for (i = 0; i < s->medium_count; ++i)
+        for (w = 0; w < 4; ++w) {
+            const rrv_field *f = rrv__medium_field_of(&s->media[i], (rrv_medium_field)w);
+            s->grid_bytes += rrv__sf_field_bytes(f) - rrv__sf_blob_capacity(f->blob_count) * sizeof(rrv_blob);
+        }
+    s->bytes = rrv__sf_scene_bytes(s);
+}
+
+RRV_DEF rrv_result rrv_scene_create(rrv_scene **out, rrv_error *err)
+{
+    rrv__clear_error(err);
+    if (!out) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_create: NULL argument");
+    *out = rrv__scene_new("scene");
+    if (!*out) return rrv__fail(err, RRV_ERROR_MEMORY, "scene", 0, "out of memory");
+    (*out)->bytes = sizeof **out;
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_scene_set_camera(rrv_scene *scene, const rrv_camera *camera, rrv_error *err)
+{
+    rrv_camera c;
+    rrv__ck ck;
+    rrv__clear_error(err);
+    if (!scene || !camera)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_set_camera: NULL argument");
+    c = *camera;
+    rrv__camera_def(&c);
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "camera");
+    RRV__CK(rrv__camera_check(&ck, &c));
+    scene->camera = c;
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_scene_set_settings(rrv_scene *scene, const rrv_settings *settings,
+                                          rrv_error *err)
+{
+    rrv_settings s;
+    rrv__ck ck, ambient;
+    rrv__clear_error(err);
+    if (!scene || !settings)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_set_settings: NULL argument");
+    s = *settings;
+    rrv__settings_def(&s);
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "settings");
+    rrv__ck_init(&ambient, err, scene->path, 0, RRV_ERROR_ARGUMENT, "settings: ambient");
+    RRV__CK(rrv__settings_check(&ck, &ambient, &s));
+    rrv__api_edited(scene); /* majorant_cells and the bakes depend on settings */
+    scene->settings = s;
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_scene_set_environment(rrv_scene *scene, const rrv_environment *env,
+                                             rrv_error *err)
+{
+    rrv_environment e;
+    rrv__ck ck;
+    rrv__clear_error(err);
+    if (!scene || !env)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_set_environment: NULL argument");
+    e = *env;
+    rrv__environment_def(&e);
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "environment");
+    RRV__CK(rrv__environment_check(&ck, &e));
+    scene->environment = e;
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_scene_add_material(rrv_scene *scene, const rrv_material *material,
+                                          int *index, rrv_error *err)
+{
+    rrv_material m;
+    rrv__ck ck;
+    rrv_result r;
+    rrv__clear_error(err);
+    if (!scene || !material)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_add_material: NULL argument");
+    m = *material;
+    m.name[sizeof m.name - 1] = '\0';
+    rrv__material_def(&m);
+    rrv__name_default(scene, m.name, 0);
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "material \"%s\"", m.name);
+    r = rrv__store_material(&ck, scene, &m, index);
+    rrv__api_edited(scene);
+    return r;
+}
+
+static rrv_result rrv__api_shape_material(rrv__ck *ck, rrv_scene *scene, rrv_shape *s)
+{
+    int index;
+    if (scene->material_count > 0 || s->material != 0) return RRV_OK;
+    RRV__CK(rrv__default_material(ck, scene, &index));
+    s->material = index;
+    return RRV_OK;
+}
+
+RRV_DEF rrv_result rrv_scene_add_shape(rrv_scene *scene, const rrv_shape *shape, int *index,
+                                       rrv_error *err)
+{
+    rrv_shape s;
+    rrv__ck ck;
+    rrv_result r;
+    rrv__clear_error(err);
+    if (!scene || !shape)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_add_shape: NULL argument");
+    s = *shape;
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "shape %d (%s)", scene->shape_count,
+                 rrv__shape_name(s.kind));
+    r = rrv__api_shape_material(&ck, scene, &s);
+    if (r == RRV_OK) r = rrv__store_shape(&ck, scene, &s);
+    if (r == RRV_OK && index) *index = scene->shape_count - 1;
+    rrv__api_edited(scene);
+    return r;
+}
+
+RRV_DEF rrv_result rrv_scene_add_triangles(rrv_scene *scene, const rrv_shape *proto,
+                                           const double *points, int point_count,
+                                           const int *indices, int triangle_count, rrv_error *err)
+{
+    rrv_shape s;
+    rrv__ck ck;
+    rrv_result r = RRV_OK;
+    int i, c;
+    rrv__clear_error(err);
+    if (!scene || !proto || (point_count > 0 && !points) || (triangle_count > 0 && !indices) ||
+        point_count < 0 || triangle_count < 0)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_add_triangles: invalid argument");
+    s = *proto;
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "mesh");
+    r = rrv__api_shape_material(&ck, scene, &s);
+    for (i = 0; i < triangle_count && r == RRV_OK; ++i) {
+        rrv_vec3 v[3];
+        for (c = 0; c < 3; ++c) {
+            int k = indices[3 * i + c];
+            if (k < 0 || k >= point_count) {
+                r = rrv__ck_fail(&ck, RRV_OK, "index %d is out of range (%d points)", k, point_count);
+                break;
+            }
+            v[c] = rrv__v3(points[3 * k], points[3 * k + 1], points[3 * k + 2]);
+        }
+        if (r == RRV_OK) r = rrv__store_triangle(&ck, scene, v[0], v[1], v[2], &s);
+    }
+    rrv__api_edited(scene);
+    return r;
+}
+
+RRV_DEF rrv_result rrv_scene_add_medium(rrv_scene *scene, const rrv_medium *medium, int *index,
+                                        rrv_error *err)
+{
+    rrv_medium m;
+    rrv__ck ck;
+    rrv_result r;
+    rrv__clear_error(err);
+    if (!scene || !medium)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_add_medium: NULL argument");
+    m = *medium;
+    m.name[sizeof m.name - 1] = '\0';
+    memset(m.line, 0, sizeof m.line);
+    rrv__medium_def(&m);
+    rrv__name_default(scene, m.name, 1);
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "medium \"%s\"", m.name);
+    r = rrv__store_medium(&ck, scene, &m, index);
+    rrv__api_edited(scene);
+    return r;
+}
+
+/* A deep copy, so the scene owns every array it frees. */
+static int rrv__field_copy(rrv_field *dst, const rrv_field *src)
+{
+    *dst = *src;
+    dst->blobs = NULL;
+    dst->grid.data = NULL;
+    dst->nanovdb.buffer = NULL;
+    if (src->kind == RRV_FIELD_BLOBS && src->blob_count > 0 && src->blobs) {
+        size_t cap = rrv__sf_blob_capacity(src->blob_count);
+        if (src->blob_count > RRV_MAX_BLOBS) return 1; /* refused by the check */
+        dst->blobs = (rrv_blob *)RRV_MALLOC(cap * sizeof(rrv_blob));
+        if (!dst->blobs) return 0;
+        memcpy(dst->blobs, src->blobs, (size_t)src->blob_count * sizeof(rrv_blob));
+    } else {
+        dst->blob_count = 0;
+    }
+    if (src->kind == RRV_FIELD_GRID && src->grid.data && src->grid.nx > 0 && src->grid.ny > 0 &&
+        src->grid.nz > 0 && src->grid.channels > 0) {
+        size_t n = (size_t)src->grid.nx * (size_t)src->grid.ny * (size_t)src->grid.nz *
+                   (size_t)src->grid.channels;
+        dst->grid.data = (float *)RRV_MALLOC(n * sizeof(float));
+        if (!dst->grid.data) return 0;
+        memcpy(dst->grid.data, src->grid.data, n * sizeof(float));
+    }
+    if (src->kind == RRV_FIELD_NANOVDB && src->nanovdb.buffer && src->nanovdb.size > 0) {
+        dst->nanovdb.buffer = (unsigned char *)RRV_MALLOC(src->nanovdb.size);
+        if (!dst->nanovdb.buffer) return 0;
+        memcpy(dst->nanovdb.buffer, src->nanovdb.buffer, src->nanovdb.size);
+    } else {
+        dst->nanovdb.size = 0;
+    }
+    return 1;
+}
+
+RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_field which,
+                                       const rrv_field *field, rrv_error *err)
+{
+    rrv_field f;
+    rrv_medium *m;
+    rrv__ck ck;
+    rrv_result r;
+    rrv__clear_error(err);
+    if (!scene || !field || medium < 0 || medium >= scene->medium_count ||
+        (unsigned)which > (unsigned)RRV_MEDIUM_IOR)
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene ? scene->path : NULL, 0,
+                         "rrv_scene_set_field: invalid argument");
+    m = &scene->media[medium];
+    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "%s of medium \"%s\"",
+                 rrv__medium_field_names[which], m->name);
+    if (!rrv__field_copy(&f, field)) {
+        rrv__sf_field_free(&f);
+        return rrv__ck_fail(&ck, RRV_ERROR_MEMORY, "out of memory");
+    }
+    rrv__field_def(&f, which, m);
+    r = rrv__field_check(&ck, which, m, &f, 0);
+    if (r != RRV_OK) {
+        rrv__sf_field_free(&f);
+        return r;
+    }
+    rrv__sf_field_free(rrv__medium_field_of(m, which));
+    *rrv__medium_field_of(m, which) = f;
+    m->line[1 + which] = 0;
+    m->source[1 + which][0] = '\0';
+    rrv__api_edited(scene);
+    return RRV_OK;
+}
+
+/* >> 12 curved NEE (module): shoot, aim, the cones, the manifold walk =========
+   Connections to lights along bent rays. What every build keeps comes
+   first: the face jumps and weak-chord classes that sort paths, nee AIM and
+   the light point a curved connection aims at. The solvers of nee SHOOT
+   and MANIFOLD, with the cones, follow in the one block RRV_NO_CURVED_NEE
+   leaves out. */
 
 /* Shots a solve may take: of the solves that converged within 40, 99 % took 15 or fewer. */
 #define RRV__SOLVE_ITERATIONS 20
@@ -8660,12 +9882,418 @@ RRV_DEF rrv_result rrv_trace_ray(const rrv_scene *scene, rrv_integrator integrat
 #define RRV__WEAK_BEND 0.0
 #endif
 
+/* Is a jump of the refractivity across a face (rrv__cross_face's
+   face_jump) one that curved connections cannot solve across? */
+static int rrv__jump_counts(double jump) { return jump > RRV__SOLVE_JUMP; }
+
+/* Does the refractivity jump across the face the ray along d meets at x? */
+static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
+{
+    double gap = rrv__face_gap(x);
+    double before = rrv__scene_refractivity(scene, rrv__madd(x, d, -gap), NULL);
+    double after = rrv__scene_refractivity(scene, rrv__madd(x, d, gap), NULL);
+    return fabs(after - before) > RRV__SOLVE_JUMP;
+}
+
+/* Is x inside a refraction support (where rays bend)? */
+static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x)
+{
+    rrv__support_view v;
+    rrv__look_along(scene, x, rrv__v3(0.6, 0.48, 0.64), &v);
+    return v.inside;
+}
+
+/* Is a straight connection from x to a light sample one of the paths
+   straight NEE stands for when shooting sorts paths into classes, i.e.
+   does it stay out of every refraction support? Forward paths make the
+   same test. */
+static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls)
+{
+    if (!ctx->partition) return 1;
+    return rrv__weak_chord(ctx, x, ls->wi, ls->dist);
+}
+
+/* A bound on how far the straight chord from x along unit d, length len,
+   would turn a ray: the integral along it of each majorant cell's bound
+   on |grad eta| over the lowest eta in the scene (the ray equation turns
+   the direction at |grad_perp eta| / eta per metre). Stops counting once
+   the sum passes stop. */
+static double rrv__chord_bend(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop)
+{
+    const rrv_scene *scene = ctx->scene;
+    const double xs[3] = {x.x, x.y, x.z}, ds[3] = {d.x, d.y, d.z};
+    /* a context set up by hand (tests) may leave it 0: the lowest eta allowed */
+    double eta_floor = ctx->eta_floor > 0 ? ctx->eta_floor : RRV_MIN_IOR;
+    double sum = 0, limit = stop * eta_floor;
+    int i;
+    for (i = 0; i < scene->medium_count && sum <= limit; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        const struct rrv__majorant_grid *g = m->majorant;
+        double t0 = 0, t1 = DBL_MAX, t, t_end, t_next[3], t_delta[3];
+        ptrdiff_t stride[3], idx = 0;
+        int cell[3], step[3], a, misses = 0;
+        if (!rrv__medium_refracts(m) || !g || !g->grad_max) continue;
+        for (a = 0; a < 3; ++a) { /* the grid's box clips the chord */
+            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
+            const double hi = a == 0 ? g->hi.x : a == 1 ? g->hi.y : g->hi.z;
+            if (ds[a] == 0) {
+                misses |= xs[a] < lo || xs[a] > hi;
+            } else {
+                double ta = (lo - xs[a]) / ds[a], tb = (hi - xs[a]) / ds[a];
+                if (ta > tb) { double swap = ta; ta = tb; tb = swap; }
+                if (ta > t0) t0 = ta;
+                if (tb < t1) t1 = tb;
+            }
+        }
+        if (misses) continue;
+        t = t0 > 0 ? t0 : 0;
+        t_end = t1 < len ? t1 : len;
+        if (!(t < t_end)) continue;
+        stride[0] = 1;
+        stride[1] = g->n[0];
+        stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
+        for (a = 0; a < 3; ++a) {
+            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
+            const double cs = a == 0 ? g->cell.x : a == 1 ? g->cell.y : g->cell.z;
+            double c = (xs[a] + ds[a] * t - lo) / cs;
+            cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+            idx += stride[a] * cell[a];
+            if (ds[a] != 0) {
+                step[a] = ds[a] > 0 ? 1 : -1;
+                t_next[a] = (lo + (cell[a] + (ds[a] > 0)) * cs - xs[a]) / ds[a];
+                t_delta[a] = cs / fabs(ds[a]);
+                stride[a] *= step[a];
+                if (t_next[a] < t) t_next[a] = t;
+            } else {
+                step[a] = 0;
+                t_next[a] = t_delta[a] = DBL_MAX;
+            }
+        }
+        for (;;) {
+            double t_face;
+            a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+            t_face = t_next[a] < t_end ? t_next[a] : t_end;
+            sum += (double)g->grad_max[idx] * (t_face - t);
+            if (t_face >= t_end || sum > limit) break;
+            t = t_face;
+            cell[a] += step[a];
+            if (cell[a] < 0 || cell[a] >= g->n[a]) break;
+            idx += stride[a];
+            t_next[a] += t_delta[a];
+        }
+    }
+    return sum / eta_floor;
+}
+
+/* The class of a connection from x to a point len along unit d (len
+   DBL_MAX: the sky in direction d) when the estimators share paths (nee
+   shoot and manifold): weak, and left to straight NEE with its ordinary
+   MIS, if its straight chord crosses no sharp interface and turns a ray by
+   at most RRV__WEAK_BEND bend tolerances (rrv__chord_bend); else curved.
+   A chord that touches no support is weak. It is a function of the two
+   ends alone, so a forward path between them (not jumped) is sorted the
+   same way from its end points. Treating a weak connection as straight is
+   an approximation: the path straight NEE stands for is the chord, the
+   real one turns by less than the bound, the same order as the bending
+   one comb kick leaves out. */
+/* The chord's bound on bending (rrv__chord_bend, counted until it passes
+   stop) into *bound; 0 if the chord crosses a sharp interface. */
+static int rrv__chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop, double *bound)
+{
+    const rrv_scene *scene = ctx->scene;
+    double t = 0;
+    int faces;
+    rrv__support_view v;
+    *bound = 0;
+    rrv__look_along(scene, x, d, &v);
+    if (!v.inside && !(v.t_face < len)) return 1;
+    /* each support box has at most two faces and a sphere two more along
+       a line; more crossings than that are rounding: call it curved */
+    for (faces = 0; v.t_face < len - t; ++faces) {
+        rrv_vec3 at = rrv__madd(x, d, t + v.t_face);
+        if (faces >= 4 * scene->medium_count || rrv__face_jumps(scene, at, d)) return 0;
+        t += v.t_face + rrv__face_gap(at);
+        rrv__look_along(scene, rrv__madd(x, d, t), d, &v);
+    }
+    *bound = rrv__chord_bend(ctx, x, d, len, stop);
+    return 1;
+}
+
+static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double *bound)
+{
+    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
+    return rrv__chord_bound(ctx, x, d, len, tolerance, bound) && *bound <= tolerance;
+}
+
+static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len)
+{
+    double bound;
+    return rrv__weak_chord_bound(ctx, x, d, len, &bound);
+}
+
+/* The class of a forward path from its last vertex x along w0 that ends
+   along unit d at len (DBL_MAX: the sky): 0 if its chord is curved; 1 if
+   the chord is weak and the path is the chord's near-straight root, the
+   one straight NEE stands for (a ray that turns by at most the chord's
+   bound leaves within that angle of it); 2 if the chord is weak but the
+   path left at a wider angle: another root of the same two ends (a ray
+   bent by a lens into a point whose chord only grazes it), which straight
+   NEE never samples and curved NEE skips for weak chords: the forward path
+   counts it in full, or with shoot and manifold shares it with the rays
+   drawn toward strong supports (rrv__cone_nee). */
+static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len)
+{
+    double bound;
+    if (!rrv__weak_chord_bound(ctx, x, d, len, &bound)) return 0;
+    /* the sine of the angle, well conditioned where acos of a dot product
+       near 1 is not; 1e-7 rad of slack for the nudges off faces and
+       rounding along a path that went straight */
+    return rrv__dot(w0, d) > 0 && rrv__length(rrv__cross(w0, d)) <= bound + 1e-7 ? 1 : 2;
+}
+
+static void rrv__vertex_eval(const rrv__vertex_bsdf *v, rrv_vec3 w, double f[3])
+{
+    int c;
+    if (v->surface) {
+        double cosw = fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI;
+        for (c = 0; c < 3; ++c) f[c] = v->albedo[c] * cosw;
+    } else {
+        f[0] = f[1] = f[2] = rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
+    }
+}
+
+/* The density of the vertex's own sampling of w (cosine lobe, phase function). */
+static double rrv__vertex_pdf(const rrv__vertex_bsdf *v, rrv_vec3 w)
+{
+    return v->surface ? fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI : rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
+}
+
+/* The area density with which rrv__pick_area_light names the point y of
+   light s from x0, selection included: uniform on a quad or triangle; on
+   a sphere the cone's solid-angle density turned into area at y, on the
+   cap x0 sees (0 elsewhere: no draw names a point x0 does not see). */
+static double rrv__light_area_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 y)
+{
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv_vec3 to_x0 = rrv__sub(x0, y), n = rrv__sub(y, s->center);
+        double dist2 = rrv__dot(to_x0, to_x0), facing = rrv__dot(n, to_x0) / s->radius;
+        if (!(facing > 0) || !(dist2 > 0)) return 0.0;
+        return rrv__emitter_pdf(s, x0, y, n) * facing / (sqrt(dist2) * dist2) / rrv__light_choices(scene);
+    }
+    return 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
+}
+
+/* ---- nee AIM: bent shadow rays aimed at light samples -----------------------------
+   Where the two-point problem is not solved (the comb, whose kick points
+   move with the ray and have no Jacobi field; or by choice), light is still
+   sampled: a point y on a light (rrv__pick_area_light) gives the
+   direction w0 from x0 to it, and the shadow ray leaves along w0 bent
+   exactly as a camera ray would be (the same comb kicks or eikonal steps,
+   its transmittance ratio-tracked chord by chord). If it lands on the front
+   of that light, the light's radiance counts. As an estimator this is
+   sampling w0 with the solid-angle density pdf(w0) of the straight line
+   from x0 along w0 meeting the light (rrv__aim_pdf), a function of w0 alone,
+   whatever the bent ray then does; so the power heuristic against the
+   vertex's own sampling of w0 is exact, and a forward path that reaches
+   the light from x0 along w0 takes the complementary weight (in
+   rrv__hit_surface), whether or not its end is where w0's line meets it.
+   Unbiased for the discretisation camera rays use, at about the cost of a
+   straight shadow ray plus the kicks along it. It does not focus: a ray
+   that refraction turns off the light contributes nothing, so caustics of
+   small lights come from forward paths, as with nee none; on weak heat
+   haze nearly every aimed ray lands, and the estimate is as good as
+   straight NEE's without its bias.
+   The classes are shoot's: a weak chord (rrv__weak_chord) is straight
+   NEE's, a path crossing a sharp interface (Fresnel) is the forward path's
+   alone, and the sky is not aimed at. A sphere light's w is straight
+   NEE's draw in its cone (rrv__pick_area_light). */
+
+
+/* Who carries a connection from x0 along unit w over len to a point of
+   the light s: 0, straight NEE (a weak chord,
+   rrv__weak_chord); 1, nee aim; 2, the forward path alone (the chord
+   crosses a sharp interface, or bends too much to be worth aiming:
+   RRV__AIM_REACH). A function of x0 and w alone (len and s are where w's
+   line meets the light), so a forward path computes it for itself. */
+static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double len)
+{
+    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
+    /* the light's size across: a sphere's by its disc's area */
+    double size = s->kind == RRV_SHAPE_SPHERE ? sqrt(RRV__PI) * s->radius : sqrt(rrv__shape_area(s));
+    double reach = RRV__AIM_REACH * size / len, bound;
+    if (!rrv__chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound)) return 2;
+    if (bound <= tolerance) return 0;
+    return bound <= reach ? 1 : 2;
+}
+
+/* The solid-angle density of nee aim's w toward the light s from x0,
+   light choice included: 0 where the line from x0 along unit w misses s.
+   Both faces of a quad or triangle count: the point is drawn whatever
+   side of s faces x0, and a bent ray aimed at the back may land on the
+   front. A sphere's is its cone's (rrv__pick_area_light). *len: how far
+   along w the line meets s. */
+static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double *len)
+{
+    rrv_vec3 n, rel;
+    double n2, facing, t, a, b, cos_y;
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv_vec3 to_c = rrv__sub(s->center, x0);
+        double along = rrv__dot(to_c, w), miss2 = rrv__dot(to_c, to_c) - along * along, r2 = s->radius * s->radius;
+        if (!(along > 0) || !(miss2 < r2) || !(rrv__dot(to_c, to_c) > r2)) return 0.0;
+        *len = along - sqrt(r2 - miss2);
+        return rrv__emitter_pdf(s, x0, x0, w) / rrv__light_choices(scene);
+    }
+    n = rrv__cross(s->e1, s->e2);
+    n2 = rrv__dot(n, n);
+    facing = rrv__dot(n, w);
+    if (!(facing != 0) || !(n2 > 0)) return 0.0;
+    t = rrv__dot(n, rrv__sub(s->p0, x0)) / facing;
+    if (!(t > 0) || !(t < DBL_MAX)) return 0.0;
+    rel = rrv__sub(rrv__madd(x0, w, t), s->p0);
+    a = rrv__dot(rrv__cross(rel, s->e2), n) / n2;
+    b = rrv__dot(rrv__cross(s->e1, rel), n) / n2;
+    if (a < 0 || b < 0 || (s->kind == RRV_SHAPE_TRIANGLE ? a + b > 1 : a > 1 || b > 1)) return 0.0;
+    cos_y = fabs(facing) / sqrt(n2);
+    *len = t;
+    return t * t / (rrv__shape_area(s) * cos_y * rrv__light_choices(scene));
+}
+
+/* The density nee (straight or aimed) draws w with from x0 toward the
+   light s, 0 where it leaves w to forward paths: what a
+   forward path that reached s from x0 along w weighs itself against. */
+static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w)
+{
+    double len, pdf = rrv__aim_pdf(ctx->scene, s, x0, w, &len);
+    return pdf > 0 && rrv__aim_class(ctx, s, x0, w, len) < 2 ? pdf : 0.0;
+}
+
+/* nee aim's shadow ray from o along *d, bent as camera rays are: the shape
+   index of the first surface it meets (*hit, *d its direction there) and
+   the transmittance up to it; -1 where T reaches 0 or the step bound
+   (counted as cut), -2 where it leaves the scene or meets a sharp
+   interface. */
+static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *rng, rrv__hit *hit, double T[3])
+{
+    const rrv_scene *scene = ctx->scene;
+    rrv__bender b;
+    long steps = 0;
+    ++ctx->stats.paths;
+    T[0] = T[1] = T[2] = 1.0;
+    rrv__bender_start(&b, scene, ctx->eikonal, o);
+    for (;;) {
+        double segment, reach, Ts[3];
+        int has_hit, c, end;
+        if (++steps > ctx->step_bound) {
+            ++ctx->stats.paths_cut;
+            return -1;
+        }
+        if (b.run > ctx->trap_length) {
+            ++ctx->stats.paths_cut;
+            ++ctx->stats.trapped_paths;
+            return -1;
+        }
+        if (!b.pending) rrv__plan_segment(&b, scene, o, d, rng);
+        segment = b.segment;
+        has_hit = rrv__segment_hit(ctx, &b, o, *d, segment, hit);
+        if (!has_hit && !(segment < DBL_MAX)) return -2;
+        reach = has_hit ? hit->t : segment;
+        if (rrv__chord_meets_extinction(scene, o, *d, reach)) {
+            rrv__transmittance(ctx, o, *d, reach, rng, Ts);
+            for (c = 0; c < 3; ++c) T[c] *= Ts[c];
+            if (!rrv__nonzero3(T)) return -1;
+        }
+        if (has_hit) return hit->shape;
+        end = b.end;
+        if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
+        rrv__finish_segment(&b, scene, &o, d, rng);
+        /* the jump the face's crossing looked up, as the forward path reads it */
+        if (end == RRV__END_FACE && rrv__jump_counts(b.face_jump)) return -2;
+    }
+}
+
+/* nee aim from vertex x0 (the section's comment says why it is unbiased). */
+static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                         const rrv__light_draw *draw, rrv__rng *rng)
+{
+    const rrv_scene *scene = ctx->scene;
+    rrv_vec3 y, ny, w0, d;
+    rrv__hit hit;
+    double pdf_area, to_y, pdf_aim, pdf_dir, f[3], T[3], k;
+    int c, met;
+    const rrv_shape *s = rrv__pick_area_light(scene, draw, x0, 1, &y, &ny, &pdf_area);
+    (void)pdf_area;
+    if (!s) return;
+    to_y = rrv__length(rrv__sub(y, x0));
+    if (!(to_y > 0)) return;
+    w0 = rrv__scale(rrv__sub(y, x0), 1.0 / to_y);
+    rrv__vertex_eval(v, w0, f);
+    if (!(f[0] > 0 || f[1] > 0 || f[2] > 0)) return;
+    if (rrv__aim_class(ctx, s, x0, w0, to_y) != 1) return; /* straight NEE's or the forward path's */
+    pdf_aim = rrv__aim_pdf(scene, s, x0, w0, &to_y);
+    if (!(pdf_aim > 0) || !(pdf_aim < DBL_MAX)) return; /* y on the light's rim, seen edge-on */
+    ++ctx->stats.aim_shots;
+    d = w0;
+    met = rrv__aim_trace(ctx, x0, &d, rng, &hit, T);
+    if (met == -1) return;
+    if (met == -2 || &scene->shapes[met] != s || !(rrv__dot(hit.n, d) < 0)) {
+        ++ctx->stats.aim_missed;
+        return;
+    }
+    pdf_dir = rrv__vertex_pdf(v, w0);
+    k = rrv__power_heuristic(pdf_aim, pdf_dir) / pdf_aim * rrv__eta_scale(ctx, hit.p) * rrv__path_mis(path);
+    for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
+}
+
+/* The light point y the draw names from x0 for a curved connection, its
+   normal and its area pdf (selection included); NULL for the sky, and for
+   sphere lights unless spheres is set. A quad's or triangle's point is
+   uniform in area; a sphere's is where the direction straight NEE draws
+   uniformly in the sphere's cone from x0 meets its near side, so that
+   one draw names one point whichever class routes it (straight NEE, a
+   curved estimator). The estimators divide by pdf_area, and the forward
+   paths weigh themselves with rrv__light_area_pdf, the same density. */
+static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 x0,
+                                             int spheres, rrv_vec3 *y, rrv_vec3 *ny, double *pdf_area)
+{
+    int pick = rrv__light_pick(scene, draw);
+    const rrv_shape *s;
+    if (pick < 0 || pick == scene->light_count) return NULL;
+    s = &scene->shapes[scene->lights[pick]];
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv__light_sample ls;
+        if (!spheres || !rrv__sample_light(scene, x0, draw, &ls) || !(ls.dist > 0)) return NULL;
+        *y = ls.point;
+        *ny = rrv__scale(rrv__sub(ls.point, s->center), 1.0 / s->radius);
+        *pdf_area = rrv__light_area_pdf(scene, s, x0, ls.point);
+        return *pdf_area > 0 ? s : NULL;
+    }
+    *y = rrv__area_light_point(s, draw->u1, draw->u2);
+    *ny = rrv__normalize(rrv__cross(s->e1, s->e2));
+    *pdf_area = 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
+    return s;
+}
+
 /* RRV_NO_CURVED_NEE leaves out the solvers of nee shoot and manifold and
    the cones that go with them; nee aim, the weak-chord classes and the
    face jumps stay. Such a build supports no scene for solving, so the
    default integrator never picks eikonal for its shooting and the default
    nee aims; an explicit shoot or manifold is refused (rrv__settings_check). */
 #ifndef RRV_NO_CURVED_NEE
+/* ---- nee SHOOT: a curved connection solved by Newton's method ------------
+   nee SHOOT (eikonal integrator). A connection from a vertex x0 to a point y
+   on an area light along the bent ray is found by Newton's method on the two
+   angles of the initial direction w0, the ray traced with exactly the
+   segments a camera ray takes (rrv__plan_segment / rrv__finish_segment: RK4
+   or leapfrog steps, straight chords between them, faces). The residual is
+   the offset of y from where the path first crosses the light's plane from
+   its front (for two interior points, as in the tests: from the chord that
+   passes y, in the plane through y perpendicular to it). Its Jacobian comes from
+   the variational (Jacobi-field) equations of the very same discrete steps,
+   which need the Hessian of eta (rrv__scene_hessian). At the root
+   dw0 = dA_y |cos theta_y| / |det J_perp|, J_perp the 2x2 derivative of the
+   endpoint perpendicular to the arriving chord with respect to w0 per unit
+   solid angle (r^2 I for straight rays: cos / r^2). */
+
 /* Can shooting differentiate this medium's IOR? Every kind rrv__refractivity_
    hessian has a derivative for: the closed-form profiles, blobs, and grids
    (gridvol or NanoVDB, baked or not, trilinear or cubic: the derivative of
@@ -8983,36 +10611,6 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
     return 1;
 }
 
-#else
-static int rrv__solver_supports_scene(const rrv_scene *scene)
-{
-    (void)scene;
-    return 0;
-}
-#endif /* RRV_NO_CURVED_NEE */
-
-/* Is a jump of the refractivity across a face (rrv__cross_face's
-   face_jump) one that curved connections cannot solve across? */
-static int rrv__jump_counts(double jump) { return jump > RRV__SOLVE_JUMP; }
-
-/* Does the refractivity jump across the face the ray along d meets at x? */
-static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
-{
-    double gap = rrv__face_gap(x);
-    double before = rrv__scene_refractivity(scene, rrv__madd(x, d, -gap), NULL);
-    double after = rrv__scene_refractivity(scene, rrv__madd(x, d, gap), NULL);
-    return fabs(after - before) > RRV__SOLVE_JUMP;
-}
-
-/* Is x inside a refraction support (where rays bend)? */
-static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x)
-{
-    rrv__support_view v;
-    rrv__look_along(scene, x, rrv__v3(0.6, 0.48, 0.64), &v);
-    return v.inside;
-}
-
-#ifndef RRV_NO_CURVED_NEE
 enum { RRV__SHOT_REACHED, RRV__SHOT_MISSED, RRV__SHOT_INTERFACE, RRV__SHOT_BLOCKED };
 
 typedef struct rrv__shot {
@@ -9414,189 +11012,7 @@ static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, co
     return found;
 }
 
-#endif /* RRV_NO_CURVED_NEE */
 
-/* Is a straight connection from x to a light sample one of the paths
-   straight NEE stands for when shooting sorts paths into classes, i.e.
-   does it stay out of every refraction support? Forward paths make the
-   same test. */
-static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls)
-{
-    if (!ctx->partition) return 1;
-    return rrv__weak_chord(ctx, x, ls->wi, ls->dist);
-}
-
-/* A bound on how far the straight chord from x along unit d, length len,
-   would turn a ray: the integral along it of each majorant cell's bound
-   on |grad eta| over the lowest eta in the scene (the ray equation turns
-   the direction at |grad_perp eta| / eta per metre). Stops counting once
-   the sum passes stop. */
-static double rrv__chord_bend(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop)
-{
-    const rrv_scene *scene = ctx->scene;
-    const double xs[3] = {x.x, x.y, x.z}, ds[3] = {d.x, d.y, d.z};
-    /* a context set up by hand (tests) may leave it 0: the lowest eta allowed */
-    double eta_floor = ctx->eta_floor > 0 ? ctx->eta_floor : RRV_MIN_IOR;
-    double sum = 0, limit = stop * eta_floor;
-    int i;
-    for (i = 0; i < scene->medium_count && sum <= limit; ++i) {
-        const rrv_medium *m = &scene->media[i];
-        const struct rrv__majorant_grid *g = m->majorant;
-        double t0 = 0, t1 = DBL_MAX, t, t_end, t_next[3], t_delta[3];
-        ptrdiff_t stride[3], idx = 0;
-        int cell[3], step[3], a, misses = 0;
-        if (!rrv__medium_refracts(m) || !g || !g->grad_max) continue;
-        for (a = 0; a < 3; ++a) { /* the grid's box clips the chord */
-            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
-            const double hi = a == 0 ? g->hi.x : a == 1 ? g->hi.y : g->hi.z;
-            if (ds[a] == 0) {
-                misses |= xs[a] < lo || xs[a] > hi;
-            } else {
-                double ta = (lo - xs[a]) / ds[a], tb = (hi - xs[a]) / ds[a];
-                if (ta > tb) { double swap = ta; ta = tb; tb = swap; }
-                if (ta > t0) t0 = ta;
-                if (tb < t1) t1 = tb;
-            }
-        }
-        if (misses) continue;
-        t = t0 > 0 ? t0 : 0;
-        t_end = t1 < len ? t1 : len;
-        if (!(t < t_end)) continue;
-        stride[0] = 1;
-        stride[1] = g->n[0];
-        stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
-        for (a = 0; a < 3; ++a) {
-            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
-            const double cs = a == 0 ? g->cell.x : a == 1 ? g->cell.y : g->cell.z;
-            double c = (xs[a] + ds[a] * t - lo) / cs;
-            cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
-            idx += stride[a] * cell[a];
-            if (ds[a] != 0) {
-                step[a] = ds[a] > 0 ? 1 : -1;
-                t_next[a] = (lo + (cell[a] + (ds[a] > 0)) * cs - xs[a]) / ds[a];
-                t_delta[a] = cs / fabs(ds[a]);
-                stride[a] *= step[a];
-                if (t_next[a] < t) t_next[a] = t;
-            } else {
-                step[a] = 0;
-                t_next[a] = t_delta[a] = DBL_MAX;
-            }
-        }
-        for (;;) {
-            double t_face;
-            a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
-            t_face = t_next[a] < t_end ? t_next[a] : t_end;
-            sum += (double)g->grad_max[idx] * (t_face - t);
-            if (t_face >= t_end || sum > limit) break;
-            t = t_face;
-            cell[a] += step[a];
-            if (cell[a] < 0 || cell[a] >= g->n[a]) break;
-            idx += stride[a];
-            t_next[a] += t_delta[a];
-        }
-    }
-    return sum / eta_floor;
-}
-
-/* The class of a connection from x to a point len along unit d (len
-   DBL_MAX: the sky in direction d) when the estimators share paths (nee
-   shoot and manifold): weak, and left to straight NEE with its ordinary
-   MIS, if its straight chord crosses no sharp interface and turns a ray by
-   at most RRV__WEAK_BEND bend tolerances (rrv__chord_bend); else curved.
-   A chord that touches no support is weak. It is a function of the two
-   ends alone, so a forward path between them (not jumped) is sorted the
-   same way from its end points. Treating a weak connection as straight is
-   an approximation: the path straight NEE stands for is the chord, the
-   real one turns by less than the bound, the same order as the bending
-   one comb kick leaves out. */
-/* The chord's bound on bending (rrv__chord_bend, counted until it passes
-   stop) into *bound; 0 if the chord crosses a sharp interface. */
-static int rrv__chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop, double *bound)
-{
-    const rrv_scene *scene = ctx->scene;
-    double t = 0;
-    int faces;
-    rrv__support_view v;
-    *bound = 0;
-    rrv__look_along(scene, x, d, &v);
-    if (!v.inside && !(v.t_face < len)) return 1;
-    /* each support box has at most two faces and a sphere two more along
-       a line; more crossings than that are rounding: call it curved */
-    for (faces = 0; v.t_face < len - t; ++faces) {
-        rrv_vec3 at = rrv__madd(x, d, t + v.t_face);
-        if (faces >= 4 * scene->medium_count || rrv__face_jumps(scene, at, d)) return 0;
-        t += v.t_face + rrv__face_gap(at);
-        rrv__look_along(scene, rrv__madd(x, d, t), d, &v);
-    }
-    *bound = rrv__chord_bend(ctx, x, d, len, stop);
-    return 1;
-}
-
-static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double *bound)
-{
-    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
-    return rrv__chord_bound(ctx, x, d, len, tolerance, bound) && *bound <= tolerance;
-}
-
-static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len)
-{
-    double bound;
-    return rrv__weak_chord_bound(ctx, x, d, len, &bound);
-}
-
-/* The class of a forward path from its last vertex x along w0 that ends
-   along unit d at len (DBL_MAX: the sky): 0 if its chord is curved; 1 if
-   the chord is weak and the path is the chord's near-straight root, the
-   one straight NEE stands for (a ray that turns by at most the chord's
-   bound leaves within that angle of it); 2 if the chord is weak but the
-   path left at a wider angle: another root of the same two ends (a ray
-   bent by a lens into a point whose chord only grazes it), which straight
-   NEE never samples and curved NEE skips for weak chords: the forward path
-   counts it in full, or with shoot and manifold shares it with the rays
-   drawn toward strong supports (rrv__cone_nee). */
-static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len)
-{
-    double bound;
-    if (!rrv__weak_chord_bound(ctx, x, d, len, &bound)) return 0;
-    /* the sine of the angle, well conditioned where acos of a dot product
-       near 1 is not; 1e-7 rad of slack for the nudges off faces and
-       rounding along a path that went straight */
-    return rrv__dot(w0, d) > 0 && rrv__length(rrv__cross(w0, d)) <= bound + 1e-7 ? 1 : 2;
-}
-
-static void rrv__vertex_eval(const rrv__vertex_bsdf *v, rrv_vec3 w, double f[3])
-{
-    int c;
-    if (v->surface) {
-        double cosw = fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI;
-        for (c = 0; c < 3; ++c) f[c] = v->albedo[c] * cosw;
-    } else {
-        f[0] = f[1] = f[2] = rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
-    }
-}
-
-/* The density of the vertex's own sampling of w (cosine lobe, phase function). */
-static double rrv__vertex_pdf(const rrv__vertex_bsdf *v, rrv_vec3 w)
-{
-    return v->surface ? fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI : rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
-}
-
-/* The area density with which rrv__pick_area_light names the point y of
-   light s from x0, selection included: uniform on a quad or triangle; on
-   a sphere the cone's solid-angle density turned into area at y, on the
-   cap x0 sees (0 elsewhere: no draw names a point x0 does not see). */
-static double rrv__light_area_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 y)
-{
-    if (s->kind == RRV_SHAPE_SPHERE) {
-        rrv_vec3 to_x0 = rrv__sub(x0, y), n = rrv__sub(y, s->center);
-        double dist2 = rrv__dot(to_x0, to_x0), facing = rrv__dot(n, to_x0) / s->radius;
-        if (!(facing > 0) || !(dist2 > 0)) return 0.0;
-        return rrv__emitter_pdf(s, x0, y, n) * facing / (sqrt(dist2) * dist2) / rrv__light_choices(scene);
-    }
-    return 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
-}
-
-#ifndef RRV_NO_CURVED_NEE
 /* The plane a shot toward light point y (normal ny) is solved in: a quad's
    or triangle's own, where the ray first crosses it from its front; for a
    sphere none (NULL), the solve aims the ray through y across its arriving
@@ -9799,170 +11215,7 @@ static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, cons
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
 
-#endif /* RRV_NO_CURVED_NEE */
 
-/* ---- nee AIM: bent shadow rays aimed at light samples -----------------------------
-   Where the two-point problem is not solved (the comb, whose kick points
-   move with the ray and have no Jacobi field; or by choice), light is still
-   sampled: a point y on a light (rrv__pick_area_light) gives the
-   direction w0 from x0 to it, and the shadow ray leaves along w0 bent
-   exactly as a camera ray would be (the same comb kicks or eikonal steps,
-   its transmittance ratio-tracked chord by chord). If it lands on the front
-   of that light, the light's radiance counts. As an estimator this is
-   sampling w0 with the solid-angle density pdf(w0) of the straight line
-   from x0 along w0 meeting the light (rrv__aim_pdf), a function of w0 alone,
-   whatever the bent ray then does; so the power heuristic against the
-   vertex's own sampling of w0 is exact, and a forward path that reaches
-   the light from x0 along w0 takes the complementary weight (in
-   rrv__hit_surface), whether or not its end is where w0's line meets it.
-   Unbiased for the discretisation camera rays use, at about the cost of a
-   straight shadow ray plus the kicks along it. It does not focus: a ray
-   that refraction turns off the light contributes nothing, so caustics of
-   small lights come from forward paths, as with nee none; on weak heat
-   haze nearly every aimed ray lands, and the estimate is as good as
-   straight NEE's without its bias.
-   The classes are shoot's: a weak chord (rrv__weak_chord) is straight
-   NEE's, a path crossing a sharp interface (Fresnel) is the forward path's
-   alone, and the sky is not aimed at. A sphere light's w is straight
-   NEE's draw in its cone (rrv__pick_area_light). */
-
-
-/* Who carries a connection from x0 along unit w over len to a point of
-   the light s: 0, straight NEE (a weak chord,
-   rrv__weak_chord); 1, nee aim; 2, the forward path alone (the chord
-   crosses a sharp interface, or bends too much to be worth aiming:
-   RRV__AIM_REACH). A function of x0 and w alone (len and s are where w's
-   line meets the light), so a forward path computes it for itself. */
-static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double len)
-{
-    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
-    /* the light's size across: a sphere's by its disc's area */
-    double size = s->kind == RRV_SHAPE_SPHERE ? sqrt(RRV__PI) * s->radius : sqrt(rrv__shape_area(s));
-    double reach = RRV__AIM_REACH * size / len, bound;
-    if (!rrv__chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound)) return 2;
-    if (bound <= tolerance) return 0;
-    return bound <= reach ? 1 : 2;
-}
-
-/* The solid-angle density of nee aim's w toward the light s from x0,
-   light choice included: 0 where the line from x0 along unit w misses s.
-   Both faces of a quad or triangle count: the point is drawn whatever
-   side of s faces x0, and a bent ray aimed at the back may land on the
-   front. A sphere's is its cone's (rrv__pick_area_light). *len: how far
-   along w the line meets s. */
-static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double *len)
-{
-    rrv_vec3 n, rel;
-    double n2, facing, t, a, b, cos_y;
-    if (s->kind == RRV_SHAPE_SPHERE) {
-        rrv_vec3 to_c = rrv__sub(s->center, x0);
-        double along = rrv__dot(to_c, w), miss2 = rrv__dot(to_c, to_c) - along * along, r2 = s->radius * s->radius;
-        if (!(along > 0) || !(miss2 < r2) || !(rrv__dot(to_c, to_c) > r2)) return 0.0;
-        *len = along - sqrt(r2 - miss2);
-        return rrv__emitter_pdf(s, x0, x0, w) / rrv__light_choices(scene);
-    }
-    n = rrv__cross(s->e1, s->e2);
-    n2 = rrv__dot(n, n);
-    facing = rrv__dot(n, w);
-    if (!(facing != 0) || !(n2 > 0)) return 0.0;
-    t = rrv__dot(n, rrv__sub(s->p0, x0)) / facing;
-    if (!(t > 0) || !(t < DBL_MAX)) return 0.0;
-    rel = rrv__sub(rrv__madd(x0, w, t), s->p0);
-    a = rrv__dot(rrv__cross(rel, s->e2), n) / n2;
-    b = rrv__dot(rrv__cross(s->e1, rel), n) / n2;
-    if (a < 0 || b < 0 || (s->kind == RRV_SHAPE_TRIANGLE ? a + b > 1 : a > 1 || b > 1)) return 0.0;
-    cos_y = fabs(facing) / sqrt(n2);
-    *len = t;
-    return t * t / (rrv__shape_area(s) * cos_y * rrv__light_choices(scene));
-}
-
-/* The density nee (straight or aimed) draws w with from x0 toward the
-   light s, 0 where it leaves w to forward paths: what a
-   forward path that reached s from x0 along w weighs itself against. */
-static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w)
-{
-    double len, pdf = rrv__aim_pdf(ctx->scene, s, x0, w, &len);
-    return pdf > 0 && rrv__aim_class(ctx, s, x0, w, len) < 2 ? pdf : 0.0;
-}
-
-/* nee aim's shadow ray from o along *d, bent as camera rays are: the shape
-   index of the first surface it meets (*hit, *d its direction there) and
-   the transmittance up to it; -1 where T reaches 0 or the step bound
-   (counted as cut), -2 where it leaves the scene or meets a sharp
-   interface. */
-static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *rng, rrv__hit *hit, double T[3])
-{
-    const rrv_scene *scene = ctx->scene;
-    rrv__bender b;
-    long steps = 0;
-    ++ctx->stats.paths;
-    T[0] = T[1] = T[2] = 1.0;
-    rrv__bender_start(&b, scene, ctx->eikonal, o);
-    for (;;) {
-        double segment, reach, Ts[3];
-        int has_hit, c, end;
-        if (++steps > ctx->step_bound) {
-            ++ctx->stats.paths_cut;
-            return -1;
-        }
-        if (b.run > ctx->trap_length) {
-            ++ctx->stats.paths_cut;
-            ++ctx->stats.trapped_paths;
-            return -1;
-        }
-        if (!b.pending) rrv__plan_segment(&b, scene, o, d, rng);
-        segment = b.segment;
-        has_hit = rrv__segment_hit(ctx, &b, o, *d, segment, hit);
-        if (!has_hit && !(segment < DBL_MAX)) return -2;
-        reach = has_hit ? hit->t : segment;
-        if (rrv__chord_meets_extinction(scene, o, *d, reach)) {
-            rrv__transmittance(ctx, o, *d, reach, rng, Ts);
-            for (c = 0; c < 3; ++c) T[c] *= Ts[c];
-            if (!rrv__nonzero3(T)) return -1;
-        }
-        if (has_hit) return hit->shape;
-        end = b.end;
-        if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
-        rrv__finish_segment(&b, scene, &o, d, rng);
-        /* the jump the face's crossing looked up, as the forward path reads it */
-        if (end == RRV__END_FACE && rrv__jump_counts(b.face_jump)) return -2;
-    }
-}
-
-/* nee aim from vertex x0 (the section's comment says why it is unbiased). */
-static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
-                         const rrv__light_draw *draw, rrv__rng *rng)
-{
-    const rrv_scene *scene = ctx->scene;
-    rrv_vec3 y, ny, w0, d;
-    rrv__hit hit;
-    double pdf_area, to_y, pdf_aim, pdf_dir, f[3], T[3], k;
-    int c, met;
-    const rrv_shape *s = rrv__pick_area_light(scene, draw, x0, 1, &y, &ny, &pdf_area);
-    (void)pdf_area;
-    if (!s) return;
-    to_y = rrv__length(rrv__sub(y, x0));
-    if (!(to_y > 0)) return;
-    w0 = rrv__scale(rrv__sub(y, x0), 1.0 / to_y);
-    rrv__vertex_eval(v, w0, f);
-    if (!(f[0] > 0 || f[1] > 0 || f[2] > 0)) return;
-    if (rrv__aim_class(ctx, s, x0, w0, to_y) != 1) return; /* straight NEE's or the forward path's */
-    pdf_aim = rrv__aim_pdf(scene, s, x0, w0, &to_y);
-    if (!(pdf_aim > 0) || !(pdf_aim < DBL_MAX)) return; /* y on the light's rim, seen edge-on */
-    ++ctx->stats.aim_shots;
-    d = w0;
-    met = rrv__aim_trace(ctx, x0, &d, rng, &hit, T);
-    if (met == -1) return;
-    if (met == -2 || &scene->shapes[met] != s || !(rrv__dot(hit.n, d) < 0)) {
-        ++ctx->stats.aim_missed;
-        return;
-    }
-    pdf_dir = rrv__vertex_pdf(v, w0);
-    k = rrv__power_heuristic(pdf_aim, pdf_dir) / pdf_aim * rrv__eta_scale(ctx, hit.p) * rrv__path_mis(path);
-    for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
-}
-
-#ifndef RRV_NO_CURVED_NEE
 /* ---- rays drawn toward strong supports: the roots of weak chords ---------------------
    A connection whose straight chord passes beside a lens is straight
    NEE's (rrv__weak_chord), yet the lens may bend other rays from x0 onto
@@ -11344,38 +12597,7 @@ static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__
     return 1;
 }
 
-#endif /* RRV_NO_CURVED_NEE */
 
-/* The light point y the draw names from x0 for a curved connection, its
-   normal and its area pdf (selection included); NULL for the sky, and for
-   sphere lights unless spheres is set. A quad's or triangle's point is
-   uniform in area; a sphere's is where the direction straight NEE draws
-   uniformly in the sphere's cone from x0 meets its near side, so that
-   one draw names one point whichever class routes it (straight NEE, a
-   curved estimator). The estimators divide by pdf_area, and the forward
-   paths weigh themselves with rrv__light_area_pdf, the same density. */
-static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 x0,
-                                             int spheres, rrv_vec3 *y, rrv_vec3 *ny, double *pdf_area)
-{
-    int pick = rrv__light_pick(scene, draw);
-    const rrv_shape *s;
-    if (pick < 0 || pick == scene->light_count) return NULL;
-    s = &scene->shapes[scene->lights[pick]];
-    if (s->kind == RRV_SHAPE_SPHERE) {
-        rrv__light_sample ls;
-        if (!spheres || !rrv__sample_light(scene, x0, draw, &ls) || !(ls.dist > 0)) return NULL;
-        *y = ls.point;
-        *ny = rrv__scale(rrv__sub(ls.point, s->center), 1.0 / s->radius);
-        *pdf_area = rrv__light_area_pdf(scene, s, x0, ls.point);
-        return *pdf_area > 0 ? s : NULL;
-    }
-    *y = rrv__area_light_point(s, draw->u1, draw->u2);
-    *ny = rrv__normalize(rrv__cross(s->e1, s->e2));
-    *pdf_area = 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
-    return s;
-}
-
-#ifndef RRV_NO_CURVED_NEE
 /* The seed's initial direction, from one distribution for the first solve
    and every trial: a Gaussian around the chord of 0.02 rad (half the
    time), of 0.2 rad (three times in eight) or uniform (one in eight), so
@@ -11486,6 +12708,12 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
          scene is supported for solving, so ctx->shoot and ctx->manifold
          stay 0 and no cone is set up) */
 
+static int rrv__solver_supports_scene(const rrv_scene *scene)
+{
+    (void)scene;
+    return 0;
+}
+
 static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                            const rrv__light_draw *draw, rrv__rng *rng)
 {
@@ -11528,13 +12756,15 @@ static struct rrv__chain *rrv__chain_new(int cap)
 static void rrv__chain_delete(struct rrv__chain *ch) { (void)ch; }
 #endif /* RRV_NO_CURVED_NEE */
 
-/* >> 12 image I/O (module): PFM, PNG and OpenEXR files, checksums ===========
+/* >> 13 image I/O (module): PFM, PNG and OpenEXR files, checksums ===========
    This section owns everything that turns a float RGB buffer into bytes and
    back: the PFM writer and reader, the PNG preview writer (with its own
    deflate, which the EXR writer's ZIP chunks share), the CRC-32 and
    Adler-32 those formats use, and the file forms that write through a
    temporary file so a failed write never replaces a good image with half of
-   a new one. */
+   a new one. The file forms' one way of opening a file for reading also
+   serves the whole-file reader at the end, which the NanoVDB and scene file
+   modules share. */
 
 /* Floats are moved through uint32_t bit patterns to fix their byte order. */
 typedef char rrv__float_must_be_ieee_single[(sizeof(float) == 4 && FLT_MANT_DIG == 24) ? 1 : -1];
@@ -13921,7 +15151,113 @@ RRV_DEF rrv_result rrv_read_exr(const char *path, float **rgb, int *width, int *
 }
 #endif
 
-/* >> 13 NanoVDB files (module): segments, grids and the validation of trees ==
+/* ---- whole files, for the NanoVDB and scene file readers ---------------- */
+
+/* Kept here, after the file forms it reads through, as only those two modules read whole files. */
+#if !defined(RRV_NO_SCENE_FILE) || !defined(RRV_NO_NANOVDB)
+
+#ifndef RRV_NO_STDIO
+/* A text file stops after the piece holding its first NUL byte: the parser
+   refuses the file on that line anyway, and a device such as /dev/zero
+   would otherwise be read up to the limit. */
+static int rrv__sf_text_stop(const unsigned char *data, size_t have, size_t got)
+{
+    return memchr(data + have - got, '\0', got) != NULL;
+}
+
+/* A binary file (NanoVDB, the only one read whole) stops after its first
+   piece unless it starts as one: where plain C cannot refuse a device,
+   /dev/zero is not read up to the limit either. */
+static int rrv__sf_binary_stop(const unsigned char *data, size_t have, size_t got)
+{
+    (void)got;
+    return have >= 7 && memcmp(data, "NanoVDB", 7) != 0;
+}
+
+/* A whole file, at most max_bytes of it (rrv__read_stream): one larger by
+   its size is refused before a byte is read, and a file of known size is
+   read into one buffer of that size (plus the byte that finds growth). */
+static rrv_result rrv__sf_stdio_read(const char *path, size_t max_bytes, int text, void **data,
+                                     size_t *size, const char **why)
+{
+    enum { PIECE = 64 * 1024 };
+    unsigned char *buf;
+    size_t first = 2 * (size_t)PIECE;
+    uint64_t file_size;
+    rrv_result r;
+    int errnum;
+    FILE *f = rrv__open_read(path, &file_size, why);
+    if (!f) return RRV_ERROR_IO;
+    if (file_size != UINT64_MAX) {
+        if (file_size > max_bytes) {
+            fclose(f);
+            return RRV_ERROR_LIMIT;
+        }
+        first = (size_t)file_size + 1;
+    }
+    r = rrv__read_stream(f, first, PIECE, max_bytes, 1, text ? rrv__sf_text_stop : rrv__sf_binary_stop,
+                         &buf, size, &errnum);
+    fclose(f);
+    if (r == RRV_ERROR_IO) *why = rrv__io_reason(errnum);
+    *data = buf;
+    return r;
+}
+#endif
+
+/* RRV_OK with the whole file; RRV_ERROR_IO (*why says why, or ""),
+   RRV_ERROR_LIMIT past max_bytes, RRV_ERROR_MEMORY, or RRV_ERROR_UNSUPPORTED
+   when there is no way to read files at all. */
+/* Gives back a buffer rrv__sf_read_whole returned, to whoever allocated it. */
+static void rrv__sf_release_whole(const rrv_load_options *opt, void *data)
+{
+    if (!data) return;
+    if (opt && opt->read_file && opt->release_file)
+        opt->release_file(opt->read_file_user, data);
+    else
+        RRV_FREE(data);
+}
+
+/* 1 when a buffer of rrv__sf_read_whole may be kept and later freed with
+   RRV_FREE (a NanoVDB grid keeps its file's bytes). */
+#ifndef RRV_NO_NANOVDB
+static int rrv__sf_whole_is_ours(const rrv_load_options *opt)
+{
+    return !(opt && opt->read_file && opt->release_file);
+}
+#endif
+
+static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, int text,
+                                     size_t max_bytes, void **data, size_t *size, const char **why)
+{
+    *data = NULL;
+    *size = 0;
+    *why = "";
+    if (opt && opt->on_input) opt->on_input(opt->on_input_user, path);
+    if (opt && opt->read_file) {
+        if (opt->read_file(opt->read_file_user, path, data, size) != 0) {
+            rrv__sf_release_whole(opt, *data);
+            *data = NULL;
+            return RRV_ERROR_IO;
+        }
+        if (!*data && *size > 0) return RRV_ERROR_IO;
+        if (*size > max_bytes) {
+            rrv__sf_release_whole(opt, *data);
+            *data = NULL;
+            return RRV_ERROR_LIMIT;
+        }
+        return RRV_OK;
+    }
+#ifndef RRV_NO_STDIO
+    return rrv__sf_stdio_read(path, max_bytes, text, data, size, why);
+#else
+    (void)text;
+    return RRV_ERROR_UNSUPPORTED;
+#endif
+}
+
+#endif /* whole files */
+
+/* >> 14 NanoVDB files (module): segments, grids and the validation of trees ==
    Reads what nanovdb_convert writes: a file of segments, each a 16-byte
    header ("NanoVDB0" or the newer "NanoVDB2", version, grid count, codec)
    followed by 176 bytes of metadata and the name of each grid, then the
@@ -14488,11 +15824,6 @@ RRV_DEF rrv_result rrv_nanovdb_read_memory(const void *data, size_t size, const 
     return rrv__nv_load((unsigned char *)(uintptr_t)data, size, 0, name, grid_name, max_grid_bytes, grid, err, &kept);
 }
 
-static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, int text,
-                                     size_t max_bytes, void **data, size_t *size, const char **why);
-static void rrv__sf_release_whole(const rrv_load_options *opt, void *data);
-static int rrv__sf_whole_is_ours(const rrv_load_options *opt);
-
 /* Errors name `name`; an unreadable file gives RRV_ERROR_IO with *why the
    reason in words, or "". The file may hold other grids too, so the limit
    applies to the file as read and then to the grid kept. */
@@ -14583,142 +15914,26 @@ RRV_DEF void rrv_nanovdb_free(rrv_nanovdb *grid)
     grid->size = 0;
 }
 
-/* >> 14 scene file (module): the .rrv parser, OBJ, gridvol; building scenes =
-   This section owns rrv_scene_load, rrv_scene_parse, rrv_scene_free,
-   rrv_grid_read and rrv_grid_read_memory, the OBJ loader behind `mesh file`,
-   the default (stdio) file reader, and the scene-building calls
-   (rrv_scene_create, rrv_scene_add_*, rrv_scene_set_*) with the one home of
-   every default and check, which the statements use. Every input here is untrusted: scene
-   text is not NUL-terminated, every count is checked before it is multiplied
-   or allocated, and every error names the file, the line and the cause. The
-   grammar lives in parts/SCENE_SPEC.md and scenes/README.md. */
+/* >> 15 scene file (module): the .rrv parser, OBJ, gridvol =================
+   This section owns rrv_scene_load, rrv_scene_parse, rrv_grid_read and
+   rrv_grid_read_memory, and the OBJ loader behind `mesh file`. A statement
+   builds through the defaults, checks and stores of >> 11. RRV_NO_SCENE_FILE
+   leaves out all of this section but the refusals at its end. Every input
+   here is untrusted: scene text is not NUL-terminated, every count is
+   checked before it is multiplied or allocated, and every error names the
+   file, the line and the cause. The grammar lives in parts/SCENE_SPEC.md
+   and scenes/README.md. */
+#ifndef RRV_NO_SCENE_FILE
 #include <stdlib.h> /* strtod, also when RRV_MALLOC is the caller's */
 
 #define RRV__SF_GRID_HEADER 48 /* magic 3, version 1, encoding 4, res 12, channels 4, box 24 */
 #define RRV__SF_PATH_MAX 1024
-#define RRV__SF_NO_LO (-DBL_MAX)
-#define RRV__SF_NO_HI DBL_MAX
 /* Tokens quoted in messages are clipped so one garbage line cannot drown the
    useful part of the 256-byte message. */
 #define RRV__SF_CLIP(t) (int)((t)->n > 60 ? 60 : (t)->n), (t)->p
 
 /* ---- file reading --------------------------------------------------------- */
 
-/* Scene files and the NanoVDB reader read through here. */
-#if !defined(RRV_NO_SCENE_FILE) || !defined(RRV_NO_NANOVDB)
-
-#ifndef RRV_NO_STDIO
-#ifndef RRV_NO_SCENE_FILE /* the gridvol reader's */
-static int rrv__sf_stdio_size(FILE *f, unsigned long long *size)
-{
-    long len;
-    if (fseek(f, 0, SEEK_END) != 0) return 0;
-    len = ftell(f);
-    if (len < 0 || fseek(f, 0, SEEK_SET) != 0) return 0;
-    *size = (unsigned long long)len;
-    return 1;
-}
-#endif
-
-/* A text file stops after the piece holding its first NUL byte: the parser
-   refuses the file on that line anyway, and a device such as /dev/zero
-   would otherwise be read up to the limit. */
-static int rrv__sf_text_stop(const unsigned char *data, size_t have, size_t got)
-{
-    return memchr(data + have - got, '\0', got) != NULL;
-}
-
-/* A binary file (NanoVDB, the only one read whole) stops after its first
-   piece unless it starts as one: where plain C cannot refuse a device,
-   /dev/zero is not read up to the limit either. */
-static int rrv__sf_binary_stop(const unsigned char *data, size_t have, size_t got)
-{
-    (void)got;
-    return have >= 7 && memcmp(data, "NanoVDB", 7) != 0;
-}
-
-/* A whole file, at most max_bytes of it (rrv__read_stream): one larger by
-   its size is refused before a byte is read, and a file of known size is
-   read into one buffer of that size (plus the byte that finds growth). */
-static rrv_result rrv__sf_stdio_read(const char *path, size_t max_bytes, int text, void **data,
-                                     size_t *size, const char **why)
-{
-    enum { PIECE = 64 * 1024 };
-    unsigned char *buf;
-    size_t first = 2 * (size_t)PIECE;
-    uint64_t file_size;
-    rrv_result r;
-    int errnum;
-    FILE *f = rrv__open_read(path, &file_size, why);
-    if (!f) return RRV_ERROR_IO;
-    if (file_size != UINT64_MAX) {
-        if (file_size > max_bytes) {
-            fclose(f);
-            return RRV_ERROR_LIMIT;
-        }
-        first = (size_t)file_size + 1;
-    }
-    r = rrv__read_stream(f, first, PIECE, max_bytes, 1, text ? rrv__sf_text_stop : rrv__sf_binary_stop,
-                         &buf, size, &errnum);
-    fclose(f);
-    if (r == RRV_ERROR_IO) *why = rrv__io_reason(errnum);
-    *data = buf;
-    return r;
-}
-#endif
-
-/* RRV_OK with the whole file; RRV_ERROR_IO (*why says why, or ""),
-   RRV_ERROR_LIMIT past max_bytes, RRV_ERROR_MEMORY, or RRV_ERROR_UNSUPPORTED
-   when there is no way to read files at all. */
-/* Gives back a buffer rrv__sf_read_whole returned, to whoever allocated it. */
-static void rrv__sf_release_whole(const rrv_load_options *opt, void *data)
-{
-    if (!data) return;
-    if (opt && opt->read_file && opt->release_file)
-        opt->release_file(opt->read_file_user, data);
-    else
-        RRV_FREE(data);
-}
-
-/* 1 when a buffer of rrv__sf_read_whole may be kept and later freed with
-   RRV_FREE (a NanoVDB grid keeps its file's bytes). */
-#ifndef RRV_NO_NANOVDB
-static int rrv__sf_whole_is_ours(const rrv_load_options *opt)
-{
-    return !(opt && opt->read_file && opt->release_file);
-}
-#endif
-
-static rrv_result rrv__sf_read_whole(const rrv_load_options *opt, const char *path, int text,
-                                     size_t max_bytes, void **data, size_t *size, const char **why)
-{
-    *data = NULL;
-    *size = 0;
-    *why = "";
-    if (opt && opt->on_input) opt->on_input(opt->on_input_user, path);
-    if (opt && opt->read_file) {
-        if (opt->read_file(opt->read_file_user, path, data, size) != 0) {
-            rrv__sf_release_whole(opt, *data);
-            *data = NULL;
-            return RRV_ERROR_IO;
-        }
-        if (!*data && *size > 0) return RRV_ERROR_IO;
-        if (*size > max_bytes) {
-            rrv__sf_release_whole(opt, *data);
-            *data = NULL;
-            return RRV_ERROR_LIMIT;
-        }
-        return RRV_OK;
-    }
-#ifndef RRV_NO_STDIO
-    return rrv__sf_stdio_read(path, max_bytes, text, data, size, why);
-#else
-    (void)text;
-    return RRV_ERROR_UNSUPPORTED;
-#endif
-}
-
-#ifndef RRV_NO_SCENE_FILE
 static size_t rrv__sf_max_bytes(const rrv_load_options *opt)
 {
     return opt && opt->max_grid_bytes ? opt->max_grid_bytes : RRV_DEFAULT_MAX_GRID_BYTES;
@@ -14771,10 +15986,7 @@ static int rrv__sf_join_path(const char *base_dir, const char *path, char *out, 
     }
     return 1;
 }
-#endif /* RRV_NO_SCENE_FILE */
-#endif /* file reading */
 
-#ifndef RRV_NO_SCENE_FILE
 /* ---- gridvol ---------------------------------------------------------------- */
 
 typedef struct rrv__sf_grid_header {
@@ -14979,6 +16191,16 @@ RRV_DEF rrv_result rrv_grid_read_memory(const void *data, size_t size, const cha
 }
 
 #ifndef RRV_NO_STDIO
+static int rrv__sf_stdio_size(FILE *f, unsigned long long *size)
+{
+    long len;
+    if (fseek(f, 0, SEEK_END) != 0) return 0;
+    len = ftell(f);
+    if (len < 0 || fseek(f, 0, SEEK_SET) != 0) return 0;
+    *size = (unsigned long long)len;
+    return 1;
+}
+
 /* Streams the samples so a grid never sits in memory twice, and reads the
    header first so the size limit applies before anything large is allocated. */
 static rrv_result rrv__sf_grid_read_stdio(const char *path, const char *name, size_t max_bytes,
@@ -15280,238 +16502,6 @@ static rrv_result rrv__sf_perr(rrv__sf_parser *p, rrv_result code, const char *f
 }
 
 #define RRV__SF_OOM(p) rrv__sf_perr((p), RRV_ERROR_MEMORY, "out of memory")
-#endif /* RRV_NO_SCENE_FILE */
-
-/* Makes room for one more element; capacity doubles, counts stay ints. */
-static int rrv__sf_reserve(void **array, int *capacity, int count, size_t elem)
-{
-    int cap;
-    void *v;
-    if (count < *capacity) return 1;
-    if (*capacity > INT_MAX / 2) return 0;
-    cap = *capacity ? *capacity * 2 : 8;
-    if ((size_t)cap > SIZE_MAX / elem) return 0;
-    v = RRV_REALLOC(*array, (size_t)cap * elem);
-    if (!v) return 0;
-    *array = v;
-    *capacity = cap;
-    return 1;
-}
-
-/* Blob arrays have no capacity field: their capacity is a function of the
-   count (4, then powers of two), which also lets rrv__sf_scene_bytes count it. */
-static size_t rrv__sf_blob_capacity(int count)
-{
-    size_t cap = 4;
-    while (cap < (size_t)count)
-        cap *= 2;
-    return count > 0 ? cap : 0;
-}
-
-/* ---- keys: the per-statement tables ------------------------------------------ */
-
-enum {
-    RRV__SF_NUM, /* `arity` finite numbers */
-    RRV__SF_INT, /* `arity` integers */
-    RRV__SF_U64, /* one unsigned 64-bit integer */
-    RRV__SF_WORD, /* one word: a name or a path */
-    RRV__SF_CHOICE, /* one word out of `choices` ("a|b|c") */
-    RRV__SF_NUMLIST, /* any count of finite numbers */
-    RRV__SF_INTLIST /* any count of integers */
-};
-enum { RRV__SF_GT = 1, RRV__SF_LT = 2, RRV__SF_REQ = 4 };
-
-typedef struct rrv__sf_key {
-    const char *name;
-    unsigned char kind, arity, flags;
-    double lo, hi; /* RRV__SF_NO_LO / RRV__SF_NO_HI: unbounded; GT/LT make them strict */
-    const char *choices;
-} rrv__sf_key;
-
-typedef struct rrv__sf_slot {
-    int given;
-    double v[6];
-    uint64_t u;
-    int choice;
-    size_t tok; /* first value token */
-    size_t count; /* list length */
-} rrv__sf_slot;
-
-#define RRV__SF_MAX_KEYS 20
-#define RRV__SF_ANY RRV__SF_NO_LO, RRV__SF_NO_HI
-#define RRV__SF_NN 0.0, RRV__SF_NO_HI /* >= 0 (or > 0 with RRV__SF_GT) */
-#define RRV__SF_UNIT 0.0, 1.0
-
-static const rrv__sf_key rrv__sf_camera_keys[] = {
-    /* The renderer squares distances from the camera in double precision,
-       which overflows beyond about 1e154: farther cameras would see nothing. */
-    {"eye", RRV__SF_NUM, 3, RRV__SF_REQ, -1e150, 1e150, NULL},
-    {"look", RRV__SF_NUM, 3, RRV__SF_REQ, -1e150, 1e150, NULL},
-    {"up", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
-    {"fov", RRV__SF_NUM, 1, RRV__SF_GT | RRV__SF_LT, 0.0, 180.0, NULL},
-    {"resolution", RRV__SF_INT, 2, 0, 1.0, 16384.0, NULL},
-};
-static const rrv__sf_key rrv__sf_render_keys[] = {
-    {"spp", RRV__SF_INT, 1, 0, 1.0, (double)RRV_MAX_SPP, NULL},
-    {"maxdepth", RRV__SF_INT, 1, 0, 1.0, 1024.0, NULL},
-    {"seed", RRV__SF_U64, 1, 0, RRV__SF_NN, NULL},
-    {"integrator", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|classic|refractive|eikonal"},
-    /* bounded so one event or step cannot be absurdly small (BOUNDS) */
-    {"bendtolerance", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_UNIT, NULL}, /* and >= 1e-4 */
-    {"mueta", RRV__SF_NUM, 1, 0, 0.0, 1e6, NULL},
-    {"step", RRV__SF_NUM, 1, 0, 1e-6, 1e6, NULL},
-    {"stepper", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|leapfrog|rk4"},
-    {"refraction", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "default|poisson|midpoint|comb"},
-    {"majorantcells", RRV__SF_INT, 1, 0, 0.0, 256.0, NULL},
-    {"iorinterp", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "trilinear|cubic"},
-    {"nee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "none|straight|shoot|manifold|aim"},
-    {"manifoldgauge", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "chord|iso"},
-    {"manifoldtrials", RRV__SF_INT, 1, 0, 0.0, 1024.0, NULL},
-    {"manifolddrop", RRV__SF_NUM, 1, 0, 0.0, 1.0, NULL},
-    {"sampler", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "pcg|sobol"},
-    {"emissionnee", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "on|off"},
-    {"manifoldsolver", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "lm|dogleg"},
-    {"transmittance", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "ratio|residual|march"},
-};
-/* Choice index -> enum, spelled out so reordering an enum in api.h cannot
-   silently change what a word means. */
-static const rrv_integrator rrv__sf_integrators[] = {
-    RRV_INTEGRATOR_DEFAULT, RRV_INTEGRATOR_CLASSIC, RRV_INTEGRATOR_REFRACTIVE, RRV_INTEGRATOR_EIKONAL};
-static const rrv_stepper rrv__sf_steppers[] = {RRV_STEPPER_DEFAULT, RRV_STEPPER_LEAPFROG,
-                                               RRV_STEPPER_RK4};
-static const rrv_refraction_scheme rrv__sf_schemes[] = {
-    RRV_REFRACTION_DEFAULT, RRV_REFRACTION_POISSON, RRV_REFRACTION_MIDPOINT, RRV_REFRACTION_COMB};
-static const rrv_falloff_kind rrv__sf_falloffs[] = {RRV_FALLOFF_NONE, RRV_FALLOFF_SPHERE,
-                                                    RRV_FALLOFF_PLUME};
-static const rrv__sf_key rrv__sf_ambient_keys[] = {
-    {"ior", RRV__SF_NUM, 1, RRV__SF_REQ, 1.0, RRV__SF_NO_HI, NULL},
-};
-static const rrv__sf_key rrv__sf_diffuse_keys[] = {
-    {"albedo", RRV__SF_NUM, 3, 0, RRV__SF_UNIT, NULL},
-};
-static const rrv__sf_key rrv__sf_checker_keys[] = {
-    {"albedo", RRV__SF_NUM, 3, 0, RRV__SF_UNIT, NULL},
-    {"albedo2", RRV__SF_NUM, 3, 0, RRV__SF_UNIT, NULL},
-    {"checkerscale", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
-};
-/* Shapes share their last three keys: material, L, scale. */
-#define RRV__SF_SHAPE_TAIL                                                                         \
-    {"material", RRV__SF_WORD, 1, 0, RRV__SF_ANY, NULL},                                           \
-        {"L", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},                                                \
-    {                                                                                              \
-        "scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL                                               \
-    }
-static const rrv__sf_key rrv__sf_sphere_keys[] = {
-    {"center", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
-    RRV__SF_SHAPE_TAIL,
-};
-static const rrv__sf_key rrv__sf_quad_keys[] = {
-    {"origin", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"u", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"v", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    RRV__SF_SHAPE_TAIL,
-};
-static const rrv__sf_key rrv__sf_triangle_keys[] = {
-    {"p0", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"p1", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"p2", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    RRV__SF_SHAPE_TAIL,
-};
-static const rrv__sf_key rrv__sf_mesh_keys[] = {
-    {"file", RRV__SF_WORD, 1, 0, RRV__SF_ANY, NULL},
-    {"points", RRV__SF_NUMLIST, 0, 0, RRV__SF_ANY, NULL},
-    {"indices", RRV__SF_INTLIST, 0, 0, 0.0, (double)INT_MAX, NULL},
-    {"translate", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
-    {"material", RRV__SF_WORD, 1, 0, RRV__SF_ANY, NULL},
-    {"L", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
-    {"scale", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL}, /* geometry, not emission */
-};
-static const rrv__sf_key rrv__sf_env_constant_keys[] = {
-    {"L", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
-    {"scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
-};
-static const rrv__sf_key rrv__sf_env_gradient_keys[] = {
-    {"top", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_NN, NULL},
-    {"bottom", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_NN, NULL},
-    {"scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
-};
-static const rrv__sf_key rrv__sf_medium_keys[] = {
-    {"box", RRV__SF_NUM, 6, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"sigma_a", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
-    {"sigma_s", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
-    {"scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
-    {"g", RRV__SF_NUM, 1, RRV__SF_GT | RRV__SF_LT, -1.0, 1.0, NULL},
-    {"albedo", RRV__SF_NUM, 3, 0, RRV__SF_UNIT, NULL},
-    {"sigma_t", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
-    {"Le", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
-    {"Lescale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
-};
-
-/* Field kinds. The `base` key sits last where a kind has one. */
-static const rrv__sf_key rrv__sf_blob_keys[] = {
-    {"center", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
-    {"weight", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
-    {"base", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
-};
-static const rrv__sf_key rrv__sf_noise_keys[] = {
-    {"octaves", RRV__SF_INT, 1, 0, 1.0, 12.0, NULL},
-    {"frequency", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
-    {"lacunarity", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
-    {"gain", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_UNIT, NULL},
-    {"threshold", RRV__SF_NUM, 1, RRV__SF_LT, RRV__SF_UNIT, NULL},
-    {"seed", RRV__SF_INT, 1, 0, 0.0, 4294967295.0, NULL},
-    {"falloff", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "none|sphere|plume"},
-    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
-    {"radius", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
-    {"amplitude", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
-    {"base", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
-};
-static const rrv__sf_key rrv__sf_luneburg_keys[] = {
-    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
-    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
-};
-static const rrv__sf_key rrv__sf_fisheye_keys[] = {
-    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
-    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
-    {"n0", RRV__SF_NUM, 1, 0, 1.0, RRV__SF_NO_HI, NULL},
-};
-static const rrv__sf_key rrv__sf_slab_keys[] = {
-    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
-    {"normal", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"gradient", RRV__SF_NUM, 1, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"base", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
-};
-static const rrv__sf_key rrv__sf_shell_keys[] = {
-    {"center", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL},
-    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
-    {"thickness", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
-    {"edge", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
-    {"amplitude", RRV__SF_NUM, 1, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"base", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
-};
-static const rrv__sf_key rrv__sf_gas_keys[] = {
-    {"eta_ref", RRV__SF_NUM, 1, 0, 1.0, RRV__SF_NO_HI, NULL},
-    {"P_ref", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
-    {"T_ref", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
-};
-static const rrv__sf_key rrv__sf_nanovdb_keys[] = {
-    {"grid", RRV__SF_WORD, 1, 0, RRV__SF_ANY, NULL},
-    {"cellcentered", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "on|off"},
-};
-/* Keys a field statement accepts whatever its kind. */
-static const rrv__sf_key rrv__sf_ior_extra_keys[] = {
-    {"iorscale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
-};
-static const rrv__sf_key rrv__sf_temperature_extra_keys[] = {
-    {"temperatureoffset", RRV__SF_NUM, 1, 0, RRV__SF_ANY, NULL},
-    {"temperaturescale", RRV__SF_NUM, 1, RRV__SF_GT, RRV__SF_NN, NULL},
-    {"blackbody", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "on|off"},
-};
-
-#define RRV__SF_COUNT(a) (int)(sizeof(a) / sizeof((a)[0]))
-#ifndef RRV_NO_SCENE_FILE
 
 /* "did you mean": the candidate nearest a misspelt word, by optimal string
    alignment (Levenshtein plus a swap of neighbours, the commonest typo).
@@ -15600,29 +16590,6 @@ static int rrv__sf_find_key(const rrv__sf_key *keys, int nkeys, const rrv__sf_to
     return -1;
 }
 
-#endif /* RRV_NO_SCENE_FILE */
-
-static int rrv__sf_in_range(const rrv__sf_key *k, double v)
-{
-    if (k->lo != RRV__SF_NO_LO && ((k->flags & RRV__SF_GT) ? !(v > k->lo) : !(v >= k->lo)))
-        return 0;
-    if (k->hi != RRV__SF_NO_HI && ((k->flags & RRV__SF_LT) ? !(v < k->hi) : !(v <= k->hi)))
-        return 0;
-    return 1;
-}
-
-static void rrv__sf_range_text(const rrv__sf_key *k, char *buf, size_t cap)
-{
-    int gt = (k->flags & RRV__SF_GT) != 0, lt = (k->flags & RRV__SF_LT) != 0;
-    if (k->hi == RRV__SF_NO_HI)
-        snprintf(buf, cap, "%s %.15g", gt ? ">" : ">=", k->lo);
-    else if (k->lo == RRV__SF_NO_LO)
-        snprintf(buf, cap, "%s %.15g", lt ? "<" : "<=", k->hi);
-    else
-        snprintf(buf, cap, "in %c%.15g, %.15g%c", gt ? '(' : '[', k->lo, k->hi, lt ? ')' : ']');
-}
-
-#ifndef RRV_NO_SCENE_FILE
 static rrv_result rrv__sf_range_error(rrv__sf_parser *p, const char *stmt, const rrv__sf_key *k,
                                       const rrv__sf_tok *t)
 {
@@ -15793,932 +16760,6 @@ static int rrv__sf_tok_string(const rrv__sf_tok *t, char *out, size_t cap)
     return 1;
 }
 
-#endif /* RRV_NO_SCENE_FILE */
-
-/* ---- building scenes in code: one home for defaults and checks -------------
-   The parser is a client of this part: a statement starts from a zeroed
-   object, lets rrv__*_def fill the defaults, writes the keys it was given
-   over them (so an explicit zero survives) and hands the object to the
-   same check and store the public rrv_scene_add_* calls use. The ranges
-   of single values are the key tables above, for files and code alike;
-   the checks here add what one key cannot say (eye against look, a box's
-   corners, a quad's area, the limits of BOUNDS). rrv_scene_prepare runs
-   every check again, so a scene edited by hand is held to the same rules. */
-
-static int rrv__finite3(const double *v)
-{
-    int i;
-    for (i = 0; i < 3; ++i)
-        if (!(v[i] == v[i]) || v[i] > DBL_MAX || v[i] < -DBL_MAX) return 0;
-    return 1;
-}
-
-static int rrv__vec_finite(rrv_vec3 v)
-{
-    double d[3];
-    d[0] = v.x;
-    d[1] = v.y;
-    d[2] = v.z;
-    return rrv__finite3(d);
-}
-
-static int rrv__vec_zero(rrv_vec3 v) { return v.x == 0.0 && v.y == 0.0 && v.z == 0.0; }
-
-
-static rrv_vec3 rrv__box_center(const rrv_medium *m)
-{
-    return rrv__v3(m->lo.x * 0.5 + m->hi.x * 0.5, m->lo.y * 0.5 + m->hi.y * 0.5,
-                   m->lo.z * 0.5 + m->hi.z * 0.5);
-}
-
-/* Who is checked, for messages: "what: problem" at file:line (line 0 and
-   RRV_ERROR_ARGUMENT for objects built in code, RRV_ERROR_PARSE for
-   statements). */
-typedef struct rrv__ck {
-    rrv_error *err;
-    const char *file;
-    int line;
-    rrv_result code;
-    char what[96];
-} rrv__ck;
-
-static void rrv__ck_init(rrv__ck *ck, rrv_error *err, const char *file, int line, rrv_result code,
-                         const char *fmt, ...)
-{
-    va_list args;
-    ck->err = err;
-    ck->file = file;
-    ck->line = line;
-    ck->code = code;
-    va_start(args, fmt);
-    vsnprintf(ck->what, sizeof ck->what, fmt, args);
-    va_end(args);
-}
-
-static rrv_result rrv__ck_fail(const rrv__ck *ck, rrv_result code, const char *fmt, ...)
-{
-    char buf[200];
-    va_list args;
-    va_start(args, fmt);
-    vsnprintf(buf, sizeof buf, fmt, args);
-    va_end(args);
-    return rrv__fail(ck->err, code ? code : ck->code, ck->file, ck->line, "%s: %s", ck->what, buf);
-}
-
-/* One value against key k of a statement's table. */
-static rrv_result rrv__ck_key(const rrv__ck *ck, const rrv__sf_key *k, double v)
-{
-    char range[96];
-    if (!(v == v) || v > DBL_MAX || v < -DBL_MAX)
-        return rrv__ck_fail(ck, RRV_OK, "%s must be finite, got %g", k->name, v);
-    if (rrv__sf_in_range(k, v)) return RRV_OK;
-    rrv__sf_range_text(k, range, sizeof range);
-    return rrv__ck_fail(ck, RRV_OK, "%s must be %s, got %.15g", k->name, range, v);
-}
-
-static rrv_result rrv__ck_key3(const rrv__ck *ck, const rrv__sf_key *k, const double *v)
-{
-    int c;
-    for (c = 0; c < 3; ++c) {
-        rrv_result r = rrv__ck_key(ck, k, v[c]);
-        if (r != RRV_OK) return r;
-    }
-    return RRV_OK;
-}
-
-static rrv_result rrv__ck_vec(const rrv__ck *ck, const rrv__sf_key *k, rrv_vec3 v)
-{
-    double d[3];
-    d[0] = v.x;
-    d[1] = v.y;
-    d[2] = v.z;
-    return rrv__ck_key3(ck, k, d);
-}
-
-#define RRV__CK(call)                                                                              \
-    do {                                                                                           \
-        rrv_result rrv__ck_r = (call);                                                             \
-        if (rrv__ck_r != RRV_OK) return rrv__ck_r;                                                 \
-    } while (0)
-
-/* -- camera -- */
-
-static void rrv__camera_def(rrv_camera *c)
-{
-    if (rrv__vec_zero(c->up)) c->up.y = 1.0;
-    if (c->fov == 0.0) c->fov = 40.0;
-    if (c->width == 0) c->width = 320;
-    if (c->height == 0) c->height = 240;
-}
-
-static rrv_result rrv__camera_check(const rrv__ck *ck, const rrv_camera *c)
-{
-    const rrv__sf_key *k = rrv__sf_camera_keys;
-    rrv_vec3 dir, d, u, x;
-    double n2, d2;
-    RRV__CK(rrv__ck_vec(ck, &k[0], c->eye));
-    RRV__CK(rrv__ck_vec(ck, &k[1], c->look));
-    RRV__CK(rrv__ck_key(ck, &k[3], c->fov));
-    RRV__CK(rrv__ck_key(ck, &k[4], (double)c->width));
-    RRV__CK(rrv__ck_key(ck, &k[4], (double)c->height));
-    dir = rrv__sub(c->look, c->eye);
-    if (rrv__vec_zero(dir) || !rrv__vec_finite(dir))
-        return rrv__ck_fail(ck, RRV_OK, "eye and look must be distinct finite points");
-    if (rrv__vec_zero(c->up) || !rrv__vec_finite(c->up))
-        return rrv__ck_fail(ck, RRV_OK, "up must be a nonzero finite vector");
-    /* Both vectors scaled to a largest component of 1 first: squaring a far
-       camera's view direction (eye at 1e200) would overflow to inf and make
-       any up look parallel. sin^2 of the angle below 1e-12 is too close to
-       parallel for a frame. */
-    d = rrv__unit_max(dir);
-    u = rrv__unit_max(c->up);
-    x = rrv__cross(d, u);
-    n2 = rrv__dot(x, x);
-    d2 = rrv__dot(d, d) * rrv__dot(u, u);
-    if (!(n2 > 1e-12 * d2)) return rrv__ck_fail(ck, RRV_OK, "up is parallel to the view direction");
-    return RRV_OK;
-}
-
-/* -- settings (`render` and `ambient`) -- */
-
-static void rrv__settings_def(rrv_settings *s)
-{
-    if (s->spp == 0) s->spp = 16;
-    if (s->max_depth == 0) s->max_depth = 32;
-    if (s->bend_tolerance == 0.0) s->bend_tolerance = 0.01;
-    if (s->step == 0.0) s->step = 0.01;
-}
-
-static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
-                                      const rrv_settings *s)
-{
-    const rrv__sf_key *k = rrv__sf_render_keys;
-    RRV__CK(rrv__ck_key(ck, &k[0], (double)s->spp));
-    RRV__CK(rrv__ck_key(ck, &k[1], (double)s->max_depth));
-    if ((unsigned)s->integrator > (unsigned)RRV_INTEGRATOR_EIKONAL)
-        return rrv__ck_fail(ck, RRV_OK, "integrator %d is not one of rrv_integrator", (int)s->integrator);
-    RRV__CK(rrv__ck_key(ck, &k[4], s->bend_tolerance));
-    /* bounded so one event or step cannot be absurdly small (BOUNDS) */
-    if (s->bend_tolerance < 1e-4)
-        return rrv__ck_fail(ck, RRV_OK, "bendtolerance must be at least 0.0001, got %g",
-                            s->bend_tolerance);
-    RRV__CK(rrv__ck_key(ck, &k[5], s->mu_eta));
-    RRV__CK(rrv__ck_key(ck, &k[6], s->step));
-    if ((unsigned)s->stepper > (unsigned)RRV_STEPPER_RK4)
-        return rrv__ck_fail(ck, RRV_OK, "stepper %d is not one of rrv_stepper", (int)s->stepper);
-    if ((unsigned)s->refraction > (unsigned)RRV_REFRACTION_COMB)
-        return rrv__ck_fail(ck, RRV_OK, "refraction %d is not one of rrv_refraction_scheme",
-                            (int)s->refraction);
-    RRV__CK(rrv__ck_key(ck, &k[9], (double)s->majorant_cells));
-    if ((unsigned)s->ior_interpolation > (unsigned)RRV_IOR_INTERP_CUBIC)
-        return rrv__ck_fail(ck, RRV_OK, "ior_interpolation %d is not one of rrv_ior_interpolation",
-                            (int)s->ior_interpolation);
-    if ((unsigned)s->nee > (unsigned)RRV_NEE_AIM)
-        return rrv__ck_fail(ck, RRV_OK, "nee %d is not one of rrv_nee", (int)s->nee);
-#ifdef RRV_NO_CURVED_NEE
-    /* refused, not aimed instead: a render must not quietly be another
-       estimator than the one asked for */
-    if (s->nee == RRV_NEE_SHOOT || s->nee == RRV_NEE_MANIFOLD)
-        return rrv__ck_fail(ck, RRV_ERROR_UNSUPPORTED, "nee %s is disabled (RRV_NO_CURVED_NEE); use nee aim",
-                            s->nee == RRV_NEE_SHOOT ? "shoot" : "manifold");
-#endif
-    if ((unsigned)s->sampler > (unsigned)RRV_SAMPLER_SOBOL)
-        return rrv__ck_fail(ck, RRV_OK, "sampler %d is not one of rrv_sampler", (int)s->sampler);
-    if ((unsigned)s->emission_nee > (unsigned)RRV_EMISSION_NEE_OFF)
-        return rrv__ck_fail(ck, RRV_OK, "emission_nee %d is not one of rrv_emission_nee", (int)s->emission_nee);
-    if ((unsigned)s->manifold_gauge > (unsigned)RRV_GAUGE_ISO)
-        return rrv__ck_fail(ck, RRV_OK, "manifold_gauge %d is not one of rrv_manifold_gauge",
-                            (int)s->manifold_gauge);
-    if ((unsigned)s->transmittance > (unsigned)RRV_TRANSMITTANCE_MARCH)
-        return rrv__ck_fail(ck, RRV_OK, "transmittance %d is not one of rrv_transmittance", (int)s->transmittance);
-    if ((unsigned)s->manifold_solver > (unsigned)RRV_MANIFOLD_SOLVER_DOGLEG)
-        return rrv__ck_fail(ck, RRV_OK, "manifold_solver %d is not one of rrv_manifold_solver",
-                            (int)s->manifold_solver);
-    RRV__CK(rrv__ck_key(ck, &k[13], (double)s->manifold_trials));
-    RRV__CK(rrv__ck_key(ck, &k[14], s->manifold_drop));
-    if (s->max_bake_samples < 0)
-        return rrv__ck_fail(ck, RRV_OK, "max_bake_samples must be >= 0, got %d", s->max_bake_samples);
-    if (s->ambient_ior != 0.0) /* 0: from the gas (rrv__resolve_ambient) */
-        RRV__CK(rrv__ck_key(ambient, &rrv__sf_ambient_keys[0], s->ambient_ior));
-    if (s->ambient_ior > RRV_MAX_IOR)
-        return rrv__ck_fail(ambient, RRV_OK, "ior must be at most %g, got %g", RRV_MAX_IOR,
-                            s->ambient_ior);
-    return RRV_OK;
-}
-
-/* -- environment -- */
-
-static void rrv__environment_def(rrv_environment *e)
-{
-    if (e->kind == RRV_ENV_CONSTANT && e->L[0] == 0.0 && e->L[1] == 0.0 && e->L[2] == 0.0)
-        e->L[0] = e->L[1] = e->L[2] = 1.0;
-}
-
-static rrv_result rrv__environment_check(const rrv__ck *ck, const rrv_environment *e)
-{
-    int c;
-    if ((unsigned)e->kind > (unsigned)RRV_ENV_GRADIENT)
-        return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_environment_kind", (int)e->kind);
-    if (!rrv__finite3(e->L) || !rrv__finite3(e->L2))
-        return rrv__ck_fail(ck, RRV_OK, "radiance times scale is not finite");
-    for (c = 0; c < 3; ++c)
-        if (e->L[c] < 0.0 || e->L2[c] < 0.0)
-            return rrv__ck_fail(ck, RRV_OK, "radiance must be >= 0, got %g",
-                                e->L[c] < 0.0 ? e->L[c] : e->L2[c]);
-    if (rrv__maxd(rrv__max3(e->L), rrv__max3(e->L2)) > RRV_MAX_RADIANCE)
-        return rrv__ck_fail(ck, RRV_OK, "radiance times scale must be at most %g", RRV_MAX_RADIANCE);
-    return RRV_OK;
-}
-
-/* -- materials -- */
-
-static void rrv__material_def(rrv_material *m)
-{
-    int c, black = m->albedo[0] == 0.0 && m->albedo[1] == 0.0 && m->albedo[2] == 0.0;
-    for (c = 0; c < 3; ++c) {
-        if (black) m->albedo[c] = m->kind == RRV_MATERIAL_CHECKER ? 0.8 : 0.5;
-    }
-    if (m->kind == RRV_MATERIAL_CHECKER) {
-        if (m->albedo2[0] == 0.0 && m->albedo2[1] == 0.0 && m->albedo2[2] == 0.0)
-            m->albedo2[0] = m->albedo2[1] = m->albedo2[2] = 0.2;
-        if (m->checker_scale == 0.0) m->checker_scale = 1.0;
-    }
-}
-
-static rrv_result rrv__material_check(const rrv__ck *ck, const rrv_material *m)
-{
-    const rrv__sf_key *k = rrv__sf_checker_keys;
-    if ((unsigned)m->kind > (unsigned)RRV_MATERIAL_CHECKER)
-        return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_material_kind", (int)m->kind);
-    RRV__CK(rrv__ck_key3(ck, &k[0], m->albedo));
-    if (m->kind == RRV_MATERIAL_CHECKER) {
-        RRV__CK(rrv__ck_key3(ck, &k[1], m->albedo2));
-        RRV__CK(rrv__ck_key(ck, &k[2], m->checker_scale));
-    }
-    return RRV_OK;
-}
-
-/* -- shapes -- */
-
-static const char *rrv__shape_name(rrv_shape_kind kind)
-{
-    return kind == RRV_SHAPE_SPHERE ? "sphere" : kind == RRV_SHAPE_QUAD ? "quad" : "triangle";
-}
-
-/* L is stored premultiplied by its scale. */
-static rrv_result rrv__emission_check(const rrv__ck *ck, const double *L)
-{
-    int c;
-    if (!rrv__finite3(L)) return rrv__ck_fail(ck, RRV_OK, "L times scale is not finite");
-    for (c = 0; c < 3; ++c)
-        if (L[c] < 0.0) return rrv__ck_fail(ck, RRV_OK, "L must be >= 0, got %g", L[c]);
-    if (rrv__max3(L) > RRV_MAX_RADIANCE)
-        return rrv__ck_fail(ck, RRV_OK, "L times scale must be at most %g, got %g", RRV_MAX_RADIANCE,
-                            rrv__max3(L));
-    return RRV_OK;
-}
-
-static rrv_result rrv__shape_check(const rrv__ck *ck, const rrv_scene *scene, const rrv_shape *s)
-{
-    static const rrv__sf_key any = {"p0", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL};
-    if ((unsigned)s->kind > (unsigned)RRV_SHAPE_TRIANGLE)
-        return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_shape_kind", (int)s->kind);
-    if (s->material < 0 || s->material >= scene->material_count)
-        return rrv__ck_fail(ck, RRV_OK, "material %d is not one of the scene's %d", s->material,
-                            scene->material_count);
-    RRV__CK(rrv__emission_check(ck, s->L));
-    if (s->kind == RRV_SHAPE_SPHERE) {
-        RRV__CK(rrv__ck_vec(ck, &rrv__sf_sphere_keys[0], s->center));
-        return rrv__ck_key(ck, &rrv__sf_sphere_keys[1], s->radius);
-    }
-    RRV__CK(rrv__ck_vec(ck, &any, s->p0));
-    if (!rrv__vec_finite(s->e1) || !rrv__vec_finite(s->e2))
-        return rrv__ck_fail(ck, RRV_OK, "edges are not finite");
-    if (rrv__vec_zero(rrv__cross(s->e1, s->e2)))
-        return rrv__ck_fail(ck, RRV_OK, s->kind == RRV_SHAPE_QUAD
-                                            ? "u and v are parallel (zero area)"
-                                            : "the points are collinear (zero area)");
-    return RRV_OK;
-}
-
-/* -- media -- */
-
-static void rrv__medium_def(rrv_medium *m)
-{
-    int c, none = 1;
-    for (c = 0; c < 3; ++c)
-        if (m->sigma_a[c] != 0.0 || m->sigma_s[c] != 0.0) none = 0;
-    for (c = 0; c < 3 && none; ++c)
-        m->sigma_a[c] = m->sigma_s[c] = 1.0;
-    if (m->scale == 0.0) m->scale = 1.0;
-    if (m->Lescale == 0.0) m->Lescale = 1.0;
-    if (m->temperaturescale == 0.0) m->temperaturescale = 1.0;
-    if (m->eta_ref == 0.0) m->eta_ref = 1.000292;
-    if (m->P_ref == 0.0) m->P_ref = 101325.0;
-    if (m->T_ref == 0.0) m->T_ref = 300.0;
-    if (m->ior_scale == 0.0) m->ior_scale = 1.0;
-}
-
-/* What a medium statement can get wrong; the fields and the limits of
-   BOUNDS are checked by rrv__field_check and rrv__check_medium. */
-static rrv_result rrv__medium_check(const rrv__ck *ck, const rrv_medium *m)
-{
-    const rrv__sf_key *k = rrv__sf_medium_keys;
-    double lo[3], hi[3];
-    int c;
-    lo[0] = m->lo.x, lo[1] = m->lo.y, lo[2] = m->lo.z;
-    hi[0] = m->hi.x, hi[1] = m->hi.y, hi[2] = m->hi.z;
-    RRV__CK(rrv__ck_key3(ck, &k[0], lo));
-    RRV__CK(rrv__ck_key3(ck, &k[0], hi));
-    for (c = 0; c < 3; ++c)
-        if (!(lo[c] < hi[c]))
-            return rrv__ck_fail(ck, RRV_OK, "box is empty along %c (%g is not below %g)", "xyz"[c],
-                                lo[c], hi[c]);
-    RRV__CK(rrv__ck_key3(ck, &k[1], m->sigma_a));
-    RRV__CK(rrv__ck_key3(ck, &k[2], m->sigma_s));
-    RRV__CK(rrv__ck_key(ck, &k[3], m->scale));
-    RRV__CK(rrv__ck_key(ck, &k[4], m->g));
-    RRV__CK(rrv__ck_key3(ck, &k[7], m->Le));
-    RRV__CK(rrv__ck_key(ck, &k[8], m->Lescale));
-    RRV__CK(rrv__ck_key(ck, &rrv__sf_temperature_extra_keys[0], m->temperatureoffset));
-    RRV__CK(rrv__ck_key(ck, &rrv__sf_temperature_extra_keys[1], m->temperaturescale));
-    RRV__CK(rrv__ck_key(ck, &rrv__sf_gas_keys[0], m->eta_ref));
-    RRV__CK(rrv__ck_key(ck, &rrv__sf_gas_keys[1], m->P_ref));
-    RRV__CK(rrv__ck_key(ck, &rrv__sf_gas_keys[2], m->T_ref));
-    RRV__CK(rrv__ck_key(ck, &rrv__sf_ior_extra_keys[0], m->ior_scale));
-    return RRV_OK;
-}
-
-/* -- fields -- */
-
-static void rrv__blob_def(rrv_blob *b)
-{
-    if (b->weight == 0.0) b->weight = 1.0;
-}
-
-/* The value a field kind adds everywhere when it does not say: the ambient
-   state of air for temperature and pressure, nothing for density and IOR. */
-static double rrv__field_base_default(rrv_medium_field which)
-{
-    return which == RRV_MEDIUM_TEMPERATURE ? 300.0 : which == RRV_MEDIUM_PRESSURE ? 101325.0 : 0.0;
-}
-
-static void rrv__field_def(rrv_field *f, rrv_medium_field which, const rrv_medium *m)
-{
-    int i;
-    switch (f->kind) {
-    case RRV_FIELD_BLOBS:
-        for (i = 0; i < f->blob_count; ++i) rrv__blob_def(&f->blobs[i]);
-        if (f->base == 0.0) f->base = rrv__field_base_default(which);
-        break;
-    case RRV_FIELD_NOISE: {
-        rrv_noise *n = &f->noise;
-        double sx = m->hi.x * 0.5 - m->lo.x * 0.5, sy = m->hi.y * 0.5 - m->lo.y * 0.5,
-               sz = m->hi.z * 0.5 - m->lo.z * 0.5;
-        if (n->octaves == 0) n->octaves = 5;
-        if (n->frequency == 0.0) n->frequency = 1.0;
-        if (n->lacunarity == 0.0) n->lacunarity = 2.0;
-        if (n->gain == 0.0) n->gain = 0.5;
-        if (rrv__vec_zero(n->center)) n->center = rrv__box_center(m);
-        if (n->radius == 0.0) n->radius = sx < sy ? (sx < sz ? sx : sz) : (sy < sz ? sy : sz);
-        if (f->amplitude == 0.0) f->amplitude = 1.0;
-        if (f->base == 0.0) f->base = rrv__field_base_default(which);
-        break;
-    }
-    case RRV_FIELD_LUNEBURG:
-    case RRV_FIELD_FISHEYE:
-    case RRV_FIELD_SLAB:
-    case RRV_FIELD_SHELL:
-        if (rrv__vec_zero(f->center)) f->center = rrv__box_center(m);
-        if (f->kind == RRV_FIELD_FISHEYE && f->n0 == 0.0) f->n0 = 2.0;
-        if (f->kind == RRV_FIELD_SHELL && f->edge == 0.0) f->edge = f->thickness / 4.0;
-        if (f->kind == RRV_FIELD_SLAB && !rrv__vec_zero(f->normal) && rrv__vec_finite(f->normal)) {
-            /* scaled first so squaring cannot overflow */
-            rrv_vec3 n = rrv__unit_max(f->normal);
-            f->normal = rrv__scale(n, 1.0 / rrv__length(n));
-        }
-        break;
-    default:
-        break;
-    }
-}
-
-/* Blobs before first_blob were checked already (the parser adds one a line). */
-static rrv_result rrv__field_check(const rrv__ck *ck, rrv_medium_field which, const rrv_medium *m,
-                                   const rrv_field *f, int first_blob)
-{
-    int i;
-    if ((unsigned)f->kind > (unsigned)RRV_FIELD_NANOVDB)
-        return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_field_kind", (int)f->kind);
-    if (f->kind >= RRV_FIELD_LUNEBURG && f->kind <= RRV_FIELD_SHELL && which != RRV_MEDIUM_IOR)
-        return rrv__ck_fail(ck, RRV_OK, "IOR profiles belong in the ior field");
-    switch (f->kind) {
-    case RRV_FIELD_CONSTANT: {
-        double v = f->value;
-        if (!(v == v) || v > DBL_MAX || v < -DBL_MAX)
-            return rrv__ck_fail(ck, RRV_OK, "constant must be finite, got %g", v);
-        if (which == RRV_MEDIUM_DENSITY && v < 0.0)
-            return rrv__ck_fail(ck, RRV_OK, "constant must be >= 0, got %.15g", v);
-        if (which == RRV_MEDIUM_PRESSURE && !(v > 0.0))
-            return rrv__ck_fail(ck, RRV_OK, "constant must be > 0, got %.15g", v);
-        if (which == RRV_MEDIUM_IOR && !(v > -1.0))
-            return rrv__ck_fail(ck, RRV_OK,
-                                "constant (the refractivity eta - 1) must be > -1, got %.15g", v);
-        if (which == RRV_MEDIUM_TEMPERATURE) {
-            double T = (v - m->temperatureoffset) * m->temperaturescale;
-            if (!(T > 0.0) || T > DBL_MAX)
-                return rrv__ck_fail(ck, RRV_OK, "constant %.15g gives T = %g K, must be > 0 and finite",
-                                    v, T);
-        }
-        return RRV_OK;
-    }
-    case RRV_FIELD_BLOBS:
-        if (f->blob_count < 1 || !f->blobs)
-            return rrv__ck_fail(ck, RRV_OK, "blobs need at least one blob");
-        if (f->blob_count > RRV_MAX_BLOBS)
-            return rrv__ck_fail(ck, RRV_ERROR_LIMIT, "more than %d blobs in one field (a grid holds more)",
-                                RRV_MAX_BLOBS);
-        for (i = first_blob; i < f->blob_count; ++i) {
-            RRV__CK(rrv__ck_vec(ck, &rrv__sf_blob_keys[0], f->blobs[i].center));
-            RRV__CK(rrv__ck_key(ck, &rrv__sf_blob_keys[1], f->blobs[i].radius));
-            RRV__CK(rrv__ck_key(ck, &rrv__sf_blob_keys[2], f->blobs[i].weight));
-        }
-        return rrv__ck_key(ck, &rrv__sf_blob_keys[3], f->base);
-    case RRV_FIELD_NOISE: {
-        const rrv__sf_key *k = rrv__sf_noise_keys;
-        const rrv_noise *n = &f->noise;
-        RRV__CK(rrv__ck_key(ck, &k[0], (double)n->octaves));
-        RRV__CK(rrv__ck_key(ck, &k[1], n->frequency));
-        RRV__CK(rrv__ck_key(ck, &k[2], n->lacunarity));
-        RRV__CK(rrv__ck_key(ck, &k[3], n->gain));
-        RRV__CK(rrv__ck_key(ck, &k[4], n->threshold));
-        if ((unsigned)n->falloff > (unsigned)RRV_FALLOFF_PLUME)
-            return rrv__ck_fail(ck, RRV_OK, "falloff %d is not one of rrv_falloff_kind", (int)n->falloff);
-        RRV__CK(rrv__ck_vec(ck, &k[7], n->center));
-        RRV__CK(rrv__ck_key(ck, &k[8], n->radius));
-        RRV__CK(rrv__ck_key(ck, &k[9], f->amplitude));
-        return rrv__ck_key(ck, &k[10], f->base);
-    }
-    case RRV_FIELD_GRID: {
-        const rrv_grid *g = &f->grid;
-        if (!g->data || g->nx < 2 || g->ny < 2 || g->nz < 2 || (g->channels != 1 && g->channels != 3))
-            return rrv__ck_fail(ck, RRV_OK, "a grid needs data, each resolution >= 2 and 1 or 3 channels");
-        if (!rrv__vec_finite(g->lo) || !rrv__vec_finite(g->hi) || !(g->lo.x < g->hi.x) ||
-            !(g->lo.y < g->hi.y) || !(g->lo.z < g->hi.z))
-            return rrv__ck_fail(ck, RRV_OK, "the grid's box is empty or not finite");
-        if (which != RRV_MEDIUM_DENSITY && g->channels != 1)
-            return rrv__ck_fail(ck, RRV_ERROR_FORMAT, "grids need 1 channel, found %d", g->channels);
-        return RRV_OK;
-    }
-    case RRV_FIELD_NANOVDB:
-#ifdef RRV_NO_NANOVDB
-        return rrv__ck_fail(ck, RRV_ERROR_UNSUPPORTED, "NanoVDB grids are disabled (RRV_NO_NANOVDB)");
-#endif
-        if (!f->nanovdb.buffer) return rrv__ck_fail(ck, RRV_OK, "the NanoVDB grid has no data");
-        return RRV_OK;
-    case RRV_FIELD_LUNEBURG:
-    case RRV_FIELD_FISHEYE:
-        RRV__CK(rrv__ck_vec(ck, &rrv__sf_luneburg_keys[0], f->center));
-        RRV__CK(rrv__ck_key(ck, &rrv__sf_luneburg_keys[1], f->radius));
-        return f->kind == RRV_FIELD_FISHEYE ? rrv__ck_key(ck, &rrv__sf_fisheye_keys[2], f->n0) : RRV_OK;
-    case RRV_FIELD_SLAB:
-        RRV__CK(rrv__ck_vec(ck, &rrv__sf_slab_keys[0], f->center));
-        if (rrv__vec_zero(f->normal) || !rrv__vec_finite(f->normal))
-            return rrv__ck_fail(ck, RRV_OK, "slab normal must be nonzero");
-        RRV__CK(rrv__ck_key(ck, &rrv__sf_slab_keys[2], f->gradient));
-        return rrv__ck_key(ck, &rrv__sf_slab_keys[3], f->base);
-    case RRV_FIELD_SHELL: {
-        const rrv__sf_key *k = rrv__sf_shell_keys;
-        RRV__CK(rrv__ck_vec(ck, &k[0], f->center));
-        RRV__CK(rrv__ck_key(ck, &k[1], f->radius));
-        RRV__CK(rrv__ck_key(ck, &k[2], f->thickness));
-        RRV__CK(rrv__ck_key(ck, &k[3], f->edge));
-        RRV__CK(rrv__ck_key(ck, &k[4], f->amplitude));
-        return rrv__ck_key(ck, &k[5], f->base);
-    }
-    default:
-        return RRV_OK;
-    }
-}
-
-static rrv_field *rrv__medium_field_of(rrv_medium *m, rrv_medium_field which)
-{
-    return which == RRV_MEDIUM_DENSITY       ? &m->density
-           : which == RRV_MEDIUM_TEMPERATURE ? &m->temperature
-           : which == RRV_MEDIUM_PRESSURE    ? &m->pressure
-                                             : &m->ior;
-}
-
-static const char *const rrv__medium_field_names[4] = {"density", "temperature", "pressure", "ior"};
-
-/* -- the store: checks, then appends; shared by the parser and the API -- */
-
-static rrv_scene *rrv__scene_new(const char *name)
-{
-    rrv_scene *s = (rrv_scene *)RRV_MALLOC(sizeof *s);
-    size_t n = strlen(name);
-    if (!s) return NULL;
-    memset(s, 0, sizeof *s);
-    if (n >= sizeof s->path) name += n - (sizeof s->path - 1); /* keep the file name's end */
-    memcpy(s->path, name, strlen(name) + 1);
-    rrv__camera_def(&s->camera);
-    rrv__settings_def(&s->settings);
-    return s;
-}
-
-static int rrv__name_taken(const rrv_scene *s, const char *name, int media)
-{
-    int i, n = media ? s->medium_count : s->material_count;
-    for (i = 0; i < n; ++i)
-        if (strcmp(media ? s->media[i].name : s->materials[i].name, name) == 0) return 1;
-    return 0;
-}
-
-/* An empty material or medium name becomes "material N" or "medium N". */
-static void rrv__name_default(const rrv_scene *s, char *name, int media)
-{
-    if (name[0] == '\0')
-        snprintf(name, 64, "%s %d", media ? "medium" : "material",
-                 media ? s->medium_count : s->material_count);
-}
-
-/* The name of a material or medium: printable, 1 to 63 bytes, new. */
-static rrv_result rrv__name_check(const rrv__ck *ck, const rrv_scene *s, char *name, int media)
-{
-    size_t i;
-    rrv__name_default(s, name, media);
-    for (i = 0; name[i]; ++i)
-        if ((unsigned char)name[i] < 32)
-            return rrv__ck_fail(ck, RRV_OK, "the name has a control character");
-    if (rrv__name_taken(s, name, media))
-        return rrv__fail(ck->err, ck->code, ck->file, ck->line, "%s \"%s\" defined twice",
-                         media ? "medium" : "material", name);
-    return RRV_OK;
-}
-
-static rrv_result rrv__store_material(const rrv__ck *ck, rrv_scene *s, const rrv_material *m,
-                                      int *index)
-{
-    rrv_material copy = *m;
-    copy.name[sizeof copy.name - 1] = '\0';
-    RRV__CK(rrv__name_check(ck, s, copy.name, 0));
-    RRV__CK(rrv__material_check(ck, &copy));
-    if (!rrv__sf_reserve((void **)&s->materials, &s->material_capacity, s->material_count,
-                         sizeof copy))
-        return rrv__ck_fail(ck, RRV_ERROR_MEMORY, "out of memory");
-    if (index) *index = s->material_count;
-    s->materials[s->material_count++] = copy;
-    return RRV_OK;
-}
-
-/* The implicit grey "default" material, made on first use. */
-static rrv_result rrv__default_material(const rrv__ck *ck, rrv_scene *s, int *index)
-{
-    rrv_material m;
-    int i;
-    for (i = 0; i < s->material_count; ++i)
-        if (strcmp(s->materials[i].name, "default") == 0) {
-            *index = i;
-            return RRV_OK;
-        }
-    memset(&m, 0, sizeof m);
-    memcpy(m.name, "default", 8);
-    rrv__material_def(&m);
-    return rrv__store_material(ck, s, &m, index);
-}
-
-static rrv_result rrv__store_shape(const rrv__ck *ck, rrv_scene *s, const rrv_shape *shape)
-{
-    RRV__CK(rrv__shape_check(ck, s, shape));
-    if (!rrv__sf_reserve((void **)&s->shapes, &s->shape_capacity, s->shape_count, sizeof *shape))
-        return rrv__ck_fail(ck, RRV_ERROR_MEMORY, "out of memory");
-    s->shapes[s->shape_count++] = *shape;
-    return RRV_OK;
-}
-
-/* A mesh triangle (a, b, c); zero-area ones are dropped. */
-static rrv_result rrv__store_triangle(const rrv__ck *ck, rrv_scene *s, rrv_vec3 a, rrv_vec3 b,
-                                      rrv_vec3 c, const rrv_shape *proto)
-{
-    rrv_shape t = *proto;
-    t.kind = RRV_SHAPE_TRIANGLE;
-    t.p0 = a;
-    t.e1 = rrv__sub(b, a);
-    t.e2 = rrv__sub(c, a);
-    if (!rrv__vec_finite(a) || !rrv__vec_finite(t.e1) || !rrv__vec_finite(t.e2))
-        return rrv__ck_fail(ck, RRV_OK, "a vertex is not finite after scale and translate");
-    if (rrv__vec_zero(rrv__cross(t.e1, t.e2))) return RRV_OK;
-    return rrv__store_shape(ck, s, &t);
-}
-
-static rrv_result rrv__store_medium(const rrv__ck *ck, rrv_scene *s, const rrv_medium *m, int *index)
-{
-    rrv_medium copy = *m;
-    copy.name[sizeof copy.name - 1] = '\0';
-    RRV__CK(rrv__name_check(ck, s, copy.name, 1));
-    RRV__CK(rrv__medium_check(ck, &copy));
-    if (s->medium_count >= RRV__MAX_MEDIA)
-        return rrv__fail(ck->err, RRV_ERROR_LIMIT, ck->file, ck->line,
-                         "medium: at most %d media are supported", RRV__MAX_MEDIA);
-    if (!rrv__sf_reserve((void **)&s->media, &s->medium_capacity, s->medium_count, sizeof copy))
-        return rrv__ck_fail(ck, RRV_ERROR_MEMORY, "out of memory");
-    memset(&copy.density, 0, sizeof copy.density);
-    memset(&copy.temperature, 0, sizeof copy.temperature);
-    memset(&copy.pressure, 0, sizeof copy.pressure);
-    memset(&copy.ior, 0, sizeof copy.ior);
-    copy.majorant = NULL;
-    if (index) *index = s->medium_count;
-    s->media[s->medium_count++] = copy;
-    return RRV_OK;
-}
-
-/* Every check again, for rrv_scene_prepare: a scene filled or edited by hand
-   meets the rules a file meets. Media name the lines they came from. */
-static rrv_result rrv__scene_check(rrv_scene *s, rrv_error *err)
-{
-    rrv__ck ck, ambient;
-    int i, w;
-    /* settings left zero take their defaults, as they always have here; a
-       zero fov or an eye on the look point is refused instead */
-    rrv__settings_def(&s->settings);
-    rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "camera");
-    RRV__CK(rrv__camera_check(&ck, &s->camera));
-    rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "render");
-    rrv__ck_init(&ambient, err, s->path, 0, RRV_ERROR_ARGUMENT, "ambient");
-    RRV__CK(rrv__settings_check(&ck, &ambient, &s->settings));
-    rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "environment");
-    RRV__CK(rrv__environment_check(&ck, &s->environment));
-    for (i = 0; i < s->material_count; ++i) {
-        rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "material \"%s\"", s->materials[i].name);
-        RRV__CK(rrv__material_check(&ck, &s->materials[i]));
-    }
-    for (i = 0; i < s->shape_count; ++i) {
-        rrv__ck_init(&ck, err, s->path, 0, RRV_ERROR_ARGUMENT, "shape %d (%s)", i,
-                     rrv__shape_name(s->shapes[i].kind));
-        RRV__CK(rrv__shape_check(&ck, s, &s->shapes[i]));
-    }
-    for (i = 0; i < s->medium_count; ++i) {
-        rrv_medium *m = &s->media[i];
-        rrv__ck_init(&ck, err, s->path, m->line[0], m->line[0] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT,
-                     "medium \"%s\"", m->name);
-        RRV__CK(rrv__medium_check(&ck, m));
-        for (w = 0; w < 4; ++w) {
-            const rrv_field *f = rrv__medium_field_of(m, (rrv_medium_field)w);
-            if (f->kind == RRV_FIELD_NONE) continue;
-            rrv__ck_init(&ck, err, s->path, m->line[1 + w],
-                         m->line[1 + w] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, "%s of medium \"%s\"",
-                         rrv__medium_field_names[w], m->name);
-            RRV__CK(rrv__field_check(&ck, (rrv_medium_field)w, m, f, 0));
-        }
-    }
-    return RRV_OK;
-}
-
-/* -- the public calls -- */
-
-/* An edit invalidates what prepare built, and the bytes are counted anew. */
-static size_t rrv__sf_scene_bytes(const rrv_scene *s);
-static size_t rrv__sf_field_bytes(const rrv_field *f);
-static void rrv__api_edited(rrv_scene *s)
-{
-    int i, w;
-    rrv__scene_release_prepared(s);
-    s->grid_bytes = 0;
-    for (i = 0; i < s->medium_count; ++i)
-        for (w = 0; w < 4; ++w) {
-            const rrv_field *f = rrv__medium_field_of(&s->media[i], (rrv_medium_field)w);
-            s->grid_bytes += rrv__sf_field_bytes(f) - rrv__sf_blob_capacity(f->blob_count) * sizeof(rrv_blob);
-        }
-    s->bytes = rrv__sf_scene_bytes(s);
-}
-
-RRV_DEF rrv_result rrv_scene_create(rrv_scene **out, rrv_error *err)
-{
-    rrv__clear_error(err);
-    if (!out) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_create: NULL argument");
-    *out = rrv__scene_new("scene");
-    if (!*out) return rrv__fail(err, RRV_ERROR_MEMORY, "scene", 0, "out of memory");
-    (*out)->bytes = sizeof **out;
-    return RRV_OK;
-}
-
-RRV_DEF rrv_result rrv_scene_set_camera(rrv_scene *scene, const rrv_camera *camera, rrv_error *err)
-{
-    rrv_camera c;
-    rrv__ck ck;
-    rrv__clear_error(err);
-    if (!scene || !camera)
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_set_camera: NULL argument");
-    c = *camera;
-    rrv__camera_def(&c);
-    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "camera");
-    RRV__CK(rrv__camera_check(&ck, &c));
-    scene->camera = c;
-    return RRV_OK;
-}
-
-RRV_DEF rrv_result rrv_scene_set_settings(rrv_scene *scene, const rrv_settings *settings,
-                                          rrv_error *err)
-{
-    rrv_settings s;
-    rrv__ck ck, ambient;
-    rrv__clear_error(err);
-    if (!scene || !settings)
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_set_settings: NULL argument");
-    s = *settings;
-    rrv__settings_def(&s);
-    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "settings");
-    rrv__ck_init(&ambient, err, scene->path, 0, RRV_ERROR_ARGUMENT, "settings: ambient");
-    RRV__CK(rrv__settings_check(&ck, &ambient, &s));
-    rrv__api_edited(scene); /* majorant_cells and the bakes depend on settings */
-    scene->settings = s;
-    return RRV_OK;
-}
-
-RRV_DEF rrv_result rrv_scene_set_environment(rrv_scene *scene, const rrv_environment *env,
-                                             rrv_error *err)
-{
-    rrv_environment e;
-    rrv__ck ck;
-    rrv__clear_error(err);
-    if (!scene || !env)
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_set_environment: NULL argument");
-    e = *env;
-    rrv__environment_def(&e);
-    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "environment");
-    RRV__CK(rrv__environment_check(&ck, &e));
-    scene->environment = e;
-    return RRV_OK;
-}
-
-RRV_DEF rrv_result rrv_scene_add_material(rrv_scene *scene, const rrv_material *material,
-                                          int *index, rrv_error *err)
-{
-    rrv_material m;
-    rrv__ck ck;
-    rrv_result r;
-    rrv__clear_error(err);
-    if (!scene || !material)
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_add_material: NULL argument");
-    m = *material;
-    m.name[sizeof m.name - 1] = '\0';
-    rrv__material_def(&m);
-    rrv__name_default(scene, m.name, 0);
-    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "material \"%s\"", m.name);
-    r = rrv__store_material(&ck, scene, &m, index);
-    rrv__api_edited(scene);
-    return r;
-}
-
-static rrv_result rrv__api_shape_material(rrv__ck *ck, rrv_scene *scene, rrv_shape *s)
-{
-    int index;
-    if (scene->material_count > 0 || s->material != 0) return RRV_OK;
-    RRV__CK(rrv__default_material(ck, scene, &index));
-    s->material = index;
-    return RRV_OK;
-}
-
-RRV_DEF rrv_result rrv_scene_add_shape(rrv_scene *scene, const rrv_shape *shape, int *index,
-                                       rrv_error *err)
-{
-    rrv_shape s;
-    rrv__ck ck;
-    rrv_result r;
-    rrv__clear_error(err);
-    if (!scene || !shape)
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_add_shape: NULL argument");
-    s = *shape;
-    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "shape %d (%s)", scene->shape_count,
-                 rrv__shape_name(s.kind));
-    r = rrv__api_shape_material(&ck, scene, &s);
-    if (r == RRV_OK) r = rrv__store_shape(&ck, scene, &s);
-    if (r == RRV_OK && index) *index = scene->shape_count - 1;
-    rrv__api_edited(scene);
-    return r;
-}
-
-RRV_DEF rrv_result rrv_scene_add_triangles(rrv_scene *scene, const rrv_shape *proto,
-                                           const double *points, int point_count,
-                                           const int *indices, int triangle_count, rrv_error *err)
-{
-    rrv_shape s;
-    rrv__ck ck;
-    rrv_result r = RRV_OK;
-    int i, c;
-    rrv__clear_error(err);
-    if (!scene || !proto || (point_count > 0 && !points) || (triangle_count > 0 && !indices) ||
-        point_count < 0 || triangle_count < 0)
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_add_triangles: invalid argument");
-    s = *proto;
-    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "mesh");
-    r = rrv__api_shape_material(&ck, scene, &s);
-    for (i = 0; i < triangle_count && r == RRV_OK; ++i) {
-        rrv_vec3 v[3];
-        for (c = 0; c < 3; ++c) {
-            int k = indices[3 * i + c];
-            if (k < 0 || k >= point_count) {
-                r = rrv__ck_fail(&ck, RRV_OK, "index %d is out of range (%d points)", k, point_count);
-                break;
-            }
-            v[c] = rrv__v3(points[3 * k], points[3 * k + 1], points[3 * k + 2]);
-        }
-        if (r == RRV_OK) r = rrv__store_triangle(&ck, scene, v[0], v[1], v[2], &s);
-    }
-    rrv__api_edited(scene);
-    return r;
-}
-
-RRV_DEF rrv_result rrv_scene_add_medium(rrv_scene *scene, const rrv_medium *medium, int *index,
-                                        rrv_error *err)
-{
-    rrv_medium m;
-    rrv__ck ck;
-    rrv_result r;
-    rrv__clear_error(err);
-    if (!scene || !medium)
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_scene_add_medium: NULL argument");
-    m = *medium;
-    m.name[sizeof m.name - 1] = '\0';
-    memset(m.line, 0, sizeof m.line);
-    rrv__medium_def(&m);
-    rrv__name_default(scene, m.name, 1);
-    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "medium \"%s\"", m.name);
-    r = rrv__store_medium(&ck, scene, &m, index);
-    rrv__api_edited(scene);
-    return r;
-}
-
-static void rrv__sf_field_free(rrv_field *f);
-
-/* A deep copy, so the scene owns every array it frees. */
-static int rrv__field_copy(rrv_field *dst, const rrv_field *src)
-{
-    *dst = *src;
-    dst->blobs = NULL;
-    dst->grid.data = NULL;
-    dst->nanovdb.buffer = NULL;
-    if (src->kind == RRV_FIELD_BLOBS && src->blob_count > 0 && src->blobs) {
-        size_t cap = rrv__sf_blob_capacity(src->blob_count);
-        if (src->blob_count > RRV_MAX_BLOBS) return 1; /* refused by the check */
-        dst->blobs = (rrv_blob *)RRV_MALLOC(cap * sizeof(rrv_blob));
-        if (!dst->blobs) return 0;
-        memcpy(dst->blobs, src->blobs, (size_t)src->blob_count * sizeof(rrv_blob));
-    } else {
-        dst->blob_count = 0;
-    }
-    if (src->kind == RRV_FIELD_GRID && src->grid.data && src->grid.nx > 0 && src->grid.ny > 0 &&
-        src->grid.nz > 0 && src->grid.channels > 0) {
-        size_t n = (size_t)src->grid.nx * (size_t)src->grid.ny * (size_t)src->grid.nz *
-                   (size_t)src->grid.channels;
-        dst->grid.data = (float *)RRV_MALLOC(n * sizeof(float));
-        if (!dst->grid.data) return 0;
-        memcpy(dst->grid.data, src->grid.data, n * sizeof(float));
-    }
-    if (src->kind == RRV_FIELD_NANOVDB && src->nanovdb.buffer && src->nanovdb.size > 0) {
-        dst->nanovdb.buffer = (unsigned char *)RRV_MALLOC(src->nanovdb.size);
-        if (!dst->nanovdb.buffer) return 0;
-        memcpy(dst->nanovdb.buffer, src->nanovdb.buffer, src->nanovdb.size);
-    } else {
-        dst->nanovdb.size = 0;
-    }
-    return 1;
-}
-
-RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_field which,
-                                       const rrv_field *field, rrv_error *err)
-{
-    rrv_field f;
-    rrv_medium *m;
-    rrv__ck ck;
-    rrv_result r;
-    rrv__clear_error(err);
-    if (!scene || !field || medium < 0 || medium >= scene->medium_count ||
-        (unsigned)which > (unsigned)RRV_MEDIUM_IOR)
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene ? scene->path : NULL, 0,
-                         "rrv_scene_set_field: invalid argument");
-    m = &scene->media[medium];
-    rrv__ck_init(&ck, err, scene->path, 0, RRV_ERROR_ARGUMENT, "%s of medium \"%s\"",
-                 rrv__medium_field_names[which], m->name);
-    if (!rrv__field_copy(&f, field)) {
-        rrv__sf_field_free(&f);
-        return rrv__ck_fail(&ck, RRV_ERROR_MEMORY, "out of memory");
-    }
-    rrv__field_def(&f, which, m);
-    r = rrv__field_check(&ck, which, m, &f, 0);
-    if (r != RRV_OK) {
-        rrv__sf_field_free(&f);
-        return r;
-    }
-    rrv__sf_field_free(rrv__medium_field_of(m, which));
-    *rrv__medium_field_of(m, which) = f;
-    m->line[1 + which] = 0;
-    m->source[1 + which][0] = '\0';
-    rrv__api_edited(scene);
-    return RRV_OK;
-}
-
-#ifndef RRV_NO_SCENE_FILE
 /* ---- materials and shapes ------------------------------------------------------ */
 
 static int rrv__sf_find_material(const rrv_scene *s, const rrv__sf_tok *t)
@@ -17639,60 +17680,6 @@ static const struct rrv__sf_statement {
     {"pressure", rrv__sf_st_field},          {"ior", rrv__sf_st_field},
 };
 
-#endif /* RRV_NO_SCENE_FILE */
-
-/* ---- scene ---------------------------------------------------------------------- */
-
-static void rrv__sf_field_free(rrv_field *f)
-{
-    RRV_FREE(f->blobs);
-    RRV_FREE(f->grid.data);
-    rrv_nanovdb_free(&f->nanovdb);
-    f->blobs = NULL;
-    f->grid.data = NULL;
-}
-
-RRV_DEF void rrv_scene_free(rrv_scene *scene)
-{
-    int i;
-    if (!scene) return;
-    rrv__scene_release_prepared(scene);
-    for (i = 0; i < scene->medium_count; ++i) {
-        rrv__sf_field_free(&scene->media[i].density);
-        rrv__sf_field_free(&scene->media[i].temperature);
-        rrv__sf_field_free(&scene->media[i].pressure);
-        rrv__sf_field_free(&scene->media[i].ior);
-    }
-    RRV_FREE(scene->materials);
-    RRV_FREE(scene->shapes);
-    RRV_FREE(scene->media);
-    RRV_FREE(scene);
-}
-
-static size_t rrv__sf_field_bytes(const rrv_field *f)
-{
-    size_t b = rrv__sf_blob_capacity(f->blob_count) * sizeof(rrv_blob);
-    if (f->grid.data)
-        b += (size_t)f->grid.nx * (size_t)f->grid.ny * (size_t)f->grid.nz *
-             (size_t)f->grid.channels * sizeof(float);
-    b += f->nanovdb.size;
-    return b;
-}
-
-static size_t rrv__sf_scene_bytes(const rrv_scene *s)
-{
-    size_t b = sizeof *s + (size_t)s->material_capacity * sizeof(rrv_material) +
-               (size_t)s->shape_capacity * sizeof(rrv_shape) +
-               (size_t)s->medium_capacity * sizeof(rrv_medium);
-    int i;
-    for (i = 0; i < s->medium_count; ++i)
-        b += rrv__sf_field_bytes(&s->media[i].density) +
-             rrv__sf_field_bytes(&s->media[i].temperature) +
-             rrv__sf_field_bytes(&s->media[i].pressure) + rrv__sf_field_bytes(&s->media[i].ior);
-    return b;
-}
-
-#ifndef RRV_NO_SCENE_FILE
 static rrv_result rrv__sf_parse_lines(rrv__sf_parser *p, const char *text, size_t size)
 {
     size_t pos = 0;
