@@ -159,6 +159,13 @@
    unbiased ray marching, 1/6 to 1/9 of ratio's variance x cost a shadow
    ray but no gain in whole renders (NOTES; test/bench/RESULTS.md).
 
+   ADAPTIVE SAMPLING (rrv_render_rect_adaptive; rrv_settings.noise_threshold,
+   scene `render noisethreshold E`, `--noise-threshold E`; off by default): a
+   pixel's samples in the sample tree's doubling blocks, stopped once the
+   standard error of its mean is below E relative to its value; sums and
+   counts do not depend on how the image is split. At equal CPU time it is
+   at par with uniform sampling on the bench scenes (test/bench/RESULTS.md).
+
    READING MAP (the paper's terms and the functions that implement them;
    `grep -n '/\* >>' rrv.h` is the table of contents, in the order a ray
    lives; `grep -n '/\* ----' rrv.h` the subsections quoted)
@@ -984,9 +991,10 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
 /* Adaptive sampling: renders up to spp samples of each pixel of [x0,x1) x
    [y0,y1), in blocks [0,16), [16,32), [32,64), ... [2^k, spp) of the sample
    tree main.c sums and merges by (README, "Rendering on a farm"), and stops
-   a pixel after a block whose two halves ([0,n) and [n,2n)) give an
-   estimated relative error below threshold: the sum over RGB of |mean of
-   the 2n - mean of [0,n)| over max(sum of the means, RRV_ADAPTIVE_FLOOR).
+   a pixel after a block [n, 2n) once the estimated relative error of its
+   mean is below threshold: the standard error of the 2n samples' R + G + B
+   (their sample variance over 2n, square-rooted) over max(their mean,
+   RRV_ADAPTIVE_FLOOR).
    STORES (not adds) each pixel's tree sum in sum (layout as
    rrv_render_rect's) and its sample count in counts[(y - y0)*stride + (x -
    x0)]; the image is sum / count. Each decision looks only at the pixel's
@@ -8704,9 +8712,11 @@ static float rrv__add_saturated(float a, float b)
 
 /* The tree sum of samples [a, b) of pixel (x, y): [a, m) + [m, b) with m - a
    the largest power of two below b - a; a leaf is rounded as
-   rrv_render_rect rounds a one-sample call into a zeroed buffer. */
+   rrv_render_rect rounds a one-sample call into a zeroed buffer. moments
+   gathers the sum and the sum of squares of each sample's R + G + B, in
+   sample order (in double, beside the tree: they never touch its sums). */
 static void rrv__tree_sum(rrv__context *ctx, const rrv__camera_frame *frame, int sobol, int x, int y, int a, int b,
-                          float out[3])
+                          float out[3], double moments[2])
 {
     float right[3];
     int half = 1, c;
@@ -8714,30 +8724,29 @@ static void rrv__tree_sum(rrv__context *ctx, const rrv__camera_frame *frame, int
         double L[3], acc[3] = {0, 0, 0};
         if (rrv__pixel_sample(ctx, frame, sobol, x, y, a, L))
             for (c = 0; c < 3; ++c) acc[c] += L[c];
+        moments[0] += acc[0] + acc[1] + acc[2];
+        moments[1] += (acc[0] + acc[1] + acc[2]) * (acc[0] + acc[1] + acc[2]);
         for (c = 0; c < 3; ++c) out[c] = rrv__add_saturated(0.0f, (float)rrv__clamp(acc[c], -FLT_MAX, FLT_MAX));
         return;
     }
     while (half < (b - a) - half) half *= 2;
-    rrv__tree_sum(ctx, frame, sobol, x, y, a, a + half, out);
-    rrv__tree_sum(ctx, frame, sobol, x, y, a + half, b, right);
+    rrv__tree_sum(ctx, frame, sobol, x, y, a, a + half, out, moments);
+    rrv__tree_sum(ctx, frame, sobol, x, y, a + half, b, right, moments);
     for (c = 0; c < 3; ++c) out[c] = rrv__add_saturated(out[c], right[c]);
 }
 
-/* The estimated relative error of the mean of 2n samples from the sums of
-   its two halves of n: |mean - first half's mean| = |A - B| / 2n a channel,
-   summed over RGB, over the sum of the means (floored so that black pixels
-   stop: an absolute error of threshold x the floor is enough there). */
-static double rrv__halves_error(const float A[3], const float B[3], int n)
+/* The estimated relative error of the mean of n samples of R + G + B from
+   their moments: the standard error sqrt(s^2 / n), s^2 the unbiased
+   sample variance, over the mean (floored so that black pixels stop: an
+   absolute error of threshold x the floor is enough there). Not the
+   difference of two halves' means: with one degree of freedom that is
+   small by chance often enough that noisy pixels stopped at 32 samples,
+   and it lost 1.5x-2x in RMSE to uniform sampling at equal CPU time
+   where this is at par (test/bench/RESULTS.md, "Adaptive sampling"). */
+static double rrv__relative_error(const double moments[2], int n)
 {
-    double diff = 0, mean = 0;
-    int c;
-    for (c = 0; c < 3; ++c) {
-        diff += fabs((double)A[c] - (double)B[c]);
-        mean += (double)A[c] + (double)B[c];
-    }
-    diff /= 2.0 * n;
-    mean /= 2.0 * n;
-    return diff / rrv__maxd(mean, RRV_ADAPTIVE_FLOOR);
+    double mean = moments[0] / n, var = (moments[1] - n * mean * mean) / (n - 1);
+    return sqrt(rrv__maxd(var, 0.0) / n) / rrv__maxd(mean, RRV_ADAPTIVE_FLOOR);
 }
 
 RRV_DEF rrv_result rrv_render_rect_adaptive(const rrv_scene *scene, int x0, int y0, int x1, int y1, int spp,
@@ -8760,14 +8769,15 @@ RRV_DEF rrv_result rrv_render_rect_adaptive(const rrv_scene *scene, int x0, int 
         for (x = x0; x < x1; ++x) {
             float *out = sum + 3 * ((size_t)(y - y0) * (size_t)stride + (size_t)(x - x0));
             float block[3];
+            double moments[2] = {0, 0};
             int n = spp < RRV_ADAPTIVE_BLOCK ? spp : RRV_ADAPTIVE_BLOCK, c;
-            rrv__tree_sum(&ctx, &frame, sobol, x, y, 0, n, out);
+            rrv__tree_sum(&ctx, &frame, sobol, x, y, 0, n, out, moments);
             while (n < spp) {
                 int end = 2 * n < spp ? 2 * n : spp, full = end == 2 * n;
-                rrv__tree_sum(&ctx, &frame, sobol, x, y, n, end, block);
-                /* only halves of equal size are compared; a last, shorter
-                   block is rendered whatever the error */
-                full = full && rrv__halves_error(out, block, n) < threshold;
+                rrv__tree_sum(&ctx, &frame, sobol, x, y, n, end, block, moments);
+                /* checked after doublings only: the last, shorter block
+                   ends the pixel anyway */
+                full = full && rrv__relative_error(moments, end) < threshold;
                 for (c = 0; c < 3; ++c) out[c] = rrv__add_saturated(out[c], block[c]);
                 n = end;
                 if (full) break;

@@ -130,8 +130,8 @@ static void split_renders_are_identical(void)
     rrv_scene_free(scene);
 }
 
-/* Under a constant sky every sample is exactly 1: the halves agree, the
-   error is 0, and every pixel stops at the first check, 32 samples, with a
+/* Under a constant sky every sample is exactly 1: their variance, and so
+   the error, is 0, and every pixel stops at the first check, 32 samples, with a
    sum of exactly 32 whatever the (positive) threshold. */
 static void equal_samples_stop_at_the_first_check(void)
 {
