@@ -1415,7 +1415,8 @@ static int scene_hash(const input_list *inputs, const rrv_scene *scene, char out
     }
     /* Every field of rrv_settings, not only those the command line sets
        today: a field left out lets parts of different renders merge (the
-       sampler once was). */
+       sampler once was). All but noise_threshold, which is 0 in every
+       part (render refuses a part with one) and so tells none apart. */
     snprintf(text, sizeof text,
              "rrv %d.%d.%d spp %d depth %d seed %" PRIu64 " integrator %d nee %d bend %.17g mu_eta %.17g "
              "step %.17g refraction %d stepper %d ambient %.17g majorant %d ior %d bake %d gauge %d trials %d "
