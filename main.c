@@ -2756,6 +2756,7 @@ typedef struct farm_job {
     const char *scene_path, *out_path, *tiles_text, *dir_arg, *rrv_arg;
     long long count;          /* tiles */
     size_t max_grid_bytes;    /* of the render options */
+    int noise_threshold_set;  /* the render options give --noise-threshold (0: the scene's) */
     char *scene, *out, *dir, *real_dir, *rrv_path, *dir_copy;
     char *paths[FARM_SCRIPTS + 2]; /* the scripts, then parts/ and logs/ */
     char *text[FARM_SCRIPTS];
@@ -2860,6 +2861,10 @@ static int farm_parse(int argc, char **argv, arg_cursor *args, farm_job *f)
     free(render_argv);
     if (code == HELP_SHOWN) return EXIT_OK;
     if (code != EXIT_OK) return code;
+    /* the farm's parts are tiles, which hold sums of one sample count */
+    if (ropt.noise_threshold > 0)
+        return usage_error(args, "farm: --noise-threshold cannot be combined with the farm's --tile parts");
+    f->noise_threshold_set = ropt.has_noise_threshold;
     f->max_grid_bytes = ropt.max_grid_bytes;
     return GO_ON;
 }
@@ -2902,6 +2907,12 @@ static int farm_check(const arg_cursor *args, farm_job *f)
     if (!load_scene(f->scene_path, f->max_grid_bytes, &f->inputs, &loaded, 0)) return EXIT_INPUT;
     width = loaded->camera.width;
     height = loaded->camera.height;
+    if (loaded->settings.noise_threshold > 0 && !f->noise_threshold_set) {
+        double threshold = loaded->settings.noise_threshold;
+        rrv_scene_free(loaded);
+        return usage_error(args, "farm: the scene's `render noisethreshold %g` cannot be combined with the farm's "
+                           "--tile parts (pass -- --noise-threshold 0)", threshold);
+    }
     rrv_scene_free(loaded);
     if (!check_output_not_input(f->out_path, &f->inputs)) return EXIT_USAGE;
     if (f->plan.columns > width || f->plan.rows > height)

@@ -238,7 +238,8 @@ static void cli_matches_the_library(void)
 
 /* Parts hold sums of one sample count: --noise-threshold with --samples or
    --tile, or a scene's noisethreshold with them, is a usage error (exit 1)
-   naming the flags, with nothing written; --noise-threshold 0 lifts it. */
+   naming the flags, with nothing written, in rrv render and rrv farm;
+   --noise-threshold 0 lifts it. */
 static void parts_are_refused(void)
 {
     static const char *const cases[][3] = {
@@ -261,6 +262,16 @@ static void parts_are_refused(void)
                                                                                               : "noisethreshold"),
                "%s: the message does not name the flags: %s", cases[i][1], last_stderr);
         CHECKF(!file_exists(out), "%s: a part was written", cases[i][1]);
+    }
+    /* the farm's parts are tiles: refused before anything is written */
+    for (i = 0; i < 2; ++i) {
+        int code;
+        snprintf(args, sizeof args, "farm slurm '%s' -o '%s' --tiles 2%s", i ? key_scene_path : scene_path,
+                 tmp_path("farm.exr"), i ? "" : " -- --noise-threshold 0.05");
+        code = rrv(args);
+        CHECKF(code == 1 && strstr(last_stderr, i ? "noisethreshold" : "--noise-threshold") &&
+                   strstr(last_stderr, "--tile"), "farm %d: exit %d: %s", i, code, last_stderr);
+        CHECKF(!file_exists(tmp_path("farm.exr.farm")), "farm %d: its folder was made", i);
     }
     snprintf(args, sizeof args, "render '%s' -o '%s' -q --samples 0:128 --noise-threshold 0", key_scene_path,
              tmp_path("part.exr"));
