@@ -102,6 +102,10 @@ static const char render_help[] =
     "                         marching), residual (ratio tracking above the\n"
     "                         majorant grid's minorant) or ratio; default: the\n"
     "                         scene's, else ratio\n"
+    "  --noise-threshold E    adaptive sampling: stop a pixel once the standard\n"
+    "                         error of its mean is below E times the mean\n"
+    "                         (checked at 32, 64, ... up to --spp; 0 = off, the\n"
+    "                         default: the scene's); not with --tile or --samples\n"
     "  --threads T            worker threads (default: the number of online CPUs)\n"
     "  --crop X0 Y0 X1 Y1     render only pixels [X0,X1) x [Y0,Y1), row 0 at the\n"
     "                         top; the output is the size of the crop (an EXR\n"
@@ -841,6 +845,10 @@ typedef struct render_job {
     int sample_begin, sample_end; /* a block of the sample tree (see sum_samples) */
     float *sum;         /* the rectangle's sums, row 0 = its top row */
     int stride;
+    double noise_threshold; /* > 0: adaptive, each pixel's count in counts */
+    int *counts;
+    int spp_min, spp_median, spp_max; /* adaptive: of counts, for the summary */
+    double spp_mean;
     int tiles_x, tile_count;
     long tile_stride; /* see "honest progress" */
     double *tile_seconds; /* the time each tile took, negative until it is done */
@@ -1113,9 +1121,15 @@ static void *render_worker(void *arg)
         tx1 = tx0 + TILE_SIZE < job->x1 ? tx0 + TILE_SIZE : job->x1;
         ty1 = ty0 + TILE_SIZE < job->y1 ? ty0 + TILE_SIZE : job->y1;
         started = job->tile_seconds ? seconds_now() : 0;
-        result = sum_samples(job->scene, tx0, ty0, tx1, ty1, job->sample_begin, job->sample_end,
-                             job->sum + 3 * ((size_t)(ty0 - job->y0) * job->stride + (size_t)(tx0 - job->x0)),
-                             job->stride, scratch, &stats, &err);
+        if (job->noise_threshold > 0)
+            result = rrv_render_rect_adaptive(
+                job->scene, tx0, ty0, tx1, ty1, job->sample_end, job->noise_threshold,
+                job->sum + 3 * ((size_t)(ty0 - job->y0) * job->stride + (size_t)(tx0 - job->x0)), job->stride,
+                job->counts + (size_t)(ty0 - job->y0) * job->stride + (size_t)(tx0 - job->x0), &stats, &err);
+        else
+            result = sum_samples(job->scene, tx0, ty0, tx1, ty1, job->sample_begin, job->sample_end,
+                                 job->sum + 3 * ((size_t)(ty0 - job->y0) * job->stride + (size_t)(tx0 - job->x0)),
+                                 job->stride, scratch, &stats, &err);
 
         job_lock(job);
         if (result != RRV_OK) {
@@ -1401,7 +1415,8 @@ static int scene_hash(const input_list *inputs, const rrv_scene *scene, char out
     }
     /* Every field of rrv_settings, not only those the command line sets
        today: a field left out lets parts of different renders merge (the
-       sampler once was). */
+       sampler once was). All but noise_threshold, which is 0 in every
+       part (render refuses a part with one) and so tells none apart. */
     snprintf(text, sizeof text,
              "rrv %d.%d.%d spp %d depth %d seed %" PRIu64 " integrator %d nee %d bend %.17g mu_eta %.17g "
              "step %.17g refraction %d stepper %d ambient %.17g majorant %d ior %d bake %d gauge %d trials %d "
@@ -1519,6 +1534,8 @@ typedef struct render_options {
     int has_sampler;
     rrv_transmittance transmittance;
     int has_transmittance;
+    double noise_threshold;
+    int has_noise_threshold;
     int threads;
     double exposure;
     int crop[4], has_crop;
@@ -1626,6 +1643,12 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
             else if (strcmp(name, "march") == 0) opt->transmittance = RRV_TRANSMITTANCE_MARCH;
             else return usage_error(&args, "--transmittance needs ratio, residual or march, got \"%s\"", name);
             opt->has_transmittance = 1;
+        } else if (strcmp(arg, "--noise-threshold") == 0) {
+            if (!take_double(&args, arg, "a relative error >= 0 (0: off)", &opt->noise_threshold)) return EXIT_USAGE;
+            if (!(opt->noise_threshold >= 0 && opt->noise_threshold <= 1e6))
+                return usage_error(&args, "--noise-threshold needs a relative error in [0, 1e6] (0: off), got %g",
+                                   opt->noise_threshold);
+            opt->has_noise_threshold = 1;
         } else if (strcmp(arg, "--threads") == 0) {
             if (!take_int(&args, arg, 1, MAX_THREADS, "a positive integer",
                           &opt->threads))
@@ -1688,6 +1711,9 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
             return usage_error(&args, "a part (--tile, --samples) is an OpenEXR file: -o PART.exr, not \"%s\"",
                                opt->pfm_path);
         if (opt->has_crop) return usage_error(&args, "--crop cannot be combined with --tile or --samples");
+        if (opt->noise_threshold > 0)
+            return usage_error(&args, "--noise-threshold cannot be combined with %s: a part holds sums of one "
+                               "sample count, an adaptive pixel its own", opt->has_samples ? "--samples" : "--tile");
         if (opt->png_path) return usage_error(&args, "--png cannot be combined with --tile or --samples: "
                                               "preview the merged image");
         if (opt->exr_flag && strcmp(opt->exr_flag, "--exr-half") == 0)
@@ -1805,6 +1831,7 @@ static int render_load(render_options *opt, const arg_cursor *args, input_list *
         if (opt->has_nee) s->settings.nee = opt->nee;
         if (opt->has_sampler) s->settings.sampler = opt->sampler;
         if (opt->has_transmittance) s->settings.transmittance = opt->transmittance;
+        if (opt->has_noise_threshold) s->settings.noise_threshold = opt->noise_threshold;
         if (apply_refraction_options(s, &opt->refraction)) return GO_ON;
     }
     free_inputs(inputs);
@@ -1911,6 +1938,26 @@ static int render_plan_image(render_options *opt, const arg_cursor *args, input_
     return GO_ON;
 }
 
+static int compare_ints(const void *pa, const void *pb)
+{
+    int a = *(const int *)pa, b = *(const int *)pb;
+    return (a > b) - (a < b);
+}
+
+/* The minimum, median, maximum and mean of an adaptive render's sample
+   counts (sorted in place: they are not needed afterwards). */
+static void count_summary(int *counts, size_t n, render_job *job)
+{
+    size_t i;
+    double total = 0;
+    qsort(counts, n, sizeof *counts, compare_ints);
+    for (i = 0; i < n; ++i) total += counts[i];
+    job->spp_min = counts[0];
+    job->spp_median = counts[n / 2];
+    job->spp_max = counts[n - 1];
+    job->spp_mean = total / (double)n;
+}
+
 /* rrv render, step 3: the crop's samples rendered on the threads into a
    new *image, the sums for a part, else their mean. GO_ON, or the exit
    code with *image NULL. */
@@ -1920,16 +1967,21 @@ static int render_run(const render_options *opt, const rrv_scene *scene, int is_
     int crop_width = opt->crop[2] - opt->crop[0], crop_height = opt->crop[3] - opt->crop[1], x, y, c;
     int thread_count;
     size_t sum_count = (size_t)crop_width * (size_t)crop_height * 3;
+    double threshold = is_part ? 0 : scene->settings.noise_threshold;
     float *sum = (float *)calloc(sum_count, sizeof *sum);
+    int *counts = threshold > 0 ? (int *)malloc(sum_count / 3 * sizeof *counts) : NULL;
     *image = (float *)malloc(sum_count * sizeof **image);
-    if (!sum || !*image) {
+    if (!sum || !*image || (threshold > 0 && !counts)) {
         fprintf(stderr, "rrv: out of memory for a %dx%d framebuffer\n", crop_width, crop_height);
         free(sum);
+        free(counts);
         free(*image);
         *image = NULL;
         return EXIT_INPUT;
     }
     memset(job, 0, sizeof *job);
+    job->noise_threshold = threshold;
+    job->counts = counts;
     job->scene = scene;
     job->x0 = opt->crop[0];
     job->y0 = opt->crop[1];
@@ -1968,18 +2020,27 @@ static int render_run(const render_options *opt, const rrv_scene *scene, int is_
         fprintf(stderr, "rrv: %s: render failed: %s\n", opt->scene_path,
                 job->failure_error.message[0] ? job->failure_error.message : rrv_result_string(job->failure));
         free(sum);
+        free(counts);
+        job->counts = NULL;
         free(*image);
         *image = NULL;
         return EXIT_INPUT;
     }
-    /* A part keeps its sums; an image is their mean. */
+    /* A part keeps its sums; an image is their mean, an adaptive pixel's
+       over its own count. */
     for (y = 0; y < crop_height; ++y)
         for (x = 0; x < crop_width; ++x)
             for (c = 0; c < 3; ++c) {
                 size_t i = 3 * ((size_t)y * crop_width + x) + c;
-                (*image)[i] = is_part ? sum[i] : sum[i] / (float)scene->settings.spp;
+                float n = counts ? (float)counts[i / 3] : (float)scene->settings.spp;
+                (*image)[i] = is_part ? sum[i] : sum[i] / n;
             }
     free(sum);
+    if (counts) {
+        count_summary(counts, (size_t)crop_width * crop_height, job);
+        free(counts);
+        job->counts = NULL;
+    }
     return GO_ON;
 }
 
@@ -2012,6 +2073,10 @@ static int render_write(render_options *opt, const rrv_scene *scene, const part_
             fprintf(stderr, "part %s: tile %s, samples %d:%d of %d: ", opt->pfm_path, part->tile,
                     part->sample_begin, part->sample_end, part->spp);
         print_render_summary(crop_width, crop_height, opt->sample_end - opt->sample_begin, seconds, &job->stats);
+        if (job->noise_threshold > 0)
+            fprintf(stderr, "adaptive: noise threshold %g, spp a pixel min %d, median %d, max %d, mean %.1f (%.1f%% "
+                    "of %d)\n", job->noise_threshold, job->spp_min, job->spp_median, job->spp_max, job->spp_mean,
+                    100.0 * job->spp_mean / scene->settings.spp, scene->settings.spp);
         print_face_jump_summary(scene);
     }
     return code;
@@ -2040,6 +2105,14 @@ static int command_render(int argc, char **argv)
     code = render_load(&opt, &args, &inputs, &scene);
     if (code != GO_ON) return code;
     memset(&part, 0, sizeof part);
+    if ((opt.has_tile || opt.has_samples) && scene->settings.noise_threshold > 0) {
+        code = usage_error(&args, "the scene's `render noisethreshold %g` cannot be combined with %s (parts are "
+                           "uniform: add --noise-threshold 0)", scene->settings.noise_threshold,
+                           opt.has_samples ? "--samples" : "--tile");
+        free_inputs(&inputs);
+        rrv_scene_free(scene);
+        return code;
+    }
     if (opt.has_tile || opt.has_samples)
         code = render_plan_part(&opt, &args, &inputs, scene, &part, part_text, sizeof part_text);
     else
@@ -2082,12 +2155,6 @@ typedef struct merge_part {
 static int rects_intersect(const int a[4], const int b[4])
 {
     return a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3];
-}
-
-static int compare_ints(const void *pa, const void *pb)
-{
-    int a = *(const int *)pa, b = *(const int *)pb;
-    return (a > b) - (a < b);
 }
 
 /* The first pixel, row by row, that none of the (non-overlapping) parts
@@ -2689,6 +2756,7 @@ typedef struct farm_job {
     const char *scene_path, *out_path, *tiles_text, *dir_arg, *rrv_arg;
     long long count;          /* tiles */
     size_t max_grid_bytes;    /* of the render options */
+    int noise_threshold_set;  /* the render options give --noise-threshold (0: the scene's) */
     char *scene, *out, *dir, *real_dir, *rrv_path, *dir_copy;
     char *paths[FARM_SCRIPTS + 2]; /* the scripts, then parts/ and logs/ */
     char *text[FARM_SCRIPTS];
@@ -2793,6 +2861,10 @@ static int farm_parse(int argc, char **argv, arg_cursor *args, farm_job *f)
     free(render_argv);
     if (code == HELP_SHOWN) return EXIT_OK;
     if (code != EXIT_OK) return code;
+    /* the farm's parts are tiles, which hold sums of one sample count */
+    if (ropt.noise_threshold > 0)
+        return usage_error(args, "farm: --noise-threshold cannot be combined with the farm's --tile parts");
+    f->noise_threshold_set = ropt.has_noise_threshold;
     f->max_grid_bytes = ropt.max_grid_bytes;
     return GO_ON;
 }
@@ -2835,6 +2907,12 @@ static int farm_check(const arg_cursor *args, farm_job *f)
     if (!load_scene(f->scene_path, f->max_grid_bytes, &f->inputs, &loaded, 0)) return EXIT_INPUT;
     width = loaded->camera.width;
     height = loaded->camera.height;
+    if (loaded->settings.noise_threshold > 0 && !f->noise_threshold_set) {
+        double threshold = loaded->settings.noise_threshold;
+        rrv_scene_free(loaded);
+        return usage_error(args, "farm: the scene's `render noisethreshold %g` cannot be combined with the farm's "
+                           "--tile parts (pass -- --noise-threshold 0)", threshold);
+    }
     rrv_scene_free(loaded);
     if (!check_output_not_input(f->out_path, &f->inputs)) return EXIT_USAGE;
     if (f->plan.columns > width || f->plan.rows > height)
