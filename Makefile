@@ -108,7 +108,7 @@ $(BUILD)/O0: | $(BUILD)
 # -O2 -g (which generates the same code as -O2) reuses it.
 REUSE_IMPL := $(if $(SANFLAGS)$(CFLAGS)$(filter-out -O2 -g,$(OPT)),,RRV_IMPL_OBJ='$(IMPL_OBJ)' RRV_IMPL_CC='$(CC)')
 test: $(BUILD)/rrv $(RUN_BINS) $(EXR_CHECK) $(MEASURE_CHECKS)
-	$(REUSE_IMPL) sh test/run_tests.sh $(BUILD) $(RUN_BINS) test/compile_checks.sh
+	$(REUSE_IMPL) sh test/run_tests.sh $(BUILD) $(RUN_BINS) test/compile_checks.sh test/readme_commands.sh
 
 # Every test/fuzz_*.c is a harness. UBSan findings abort (no recovery), so
 # libFuzzer saves the input instead of printing and going on; clang also
