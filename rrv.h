@@ -108,7 +108,7 @@
    lights where they are the only ones (emission_nee); shadow rays'
    transmittance is `ratio`, `residual` or `march` (all unbiased); runaway
    paths are cut and counted (rrv_render_stats.paths_cut); adaptive sampling
-   (noise_threshold, rrv_render_rect_adaptive) is off by default.
+   (noise_threshold, rrv_render_rect_adaptive; its stop biases) is off.
 
    READING MAP (the paper's terms and their functions; `grep -n '/\* >>'
    rrv.h` lists the sections: a ray's life, building scenes, the modules)
