@@ -5168,7 +5168,7 @@ static void rrv__grid_range(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, double 
 {
     int count[3], i0[3][RRV__RANGE_POINTS], ax, i, j, k, c, corner;
     double w[3][RRV__RANGE_POINTS], side[3][RRV__RANGE_POINTS][2], samples = 0, best = 0, least = 0;
-    size_t stride[3];
+    size_t stride[3], offset[8];
     stride[0] = (size_t)g->channels;
     stride[1] = stride[0] * (size_t)g->nx;
     stride[2] = stride[1] * (size_t)g->ny;
@@ -5212,6 +5212,8 @@ static void rrv__grid_range(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, double 
        same order, as a lookup's. */
     for (ax = 0; ax < 3; ++ax)
         for (i = 0; i < count[ax]; ++i) side[ax][i][0] = 1.0 - w[ax][i], side[ax][i][1] = w[ax][i];
+    for (corner = 0; corner < 8; ++corner)
+        offset[corner] = (corner & 1 ? stride[0] : 0) + (corner & 2 ? stride[1] : 0) + (corner & 4 ? stride[2] : 0);
     for (c = 0; c < g->channels; ++c) {
         double cmax = 0, cmin = DBL_MAX;
         for (k = 0; k < count[2]; ++k)
@@ -5224,7 +5226,7 @@ static void rrv__grid_range(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, double 
                         int ux = corner & 1, uy = (corner >> 1) & 1, uz = corner >> 2;
                         double weight = side[0][i][ux] * side[1][j][uy] * side[2][k][uz];
                         if (weight > 0) {
-                            double v = base[(ux ? stride[0] : 0) + (uy ? stride[1] : 0) + (uz ? stride[2] : 0)];
+                            double v = base[offset[corner]];
                             sum += weight * v;
                             samples = v > samples ? v : samples;
                         }
