@@ -5086,8 +5086,8 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
 static void rrv__grid_range(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, double *low, double *high)
 {
     int count[3], i0[3][RRV__RANGE_POINTS], ax, i, j, k, c, corner;
-    double w[3][RRV__RANGE_POINTS], samples = 0, best = 0, least = 0;
-    size_t stride[3];
+    double w[3][RRV__RANGE_POINTS], side[3][RRV__RANGE_POINTS][2], samples = 0, best = 0, least = 0;
+    size_t stride[3], offset[8];
     stride[0] = (size_t)g->channels;
     stride[1] = stride[0] * (size_t)g->nx;
     stride[2] = stride[1] * (size_t)g->ny;
@@ -5124,26 +5124,30 @@ static void rrv__grid_range(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, double 
             w[ax][0] = 0.0;
         }
     }
+    /* The hottest loop of a split crossing (a piece's halvings each ask for
+       a range): the weights of both sides of each axis are formed once, and
+       the samples' max compares instead of calling fmax (which no sample,
+       never NaN, tells apart); the products and sums are the same, in the
+       same order, as a lookup's. */
+    for (ax = 0; ax < 3; ++ax)
+        for (i = 0; i < count[ax]; ++i) side[ax][i][0] = 1.0 - w[ax][i], side[ax][i][1] = w[ax][i];
+    for (corner = 0; corner < 8; ++corner)
+        offset[corner] = (corner & 1 ? stride[0] : 0) + (corner & 2 ? stride[1] : 0) + (corner & 4 ? stride[2] : 0);
     for (c = 0; c < g->channels; ++c) {
         double cmax = 0, cmin = DBL_MAX;
         for (k = 0; k < count[2]; ++k)
             for (j = 0; j < count[1]; ++j)
                 for (i = 0; i < count[0]; ++i) {
-                    size_t base = (size_t)i0[2][k] * stride[2] + (size_t)i0[1][j] * stride[1] +
-                                  (size_t)i0[0][i] * stride[0] + (size_t)c;
+                    const float *base = g->data + (size_t)i0[2][k] * stride[2] + (size_t)i0[1][j] * stride[1] +
+                                        (size_t)i0[0][i] * stride[0] + (size_t)c;
                     double sum = 0;
                     for (corner = 0; corner < 8; ++corner) {
-                        double weight = 1, wa;
-                        size_t at = base;
-                        for (ax = 0; ax < 3; ++ax) {
-                            int up = (corner >> ax) & 1;
-                            wa = ax == 0 ? w[0][i] : ax == 1 ? w[1][j] : w[2][k];
-                            weight *= up ? wa : 1.0 - wa;
-                            if (up) at += stride[ax];
-                        }
+                        int ux = corner & 1, uy = (corner >> 1) & 1, uz = corner >> 2;
+                        double weight = side[0][i][ux] * side[1][j][uy] * side[2][k][uz];
                         if (weight > 0) {
-                            sum += weight * g->data[at];
-                            samples = fmax(samples, g->data[at]);
+                            double v = base[offset[corner]];
+                            sum += weight * v;
+                            samples = v > samples ? v : samples;
                         }
                     }
                     cmax = fmax(cmax, sum);

@@ -7,7 +7,9 @@
    of check.h add up across them. The library is built with the counting
    allocator of alloc_hook.h, which test_nee and test_parser need and which
    at rest behaves as the default; test_hygiene (RRV_STATIC) stays a
-   program of its own.
+   program of its own. test_emission and test_lm joined in 2026-12: each
+   standalone build was another 7 s of CPU compiling the implementation at
+   -O2 (test/bench/RESULTS.md, "The cost of `make test`").
    Two files that define the same static name get it renamed here for one
    of them, around its #include (the compiler reports any new clash). */
 #define _POSIX_C_SOURCE 200809L
@@ -81,6 +83,21 @@
 #include "test_transmittance.c"
 #undef main
 
+#define main test_emission_main
+#define load emission_load
+#include "test_emission.c"
+#undef main
+#undef load
+
+/* test_lm.c asks for an older POSIX than the one above; the system headers
+   are in by now, so the macro only has to be put back for the files after. */
+#undef _POSIX_C_SOURCE
+#define main test_lm_main
+#include "test_lm.c"
+#undef main
+#undef _POSIX_C_SOURCE
+#define _POSIX_C_SOURCE 200809L
+
 #define main test_parser_main
 #define put32 parser_put32
 #include "test_parser.c"
@@ -98,6 +115,8 @@ int main(int argc, char **argv)
     failed |= test_nanovdb_main(argc, argv);
     failed |= test_render_main(argc, argv);
     failed |= test_nee_main();
+    failed |= test_emission_main();
+    failed |= test_lm_main();
     failed |= test_parser_main(argc, argv);
     failed |= test_transmittance_main();
     return failed ? 1 : 0;

@@ -3,12 +3,12 @@
    does not depend on the thread count or on being split into crops.
    Runs BUILD/rrv as a child process; argv[1] is the build folder. */
 #define _POSIX_C_SOURCE 200809L
-#define RRV_IMPLEMENTATION /* rrv_write_exr, for a hand-made merge part */
 #include "../rrv.h"
 #include "check.h"
 
 #include <dirent.h>
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
