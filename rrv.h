@@ -6640,7 +6640,12 @@ static void rrv__finish_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3
     }
 }
 
-/* >> 9 path tracer: null-scattering paths, emitters and lights, camera paths = */
+/* >> 9 path tracer: null-scattering paths, lights, curved NEE's classes, aim =
+   From the integrators' paths and shadow rays, through the lights, to what
+   every build keeps of curved NEE (the classes that sort connections, nee
+   aim), then the camera paths. The path tracer reaches the solvers of nee
+   shoot and manifold (>> 12) through one interface, declared at its head
+   (THE CURVED-NEE INTERFACE). */
 
 /* ---- integrators: classic and refractive null-scattering path tracing ---------- */
 
@@ -7217,6 +7222,27 @@ static inline int rrv__segment_hit(const rrv__context *ctx, const rrv__bender *b
                                segment < DBL_MAX ? segment + rrv__face_gap(rrv__madd(o, d, segment)) : DBL_MAX, hit);
 }
 
+/* Might the chord o + t d, t in [0, len], meet a medium with extinction?
+   Its bounding box against the media's boxes: no divisions, and a false
+   yes only costs the ordinary walk. The box by comparisons: the comb asks
+   at every kick, and rrv__vmin's six fmin/fmax are library calls (three
+   quarters of this test's cost); inline for the same reason. */
+static inline int rrv__chord_meets_extinction(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, double len)
+{
+    rrv_vec3 e = rrv__madd(o, d, len);
+    rrv_vec3 lo = rrv__v3(rrv__mind(o.x, e.x), rrv__mind(o.y, e.y), rrv__mind(o.z, e.z));
+    rrv_vec3 hi = rrv__v3(rrv__maxd(o.x, e.x), rrv__maxd(o.y, e.y), rrv__maxd(o.z, e.z));
+    int i;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        if (m->majorant->empty) continue;
+        if (lo.x <= m->hi.x && hi.x >= m->lo.x && lo.y <= m->hi.y && hi.y >= m->lo.y && lo.z <= m->hi.z &&
+            hi.z >= m->lo.z)
+            return 1;
+    }
+    return 0;
+}
+
 /* Moves walkers[best] to its next tentative collision or face, dropping it
    from the n walking once it has left its box. 0 if its budget ran out. */
 static int rrv__advance_walker(rrv__walker *walkers, int *n, int best, rrv__rng *rng, uint64_t *events)
@@ -7639,42 +7665,413 @@ typedef struct rrv__vertex_bsdf {
     rrv_vec3 d_in;
 } rrv__vertex_bsdf;
 
-/* In the curved NEE section (>> 12), below. */
-static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x);
-static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d);
-static int rrv__jump_counts(double jump);
-static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls);
-static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len);
-static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len);
-static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
-                           const rrv__light_draw *draw, rrv__rng *rng);
-static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir, const rrv_shape *s,
-                                        rrv_vec3 x);
-static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
-                              const rrv__light_draw *draw, rrv__rng *rng);
-static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
-                         const rrv__light_draw *draw, rrv__rng *rng);
-static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w);
-static double rrv__cone_pdf(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0);
-static void rrv__cone_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng);
-static void rrv__cone_setup(rrv__context *ctx);
-static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 x0,
-                                             int spheres, rrv_vec3 *y, rrv_vec3 *ny, double *pdf_area);
-#define RRV__CHAIN_MAX 512 /* comb planes a manifold chain may have (more: wider spacing) */
-static struct rrv__chain *rrv__chain_new(int cap);
-static void rrv__chain_delete(struct rrv__chain *ch);
-static int rrv__solver_supports_scene(const rrv_scene *scene);
+/* ---- the classes of curved NEE: face jumps, supports, weak chords -----------
+   What every build keeps of curved NEE (the solvers of nee shoot and manifold,
+   which RRV_NO_CURVED_NEE leaves out, are in >> 12): the tests that sort a
+   path into the class of the estimator that stands for it, the vertex's
+   densities, nee AIM, and the light point a curved connection aims at. */
 
-/* Curved NEE from a vertex (the light point of draw, straight NEE's), or
-   the count of vertices that could not. */
-static void rrv__curved_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
-                            const rrv__light_draw *draw, rrv__rng *rng)
+/* A face where the refractivity jumps by more than this is a sharp interface
+   (Fresnel, total internal reflection): paths across one are not shot but
+   left to forward sampling. Below it the Fresnel reflectance is < 1e-14 and
+   the ray passes straight through (the faces of a Luneburg lens, whose IOR
+   meets the ambient one, differ by rounding only). */
+#define RRV__SOLVE_JUMP 1e-7
+/* The weak class's bound, in bend tolerances (rrv__weak_chord): 0, exact,
+   unless a build sets it (see the manual's weak class). */
+#ifndef RRV__WEAK_BEND
+#define RRV__WEAK_BEND 0.0
+#endif
+
+/* Is a jump of the refractivity across a face (rrv__cross_face's
+   face_jump) one that curved connections cannot solve across? */
+static int rrv__jump_counts(double jump) { return jump > RRV__SOLVE_JUMP; }
+
+/* Does the refractivity jump across the face the ray along d meets at x? */
+static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
 {
-    if (ctx->shoot) rrv__shoot_nee(ctx, path, x0, v, draw, rng);
-    else if (ctx->manifold) rrv__manifold_nee(ctx, path, x0, v, draw, rng);
-    if (ctx->shoot || ctx->manifold) rrv__cone_nee(ctx, path, x0, v, rng);
-    else if (ctx->aim) rrv__aim_nee(ctx, path, x0, v, draw, rng);
-    else if (ctx->partition) ++ctx->stats.solves_unsupported;
+    double gap = rrv__face_gap(x);
+    double before = rrv__scene_refractivity(scene, rrv__madd(x, d, -gap), NULL);
+    double after = rrv__scene_refractivity(scene, rrv__madd(x, d, gap), NULL);
+    return fabs(after - before) > RRV__SOLVE_JUMP;
+}
+
+/* Is x inside a refraction support (where rays bend)? */
+static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x)
+{
+    rrv__support_view v;
+    rrv__look_along(scene, x, rrv__v3(0.6, 0.48, 0.64), &v);
+    return v.inside;
+}
+
+/* A bound on how far the straight chord from x along unit d, length len,
+   would turn a ray: the integral along it of each majorant cell's bound
+   on |grad eta| over the lowest eta in the scene (the ray equation turns
+   the direction at |grad_perp eta| / eta per metre). Stops counting once
+   the sum passes stop. */
+static double rrv__chord_bend(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop)
+{
+    const rrv_scene *scene = ctx->scene;
+    const double xs[3] = {x.x, x.y, x.z}, ds[3] = {d.x, d.y, d.z};
+    /* a context set up by hand (tests) may leave it 0: the lowest eta allowed */
+    double eta_floor = ctx->eta_floor > 0 ? ctx->eta_floor : RRV_MIN_IOR;
+    double sum = 0, limit = stop * eta_floor;
+    int i;
+    for (i = 0; i < scene->medium_count && sum <= limit; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        const struct rrv__majorant_grid *g = m->majorant;
+        double t0 = 0, t1 = DBL_MAX, t, t_end, t_next[3], t_delta[3];
+        ptrdiff_t stride[3], idx = 0;
+        int cell[3], step[3], a, misses = 0;
+        if (!rrv__medium_refracts(m) || !g || !g->grad_max) continue;
+        for (a = 0; a < 3; ++a) { /* the grid's box clips the chord */
+            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
+            const double hi = a == 0 ? g->hi.x : a == 1 ? g->hi.y : g->hi.z;
+            if (ds[a] == 0) {
+                misses |= xs[a] < lo || xs[a] > hi;
+            } else {
+                double ta = (lo - xs[a]) / ds[a], tb = (hi - xs[a]) / ds[a];
+                if (ta > tb) { double swap = ta; ta = tb; tb = swap; }
+                if (ta > t0) t0 = ta;
+                if (tb < t1) t1 = tb;
+            }
+        }
+        if (misses) continue;
+        t = t0 > 0 ? t0 : 0;
+        t_end = t1 < len ? t1 : len;
+        if (!(t < t_end)) continue;
+        stride[0] = 1;
+        stride[1] = g->n[0];
+        stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
+        for (a = 0; a < 3; ++a) {
+            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
+            const double cs = a == 0 ? g->cell.x : a == 1 ? g->cell.y : g->cell.z;
+            double c = (xs[a] + ds[a] * t - lo) / cs;
+            cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
+            idx += stride[a] * cell[a];
+            if (ds[a] != 0) {
+                step[a] = ds[a] > 0 ? 1 : -1;
+                t_next[a] = (lo + (cell[a] + (ds[a] > 0)) * cs - xs[a]) / ds[a];
+                t_delta[a] = cs / fabs(ds[a]);
+                stride[a] *= step[a];
+                if (t_next[a] < t) t_next[a] = t;
+            } else {
+                step[a] = 0;
+                t_next[a] = t_delta[a] = DBL_MAX;
+            }
+        }
+        for (;;) {
+            double t_face;
+            a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+            t_face = t_next[a] < t_end ? t_next[a] : t_end;
+            sum += (double)g->grad_max[idx] * (t_face - t);
+            if (t_face >= t_end || sum > limit) break;
+            t = t_face;
+            cell[a] += step[a];
+            if (cell[a] < 0 || cell[a] >= g->n[a]) break;
+            idx += stride[a];
+            t_next[a] += t_delta[a];
+        }
+    }
+    return sum / eta_floor;
+}
+
+/* The class of a connection from x to a point len along unit d (len
+   DBL_MAX: the sky in direction d) when the estimators share paths (nee
+   shoot and manifold): weak, and left to straight NEE with its ordinary
+   MIS, if its straight chord crosses no sharp interface and turns a ray by
+   at most RRV__WEAK_BEND bend tolerances (rrv__chord_bend); else curved.
+   A chord that touches no support is weak. It is a function of the two
+   ends alone, so a forward path between them (not jumped) is sorted the
+   same way from its end points. Treating a weak connection as straight is
+   an approximation: the path straight NEE stands for is the chord, the
+   real one turns by less than the bound, the same order as the bending
+   one comb kick leaves out. */
+/* The chord's bound on bending (rrv__chord_bend, counted until it passes
+   stop) into *bound; 0 if the chord crosses a sharp interface. */
+static int rrv__chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop, double *bound)
+{
+    const rrv_scene *scene = ctx->scene;
+    double t = 0;
+    int faces;
+    rrv__support_view v;
+    *bound = 0;
+    rrv__look_along(scene, x, d, &v);
+    if (!v.inside && !(v.t_face < len)) return 1;
+    /* each support box has at most two faces and a sphere two more along
+       a line; more crossings than that are rounding: call it curved */
+    for (faces = 0; v.t_face < len - t; ++faces) {
+        rrv_vec3 at = rrv__madd(x, d, t + v.t_face);
+        if (faces >= 4 * scene->medium_count || rrv__face_jumps(scene, at, d)) return 0;
+        t += v.t_face + rrv__face_gap(at);
+        rrv__look_along(scene, rrv__madd(x, d, t), d, &v);
+    }
+    *bound = rrv__chord_bend(ctx, x, d, len, stop);
+    return 1;
+}
+
+static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double *bound)
+{
+    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
+    return rrv__chord_bound(ctx, x, d, len, tolerance, bound) && *bound <= tolerance;
+}
+
+static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len)
+{
+    double bound;
+    return rrv__weak_chord_bound(ctx, x, d, len, &bound);
+}
+
+/* The class of a forward path from its last vertex x along w0 that ends
+   along unit d at len (DBL_MAX: the sky): 0 if its chord is curved; 1 if
+   the chord is weak and the path is the chord's near-straight root, the
+   one straight NEE stands for (a ray that turns by at most the chord's
+   bound leaves within that angle of it); 2 if the chord is weak but the
+   path left at a wider angle: another root of the same two ends (a ray
+   bent by a lens into a point whose chord only grazes it), which straight
+   NEE never samples and curved NEE skips for weak chords: the forward path
+   counts it in full, or with shoot and manifold shares it with the rays
+   drawn toward strong supports (rrv__cone_nee). */
+static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len)
+{
+    double bound;
+    if (!rrv__weak_chord_bound(ctx, x, d, len, &bound)) return 0;
+    /* the sine of the angle, well conditioned where acos of a dot product
+       near 1 is not; 1e-7 rad of slack for the nudges off faces and
+       rounding along a path that went straight */
+    return rrv__dot(w0, d) > 0 && rrv__length(rrv__cross(w0, d)) <= bound + 1e-7 ? 1 : 2;
+}
+
+/* Is a straight connection from x to a light sample one of the paths
+   straight NEE stands for when shooting sorts paths into classes, i.e.
+   does it stay out of every refraction support? Forward paths make the
+   same test. */
+static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls)
+{
+    if (!ctx->partition) return 1;
+    return rrv__weak_chord(ctx, x, ls->wi, ls->dist);
+}
+
+static void rrv__vertex_eval(const rrv__vertex_bsdf *v, rrv_vec3 w, double f[3])
+{
+    int c;
+    if (v->surface) {
+        double cosw = fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI;
+        for (c = 0; c < 3; ++c) f[c] = v->albedo[c] * cosw;
+    } else {
+        f[0] = f[1] = f[2] = rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
+    }
+}
+
+/* The density of the vertex's own sampling of w (cosine lobe, phase function). */
+static double rrv__vertex_pdf(const rrv__vertex_bsdf *v, rrv_vec3 w)
+{
+    return v->surface ? fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI : rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
+}
+
+/* The area density with which rrv__pick_area_light names the point y of
+   light s from x0, selection included: uniform on a quad or triangle; on
+   a sphere the cone's solid-angle density turned into area at y, on the
+   cap x0 sees (0 elsewhere: no draw names a point x0 does not see). */
+static double rrv__light_area_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 y)
+{
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv_vec3 to_x0 = rrv__sub(x0, y), n = rrv__sub(y, s->center);
+        double dist2 = rrv__dot(to_x0, to_x0), facing = rrv__dot(n, to_x0) / s->radius;
+        if (!(facing > 0) || !(dist2 > 0)) return 0.0;
+        return rrv__emitter_pdf(s, x0, y, n) * facing / (sqrt(dist2) * dist2) / rrv__light_choices(scene);
+    }
+    return 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
+}
+
+/* The light point y the draw names from x0 for a curved connection, its
+   normal and its area pdf (selection included); NULL for the sky, and for
+   sphere lights unless spheres is set. A quad's or triangle's point is
+   uniform in area; a sphere's is where the direction straight NEE draws
+   uniformly in the sphere's cone from x0 meets its near side, so that
+   one draw names one point whichever class routes it (straight NEE, a
+   curved estimator). The estimators divide by pdf_area, and the forward
+   paths weigh themselves with rrv__light_area_pdf, the same density. */
+static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 x0,
+                                             int spheres, rrv_vec3 *y, rrv_vec3 *ny, double *pdf_area)
+{
+    int pick = rrv__light_pick(scene, draw);
+    const rrv_shape *s;
+    if (pick < 0 || pick == scene->light_count) return NULL;
+    s = &scene->shapes[scene->lights[pick]];
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv__light_sample ls;
+        if (!spheres || !rrv__sample_light(scene, x0, draw, &ls) || !(ls.dist > 0)) return NULL;
+        *y = ls.point;
+        *ny = rrv__scale(rrv__sub(ls.point, s->center), 1.0 / s->radius);
+        *pdf_area = rrv__light_area_pdf(scene, s, x0, ls.point);
+        return *pdf_area > 0 ? s : NULL;
+    }
+    *y = rrv__area_light_point(s, draw->u1, draw->u2);
+    *ny = rrv__normalize(rrv__cross(s->e1, s->e2));
+    *pdf_area = 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
+    return s;
+}
+
+/* ---- nee AIM: bent shadow rays aimed at light samples -----------------------------
+   Where the two-point problem is not solved (the comb, whose kick points
+   move with the ray and have no Jacobi field; or by choice), light is still
+   sampled: a point y on a light (rrv__pick_area_light) gives the
+   direction w0 from x0 to it, and the shadow ray leaves along w0 bent
+   exactly as a camera ray would be (the same comb kicks or eikonal steps,
+   its transmittance ratio-tracked chord by chord). If it lands on the front
+   of that light, the light's radiance counts. As an estimator this is
+   sampling w0 with the solid-angle density pdf(w0) of the straight line
+   from x0 along w0 meeting the light (rrv__aim_pdf), a function of w0 alone,
+   whatever the bent ray then does; so the power heuristic against the
+   vertex's own sampling of w0 is exact, and a forward path that reaches
+   the light from x0 along w0 takes the complementary weight (in
+   rrv__hit_surface), whether or not its end is where w0's line meets it.
+   Unbiased for the discretisation camera rays use, at about the cost of a
+   straight shadow ray plus the kicks along it. It does not focus: a ray
+   that refraction turns off the light contributes nothing, so caustics of
+   small lights come from forward paths, as with nee none; on weak heat
+   haze nearly every aimed ray lands, and the estimate is as good as
+   straight NEE's without its bias.
+   The classes are shoot's: a weak chord (rrv__weak_chord) is straight
+   NEE's, a path crossing a sharp interface (Fresnel) is the forward path's
+   alone, and the sky is not aimed at. A sphere light's w is straight
+   NEE's draw in its cone (rrv__pick_area_light). */
+
+
+/* Who carries a connection from x0 along unit w over len to a point of
+   the light s: 0, straight NEE (a weak chord,
+   rrv__weak_chord); 1, nee aim; 2, the forward path alone (the chord
+   crosses a sharp interface, or bends too much to be worth aiming:
+   RRV__AIM_REACH). A function of x0 and w alone (len and s are where w's
+   line meets the light), so a forward path computes it for itself. */
+static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double len)
+{
+    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
+    /* the light's size across: a sphere's by its disc's area */
+    double size = s->kind == RRV_SHAPE_SPHERE ? sqrt(RRV__PI) * s->radius : sqrt(rrv__shape_area(s));
+    double reach = RRV__AIM_REACH * size / len, bound;
+    if (!rrv__chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound)) return 2;
+    if (bound <= tolerance) return 0;
+    return bound <= reach ? 1 : 2;
+}
+
+/* The solid-angle density of nee aim's w toward the light s from x0,
+   light choice included: 0 where the line from x0 along unit w misses s.
+   Both faces of a quad or triangle count: the point is drawn whatever
+   side of s faces x0, and a bent ray aimed at the back may land on the
+   front. A sphere's is its cone's (rrv__pick_area_light). *len: how far
+   along w the line meets s. */
+static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double *len)
+{
+    rrv_vec3 n, rel;
+    double n2, facing, t, a, b, cos_y;
+    if (s->kind == RRV_SHAPE_SPHERE) {
+        rrv_vec3 to_c = rrv__sub(s->center, x0);
+        double along = rrv__dot(to_c, w), miss2 = rrv__dot(to_c, to_c) - along * along, r2 = s->radius * s->radius;
+        if (!(along > 0) || !(miss2 < r2) || !(rrv__dot(to_c, to_c) > r2)) return 0.0;
+        *len = along - sqrt(r2 - miss2);
+        return rrv__emitter_pdf(s, x0, x0, w) / rrv__light_choices(scene);
+    }
+    n = rrv__cross(s->e1, s->e2);
+    n2 = rrv__dot(n, n);
+    facing = rrv__dot(n, w);
+    if (!(facing != 0) || !(n2 > 0)) return 0.0;
+    t = rrv__dot(n, rrv__sub(s->p0, x0)) / facing;
+    if (!(t > 0) || !(t < DBL_MAX)) return 0.0;
+    rel = rrv__sub(rrv__madd(x0, w, t), s->p0);
+    a = rrv__dot(rrv__cross(rel, s->e2), n) / n2;
+    b = rrv__dot(rrv__cross(s->e1, rel), n) / n2;
+    if (a < 0 || b < 0 || (s->kind == RRV_SHAPE_TRIANGLE ? a + b > 1 : a > 1 || b > 1)) return 0.0;
+    cos_y = fabs(facing) / sqrt(n2);
+    *len = t;
+    return t * t / (rrv__shape_area(s) * cos_y * rrv__light_choices(scene));
+}
+
+/* The density nee (straight or aimed) draws w with from x0 toward the
+   light s, 0 where it leaves w to forward paths: what a
+   forward path that reached s from x0 along w weighs itself against. */
+static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w)
+{
+    double len, pdf = rrv__aim_pdf(ctx->scene, s, x0, w, &len);
+    return pdf > 0 && rrv__aim_class(ctx, s, x0, w, len) < 2 ? pdf : 0.0;
+}
+
+/* nee aim's shadow ray from o along *d, bent as camera rays are: the shape
+   index of the first surface it meets (*hit, *d its direction there) and
+   the transmittance up to it; -1 where T reaches 0 or the step bound
+   (counted as cut), -2 where it leaves the scene or meets a sharp
+   interface. */
+static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *rng, rrv__hit *hit, double T[3])
+{
+    const rrv_scene *scene = ctx->scene;
+    rrv__bender b;
+    long steps = 0;
+    ++ctx->stats.paths;
+    T[0] = T[1] = T[2] = 1.0;
+    rrv__bender_start(&b, scene, ctx->eikonal, o);
+    for (;;) {
+        double segment, reach, Ts[3];
+        int has_hit, c, end;
+        if (++steps > ctx->step_bound) {
+            ++ctx->stats.paths_cut;
+            return -1;
+        }
+        if (b.run > ctx->trap_length) {
+            ++ctx->stats.paths_cut;
+            ++ctx->stats.trapped_paths;
+            return -1;
+        }
+        if (!b.pending) rrv__plan_segment(&b, scene, o, d, rng);
+        segment = b.segment;
+        has_hit = rrv__segment_hit(ctx, &b, o, *d, segment, hit);
+        if (!has_hit && !(segment < DBL_MAX)) return -2;
+        reach = has_hit ? hit->t : segment;
+        if (rrv__chord_meets_extinction(scene, o, *d, reach)) {
+            rrv__transmittance(ctx, o, *d, reach, rng, Ts);
+            for (c = 0; c < 3; ++c) T[c] *= Ts[c];
+            if (!rrv__nonzero3(T)) return -1;
+        }
+        if (has_hit) return hit->shape;
+        end = b.end;
+        if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
+        rrv__finish_segment(&b, scene, &o, d, rng);
+        /* the jump the face's crossing looked up, as the forward path reads it */
+        if (end == RRV__END_FACE && rrv__jump_counts(b.face_jump)) return -2;
+    }
+}
+
+/* nee aim from vertex x0 (the section's comment says why it is unbiased). */
+static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                         const rrv__light_draw *draw, rrv__rng *rng)
+{
+    const rrv_scene *scene = ctx->scene;
+    rrv_vec3 y, ny, w0, d;
+    rrv__hit hit;
+    double pdf_area, to_y, pdf_aim, pdf_dir, f[3], T[3], k;
+    int c, met;
+    const rrv_shape *s = rrv__pick_area_light(scene, draw, x0, 1, &y, &ny, &pdf_area);
+    (void)pdf_area;
+    if (!s) return;
+    to_y = rrv__length(rrv__sub(y, x0));
+    if (!(to_y > 0)) return;
+    w0 = rrv__scale(rrv__sub(y, x0), 1.0 / to_y);
+    rrv__vertex_eval(v, w0, f);
+    if (!(f[0] > 0 || f[1] > 0 || f[2] > 0)) return;
+    if (rrv__aim_class(ctx, s, x0, w0, to_y) != 1) return; /* straight NEE's or the forward path's */
+    pdf_aim = rrv__aim_pdf(scene, s, x0, w0, &to_y);
+    if (!(pdf_aim > 0) || !(pdf_aim < DBL_MAX)) return; /* y on the light's rim, seen edge-on */
+    ++ctx->stats.aim_shots;
+    d = w0;
+    met = rrv__aim_trace(ctx, x0, &d, rng, &hit, T);
+    if (met == -1) return;
+    if (met == -2 || &scene->shapes[met] != s || !(rrv__dot(hit.n, d) < 0)) {
+        ++ctx->stats.aim_missed;
+        return;
+    }
+    pdf_dir = rrv__vertex_pdf(v, w0);
+    k = rrv__power_heuristic(pdf_aim, pdf_dir) / pdf_aim * rrv__eta_scale(ctx, hit.p) * rrv__path_mis(path);
+    for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
 }
 
 /* ---- the path tracer: camera paths, their vertices, next-event estimation -----
@@ -7686,6 +8083,43 @@ static void rrv__curved_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, con
    weighed by MIS against the vertex's own sampling of the next direction,
    or not sampled at all (nee none, bending integrators): then the path
    alone finds the lights and every hit counts in full. */
+
+/* THE CURVED-NEE INTERFACE: all that this section and render (>> 10) reach
+   of the solvers of nee shoot and manifold and of their cones (>> 12),
+   which come after the tracer because they trace rays with its helpers.
+   The rest of curved NEE (the classes, nee aim) is above, in every build.
+     rrv__solver_supports_scene  can shoot and manifold solve in every
+                                 refracting medium of the scene?
+     rrv__solver_setup           a render's cones (shoot, manifold) and chain
+                                 (manifold); 0 when out of memory
+     rrv__solver_release         frees what setup allocated
+     rrv__solver_nee             the curved connection at a vertex: shoot's
+                                 or manifold's, then the cones'
+     rrv__solver_forward_weight  the MIS weight of a forward path that hits
+                                 a light where a solver or a cone stands for
+                                 it (weak: its rrv__forward_weak class)
+   A build with RRV_NO_CURVED_NEE gets the stubs at the end of >> 12, which
+   answer "no curved estimator": no scene is supported, so ctx->shoot and
+   ctx->manifold stay 0; setup has nothing to set up, a connection adds
+   nothing, and a forward path keeps the weight that no solver and no cone
+   shares (1; a weak chord's other root against a cone density of 0). */
+static int rrv__solver_supports_scene(const rrv_scene *scene);
+static int rrv__solver_setup(rrv__context *ctx);
+static void rrv__solver_release(rrv__context *ctx);
+static void rrv__solver_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                            const rrv__light_draw *draw, rrv__rng *rng);
+static double rrv__solver_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir,
+                                         const rrv_shape *s, rrv_vec3 x, int weak, int jumped);
+
+/* Curved NEE from a vertex (the light point of draw, straight NEE's), or
+   the count of vertices that could not. */
+static void rrv__curved_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                            const rrv__light_draw *draw, rrv__rng *rng)
+{
+    if (ctx->shoot || ctx->manifold) rrv__solver_nee(ctx, path, x0, v, draw, rng);
+    else if (ctx->aim) rrv__aim_nee(ctx, path, x0, v, draw, rng);
+    else if (ctx->partition) ++ctx->stats.solves_unsupported;
+}
 
 typedef struct rrv__camera_path {
     rrv__path path;      /* throughput, radiance, spectral MIS, refraction state */
@@ -7900,12 +8334,8 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
                            : 0;
             if (!(ctx->partition && cp->touched) || weak == 1)
                 w = rrv__power_heuristic(cp->prev_pdf, rrv__emitter_pdf(s, cp->vertex, x, n) / rrv__light_choices(scene));
-            else if (weak == 2) /* a root no light sample stands for: the cones' (rrv__cone_nee) */
-                w = rrv__power_heuristic(cp->prev_pdf, rrv__cone_pdf(ctx, cp->vertex, cp->w0));
-            else if (ctx->shoot && !cp->jumped)
-                w = rrv__shoot_forward_weight(ctx, cp->vertex, cp->w0, cp->prev_pdf, s, x); /* MIS with shooting */
-            else if (ctx->manifold && !cp->jumped && s->kind != RRV_SHAPE_SPHERE)
-                w = 0.0; /* counted by the curved connection alone */
+            else
+                w = rrv__solver_forward_weight(ctx, cp->vertex, cp->w0, cp->prev_pdf, s, x, weak, cp->jumped);
         }
         w *= rrv__eta_scale(ctx, x) * rrv__path_mis(&cp->path);
         for (c = 0; c < 3; ++c) cp->path.L[c] += cp->path.beta[c] * s->L[c] * w;
@@ -7942,27 +8372,6 @@ static int rrv__russian_roulette(rrv__camera_path *cp, rrv__rng *rng)
         }
     }
     return rrv__max3(cp->path.beta) > 0;
-}
-
-/* Might the chord o + t d, t in [0, len], meet a medium with extinction?
-   Its bounding box against the media's boxes: no divisions, and a false
-   yes only costs the ordinary walk. The box by comparisons: the comb asks
-   at every kick, and rrv__vmin's six fmin/fmax are library calls (three
-   quarters of this test's cost); inline for the same reason. */
-static inline int rrv__chord_meets_extinction(const rrv_scene *scene, rrv_vec3 o, rrv_vec3 d, double len)
-{
-    rrv_vec3 e = rrv__madd(o, d, len);
-    rrv_vec3 lo = rrv__v3(rrv__mind(o.x, e.x), rrv__mind(o.y, e.y), rrv__mind(o.z, e.z));
-    rrv_vec3 hi = rrv__v3(rrv__maxd(o.x, e.x), rrv__maxd(o.y, e.y), rrv__maxd(o.z, e.z));
-    int i;
-    for (i = 0; i < scene->medium_count; ++i) {
-        const rrv_medium *m = &scene->media[i];
-        if (m->majorant->empty) continue;
-        if (lo.x <= m->hi.x && hi.x >= m->lo.x && lo.y <= m->hi.y && hi.y >= m->lo.y && lo.z <= m->hi.z &&
-            hi.z >= m->lo.z)
-            return 1;
-    }
-    return 0;
 }
 
 /* One camera path from o along d; its radiance into L. */
@@ -8260,8 +8669,6 @@ static rrv_vec3 rrv__camera_ray(const rrv__camera_frame *f, const rrv_camera *ca
     return rrv__normalize(rrv__add(f->forward, rrv__add(rrv__scale(f->right, sx), rrv__scale(f->up, sy))));
 }
 
-static int rrv__jump_counts(double jump);
-
 /* The jump of the scene's refractivity across a surface at `at`, a few
    rounding gaps to either side along its normal; 0 where it is one curved
    connections cross (RRV__SOLVE_JUMP: below it Fresnel reflects < 1e-14,
@@ -8489,8 +8896,7 @@ static rrv_result rrv__render_context(const rrv_scene *scene, rrv__context *ctx,
         }
         ctx->eta_floor = rrv__maxd(ctx->eta_floor, RRV_MIN_IOR);
     }
-    if (ctx->shoot || ctx->manifold) rrv__cone_setup(ctx);
-    if (ctx->manifold && !(ctx->chain = rrv__chain_new(RRV__CHAIN_MAX)))
+    if (!rrv__solver_setup(ctx))
         return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "rrv_render_rect: out of memory for nee manifold's chain");
     r_camera = ctx->bends ? rrv__scene_refractivity(scene, frame->eye, NULL) : 0.0;
     ctx->eta_camera2 = (1.0 + r_camera) * (1.0 + r_camera);
@@ -8583,7 +8989,7 @@ RRV_DEF rrv_result rrv_render_rect(const rrv_scene *scene, int x0, int y0, int x
         }
     }
     if (stats) rrv__add_render_stats(stats, &ctx.stats);
-    rrv__chain_delete(ctx.chain);
+    rrv__solver_release(&ctx);
     return RRV_OK;
 }
 
@@ -8677,7 +9083,7 @@ RRV_DEF rrv_result rrv_render_rect_adaptive(const rrv_scene *scene, int x0, int 
             counts[(size_t)(y - y0) * (size_t)stride + (size_t)(x - x0)] = n;
         }
     if (stats) rrv__add_render_stats(stats, &ctx.stats);
-    rrv__chain_delete(ctx.chain);
+    rrv__solver_release(&ctx);
     return RRV_OK;
 }
 
@@ -9975,12 +10381,14 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
     return RRV_OK;
 }
 
-/* >> 12 curved NEE (module): shoot, aim, the cones, the manifold walk =========
-   Connections to lights along bent rays. What every build keeps comes
-   first: the face jumps and weak-chord classes that sort paths, nee AIM and
-   the light point a curved connection aims at. The solvers of nee SHOOT
-   and MANIFOLD, with the cones, follow in the one block RRV_NO_CURVED_NEE
-   leaves out. */
+/* >> 12 curved NEE (module): shoot, the cones, the manifold walk ==============
+   Connections to lights along bent rays that a solver finds: nee SHOOT and
+   MANIFOLD, with the cones, in the one block RRV_NO_CURVED_NEE leaves out.
+   What every build keeps (the face jumps and weak-chord classes that sort
+   paths, nee AIM, the light point a connection aims at) is in >> 9, before
+   the path tracer; the tracer and render reach this section only through
+   the curved-NEE interface declared there, defined at this section's end
+   (the stubs after #else are what a build without it gets). */
 
 /* Shots a solve may take: of the solves that converged within 40, 99 % took 15 or fewer. */
 #define RRV__SOLVE_ITERATIONS 20
@@ -10004,412 +10412,10 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
 #define RRV__SOLVE_HALVINGS 3
 #endif
 #define RRV__SOLVE_SEGMENTS 200000L   /* a shot longer than this is a failed one */
-/* A face where the refractivity jumps by more than this is a sharp interface
-   (Fresnel, total internal reflection): paths across one are not shot but
-   left to forward sampling. Below it the Fresnel reflectance is < 1e-14 and
-   the ray passes straight through (the faces of a Luneburg lens, whose IOR
-   meets the ambient one, differ by rounding only). */
-#define RRV__SOLVE_JUMP 1e-7
-/* The weak class's bound, in bend tolerances (rrv__weak_chord): 0, exact,
-   unless a build sets it (see the manual's weak class). */
-#ifndef RRV__WEAK_BEND
-#define RRV__WEAK_BEND 0.0
-#endif
-
-/* Is a jump of the refractivity across a face (rrv__cross_face's
-   face_jump) one that curved connections cannot solve across? */
-static int rrv__jump_counts(double jump) { return jump > RRV__SOLVE_JUMP; }
-
-/* Does the refractivity jump across the face the ray along d meets at x? */
-static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
-{
-    double gap = rrv__face_gap(x);
-    double before = rrv__scene_refractivity(scene, rrv__madd(x, d, -gap), NULL);
-    double after = rrv__scene_refractivity(scene, rrv__madd(x, d, gap), NULL);
-    return fabs(after - before) > RRV__SOLVE_JUMP;
-}
-
-/* Is x inside a refraction support (where rays bend)? */
-static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x)
-{
-    rrv__support_view v;
-    rrv__look_along(scene, x, rrv__v3(0.6, 0.48, 0.64), &v);
-    return v.inside;
-}
-
-/* Is a straight connection from x to a light sample one of the paths
-   straight NEE stands for when shooting sorts paths into classes, i.e.
-   does it stay out of every refraction support? Forward paths make the
-   same test. */
-static int rrv__straight_allowed(const rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls)
-{
-    if (!ctx->partition) return 1;
-    return rrv__weak_chord(ctx, x, ls->wi, ls->dist);
-}
-
-/* A bound on how far the straight chord from x along unit d, length len,
-   would turn a ray: the integral along it of each majorant cell's bound
-   on |grad eta| over the lowest eta in the scene (the ray equation turns
-   the direction at |grad_perp eta| / eta per metre). Stops counting once
-   the sum passes stop. */
-static double rrv__chord_bend(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop)
-{
-    const rrv_scene *scene = ctx->scene;
-    const double xs[3] = {x.x, x.y, x.z}, ds[3] = {d.x, d.y, d.z};
-    /* a context set up by hand (tests) may leave it 0: the lowest eta allowed */
-    double eta_floor = ctx->eta_floor > 0 ? ctx->eta_floor : RRV_MIN_IOR;
-    double sum = 0, limit = stop * eta_floor;
-    int i;
-    for (i = 0; i < scene->medium_count && sum <= limit; ++i) {
-        const rrv_medium *m = &scene->media[i];
-        const struct rrv__majorant_grid *g = m->majorant;
-        double t0 = 0, t1 = DBL_MAX, t, t_end, t_next[3], t_delta[3];
-        ptrdiff_t stride[3], idx = 0;
-        int cell[3], step[3], a, misses = 0;
-        if (!rrv__medium_refracts(m) || !g || !g->grad_max) continue;
-        for (a = 0; a < 3; ++a) { /* the grid's box clips the chord */
-            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
-            const double hi = a == 0 ? g->hi.x : a == 1 ? g->hi.y : g->hi.z;
-            if (ds[a] == 0) {
-                misses |= xs[a] < lo || xs[a] > hi;
-            } else {
-                double ta = (lo - xs[a]) / ds[a], tb = (hi - xs[a]) / ds[a];
-                if (ta > tb) { double swap = ta; ta = tb; tb = swap; }
-                if (ta > t0) t0 = ta;
-                if (tb < t1) t1 = tb;
-            }
-        }
-        if (misses) continue;
-        t = t0 > 0 ? t0 : 0;
-        t_end = t1 < len ? t1 : len;
-        if (!(t < t_end)) continue;
-        stride[0] = 1;
-        stride[1] = g->n[0];
-        stride[2] = (ptrdiff_t)g->n[0] * g->n[1];
-        for (a = 0; a < 3; ++a) {
-            const double lo = a == 0 ? g->lo.x : a == 1 ? g->lo.y : g->lo.z;
-            const double cs = a == 0 ? g->cell.x : a == 1 ? g->cell.y : g->cell.z;
-            double c = (xs[a] + ds[a] * t - lo) / cs;
-            cell[a] = !(c >= 0) ? 0 : c >= g->n[a] - 1 ? g->n[a] - 1 : (int)c;
-            idx += stride[a] * cell[a];
-            if (ds[a] != 0) {
-                step[a] = ds[a] > 0 ? 1 : -1;
-                t_next[a] = (lo + (cell[a] + (ds[a] > 0)) * cs - xs[a]) / ds[a];
-                t_delta[a] = cs / fabs(ds[a]);
-                stride[a] *= step[a];
-                if (t_next[a] < t) t_next[a] = t;
-            } else {
-                step[a] = 0;
-                t_next[a] = t_delta[a] = DBL_MAX;
-            }
-        }
-        for (;;) {
-            double t_face;
-            a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
-            t_face = t_next[a] < t_end ? t_next[a] : t_end;
-            sum += (double)g->grad_max[idx] * (t_face - t);
-            if (t_face >= t_end || sum > limit) break;
-            t = t_face;
-            cell[a] += step[a];
-            if (cell[a] < 0 || cell[a] >= g->n[a]) break;
-            idx += stride[a];
-            t_next[a] += t_delta[a];
-        }
-    }
-    return sum / eta_floor;
-}
-
-/* The class of a connection from x to a point len along unit d (len
-   DBL_MAX: the sky in direction d) when the estimators share paths (nee
-   shoot and manifold): weak, and left to straight NEE with its ordinary
-   MIS, if its straight chord crosses no sharp interface and turns a ray by
-   at most RRV__WEAK_BEND bend tolerances (rrv__chord_bend); else curved.
-   A chord that touches no support is weak. It is a function of the two
-   ends alone, so a forward path between them (not jumped) is sorted the
-   same way from its end points. Treating a weak connection as straight is
-   an approximation: the path straight NEE stands for is the chord, the
-   real one turns by less than the bound, the same order as the bending
-   one comb kick leaves out. */
-/* The chord's bound on bending (rrv__chord_bend, counted until it passes
-   stop) into *bound; 0 if the chord crosses a sharp interface. */
-static int rrv__chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop, double *bound)
-{
-    const rrv_scene *scene = ctx->scene;
-    double t = 0;
-    int faces;
-    rrv__support_view v;
-    *bound = 0;
-    rrv__look_along(scene, x, d, &v);
-    if (!v.inside && !(v.t_face < len)) return 1;
-    /* each support box has at most two faces and a sphere two more along
-       a line; more crossings than that are rounding: call it curved */
-    for (faces = 0; v.t_face < len - t; ++faces) {
-        rrv_vec3 at = rrv__madd(x, d, t + v.t_face);
-        if (faces >= 4 * scene->medium_count || rrv__face_jumps(scene, at, d)) return 0;
-        t += v.t_face + rrv__face_gap(at);
-        rrv__look_along(scene, rrv__madd(x, d, t), d, &v);
-    }
-    *bound = rrv__chord_bend(ctx, x, d, len, stop);
-    return 1;
-}
-
-static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double *bound)
-{
-    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
-    return rrv__chord_bound(ctx, x, d, len, tolerance, bound) && *bound <= tolerance;
-}
-
-static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len)
-{
-    double bound;
-    return rrv__weak_chord_bound(ctx, x, d, len, &bound);
-}
-
-/* The class of a forward path from its last vertex x along w0 that ends
-   along unit d at len (DBL_MAX: the sky): 0 if its chord is curved; 1 if
-   the chord is weak and the path is the chord's near-straight root, the
-   one straight NEE stands for (a ray that turns by at most the chord's
-   bound leaves within that angle of it); 2 if the chord is weak but the
-   path left at a wider angle: another root of the same two ends (a ray
-   bent by a lens into a point whose chord only grazes it), which straight
-   NEE never samples and curved NEE skips for weak chords: the forward path
-   counts it in full, or with shoot and manifold shares it with the rays
-   drawn toward strong supports (rrv__cone_nee). */
-static int rrv__forward_weak(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 w0, rrv_vec3 d, double len)
-{
-    double bound;
-    if (!rrv__weak_chord_bound(ctx, x, d, len, &bound)) return 0;
-    /* the sine of the angle, well conditioned where acos of a dot product
-       near 1 is not; 1e-7 rad of slack for the nudges off faces and
-       rounding along a path that went straight */
-    return rrv__dot(w0, d) > 0 && rrv__length(rrv__cross(w0, d)) <= bound + 1e-7 ? 1 : 2;
-}
-
-static void rrv__vertex_eval(const rrv__vertex_bsdf *v, rrv_vec3 w, double f[3])
-{
-    int c;
-    if (v->surface) {
-        double cosw = fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI;
-        for (c = 0; c < 3; ++c) f[c] = v->albedo[c] * cosw;
-    } else {
-        f[0] = f[1] = f[2] = rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
-    }
-}
-
-/* The density of the vertex's own sampling of w (cosine lobe, phase function). */
-static double rrv__vertex_pdf(const rrv__vertex_bsdf *v, rrv_vec3 w)
-{
-    return v->surface ? fmax(0.0, rrv__dot(v->n, w)) * RRV__INV_PI : rrv__hg_eval(v->g, rrv__dot(v->d_in, w));
-}
-
-/* The area density with which rrv__pick_area_light names the point y of
-   light s from x0, selection included: uniform on a quad or triangle; on
-   a sphere the cone's solid-angle density turned into area at y, on the
-   cap x0 sees (0 elsewhere: no draw names a point x0 does not see). */
-static double rrv__light_area_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 y)
-{
-    if (s->kind == RRV_SHAPE_SPHERE) {
-        rrv_vec3 to_x0 = rrv__sub(x0, y), n = rrv__sub(y, s->center);
-        double dist2 = rrv__dot(to_x0, to_x0), facing = rrv__dot(n, to_x0) / s->radius;
-        if (!(facing > 0) || !(dist2 > 0)) return 0.0;
-        return rrv__emitter_pdf(s, x0, y, n) * facing / (sqrt(dist2) * dist2) / rrv__light_choices(scene);
-    }
-    return 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
-}
-
-/* ---- nee AIM: bent shadow rays aimed at light samples -----------------------------
-   Where the two-point problem is not solved (the comb, whose kick points
-   move with the ray and have no Jacobi field; or by choice), light is still
-   sampled: a point y on a light (rrv__pick_area_light) gives the
-   direction w0 from x0 to it, and the shadow ray leaves along w0 bent
-   exactly as a camera ray would be (the same comb kicks or eikonal steps,
-   its transmittance ratio-tracked chord by chord). If it lands on the front
-   of that light, the light's radiance counts. As an estimator this is
-   sampling w0 with the solid-angle density pdf(w0) of the straight line
-   from x0 along w0 meeting the light (rrv__aim_pdf), a function of w0 alone,
-   whatever the bent ray then does; so the power heuristic against the
-   vertex's own sampling of w0 is exact, and a forward path that reaches
-   the light from x0 along w0 takes the complementary weight (in
-   rrv__hit_surface), whether or not its end is where w0's line meets it.
-   Unbiased for the discretisation camera rays use, at about the cost of a
-   straight shadow ray plus the kicks along it. It does not focus: a ray
-   that refraction turns off the light contributes nothing, so caustics of
-   small lights come from forward paths, as with nee none; on weak heat
-   haze nearly every aimed ray lands, and the estimate is as good as
-   straight NEE's without its bias.
-   The classes are shoot's: a weak chord (rrv__weak_chord) is straight
-   NEE's, a path crossing a sharp interface (Fresnel) is the forward path's
-   alone, and the sky is not aimed at. A sphere light's w is straight
-   NEE's draw in its cone (rrv__pick_area_light). */
-
-
-/* Who carries a connection from x0 along unit w over len to a point of
-   the light s: 0, straight NEE (a weak chord,
-   rrv__weak_chord); 1, nee aim; 2, the forward path alone (the chord
-   crosses a sharp interface, or bends too much to be worth aiming:
-   RRV__AIM_REACH). A function of x0 and w alone (len and s are where w's
-   line meets the light), so a forward path computes it for itself. */
-static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double len)
-{
-    double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
-    /* the light's size across: a sphere's by its disc's area */
-    double size = s->kind == RRV_SHAPE_SPHERE ? sqrt(RRV__PI) * s->radius : sqrt(rrv__shape_area(s));
-    double reach = RRV__AIM_REACH * size / len, bound;
-    if (!rrv__chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound)) return 2;
-    if (bound <= tolerance) return 0;
-    return bound <= reach ? 1 : 2;
-}
-
-/* The solid-angle density of nee aim's w toward the light s from x0,
-   light choice included: 0 where the line from x0 along unit w misses s.
-   Both faces of a quad or triangle count: the point is drawn whatever
-   side of s faces x0, and a bent ray aimed at the back may land on the
-   front. A sphere's is its cone's (rrv__pick_area_light). *len: how far
-   along w the line meets s. */
-static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w, double *len)
-{
-    rrv_vec3 n, rel;
-    double n2, facing, t, a, b, cos_y;
-    if (s->kind == RRV_SHAPE_SPHERE) {
-        rrv_vec3 to_c = rrv__sub(s->center, x0);
-        double along = rrv__dot(to_c, w), miss2 = rrv__dot(to_c, to_c) - along * along, r2 = s->radius * s->radius;
-        if (!(along > 0) || !(miss2 < r2) || !(rrv__dot(to_c, to_c) > r2)) return 0.0;
-        *len = along - sqrt(r2 - miss2);
-        return rrv__emitter_pdf(s, x0, x0, w) / rrv__light_choices(scene);
-    }
-    n = rrv__cross(s->e1, s->e2);
-    n2 = rrv__dot(n, n);
-    facing = rrv__dot(n, w);
-    if (!(facing != 0) || !(n2 > 0)) return 0.0;
-    t = rrv__dot(n, rrv__sub(s->p0, x0)) / facing;
-    if (!(t > 0) || !(t < DBL_MAX)) return 0.0;
-    rel = rrv__sub(rrv__madd(x0, w, t), s->p0);
-    a = rrv__dot(rrv__cross(rel, s->e2), n) / n2;
-    b = rrv__dot(rrv__cross(s->e1, rel), n) / n2;
-    if (a < 0 || b < 0 || (s->kind == RRV_SHAPE_TRIANGLE ? a + b > 1 : a > 1 || b > 1)) return 0.0;
-    cos_y = fabs(facing) / sqrt(n2);
-    *len = t;
-    return t * t / (rrv__shape_area(s) * cos_y * rrv__light_choices(scene));
-}
-
-/* The density nee (straight or aimed) draws w with from x0 toward the
-   light s, 0 where it leaves w to forward paths: what a
-   forward path that reached s from x0 along w weighs itself against. */
-static double rrv__aim_forward_pdf(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 x0, rrv_vec3 w)
-{
-    double len, pdf = rrv__aim_pdf(ctx->scene, s, x0, w, &len);
-    return pdf > 0 && rrv__aim_class(ctx, s, x0, w, len) < 2 ? pdf : 0.0;
-}
-
-/* nee aim's shadow ray from o along *d, bent as camera rays are: the shape
-   index of the first surface it meets (*hit, *d its direction there) and
-   the transmittance up to it; -1 where T reaches 0 or the step bound
-   (counted as cut), -2 where it leaves the scene or meets a sharp
-   interface. */
-static int rrv__aim_trace(rrv__context *ctx, rrv_vec3 o, rrv_vec3 *d, rrv__rng *rng, rrv__hit *hit, double T[3])
-{
-    const rrv_scene *scene = ctx->scene;
-    rrv__bender b;
-    long steps = 0;
-    ++ctx->stats.paths;
-    T[0] = T[1] = T[2] = 1.0;
-    rrv__bender_start(&b, scene, ctx->eikonal, o);
-    for (;;) {
-        double segment, reach, Ts[3];
-        int has_hit, c, end;
-        if (++steps > ctx->step_bound) {
-            ++ctx->stats.paths_cut;
-            return -1;
-        }
-        if (b.run > ctx->trap_length) {
-            ++ctx->stats.paths_cut;
-            ++ctx->stats.trapped_paths;
-            return -1;
-        }
-        if (!b.pending) rrv__plan_segment(&b, scene, o, d, rng);
-        segment = b.segment;
-        has_hit = rrv__segment_hit(ctx, &b, o, *d, segment, hit);
-        if (!has_hit && !(segment < DBL_MAX)) return -2;
-        reach = has_hit ? hit->t : segment;
-        if (rrv__chord_meets_extinction(scene, o, *d, reach)) {
-            rrv__transmittance(ctx, o, *d, reach, rng, Ts);
-            for (c = 0; c < 3; ++c) T[c] *= Ts[c];
-            if (!rrv__nonzero3(T)) return -1;
-        }
-        if (has_hit) return hit->shape;
-        end = b.end;
-        if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
-        rrv__finish_segment(&b, scene, &o, d, rng);
-        /* the jump the face's crossing looked up, as the forward path reads it */
-        if (end == RRV__END_FACE && rrv__jump_counts(b.face_jump)) return -2;
-    }
-}
-
-/* nee aim from vertex x0 (the section's comment says why it is unbiased). */
-static void rrv__aim_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
-                         const rrv__light_draw *draw, rrv__rng *rng)
-{
-    const rrv_scene *scene = ctx->scene;
-    rrv_vec3 y, ny, w0, d;
-    rrv__hit hit;
-    double pdf_area, to_y, pdf_aim, pdf_dir, f[3], T[3], k;
-    int c, met;
-    const rrv_shape *s = rrv__pick_area_light(scene, draw, x0, 1, &y, &ny, &pdf_area);
-    (void)pdf_area;
-    if (!s) return;
-    to_y = rrv__length(rrv__sub(y, x0));
-    if (!(to_y > 0)) return;
-    w0 = rrv__scale(rrv__sub(y, x0), 1.0 / to_y);
-    rrv__vertex_eval(v, w0, f);
-    if (!(f[0] > 0 || f[1] > 0 || f[2] > 0)) return;
-    if (rrv__aim_class(ctx, s, x0, w0, to_y) != 1) return; /* straight NEE's or the forward path's */
-    pdf_aim = rrv__aim_pdf(scene, s, x0, w0, &to_y);
-    if (!(pdf_aim > 0) || !(pdf_aim < DBL_MAX)) return; /* y on the light's rim, seen edge-on */
-    ++ctx->stats.aim_shots;
-    d = w0;
-    met = rrv__aim_trace(ctx, x0, &d, rng, &hit, T);
-    if (met == -1) return;
-    if (met == -2 || &scene->shapes[met] != s || !(rrv__dot(hit.n, d) < 0)) {
-        ++ctx->stats.aim_missed;
-        return;
-    }
-    pdf_dir = rrv__vertex_pdf(v, w0);
-    k = rrv__power_heuristic(pdf_aim, pdf_dir) / pdf_aim * rrv__eta_scale(ctx, hit.p) * rrv__path_mis(path);
-    for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
-}
-
-/* The light point y the draw names from x0 for a curved connection, its
-   normal and its area pdf (selection included); NULL for the sky, and for
-   sphere lights unless spheres is set. A quad's or triangle's point is
-   uniform in area; a sphere's is where the direction straight NEE draws
-   uniformly in the sphere's cone from x0 meets its near side, so that
-   one draw names one point whichever class routes it (straight NEE, a
-   curved estimator). The estimators divide by pdf_area, and the forward
-   paths weigh themselves with rrv__light_area_pdf, the same density. */
-static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__light_draw *draw, rrv_vec3 x0,
-                                             int spheres, rrv_vec3 *y, rrv_vec3 *ny, double *pdf_area)
-{
-    int pick = rrv__light_pick(scene, draw);
-    const rrv_shape *s;
-    if (pick < 0 || pick == scene->light_count) return NULL;
-    s = &scene->shapes[scene->lights[pick]];
-    if (s->kind == RRV_SHAPE_SPHERE) {
-        rrv__light_sample ls;
-        if (!spheres || !rrv__sample_light(scene, x0, draw, &ls) || !(ls.dist > 0)) return NULL;
-        *y = ls.point;
-        *ny = rrv__scale(rrv__sub(ls.point, s->center), 1.0 / s->radius);
-        *pdf_area = rrv__light_area_pdf(scene, s, x0, ls.point);
-        return *pdf_area > 0 ? s : NULL;
-    }
-    *y = rrv__area_light_point(s, draw->u1, draw->u2);
-    *ny = rrv__normalize(rrv__cross(s->e1, s->e2));
-    *pdf_area = 1.0 / (rrv__shape_area(s) * rrv__light_choices(scene));
-    return s;
-}
 
 /* RRV_NO_CURVED_NEE leaves out the solvers of nee shoot and manifold and
    the cones that go with them; nee aim, the weak-chord classes and the
-   face jumps stay. Such a build supports no scene for solving, so the
+   face jumps stay (>> 9). Such a build supports no scene for solving, so the
    default integrator never picks eikonal for its shooting and the default
    nee aims; an explicit shoot or manifold is refused (rrv__settings_check). */
 #ifndef RRV_NO_CURVED_NEE
@@ -11546,6 +11552,7 @@ static void rrv__cone_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const
    (rrv__chain_aim). The chain's arrays are one heap block per render
    context (rrv__chain_new), not on the stack. */
 
+#define RRV__CHAIN_MAX 512 /* comb planes a manifold chain may have (more: wider spacing) */
 #define RRV__MANIFOLD_TOL 1e-9    /* max |residual| at a root (eta radians) */
 #define RRV__MANIFOLD_FLAT 1e-9   /* |grad eta| below which a vertex has no isosurface */
 #define RRV__MANIFOLD_ROOTS 8     /* distinct roots the fixed-trial variant keeps */
@@ -12838,9 +12845,41 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
     }
 }
 
-#else /* RRV_NO_CURVED_NEE: what the integrators call, never reached (no
+/* ---- the curved-NEE interface (declared at the head of the path tracer) ---------- */
+
+static int rrv__solver_setup(rrv__context *ctx)
+{
+    if (ctx->shoot || ctx->manifold) rrv__cone_setup(ctx);
+    return !ctx->manifold || (ctx->chain = rrv__chain_new(RRV__CHAIN_MAX)) != NULL;
+}
+
+static void rrv__solver_release(rrv__context *ctx) { rrv__chain_delete(ctx->chain); }
+
+static void rrv__solver_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                            const rrv__light_draw *draw, rrv__rng *rng)
+{
+    if (ctx->shoot) rrv__shoot_nee(ctx, path, x0, v, draw, rng);
+    else if (ctx->manifold) rrv__manifold_nee(ctx, path, x0, v, draw, rng);
+    else return;
+    rrv__cone_nee(ctx, path, x0, v, rng);
+}
+
+/* A forward path from x0 (left along w0 with density pdf_dir) that hit
+   light s at x, in a support's class (rrv__forward_weak gave weak, 0 or
+   2); jumped: it crossed a sharp interface, which no solver crosses. */
+static double rrv__solver_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir,
+                                         const rrv_shape *s, rrv_vec3 x, int weak, int jumped)
+{
+    if (weak == 2) /* a root no light sample stands for: the cones' (rrv__cone_nee) */
+        return rrv__power_heuristic(pdf_dir, rrv__cone_pdf(ctx, x0, w0));
+    if (ctx->shoot && !jumped) return rrv__shoot_forward_weight(ctx, x0, w0, pdf_dir, s, x); /* MIS with shooting */
+    if (ctx->manifold && !jumped && s->kind != RRV_SHAPE_SPHERE) return 0.0; /* the curved connection's alone */
+    return 1.0;
+}
+
+#else /* RRV_NO_CURVED_NEE: the interface answers "no curved estimator" (no
          scene is supported for solving, so ctx->shoot and ctx->manifold
-         stay 0 and no cone is set up) */
+         stay 0, nothing is set up and no connection is made) */
 
 static int rrv__solver_supports_scene(const rrv_scene *scene)
 {
@@ -12848,46 +12887,28 @@ static int rrv__solver_supports_scene(const rrv_scene *scene)
     return 0;
 }
 
-static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
-                           const rrv__light_draw *draw, rrv__rng *rng)
+static int rrv__solver_setup(rrv__context *ctx)
+{
+    (void)ctx;
+    return 1;
+}
+
+static void rrv__solver_release(rrv__context *ctx) { (void)ctx; }
+
+static void rrv__solver_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                            const rrv__light_draw *draw, rrv__rng *rng)
 {
     (void)ctx; (void)path; (void)x0; (void)v; (void)draw; (void)rng;
 }
 
-static double rrv__shoot_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir, const rrv_shape *s,
-                                        rrv_vec3 x)
+/* no cones: a weak chord's other root is weighed against the density 0 of
+   a direction no cone draws; no solver shares any other */
+static double rrv__solver_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir,
+                                         const rrv_shape *s, rrv_vec3 x, int weak, int jumped)
 {
-    (void)ctx; (void)x0; (void)w0; (void)pdf_dir; (void)s; (void)x;
-    return 1.0;
+    (void)ctx; (void)x0; (void)w0; (void)s; (void)x; (void)jumped;
+    return weak == 2 ? rrv__power_heuristic(pdf_dir, 0.0) : 1.0;
 }
-
-static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
-                              const rrv__light_draw *draw, rrv__rng *rng)
-{
-    (void)ctx; (void)path; (void)x0; (void)v; (void)draw; (void)rng;
-}
-
-/* no cones: the density of a direction no cone draws */
-static double rrv__cone_pdf(const rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0)
-{
-    (void)ctx; (void)x0; (void)w0;
-    return 0.0;
-}
-
-static void rrv__cone_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v, rrv__rng *rng)
-{
-    (void)ctx; (void)path; (void)x0; (void)v; (void)rng;
-}
-
-static void rrv__cone_setup(rrv__context *ctx) { ctx->cone_count = 0; }
-
-static struct rrv__chain *rrv__chain_new(int cap)
-{
-    (void)cap;
-    return NULL;
-}
-
-static void rrv__chain_delete(struct rrv__chain *ch) { (void)ch; }
 #endif /* RRV_NO_CURVED_NEE */
 
 /* >> 13 image I/O (module): PFM, PNG and OpenEXR files, checksums ===========
