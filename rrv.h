@@ -1,4 +1,4 @@
-/* rrv.h 0.10.0 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.11.0 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -208,7 +208,7 @@
 #endif
 
 #define RRV_VERSION_MAJOR 0
-#define RRV_VERSION_MINOR 10
+#define RRV_VERSION_MINOR 11
 #define RRV_VERSION_PATCH 0
 
 #ifndef RRV_DEF
@@ -18460,6 +18460,13 @@ and BOUNDS (moved here from the manual at the top, word for word)
 ------------------------------------------------------------------------------
 VERSION HISTORY
 ------------------------------------------------------------------------------
+     0.11.0 adaptive sampling (rrv_render_rect_adaptive, --noise-threshold,
+            `render noisethreshold`; off by default, biased by its stop);
+            the scene-building calls a core section of their own and each
+            optional module one block; the tracer reaches curved NEE through
+            one interface of five calls; the manual in 200 lines; README's
+            commands run by make test; rrv__grid_range faster (renders
+            identical)
      0.10.0 the integrator chosen from the scene when it names none (classic
             where nothing refracts, eikonal with nee shoot for clear media
             under small lights, else the comb aiming), the ambient IOR from
