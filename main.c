@@ -235,11 +235,20 @@ static int edit_distance(const char *a, size_t an, const char *b, size_t bn)
     return d[an][bn];
 }
 
+/* 1 when b is a nearer candidate for the typo a than the best so far. */
+static int nearer(const char *a, size_t an, const char *b, size_t bn, int *best_d)
+{
+    int d = edit_distance(a, an, b, bn);
+    if (bn == 0 || d >= *best_d || (size_t)(2 * d) >= (an > bn ? an : bn)) return 0;
+    *best_d = d;
+    return 1;
+}
+
 static const char *flag_hint(const char *arg, const char *help, const char *more, char hint[80])
 {
     const char *texts[2], *best = NULL, *s;
     size_t an, n, best_n = 0;
-    int t, d, best_d = 3;
+    int t, best_d = 3;
     while (*arg == '-') ++arg;
     an = strlen(arg);
     texts[0] = help;
@@ -247,14 +256,34 @@ static const char *flag_hint(const char *arg, const char *help, const char *more
     for (t = 0; t < 2; ++t)
         for (s = texts[t]; s && (s = strstr(s, "--")) != NULL; s += 2 + n) {
             for (n = 0; isalnum((unsigned char)s[2 + n]) || s[2 + n] == '-'; ++n) {}
-            d = edit_distance(arg, an, s + 2, n);
-            if (n > 0 && d < best_d && (size_t)(2 * d) < (an > n ? an : n)) {
+            if (nearer(arg, an, s + 2, n, &best_d)) {
                 best = s;
                 best_n = n + 2;
-                best_d = d;
             }
         }
     hint[0] = '\0';
+    if (best) snprintf(hint, 80, " (did you mean \"%.*s\"?)", (int)best_n, best);
+    return hint;
+}
+
+/* "did you mean" for an unknown command: the commands are the indented
+   words under "commands:" in the usage text, so the hint cannot drift
+   from the help. */
+static const char *command_hint(const char *arg, char hint[80])
+{
+    const char *s = strstr(usage_text, "commands:\n"), *best = NULL;
+    size_t an = strlen(arg), n, best_n = 0;
+    int best_d = 3;
+    hint[0] = '\0';
+    if (!s) return hint;
+    for (s = strchr(s, '\n') + 1; s[0] == ' ' && s[1] == ' '; s = strchr(s, '\n') + 1) {
+        s += 2;
+        for (n = 0; islower((unsigned char)s[n]); ++n) {}
+        if (nearer(arg, an, s, n, &best_d)) {
+            best = s;
+            best_n = n;
+        }
+    }
     if (best) snprintf(hint, 80, " (did you mean \"%.*s\"?)", (int)best_n, best);
     return hint;
 }
@@ -3368,7 +3397,8 @@ static int show_help(const char *command)
     } else if (strcmp(command, "trace") == 0) {
         printf(trace_help, refraction_help);
     } else {
-        return usage_error(NULL, "help: unknown command \"%s\"", command);
+        char hint[80];
+        return usage_error(NULL, "help: unknown command \"%s\"%s", command, command_hint(command, hint));
     }
     return EXIT_OK;
 }
@@ -3405,7 +3435,8 @@ int main(int argc, char **argv)
         char hint[80];
         code = usage_error(NULL, "unknown option \"%s\"%s", command, flag_hint(command, usage_text, NULL, hint));
     } else {
-        code = usage_error(NULL, "unknown command \"%s\"", command);
+        char hint[80];
+        code = usage_error(NULL, "unknown command \"%s\"%s", command, command_hint(command, hint));
     }
     return finish_stdout(code);
 }

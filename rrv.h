@@ -16933,6 +16933,22 @@ static int rrv__sf_find_medium(const rrv_scene *s, const rrv__sf_tok *t)
     return -1;
 }
 
+/* The hint for an undefined name among the materials (or media) defined so
+   far: a misspelt name is the likely mistake, a name defined further down
+   the file the other (the message's "not defined" covers that). */
+static const char *rrv__sf_near_defined(const rrv_scene *s, const rrv__sf_tok *t, int media, char *buf, size_t size)
+{
+    rrv__sf_near nr;
+    int i, n = media ? s->medium_count : s->material_count;
+    memset(&nr, 0, sizeof nr);
+    nr.word = t;
+    for (i = 0; i < n; ++i) {
+        const char *name = media ? s->media[i].name : s->materials[i].name;
+        rrv__sf_near_try(&nr, name, strlen(name));
+    }
+    return rrv__sf_near_hint(&nr, buf, size);
+}
+
 /* Checks of the store name the statement and its line. */
 static void rrv__sf_ck(rrv__sf_parser *p, rrv__ck *ck, const char *what)
 {
@@ -16948,9 +16964,11 @@ static rrv_result rrv__sf_shape_material(rrv__sf_parser *p, const char *stmt,
         const rrv__sf_tok *t = &p->toks.v[slot->tok];
         *index = rrv__sf_find_material(p->scene, t);
         if (*index >= 0) return RRV_OK;
-        if (!rrv__sf_tok_equals_name(t, "default"))
-            return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: material \"%.*s\" is not defined", stmt,
-                                RRV__SF_CLIP(t));
+        if (!rrv__sf_tok_equals_name(t, "default")) {
+            char hint[96];
+            return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: material \"%.*s\" is not defined%s", stmt,
+                                RRV__SF_CLIP(t), rrv__sf_near_defined(p->scene, t, 0, hint, sizeof hint));
+        }
     }
     rrv__sf_ck(p, &ck, stmt);
     return rrv__default_material(&ck, p->scene, index);
@@ -17743,9 +17761,11 @@ static rrv_result rrv__sf_st_field(rrv__sf_parser *p)
     fs.which = (rrv_medium_field)which;
     if (p->toks.n < 2) return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: missing medium name", fs.stmt);
     mi = rrv__sf_find_medium(p->scene, &toks[1]);
-    if (mi < 0)
-        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: medium \"%.*s\" is not defined", fs.stmt,
-                            RRV__SF_CLIP(&toks[1]));
+    if (mi < 0) {
+        char hint[96];
+        return rrv__sf_perr(p, RRV_ERROR_PARSE, "%s: medium \"%.*s\" is not defined%s", fs.stmt,
+                            RRV__SF_CLIP(&toks[1]), rrv__sf_near_defined(p->scene, &toks[1], 1, hint, sizeof hint));
+    }
     fs.m = &p->scene->media[mi];
     f = rrv__medium_field_of(fs.m, fs.which);
     if (p->toks.n < 3)

@@ -940,7 +940,8 @@ static void trace_prints_csv(void)
 }
 
 /* A misspelt flag gets the nearest one from the command's help (the
-   refraction options' help included); a word near nothing gets no hint. */
+   refraction options' help included), a misspelt command the nearest
+   command; a word near nothing gets no hint. */
 static void unknown_flags_get_a_hint(void)
 {
     static const struct {
@@ -954,6 +955,10 @@ static void unknown_flags_get_a_hint(void)
         {"--versoin", "rrv: unknown option \"--versoin\" (did you mean \"--version\"?)\n"},
         {"render s.rrv -o o.pfm --xyzzy", "rrv: render: unknown option \"--xyzzy\"\n"},
         {"trace s.rrv --x", "rrv: trace: unknown option \"--x\"\n"},
+        {"rendr s.rrv -o o.pfm", "rrv: unknown command \"rendr\" (did you mean \"render\"?)\n"},
+        {"mrege a.pfm b.pfm", "rrv: unknown command \"mrege\" (did you mean \"merge\"?)\n"},
+        {"help trcae", "rrv: help: unknown command \"trcae\" (did you mean \"trace\"?)\n"},
+        {"xyzzy", "rrv: unknown command \"xyzzy\"\n"},
     };
     size_t i;
     for (i = 0; i < sizeof cases / sizeof cases[0]; ++i) {

@@ -254,6 +254,7 @@ static const struct corpus_case {
     {"unterminated_quote", RRV_ERROR_PARSE},
     {"misspelt_statement", RRV_ERROR_PARSE}, {"misspelt_key", RRV_ERROR_PARSE},
     {"misspelt_choice", RRV_ERROR_PARSE},  {"far_statement", RRV_ERROR_PARSE},
+    {"misspelt_material", RRV_ERROR_PARSE},
     {"hex_number", RRV_ERROR_PARSE},       {"nan_number", RRV_ERROR_PARSE},
     {"nul_byte", RRV_ERROR_PARSE},         {"control_byte", RRV_ERROR_PARSE},
     {"too_many_media", RRV_ERROR_LIMIT},   {"camera_far", RRV_ERROR_PARSE},
