@@ -1,0 +1,80 @@
+#!/usr/bin/env python3
+"""Fire as a light: efficiency 1 / (CPU s x MSE) of emission NEE against
+paths alone on test/bench/campfire.rrv, over the wall and floor (the pixels
+that do not see the flame), one thread, runs interleaved (on, off, on, ...),
+medians. The reference of each maxdepth is a render with emission NEE at
+--ref-spp samples; the mask, the flame alone (the scene without its quads).
+
+    python3 test/bench/campfire.py ./rrv --depths 1 2 32 --reps 5
+"""
+import argparse, os, re, resource, statistics, struct, subprocess, tempfile
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def read_pfm(path):
+    with open(path, 'rb') as f:
+        f.readline()
+        w, h = map(int, f.readline().split())
+        scale = float(f.readline())
+        data = f.read()
+    return struct.unpack(('<' if scale < 0 else '>') + '%df' % (w * h * 3), data)
+
+
+def render(rrv, scene, out, spp, seed, threads=None):
+    cmd = [rrv, 'render', scene, '-o', out, '-q', '--spp', str(spp), '--seed', str(seed)]
+    if threads:
+        cmd += ['--threads', str(threads)]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.check_call(cmd)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument('rrv')
+    ap.add_argument('--depths', type=int, nargs='+', default=[1, 2, 32])
+    ap.add_argument('--reps', type=int, default=5)
+    ap.add_argument('--ref-spp', type=int, default=2048)
+    ap.add_argument('--spp-on', type=int, default=16)
+    ap.add_argument('--spp-off', type=int, default=96)
+    ap.add_argument('--extra', default='', help='more render keys for the NEE runs, e.g. "transmittance residual"')
+    a = ap.parse_args()
+    text = open(os.path.join(HERE, 'campfire.rrv')).read()
+    tmp = tempfile.mkdtemp(prefix='campfire')
+    flame = os.path.join(tmp, 'flame.rrv')
+    with open(flame, 'w') as f:
+        f.write(re.sub(r'(?m)^quad .*\n', '', text))
+    render(a.rrv, flame, os.path.join(tmp, 'mask.pfm'), 64, 1)
+    mask = read_pfm(os.path.join(tmp, 'mask.pfm'))
+    lit = [i for i in range(len(mask) // 3) if mask[3 * i] + mask[3 * i + 1] + mask[3 * i + 2] == 0]
+    print('| maxdepth | NEE, %d spp: MSE, CPU s | paths only, %d spp: MSE, CPU s | efficiency, NEE over paths |'
+          % (a.spp_on, a.spp_off))
+    print('|---|---|---|---|')
+    for depth in a.depths:
+        scenes = {}
+        for mode in ('on', 'off'):
+            keys = 'maxdepth %d emissionnee %s' % (depth, mode) + (' ' + a.extra if mode == 'on' and a.extra else '')
+            scenes[mode] = os.path.join(tmp, 'd%d_%s.rrv' % (depth, mode))
+            with open(scenes[mode], 'w') as f:
+                f.write(re.sub(r'maxdepth \d+', keys, text, count=1))
+        ref_path = os.path.join(tmp, 'ref%d.pfm' % depth)
+        render(a.rrv, scenes['on'], ref_path, a.ref_spp, 1)
+        ref = read_pfm(ref_path)
+        runs = {'on': [], 'off': []}
+        for k in range(a.reps):
+            for mode, spp in (('on', a.spp_on), ('off', a.spp_off)):
+                out = os.path.join(tmp, 'run.pfm')
+                t = render(a.rrv, scenes[mode], out, spp, 100 + k, threads=1)
+                img = read_pfm(out)
+                mse = sum((img[3 * i + c] - ref[3 * i + c]) ** 2 for i in lit for c in range(3)) / (3 * len(lit))
+                runs[mode].append((t, mse))
+        med = {m: (statistics.median(r[1] for r in runs[m]), statistics.median(r[0] for r in runs[m])) for m in runs}
+        ratio = (med['off'][0] * med['off'][1]) / (med['on'][0] * med['on'][1])
+        print('| %d | %.3g, %.3f | %.3g, %.3f | **%.2fx** |' % (depth, med['on'][0], med['on'][1], med['off'][0],
+                                                             med['off'][1], ratio))
+
+
+if __name__ == '__main__':
+    main()
