@@ -4901,6 +4901,9 @@ typedef struct rrv__emit_from {
     double g;
     double S;                /* rrv__emission_norm at x */
     rrv_vec3 w0;             /* the direction sampled there */
+    double p_w0;             /* rrv__emission_dir_density of w0; < 0 until asked */
+    int jumped;              /* the path crossed a sharp face since x */
+    int aim;                 /* a walk of rrv__emission_aim: it collects past r* alone */
 } rrv__emit_from;
 
 /* G_c(x) of the comment above; at a surface vertex also the cosine toward
@@ -7200,10 +7203,10 @@ typedef struct rrv__flight {
    forward path from x to y is straight too: a chord that meets no box of a
    refracting medium (rrv__chord_meets_refraction), walked by a path that has
    not turned since x (its segment's direction is still the one sampled at
-   x). A path that turned reaches y along a root no straight chord stands
-   for and keeps weight 1; chords through refracting media are the forward
-   paths' alone (weight 1), as the curved connections (nee shoot, aim) are
-   made to area lights only. */
+   x). A sample whose chord meets such a box is aimed instead: its
+   direction is walked as the path would walk it (rrv__emission_aim), and
+   the emission past the box's first face, which a path that turned also
+   reaches, is weighed in solid angle (rrv__emission_dir_density). */
 
 /* Does the segment from a to b meet the box of a medium that refracts?
    (The slab test on the closed box.) */
@@ -7228,6 +7231,94 @@ static int rrv__chord_meets_refraction(const rrv_scene *scene, rrv_vec3 a, rrv_v
         if (t0 <= t1) return 1;
     }
     return 0;
+}
+
+/* The span [*t0, *t1] (t >= 0) of the ray o + t d inside the closed box,
+   or 0 if it misses. A zero component is inside or outside its slab. */
+static int rrv__ray_box_span(rrv_vec3 o, rrv_vec3 d, rrv_vec3 lo, rrv_vec3 hi, double *t0, double *t1)
+{
+    int ax;
+    *t0 = 0.0;
+    *t1 = DBL_MAX;
+    for (ax = 0; ax < 3; ++ax) {
+        double oa = rrv__axis(o, ax), da = rrv__axis(d, ax), l = rrv__axis(lo, ax), h = rrv__axis(hi, ax);
+        if (da == 0.0) {
+            if (oa < l || oa > h) return 0;
+        } else {
+            double ta = (l - oa) / da, tb = (h - oa) / da;
+            if (ta > tb) { double t = ta; ta = tb; tb = t; }
+            if (ta > *t0) *t0 = ta;
+            if (tb < *t1) *t1 = tb;
+        }
+    }
+    return *t0 <= *t1;
+}
+
+/* Emission NEE through refracting air. A sampled point y whose chord from
+   the vertex x meets a refracting medium's box is not connected straight:
+   its direction w = (y - x) / |y - x| is, by rrv__emission_aim, which walks
+   the bent ray from x along w as the path would and collects the emission
+   it meets (all of it past r*, below), weighed by the power heuristic in
+   solid angle against the vertex's own density of w; the forward path
+   weighs the emission it collects past r* by the complement (its
+   direction w0 sampled at x). Past r* and short of a sharp face (where the
+   walk stops and the path keeps weight 1) the two estimate the same
+   radiance along each w, so the sum is unbiased however the ray bends.
+   r*(w): where the ray from x first meets the box of a refracting medium
+   (0 inside one); the chords to points past it meet the box, those short
+   of it do not (rrv__chord_meets_refraction: a straight connection's).
+   The density of w is that of picking a y past r* on the line x + r w:
+   the integral of p_nee(x + r w) r^2 dr from r* on. p_nee is constant
+   in a cell of the emission grid, so each cell the line crosses from a to
+   b adds p_nee (b^3 - a^3) / 3; 0 where no refracting box is on the line. */
+static double rrv__emission_dir_density(const rrv_scene *scene, const rrv__emit_from *from, rrv_vec3 w)
+{
+    const struct rrv__emitters *e = scene->emitters;
+    double r_star = DBL_MAX, sum = 0.0, t0, t1;
+    int i;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        if (rrv__medium_refracts(m) && rrv__ray_box_span(from->x, w, m->lo, m->hi, &t0, &t1) && t0 < r_star)
+            r_star = t0;
+    }
+    if (!e || r_star == DBL_MAX || !(from->S > 0)) return 0.0;
+    for (i = 0; i < e->count; ++i) {
+        const rrv__emitter_grid *g = &e->grid[i];
+        rrv_vec3 hi = rrv__v3(g->lo.x + g->n[0] * g->cell.x, g->lo.y + g->n[1] * g->cell.y, g->lo.z + g->n[2] * g->cell.z);
+        int idx[3], step[3], a;
+        double next[3], delta[3], t, part = 0.0;
+        if (!rrv__ray_box_span(from->x, w, g->lo, hi, &t0, &t1)) continue;
+        if (t0 < r_star) t0 = r_star;
+        if (!(t0 < t1)) continue;
+        for (a = 0; a < 3; ++a) {
+            double da = rrv__axis(w, a), cell = rrv__axis(g->cell, a), lo = rrv__axis(g->lo, a);
+            double u = (rrv__axis(from->x, a) + da * t0 - lo) / cell;
+            idx[a] = (int)rrv__clamp(floor(u), 0.0, g->n[a] - 1.0);
+            step[a] = da > 0 ? 1 : da < 0 ? -1 : 0;
+            if (step[a]) {
+                next[a] = (lo + (idx[a] + (step[a] > 0)) * cell - rrv__axis(from->x, a)) / da;
+                delta[a] = cell / fabs(da);
+            } else {
+                next[a] = delta[a] = DBL_MAX;
+            }
+        }
+        for (t = t0; t < t1;) {
+            int axis = next[0] <= next[1] ? (next[0] <= next[2] ? 0 : 2) : (next[1] <= next[2] ? 1 : 2);
+            double b = next[axis] < t1 ? next[axis] : t1;
+            size_t cell = g->first + ((size_t)idx[2] * (size_t)g->n[1] + (size_t)idx[1]) * (size_t)g->n[0] + (size_t)idx[0];
+            int cluster = g->first_cluster + ((idx[2] / RRV__EMIT_BLOCK) * g->nc[1] + idx[1] / RRV__EMIT_BLOCK) * g->nc[0] +
+                          idx[0] / RRV__EMIT_BLOCK;
+            if (b > t && e->pmf[cell] > 0)
+                part += rrv__emit_cluster_g(&e->cluster[cluster], from) * e->pmf[cell] * (b * b * b - t * t * t);
+            t = b > t ? b : t;
+            if (next[axis] >= t1) break;
+            idx[axis] += step[axis];
+            if (idx[axis] < 0 || idx[axis] >= g->n[axis]) break;
+            next[axis] += delta[axis];
+        }
+        sum += part * g->inv_volume / 3.0;
+    }
+    return sum / from->S;
 }
 
 /* The vertex's density of direction w: the cosine lobe on the side the path
@@ -7276,16 +7367,23 @@ static int rrv__emission_densities(const rrv__context *ctx, const rrv__emit_from
 }
 
 /* The forward path's MIS weight for emission it collects at y in medium m. */
-static double rrv__emission_forward_weight(const rrv__context *ctx, const rrv__path *path, const rrv_medium *m,
+static double rrv__emission_forward_weight(const rrv__context *ctx, rrv__path *path, const rrv_medium *m,
                                            rrv_vec3 y, const rrv__coeffs *c)
 {
-    const rrv__emit_from *from = &path->emit;
+    rrv__emit_from *from = &path->emit;
     double p_nee, p_fwd, pdf_dir, r;
     if (!from->on) return 1.0;
-    /* a path that turned since x: not the chord's */
+    /* a path that turned since x, or a chord through refracting air: not a
+       straight connection's (past r*, rrv__emission_dir_density) */
     if (ctx->bends && (path->bender.line_d.x != from->w0.x || path->bender.line_d.y != from->w0.y ||
-                       path->bender.line_d.z != from->w0.z))
-        return 1.0;
+                       path->bender.line_d.z != from->w0.z || rrv__chord_meets_refraction(ctx->scene, from->x, y))) {
+        if (from->aim) return 1.0;
+        if (from->jumped) return 1.0;
+        if (from->p_w0 < 0) from->p_w0 = rrv__emission_dir_density(ctx->scene, from, from->w0);
+        return rrv__emission_mis(rrv__emission_dir_pdf(from, from->w0), from->p_w0);
+    }
+    /* short of r*: the aim's walk leaves it to straight connections */
+    if (from->aim) return 0.0;
     if (!rrv__emission_densities(ctx, from, (int)(m - ctx->scene->media), y, c, &p_nee, &p_fwd, &pdf_dir, &r))
         return 1.0;
     return rrv__emission_mis(p_fwd, p_nee);
@@ -8310,6 +8408,74 @@ static void rrv__emission_from_vertex(const rrv__context *ctx, rrv__emit_from *f
     from->d_in = v->d_in;
     from->g = v->g;
     from->S = rrv__emission_norm(ctx->scene->emitters, from, q);
+    from->p_w0 = -1.0;
+    from->jumped = 0;
+    from->aim = 0;
+}
+
+/* The aim's MIS weight of direction w (density p_aim) against the
+   vertex's own sampling; the forward path's is its complement
+   (rrv__emission_forward_weight), both the power heuristic. */
+static double rrv__emission_aim_weight(const rrv__emit_from *from, rrv_vec3 w, double p_aim)
+{
+    return rrv__emission_mis(p_aim, rrv__emission_dir_pdf(from, w));
+}
+
+/* The aim of emission NEE (rrv__emission_dir_density says why it is
+   unbiased): from the vertex x along w, the path's own walk (segments,
+   kicks, bends, faces, delta tracking) with its throughput scaled by
+   tint f(w) / p(w) and the MIS weight; the emission its tentative
+   collisions meet past r* goes to the path. It ends where the path would
+   leave x's estimate: a real collision, a surface, the sky, a sharp face,
+   a work bound. */
+static void rrv__emission_aim(rrv__context *ctx, rrv__path *path, rrv_vec3 x, rrv_vec3 w, const double tint[3],
+                              rrv__rng *rng)
+{
+    const rrv_scene *scene = ctx->scene;
+    rrv__path walk = *path;
+    rrv_vec3 o = x, d = w;
+    double pdf_dir = rrv__emission_dir_pdf(&path->emit, w), p_aim, k;
+    long steps = 0;
+    int c;
+    if (!(pdf_dir > 0)) return;
+    p_aim = rrv__emission_dir_density(scene, &path->emit, w);
+    if (!(p_aim > 0) || !(p_aim < DBL_MAX)) return;
+    k = pdf_dir * rrv__emission_aim_weight(&path->emit, w, p_aim) / p_aim;
+    for (c = 0; c < 3; ++c) {
+        walk.beta[c] *= tint[c] * k;
+        walk.L[c] = 0.0;
+    }
+    walk.emit.aim = 1;
+    walk.emit.w0 = w;
+    rrv__bender_start(&walk.bender, scene, ctx->eikonal, x);
+    for (;;) {
+        rrv__hit hit;
+        rrv__flight flight;
+        double segment;
+        int has_hit, outcome, end;
+        if (++steps > ctx->step_bound || walk.bender.run > ctx->trap_length) break;
+        if (!walk.bender.pending) rrv__plan_segment(&walk.bender, scene, o, &d, rng);
+        segment = walk.bender.segment;
+        if (ctx->comb && walk.bender.surface_free && segment < DBL_MAX && !walk.bender.support_in_extinction &&
+            !rrv__chord_meets_extinction(scene, o, d, segment)) {
+            has_hit = 0;
+            outcome = RRV__FLIGHT_PASSED;
+        } else {
+            has_hit = rrv__segment_hit(ctx, &walk.bender, o, d, segment, &hit);
+            outcome = rrv__refractive_delta_tracking(ctx, &walk, o, d, has_hit ? hit.t : segment, rng, &flight);
+        }
+        if (outcome == RRV__FLIGHT_BENT) {
+            o = rrv__madd(o, d, flight.t);
+            d = flight.direction;
+            continue;
+        }
+        if (outcome != RRV__FLIGHT_PASSED || has_hit || !(segment < DBL_MAX)) break;
+        end = walk.bender.end;
+        if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
+        rrv__finish_segment(&walk.bender, scene, &o, &d, rng);
+        if (end == RRV__END_FACE && rrv__jump_counts(walk.bender.face_jump)) break;
+    }
+    for (c = 0; c < 3; ++c) path->L[c] += walk.L[c];
 }
 
 /* Next-event estimation toward emissive media (section comment above
@@ -8350,6 +8516,11 @@ static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, co
     mi = rrv__emitter_sample(scene->emitters, from, q, u, &y);
     if (mi < 0) return;
     m = &scene->media[mi];
+    if (ctx->bends && rrv__chord_meets_refraction(scene, x, y)) {
+        double r0 = rrv__length(rrv__sub(y, x));
+        if (r0 > 0) rrv__emission_aim(ctx, path, x, rrv__scale(rrv__sub(y, x), 1.0 / r0), v->surface ? v->albedo : white, rng);
+        return;
+    }
     rrv__medium_coeffs(m, y, &c);
     if (!(rrv__max3(c.sigma_a) > 0)) return;
     if (!rrv__emission_densities(ctx, from, mi, y, &c, &p_nee, &p_fwd, &pdf_dir, &r)) return;
@@ -8395,6 +8566,8 @@ static void rrv__restart_at_vertex(rrv__context *ctx, rrv__camera_path *cp, rrv_
 {
     cp->o = cp->vertex = x;
     cp->w0 = cp->path.emit.w0 = cp->d;
+    cp->path.emit.p_w0 = -1.0;
+    cp->path.emit.jumped = 0;
     cp->steps = 0;
     if (ctx->bends) rrv__bender_restart(&cp->path.bender, ctx->scene, x);
     if (ctx->partition) {
@@ -8587,6 +8760,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
                 if (end == RRV__END_FACE && rrv__jump_counts(cp.path.bender.face_jump)) cp.jumped = 1;
                 cp.touched = 1;
             }
+            if (end == RRV__END_FACE && rrv__jump_counts(cp.path.bender.face_jump)) cp.path.emit.jumped = 1;
             /* Chords with nothing to meet (no surface reaches the support,
                no medium with extinction near them) go from kick to kick
                here: delta tracking and the ray cast would find nothing. */
@@ -9014,13 +9188,6 @@ static rrv_result rrv__render_context(const rrv_scene *scene, rrv__context *ctx,
                    (scene->settings.emission_nee == RRV_EMISSION_NEE_ON ||
                     (scene->settings.emission_nee == RRV_EMISSION_NEE_DEFAULT && scene->light_count == 0 &&
                      scene->environment.kind == RRV_ENV_NONE));
-    if (ctx->emission && ctx->bends) {
-        /* straight connections only reach emitters outside refracting media
-           (rrv__chord_meets_refraction): none if every emitter refracts */
-        for (i = 0; i < scene->emitters->count && rrv__medium_refracts(&scene->media[scene->emitters->grid[i].medium]);
-             ++i) {}
-        ctx->emission = i < scene->emitters->count;
-    }
     /* without a medium that refracts every connection is straight: no
        curved NEE, so such a scene renders as classic does, draw for draw */
     for (i = 0; i < scene->medium_count && !rrv__medium_refracts(&scene->media[i]); ++i) {}
@@ -18365,14 +18532,17 @@ and BOUNDS (moved here from the manual at the top, word for word)
      toward a room otherwise came from the rare paths that chance let
      scatter, each with the flame's whole radiance (test/bench/campfire.rrv
      at maxdepth 32: 1.6x -> 4.2x; test/test_emission.c checks it against
-     chance in every channel). Where the air refracts, connections are made
-     only where the forward path is classic: a chord from the vertex that
-     meets no box of a refracting medium, against a path that has not
-     turned since the vertex; everything else (an emitter inside or behind
-     hot air, as in scenes/pyro.rrv, whose fire refracts) is the forward
-     paths' alone, with weight 1. The curved connections (nee shoot, aim)
-     are not made to emissive media yet. Measured on test/bench/campfire.rrv
-     (test/bench/RESULTS.md, "Fire as a light").
+     chance in every channel). Where the air refracts, a sample whose
+     chord meets the box of a refracting medium is aimed, not connected:
+     the vertex walks the bent ray that leaves along the chord's direction
+     as the path would (kicks, faces, delta tracking) and collects the
+     emission it meets past that box's first face, weighed by the power
+     heuristic in solid angle, against the path's own emission there: the
+     density of a direction is that of the sampled points on its line past
+     the face, exact from the grid (rrv__emission_dir_density). So fire
+     inside hot air lights a room too (scenes/pyro.rrv's kind); a walk
+     stops at a sharp face, past which the paths keep weight 1. Measured on
+     test/bench/campfire.rrv (test/bench/RESULTS.md, "Fire as a light").
 
    BOUNDARIES (design decisions)
      Faces of refractive media (a medium's box; the sphere of a Luneburg or
@@ -18647,7 +18817,10 @@ VERSION HISTORY
             spares their vertices (renders of emissive media change, within
             their noise); the blackbody from a table prepared per scene
             (within 1e-6 of the sum, 82 exp -> 3); emission clusters keep
-            their radius (renders identical)
+            their radius (renders identical); emissive media are lit
+            through refracting air: a sample whose chord meets a
+            refracting box is aimed along the bent ray and weighed in
+            solid angle (rrv__emission_aim)
      0.11.0 adaptive sampling (rrv_render_rect_adaptive, --noise-threshold,
             `render noisethreshold`; off by default, biased by its stop);
             the scene-building calls a core section of their own and each

@@ -6,10 +6,18 @@ medians. The reference of each maxdepth is a render with emission NEE at
 --ref-spp samples; the mask, the flame alone (the scene without its quads).
 
     python3 test/bench/campfire.py ./rrv --depths 1 2 32 --reps 5
+
+--hot-air puts the flame in a box of hot, refracting air (the refractive
+integrator; every connection to the flame then goes through refraction).
 """
 import argparse, os, re, resource, statistics, struct, subprocess, tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+HOT_AIR = """medium air box -1.3 -0.01 -1.0 1.3 3.4 1.0 sigma_a 0 0 0 sigma_s 0 0 0
+temperature air noise octaves 2 frequency 2.5 seed 5 falloff plume center 0 1.0 0 radius 0.9 amplitude 600 base 0 temperatureoffset -300 blackbody off
+ior air gas iorscale 300
+ambient ior 1.0876
+"""
 
 
 def read_pfm(path):
@@ -39,9 +47,12 @@ def main():
     ap.add_argument('--ref-spp', type=int, default=2048)
     ap.add_argument('--spp-on', type=int, default=16)
     ap.add_argument('--spp-off', type=int, default=96)
+    ap.add_argument('--hot-air', action='store_true')
     ap.add_argument('--extra', default='', help='more render keys for the NEE runs, e.g. "transmittance residual"')
     a = ap.parse_args()
     text = open(os.path.join(HERE, 'campfire.rrv')).read()
+    if a.hot_air:
+        text = text.replace('integrator classic', 'integrator refractive') + HOT_AIR
     tmp = tempfile.mkdtemp(prefix='campfire')
     flame = os.path.join(tmp, 'flame.rrv')
     with open(flame, 'w') as f:
