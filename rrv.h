@@ -7292,8 +7292,9 @@ static double rrv__emission_dir_density(const rrv_scene *scene, const rrv__emit_
         if (!(t0 < t1)) continue;
         for (a = 0; a < 3; ++a) {
             double da = rrv__axis(w, a), cell = rrv__axis(g->cell, a), lo = rrv__axis(g->lo, a);
-            double u = (rrv__axis(from->x, a) + da * t0 - lo) / cell;
-            idx[a] = (int)rrv__clamp(floor(u), 0.0, g->n[a] - 1.0);
+            double u = floor((rrv__axis(from->x, a) + da * t0 - lo) / cell);
+            /* NaN or below: the first cell (an int from NaN is undefined) */
+            idx[a] = u >= 0.0 ? (u <= g->n[a] - 1.0 ? (int)u : g->n[a] - 1) : 0;
             step[a] = da > 0 ? 1 : da < 0 ? -1 : 0;
             if (step[a]) {
                 next[a] = (lo + (idx[a] + (step[a] > 0)) * cell - rrv__axis(from->x, a)) / da;
@@ -7309,7 +7310,7 @@ static double rrv__emission_dir_density(const rrv_scene *scene, const rrv__emit_
             int cluster = g->first_cluster + ((idx[2] / RRV__EMIT_BLOCK) * g->nc[1] + idx[1] / RRV__EMIT_BLOCK) * g->nc[0] +
                           idx[0] / RRV__EMIT_BLOCK;
             if (b > t && e->pmf[cell] > 0)
-                part += rrv__emit_cluster_g(&e->cluster[cluster], from) * e->pmf[cell] * (b * b * b - t * t * t);
+                part += rrv__emit_cluster_g(&e->cluster[cluster], from) * e->pmf[cell] * (b - t) * (b * b + b * t + t * t);
             t = b > t ? b : t;
             if (next[axis] >= t1) break;
             idx[axis] += step[axis];
@@ -7318,7 +7319,10 @@ static double rrv__emission_dir_density(const rrv_scene *scene, const rrv__emit_
         }
         sum += part * g->inv_volume / 3.0;
     }
-    return sum / from->S;
+    sum /= from->S;
+    /* far beyond any scene's size the cubes overflow: no aim there, and
+       the forward path's weight is then 1 */
+    return sum < DBL_MAX ? sum : 0.0;
 }
 
 /* The vertex's density of direction w: the cosine lobe on the side the path
