@@ -4913,14 +4913,13 @@ typedef struct rrv__emit_from {
 static double rrv__emit_cluster_g(const rrv__emit_cluster *c, const rrv__emit_from *from)
 {
     rrv_vec3 d = rrv__sub(c->centre, from->x);
-    double d2 = rrv__dot(d, d), g;
+    double d2 = rrv__dot(d, d);
     if (from->surface && d2 > c->radius2) {
         double facing = rrv__dot(from->n, d) + c->radius;
         if (!(facing > 0)) return 0.0;
         return 1.0 / d2 * rrv__clamp(facing / sqrt(d2), 0.0, 1.0);
     }
-    g = 1.0 / rrv__maxd(d2, c->radius2);
-    return g;
+    return 1.0 / rrv__maxd(d2, c->radius2);
 }
 
 /* S(x): what normalises the clusters' W_c G_c(x). With q, also each
@@ -7208,31 +7207,6 @@ typedef struct rrv__flight {
    the emission past the box's first face, which a path that turned also
    reaches, is weighed in solid angle (rrv__emission_dir_density). */
 
-/* Does the segment from a to b meet the box of a medium that refracts?
-   (The slab test on the closed box.) */
-static int rrv__chord_meets_refraction(const rrv_scene *scene, rrv_vec3 a, rrv_vec3 b)
-{
-    int i, ax;
-    for (i = 0; i < scene->medium_count; ++i) {
-        const rrv_medium *m = &scene->media[i];
-        double t0 = 0.0, t1 = 1.0;
-        if (!rrv__medium_refracts(m)) continue;
-        for (ax = 0; ax < 3 && t0 <= t1; ++ax) {
-            double o = rrv__axis(a, ax), d = rrv__axis(b, ax) - o, lo = rrv__axis(m->lo, ax), hi = rrv__axis(m->hi, ax);
-            if (d == 0.0) {
-                if (o < lo || o > hi) t0 = 2.0;
-            } else {
-                double ta = (lo - o) / d, tb = (hi - o) / d;
-                if (ta > tb) { double t = ta; ta = tb; tb = t; }
-                if (ta > t0) t0 = ta;
-                if (tb < t1) t1 = tb;
-            }
-        }
-        if (t0 <= t1) return 1;
-    }
-    return 0;
-}
-
 /* The span [*t0, *t1] (t >= 0) of the ray o + t d inside the closed box,
    or 0 if it misses. A zero component is inside or outside its slab. */
 static int rrv__ray_box_span(rrv_vec3 o, rrv_vec3 d, rrv_vec3 lo, rrv_vec3 hi, double *t0, double *t1)
@@ -7252,6 +7226,22 @@ static int rrv__ray_box_span(rrv_vec3 o, rrv_vec3 d, rrv_vec3 lo, rrv_vec3 hi, d
         }
     }
     return *t0 <= *t1;
+}
+
+/* Does the segment from a to b meet the box of a medium that refracts?
+   (The slab test on the closed box: the ray a + t (b - a) meets it at a
+   t <= 1. rrv__emission_dir_density finds r* with the same test, so a
+   chord meets a box exactly when its end lies past r*.) */
+static int rrv__chord_meets_refraction(const rrv_scene *scene, rrv_vec3 a, rrv_vec3 b)
+{
+    rrv_vec3 d = rrv__sub(b, a);
+    double t0, t1;
+    int i;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        if (rrv__medium_refracts(m) && rrv__ray_box_span(a, d, m->lo, m->hi, &t0, &t1) && t0 <= 1.0) return 1;
+    }
+    return 0;
 }
 
 /* Emission NEE through refracting air. A sampled point y whose chord from
@@ -7351,7 +7341,9 @@ static double rrv__emission_mis(double a, double b)
 }
 
 /* The two densities at y of medium mi seen from the vertex; 0 when the
-   connection x -> y is not made (see above). *pdf_dir: the vertex's p(w). */
+   connection x -> y is not made (see above). A chord through refracting
+   air its callers turn away first (it is aimed, or the path's past r*).
+   *pdf_dir: the vertex's p(w). */
 static int rrv__emission_densities(const rrv__context *ctx, const rrv__emit_from *from, int mi, rrv_vec3 y,
                                    const rrv__coeffs *c, double *p_nee, double *p_fwd, double *pdf_dir, double *r)
 {
@@ -7364,7 +7356,6 @@ static int rrv__emission_densities(const rrv__context *ctx, const rrv__emit_from
     if (!(*pdf_dir > 0)) return 0;
     *p_nee = rrv__emission_pdf(ctx->scene->emitters, mi, from, y);
     if (!(*p_nee > 0)) return 0;
-    if (ctx->bends && rrv__chord_meets_refraction(ctx->scene, from->x, y)) return 0;
     s = (c->sigma_a[0] + c->sigma_s[0] + c->sigma_a[1] + c->sigma_s[1] + c->sigma_a[2] + c->sigma_s[2]) / 3.0;
     *p_fwd = *pdf_dir * s / r2;
     return 1;
@@ -7567,7 +7558,7 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
         pa = c.sigma_a[path->hero] / mu;
         ps = c.sigma_s[path->hero] / mu;
         u = rrv__uniform_walk(rng);
-        if (u < pa + ps && emits && pa > 0) {
+        if (emits && pa > 0 && ps > 0 && u < pa + ps) {
             /* In a medium that emits, a real collision always scatters and
                the albedo weighs the path: the light a flame scatters toward
                a room then comes from every path that meets the flame, not
@@ -7577,7 +7568,6 @@ static int rrv__refractive_delta_tracking(rrv__context *ctx, rrv__path *path, rr
                every depth past one. A channel takes this collision with
                sigma_t / mu and carries sigma_s. */
             double sigma_t[3];
-            if (!(ps > 0)) return RRV__FLIGHT_ABSORBED;
             for (ch = 0; ch < 3; ++ch) sigma_t[ch] = c.sigma_a[ch] + c.sigma_s[ch];
             rrv__path_reweight(path, sigma_t);
             for (ch = 0; ch < 3; ++ch) path->beta[ch] *= sigma_t[ch] > 0 ? c.sigma_s[ch] / sigma_t[ch] : 0.0;
@@ -8417,6 +8407,24 @@ static void rrv__emission_from_vertex(const rrv__context *ctx, rrv__emit_from *f
     from->aim = 0;
 }
 
+/* One straight piece of a walk from o along d, at most segment long: the
+   first surface on it (*has_hit, *hit) and delta tracking up to it. A comb
+   chord with nothing to meet (no surface reaches the support, no medium
+   with extinction near it), also one that ends at a face, needs no ray
+   cast and no tracking: it passes. */
+static int rrv__walk_segment(rrv__context *ctx, rrv__path *path, rrv_vec3 o, rrv_vec3 d, double segment,
+                             rrv__rng *rng, rrv__hit *hit, int *has_hit, rrv__flight *flight)
+{
+    if (ctx->comb && path->bender.surface_free && segment < DBL_MAX && !path->bender.support_in_extinction &&
+        !rrv__chord_meets_extinction(ctx->scene, o, d, segment)) {
+        *has_hit = 0;
+        return RRV__FLIGHT_PASSED;
+    }
+    *has_hit = ctx->bends ? rrv__segment_hit(ctx, &path->bender, o, d, segment, hit)
+                          : rrv__intersect_line(ctx->scene, o, d, NULL, DBL_MAX, hit);
+    return rrv__refractive_delta_tracking(ctx, path, o, d, *has_hit ? hit->t : segment, rng, flight);
+}
+
 /* The aim's MIS weight of direction w (density p_aim) against the
    vertex's own sampling; the forward path's is its complement
    (rrv__emission_forward_weight), both the power heuristic. */
@@ -8460,14 +8468,7 @@ static void rrv__emission_aim(rrv__context *ctx, rrv__path *path, rrv_vec3 x, rr
         if (++steps > ctx->step_bound || walk.bender.run > ctx->trap_length) break;
         if (!walk.bender.pending) rrv__plan_segment(&walk.bender, scene, o, &d, rng);
         segment = walk.bender.segment;
-        if (ctx->comb && walk.bender.surface_free && segment < DBL_MAX && !walk.bender.support_in_extinction &&
-            !rrv__chord_meets_extinction(scene, o, d, segment)) {
-            has_hit = 0;
-            outcome = RRV__FLIGHT_PASSED;
-        } else {
-            has_hit = rrv__segment_hit(ctx, &walk.bender, o, d, segment, &hit);
-            outcome = rrv__refractive_delta_tracking(ctx, &walk, o, d, has_hit ? hit.t : segment, rng, &flight);
-        }
+        outcome = rrv__walk_segment(ctx, &walk, o, d, segment, rng, &hit, &has_hit, &flight);
         if (outcome == RRV__FLIGHT_BENT) {
             o = rrv__madd(o, d, flight.t);
             d = flight.direction;
@@ -8734,19 +8735,7 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             if (!cp.path.bender.pending) rrv__plan_segment(&cp.path.bender, scene, cp.o, &cp.d, rng);
             segment = cp.path.bender.segment;
         }
-        if (ctx->comb && cp.path.bender.surface_free && segment < DBL_MAX &&
-            !cp.path.bender.support_in_extinction && !rrv__chord_meets_extinction(scene, cp.o, cp.d, segment)) {
-            /* a chord with nothing to meet (as in the loop below), here also
-               one that ends at a face: no ray cast, no tracking */
-            has_hit = 0;
-            outcome = RRV__FLIGHT_PASSED;
-        } else {
-            has_hit = ctx->bends ? rrv__segment_hit(ctx, &cp.path.bender, cp.o, cp.d, segment, &hit)
-                                 : rrv__intersect_line(scene, cp.o, cp.d, NULL, DBL_MAX, &hit);
-            /* delta tracking along it, up to the surface if one is hit */
-            outcome =
-                rrv__refractive_delta_tracking(ctx, &cp.path, cp.o, cp.d, has_hit ? hit.t : segment, rng, &flight);
-        }
+        outcome = rrv__walk_segment(ctx, &cp.path, cp.o, cp.d, segment, rng, &hit, &has_hit, &flight);
         if (outcome == RRV__FLIGHT_ABSORBED) break;
         if (outcome == RRV__FLIGHT_CUT) {
             ++ctx->stats.paths_cut;
@@ -8758,13 +8747,13 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             int end = cp.path.bender.end;
             if (end == RRV__END_KICK || end == RRV__END_STEP) ++ctx->stats.events;
             rrv__finish_segment(&cp.path.bender, scene, &cp.o, &cp.d, rng);
-            if (ctx->partition) {
-                /* the jump crossing the face looked up (rrv__face_jumps
-                   would look up the same two refractivities again) */
-                if (end == RRV__END_FACE && rrv__jump_counts(cp.path.bender.face_jump)) cp.jumped = 1;
-                cp.touched = 1;
+            /* the jump crossing the face looked up (rrv__face_jumps would
+               look up the same two refractivities again) */
+            if (end == RRV__END_FACE && rrv__jump_counts(cp.path.bender.face_jump)) {
+                cp.path.emit.jumped = 1;
+                if (ctx->partition) cp.jumped = 1;
             }
-            if (end == RRV__END_FACE && rrv__jump_counts(cp.path.bender.face_jump)) cp.path.emit.jumped = 1;
+            if (ctx->partition) cp.touched = 1;
             /* Chords with nothing to meet (no surface reaches the support,
                no medium with extinction near them) go from kick to kick
                here: delta tracking and the ray cast would find nothing. */

@@ -10,23 +10,17 @@ medians. The reference of each maxdepth is a render with emission NEE at
 --hot-air puts the flame in a box of hot, refracting air (the refractive
 integrator; every connection to the flame then goes through refraction).
 """
-import argparse, os, re, resource, statistics, struct, subprocess, tempfile
+import argparse, os, re, resource, statistics, subprocess, sys, tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from nee_bench import read_pfm  # noqa: E402
+
 HOT_AIR = """medium air box -1.3 -0.01 -1.0 1.3 3.4 1.0 sigma_a 0 0 0 sigma_s 0 0 0
 temperature air noise octaves 2 frequency 2.5 seed 5 falloff plume center 0 1.0 0 radius 0.9 amplitude 600 base 0 temperatureoffset -300 blackbody off
 ior air gas iorscale 300
 ambient ior 1.0876
 """
-
-
-def read_pfm(path):
-    with open(path, 'rb') as f:
-        f.readline()
-        w, h = map(int, f.readline().split())
-        scale = float(f.readline())
-        data = f.read()
-    return struct.unpack(('<' if scale < 0 else '>') + '%df' % (w * h * 3), data)
 
 
 def render(rrv, scene, out, spp, seed, threads=None):

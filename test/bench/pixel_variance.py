@@ -5,16 +5,11 @@ the seeds, averaged over the pixels; efficiency 1 / (CPU s x variance).
 
     python3 test/bench/pixel_variance.py OLD/rrv ./rrv scenes/pyro.rrv --spp 16 --seeds 6
 """
-import argparse, resource, statistics, struct, subprocess, tempfile, os
+import argparse, os, statistics, sys, tempfile
 
-
-def read_pfm(path):
-    with open(path, 'rb') as f:
-        f.readline()
-        w, h = map(int, f.readline().split())
-        scale = float(f.readline())
-        data = f.read()
-    return struct.unpack(('<' if scale < 0 else '>') + '%df' % (w * h * 3), data)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from campfire import render  # noqa: E402
+from nee_bench import read_pfm  # noqa: E402
 
 
 def main():
@@ -29,11 +24,7 @@ def main():
     runs = {'A': ([], []), 'B': ([], [])}
     for seed in range(args.seeds):
         for name, rrv in (('A', args.a), ('B', args.b)):
-            before = resource.getrusage(resource.RUSAGE_CHILDREN)
-            subprocess.check_call([rrv, 'render', args.scene, '-o', out, '-q', '--threads', '1', '--spp',
-                                   str(args.spp), '--seed', str(50 + seed)])
-            after = resource.getrusage(resource.RUSAGE_CHILDREN)
-            runs[name][0].append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+            runs[name][0].append(render(rrv, args.scene, out, args.spp, 50 + seed, threads=1))
             runs[name][1].append(read_pfm(out))
     cost = {}
     for name, (times, images) in runs.items():
