@@ -524,6 +524,16 @@ typedef enum rrv_transmittance {
                                       corrected by a randomly truncated power series */
 } rrv_transmittance;
 
+/* Whether the in-scattered light of a light inside a scattering medium is
+   also estimated with equiangular distance samples (classic integrator;
+   manual, EQUIANGULAR SAMPLING). */
+typedef enum rrv_equiangular {
+    RRV_EQUIANGULAR_DEFAULT = 0, /* ON toward the lights that lie in a scattering
+                                    medium's box, OFF toward the others */
+    RRV_EQUIANGULAR_ON,          /* toward every light shape */
+    RRV_EQUIANGULAR_OFF          /* free flights alone */
+} rrv_equiangular;
+
 typedef struct rrv_settings {
     int spp;              /* samples per pixel, >= 1 */
     int max_depth;        /* scattering/bounce vertices per path, >= 1 */
@@ -553,6 +563,7 @@ typedef struct rrv_settings {
     rrv_transmittance transmittance;
     double noise_threshold; /* adaptive sampling's relative error, for the client to
                                pass to rrv_render_rect_adaptive; 0 = off (uniform) */
+    rrv_equiangular equiangular; /* classic integrator */
 } rrv_settings;
 
 struct rrv__majorant_grid;
@@ -1192,6 +1203,10 @@ static rrv_vec3 rrv__from_frame(rrv_vec3 n, double x, double y, double z)
 /* PCG32 (O'Neill 2014): small state, good statistics, and independent
    streams, so each (pixel, sample) owns one and images do not depend on
    how the work is split between threads. */
+/* The sampler's streams (rrv__uniform_in), RRV__STREAM_* below and each
+   one's walk at RRV__STREAM_WALK past it. */
+#define RRV__STREAMS 7
+
 typedef struct rrv__rng {
     uint64_t state, inc;
     /* Sobol sampler (rrv__sobol_start, rrv__sampler_bounce): the pixel's
@@ -1203,8 +1218,8 @@ typedef struct rrv__rng {
     uint64_t sobol_key;
     uint32_t sobol_index;
     int sobol, bounce, stream;
-    int next[4], paired[4];
-    uint32_t sobol_y[4];
+    int next[RRV__STREAMS], paired[RRV__STREAMS];
+    uint32_t sobol_y[RRV__STREAMS];
 } rrv__rng;
 
 static uint32_t rrv__next_u32(rrv__rng *rng)
@@ -1251,14 +1266,23 @@ static void rrv__rng_seed(rrv__rng *rng, uint64_t seed, uint64_t stream_a, uint6
    A's phase direction the dimension sample B spends on its fifth null
    collision. Dimensions are therefore named, not counted: (bounce, stream,
    k), bounce 0 the camera's and bounce b the walk to the b-th vertex and
-   the choices made there, and each bounce's draws split into four streams
+   the choices made there, and each bounce's draws split into streams
    numbered on their own: the vertex's direction and roulette, its light
    sample, the walk of the path (free flights, collision events, comb
-   kicks, faces) and the walks of its shadow rays. A stream's first
+   kicks, faces), the walks of its shadow rays, and the equiangular sample
+   of the segment that leads to the vertex (rrv__equiangular_nee) with its
+   walks. A stream's first
    RRV__SOBOL_BUDGET numbers of a bounce are Sobol, the rest PCG32: they are
    the draws that vary in count, where alignment is lost anyway. */
 #define RRV__SOBOL_BUDGET 32
-enum { RRV__STREAM_DIRECTION, RRV__STREAM_LIGHT, RRV__STREAM_WALK };
+enum { RRV__STREAM_DIRECTION, RRV__STREAM_LIGHT, RRV__STREAM_WALK, RRV__STREAM_EQUIANGULAR = 4 };
+
+/* Every stream starts over at its first dimension. */
+static void rrv__streams_restart(rrv__rng *rng)
+{
+    int k;
+    for (k = 0; k < RRV__STREAMS; ++k) rng->next[k] = rng->paired[k] = 0;
+}
 
 static uint32_t rrv__reverse_bits(uint32_t x)
 {
@@ -1306,8 +1330,7 @@ static void rrv__sobol_start(rrv__rng *rng, uint64_t key, uint32_t index)
     rng->sobol = 1;
     rng->bounce = 0;
     rng->stream = RRV__STREAM_DIRECTION;
-    rng->next[0] = rng->next[1] = rng->next[2] = rng->next[3] = 0;
-    rng->paired[0] = rng->paired[1] = rng->paired[2] = rng->paired[3] = 0;
+    rrv__streams_restart(rng);
 }
 
 /* The path reaches its next vertex: every stream starts over at the
@@ -1315,8 +1338,7 @@ static void rrv__sobol_start(rrv__rng *rng, uint64_t key, uint32_t index)
 static void rrv__sampler_bounce(rrv__rng *rng)
 {
     ++rng->bounce;
-    rng->next[0] = rng->next[1] = rng->next[2] = rng->next[3] = 0;
-    rng->paired[0] = rng->paired[1] = rng->paired[2] = rng->paired[3] = 0;
+    rrv__streams_restart(rng);
 }
 
 /* Dimension k of a stream in this bounce. Dimension 0 of Sobol is the index
@@ -6803,6 +6825,8 @@ typedef struct rrv__context {
     int manifold;            /* nee manifold can run (Hessians known) */
     int aim;                 /* nee aim: bent shadow rays aimed at light
                                 samples (also shoot where it cannot solve) */
+    int equiangular;         /* equiangular samples (rrv__equiangular_nee): 0 none,
+                                1 toward lights in scattering media' boxes, 2 all */
     double eta_floor;        /* the lowest eta anywhere (nee shoot and manifold's class) */
     int cone_count;          /* strongly refracting supports (rrv__cone_setup) */
     rrv_vec3 cone_center[RRV__CONE_MAX]; /* and the spheres that bound them */
@@ -6817,6 +6841,17 @@ typedef struct rrv__context {
     rrv_render_stats stats;
 } rrv__context;
 
+/* A segment of a camera path set up for equiangular samples
+   (rrv__equi_segment; the section comment above rrv__light_centre), and
+   for a free flight's vertex on it, where along it the vertex lies. */
+typedef struct rrv__equi {
+    int on;            /* the segment meets exactly one scattering medium's box */
+    int medium;        /* that medium */
+    rrv_vec3 o, d;
+    double a, b;       /* the span of that box on the segment */
+    double t;          /* a vertex's distance along it */
+} rrv__equi;
+
 /* Spectral MIS (Miller et al. 2019): a hero channel drives every collision
    choice; ratio[k] is the pdf of the choices made so far had channel k been
    the hero, over the hero's own. A contribution is beta / mean(ratio), the
@@ -6828,6 +6863,7 @@ typedef struct rrv__path {
     int hero;
     rrv__bender bender;      /* refraction state (refractive integrator) */
     rrv__emit_from emit;
+    rrv__equi eq;            /* the last vertex's segment, where it was a free flight's */
 } rrv__path;
 
 static void rrv__path_start(rrv__path *path, rrv__rng *rng)
@@ -6841,6 +6877,7 @@ static void rrv__path_start(rrv__path *path, rrv__rng *rng)
     path->hero = (int)(rrv__uniform(rng) * 3.0);
     if (path->hero > 2) path->hero = 2;
     path->emit.on = 0;
+    path->eq.on = 0;
 }
 
 /* The factor that turns beta into a contribution: 1 / mean(ratio). */
@@ -7759,6 +7796,151 @@ static void rrv__light_transmittance(rrv__context *ctx, rrv_vec3 p, const rrv__l
     rrv__transmittance(ctx, p, ls->wi, tmax, rng, T);
 }
 
+/* ---- equiangular sampling toward lights inside media ----------------------------
+   A light inside a thin medium lights the medium around it as 1 / r^2:
+   free flights, drawn in proportion to the transmittance, put few
+   vertices where that glow is, and those far apart. An equiangular sample
+   (Kulla and Fajardo 2012) draws the distance t along a segment in
+   proportion to 1 / r(t)^2 from the light's centre c instead:
+       p_eq(t) = h / ((theta_b - theta_a) (h^2 + (t - D)^2)),
+   D = (c - o).d the foot of the perpendicular from c, h its length, theta
+   = atan((t - D) / h) at the span's ends a and b. rrv__equiangular_nee
+   takes one such sample a segment through a scattering medium and connects
+   it to the light as straight NEE does; it is the third way to reach the
+   same (t, direction to the light) that the free flight's vertex reaches
+   by light sampling (A) and by its phase sample hitting the light (B).
+   The three combine by the power heuristic over
+       p_A = p_ff(t) p_light,  p_B = p_ff(t) p_phase,  p_C = p_eq(t) p_light,
+   p_light the light sample's solid-angle density (its pick included),
+   which every technique evaluates from the same t and direction, so the
+   three weights sum to one wherever all three can reach. p_ff is the free
+   flight's density, sigma_t T, which a heterogeneous medium does not give
+   in closed form; any function of t the three share keeps the sum
+   unbiased (it only steers the weights), so this uses sigma~(t) exp(-sigma~(t)
+   (t - a)), sigma~ the channels' mean extinction at t: exact in a
+   homogeneous medium that begins at a, a guess elsewhere.
+   Restrictions, each a function of the segment alone so that every
+   technique agrees on it: the classic integrator (a bent ray has no such
+   density); segments whose ray meets exactly one scattering medium's box
+   (there the phase function at t is that medium's, as the free flight's
+   would be); light shapes (the sky has no centre), by default only those
+   within a scattering medium's box (EQUIANGULAR SAMPLING in the manual);
+   the span [a, b] the segment spends in that box. */
+
+/* The point an equiangular sample aims at. */
+static rrv_vec3 rrv__light_centre(const rrv_shape *s)
+{
+    if (s->kind == RRV_SHAPE_SPHERE) return s->center;
+    if (s->kind == RRV_SHAPE_TRIANGLE) return rrv__madd(rrv__madd(s->p0, s->e1, 1.0 / 3.0), s->e2, 1.0 / 3.0);
+    return rrv__madd(rrv__madd(s->p0, s->e1, 0.5), s->e2, 0.5);
+}
+
+/* A medium whose collisions can scatter: free flights make vertices in it. */
+static int rrv__medium_scatters(const rrv_medium *m)
+{
+    return m->density.kind != RRV_FIELD_NONE && m->scale > 0 && rrv__max3(m->sigma_s) > 0;
+}
+
+/* Whether equiangular samples aim at light shape s on segments through
+   medium m (ctx->equiangular 2: every light; 1, the default: a light
+   whose centre lies in m's box, whose glow free flights miss). */
+static int rrv__equi_aims_at(const rrv__context *ctx, const rrv_shape *s, const rrv_medium *m)
+{
+    return ctx->equiangular == 2 || rrv__inside_box(rrv__light_centre(s), m->lo, m->hi);
+}
+
+/* Sets up the segment o + t d, t < tmax: on when it meets exactly one
+   scattering medium's box, with [a, b] its span there. */
+static void rrv__equi_segment(const rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, double tmax, rrv__equi *eq)
+{
+    const rrv_scene *scene = ctx->scene;
+    int i;
+    eq->on = 0;
+    eq->o = o;
+    eq->d = d;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        double t0, t1;
+        if (!rrv__medium_scatters(m) || !rrv__ray_box_span(o, d, m->lo, m->hi, &t0, &t1) || !(t0 < tmax)) continue;
+        if (eq->on) {
+            eq->on = 0;
+            return;
+        }
+        eq->on = 1;
+        eq->medium = i;
+        eq->a = t0;
+        eq->b = rrv__mind(t1, tmax);
+    }
+    if (eq->on && !(eq->b > eq->a && eq->b < DBL_MAX)) eq->on = 0;
+}
+
+/* The segment's geometry toward c: D, h and the angles of a and b; 0
+   where the density degenerates (c on the ray's line). */
+static int rrv__equi_frame(const rrv__equi *eq, rrv_vec3 c, double *D, double *h, double *theta_a, double *theta_b)
+{
+    rrv_vec3 oc = rrv__sub(c, eq->o);
+    *D = rrv__dot(oc, eq->d);
+    *h = rrv__length(rrv__sub(oc, rrv__scale(eq->d, *D)));
+    if (!(*h > 1e-9 * (1.0 + rrv__length(oc)))) return 0;
+    *theta_a = atan2(eq->a - *D, *h);
+    *theta_b = atan2(eq->b - *D, *h);
+    return *theta_b > *theta_a;
+}
+
+static double rrv__equi_pdf(const rrv__equi *eq, rrv_vec3 c, double t)
+{
+    double D, h, ta, tb;
+    if (!(t >= eq->a && t <= eq->b) || !rrv__equi_frame(eq, c, &D, &h, &ta, &tb)) return 0.0;
+    return h / ((tb - ta) * (h * h + (t - D) * (t - D)));
+}
+
+/* t in [a, b] by the equiangular density toward c (inverted CDF); 0 when
+   there is none. */
+static int rrv__equi_sample(const rrv__equi *eq, rrv_vec3 c, double u, double *t, double *pdf)
+{
+    double D, h, ta, tb;
+    if (!rrv__equi_frame(eq, c, &D, &h, &ta, &tb)) return 0;
+    *t = rrv__clamp(D + h * tan(ta + u * (tb - ta)), eq->a, eq->b);
+    *pdf = h / ((tb - ta) * (h * h + (*t - D) * (*t - D)));
+    return *pdf > 0 && *pdf < DBL_MAX;
+}
+
+/* p_ff of the section comment: what the weights take for the free
+   flight's density at t. */
+static double rrv__equi_free_flight(const rrv__context *ctx, const rrv__equi *eq, double t)
+{
+    rrv__coeffs c;
+    double sigma = 0;
+    int ch;
+    rrv__medium_coeffs(&ctx->scene->media[eq->medium], rrv__madd(eq->o, eq->d, t), &c);
+    for (ch = 0; ch < 3; ++ch) sigma += (c.sigma_a[ch] + c.sigma_s[ch]) / 3.0;
+    return sigma * exp(-sigma * (t - eq->a));
+}
+
+/* The power heuristic's weight of technique `mine` among A, B and C. */
+static double rrv__equi_weight(double mine, double p_a, double p_b, double p_c)
+{
+    double sum = p_a * p_a + p_b * p_b + p_c * p_c;
+    return sum > 0 ? mine * mine / sum : 0.0;
+}
+
+/* The weight of a free flight's vertex at eq->t (A: p_own the light
+   sample's density, B: the phase function's) toward light shape s, where
+   the light sample's density is p_light and the phase function's p_phase. */
+static double rrv__equi_vertex_weight(const rrv__context *ctx, const rrv__equi *eq, const rrv_shape *s, int light_side,
+                                      double p_light, double p_phase)
+{
+    double p_ff, p_eq;
+    rrv_vec3 c;
+    if (!eq->on || !rrv__equi_aims_at(ctx, s, &ctx->scene->media[eq->medium]))
+        return light_side ? rrv__power_heuristic(p_light, p_phase) : rrv__power_heuristic(p_phase, p_light);
+    c = rrv__light_centre(s);
+    p_eq = rrv__equi_pdf(eq, c, eq->t);
+    p_ff = rrv__equi_free_flight(ctx, eq, eq->t);
+    return rrv__equi_weight(light_side ? p_ff * p_light : p_ff * p_phase, p_ff * p_light, p_ff * p_phase,
+                            p_eq * p_light);
+}
+
 static void rrv__material_albedo(const rrv_material *mat, rrv_vec3 p, rrv_vec3 n, double albedo[3])
 {
     int c;
@@ -8373,7 +8555,7 @@ static void rrv__sample_direct_light(rrv__context *ctx, rrv__path *path, rrv_vec
     static const double white[3] = {1.0, 1.0, 1.0};
     rrv__light_sample ls;
     const double *tint = white;
-    double pdf, T[3], k;
+    double pdf, T[3], k, w;
     int c;
     if (!ctx->sample_lights || !rrv__sample_light(ctx->scene, x, draw, &ls) || !rrv__straight_allowed(ctx, x, &ls))
         return;
@@ -8387,7 +8569,14 @@ static void rrv__sample_direct_light(rrv__context *ctx, rrv__path *path, rrv_vec
     }
     rrv__light_transmittance(ctx, x, &ls, rng, T);
     if (!rrv__nonzero3(T)) return;
-    k = pdf * rrv__power_heuristic(ls.pdf, pdf) / ls.pdf * rrv__eta_scale(ctx, ls.point) * rrv__path_mis(path);
+    if (!v->surface && path->eq.on && ls.dist < DBL_MAX) {
+        /* a free flight's vertex on a segment that also takes equiangular samples */
+        const rrv_shape *s = &ctx->scene->shapes[ctx->scene->lights[rrv__light_pick(ctx->scene, draw)]];
+        w = rrv__equi_vertex_weight(ctx, &path->eq, s, 1, ls.pdf, pdf);
+    } else {
+        w = rrv__power_heuristic(ls.pdf, pdf);
+    }
+    k = pdf * w / ls.pdf * rrv__eta_scale(ctx, ls.point) * rrv__path_mis(path);
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * tint[c] * T[c] * ls.L[c] * k;
 }
 
@@ -8565,6 +8754,52 @@ static void rrv__vertex_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, cons
     rng->stream = RRV__STREAM_DIRECTION;
 }
 
+/* The equiangular technique (C in the section comment above
+   rrv__light_centre) on the segment eq, for a path whose throughput and
+   spectral ratios were beta and ratio where the segment began: a light
+   shape picked as NEE picks, a distance toward its centre, its light
+   sampled from there, both legs' transmittance tracked. */
+static void rrv__equiangular_sample(rrv__context *ctx, rrv__path *path, const double beta[3], const double ratio[3],
+                                    const rrv__equi *eq, rrv__rng *rng)
+{
+    const rrv_scene *scene = ctx->scene;
+    const rrv_medium *m = &scene->media[eq->medium];
+    const rrv_shape *s;
+    rrv__light_draw draw;
+    rrv__light_sample ls;
+    rrv__coeffs co;
+    rrv_vec3 x;
+    double u, t, p_eq, p_ff, phase, T_in[3], T_out[3], k;
+    int pick, ch;
+    rrv__draw_light(rng, &draw);
+    u = rrv__uniform(rng);
+    pick = rrv__light_pick(scene, &draw);
+    if (pick < 0 || pick >= scene->light_count) return;
+    s = &scene->shapes[scene->lights[pick]];
+    if (!rrv__equi_aims_at(ctx, s, m) || !rrv__equi_sample(eq, rrv__light_centre(s), u, &t, &p_eq)) return;
+    x = rrv__madd(eq->o, eq->d, t);
+    rrv__medium_coeffs(m, x, &co);
+    if (!(rrv__max3(co.sigma_s) > 0) || !rrv__sample_light(scene, x, &draw, &ls)) return;
+    phase = rrv__hg_eval(m->g, rrv__dot(eq->d, ls.wi));
+    rrv__transmittance(ctx, eq->o, eq->d, t, rng, T_in);
+    if (!rrv__nonzero3(T_in)) return;
+    rrv__light_transmittance(ctx, x, &ls, rng, T_out);
+    if (!rrv__nonzero3(T_out)) return;
+    p_ff = rrv__equi_free_flight(ctx, eq, t);
+    k = phase * rrv__equi_weight(p_eq * ls.pdf, p_ff * ls.pdf, p_ff * phase, p_eq * ls.pdf) / (p_eq * ls.pdf) * 3.0 /
+        (ratio[0] + ratio[1] + ratio[2]);
+    for (ch = 0; ch < 3; ++ch) path->L[ch] += beta[ch] * T_in[ch] * co.sigma_s[ch] * T_out[ch] * ls.L[ch] * k;
+}
+
+static void rrv__equiangular_nee(rrv__context *ctx, rrv__path *path, const double beta[3], const double ratio[3],
+                                 const rrv__equi *eq, rrv__rng *rng)
+{
+    /* its own stream: its draws then move none of the path's dimensions */
+    rng->stream = RRV__STREAM_EQUIANGULAR;
+    rrv__equiangular_sample(ctx, path, beta, ratio, eq, rng);
+    rng->stream = RRV__STREAM_DIRECTION;
+}
+
 /* What every real vertex does once its light is sampled and its next
    direction chosen: the path restarts there, straight. */
 static void rrv__restart_at_vertex(rrv__context *ctx, rrv__camera_path *cp, rrv_vec3 x)
@@ -8645,13 +8880,16 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
                                                to_x)
                            : 0;
             if (!(ctx->partition && cp->touched) || weak == 1)
-                w = rrv__power_heuristic(cp->prev_pdf, rrv__emitter_pdf(s, cp->vertex, x, n) / rrv__light_choices(scene));
+                w = rrv__equi_vertex_weight(ctx, &cp->path.eq, s, 0,
+                                            rrv__emitter_pdf(s, cp->vertex, x, n) / rrv__light_choices(scene),
+                                            cp->prev_pdf);
             else
                 w = rrv__solver_forward_weight(ctx, cp->vertex, cp->w0, cp->prev_pdf, s, x, weak, cp->jumped);
         }
         w *= rrv__eta_scale(ctx, x) * rrv__path_mis(&cp->path);
         for (c = 0; c < 3; ++c) cp->path.L[c] += cp->path.beta[c] * s->L[c] * w;
     }
+    cp->path.eq.on = 0; /* a surface vertex: no equiangular technique reaches its light */
     if (++cp->depth > scene->settings.max_depth) return 0;
     if (!front) n = rrv__scale(n, -1.0);
     p = rrv__madd(x, n, rrv__offset_scale(x));
@@ -8714,7 +8952,9 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
     for (;;) {
         rrv__hit hit;
         rrv__flight flight;
+        rrv__equi seg;
         double segment = DBL_MAX; /* a straight piece of the (bent) ray */
+        double beta[3], ratio[3]; /* the path's where the segment begins (equiangular) */
         int has_hit, outcome;
         if (++cp.steps > ctx->step_bound) {
             ++ctx->stats.paths_cut;
@@ -8735,7 +8975,20 @@ static void rrv__trace_path(rrv__context *ctx, rrv_vec3 o, rrv_vec3 d, rrv__rng 
             if (!cp.path.bender.pending) rrv__plan_segment(&cp.path.bender, scene, cp.o, &cp.d, rng);
             segment = cp.path.bender.segment;
         }
+        memcpy(beta, cp.path.beta, sizeof beta);
+        memcpy(ratio, cp.path.ratio, sizeof ratio);
         outcome = rrv__walk_segment(ctx, &cp.path, cp.o, cp.d, segment, rng, &hit, &has_hit, &flight);
+        if (ctx->equiangular && outcome != RRV__FLIGHT_CUT) {
+            /* the segment is whole (free flights stop the path on it, not the
+               segment): its samples take the path as it was when it began */
+            rrv__equi_segment(ctx, cp.o, cp.d, has_hit ? hit.t : DBL_MAX, &seg);
+            if (seg.on && cp.depth < scene->settings.max_depth)
+                rrv__equiangular_nee(ctx, &cp.path, beta, ratio, &seg, rng);
+            if (outcome == RRV__FLIGHT_SCATTERED) {
+                cp.path.eq = seg;
+                cp.path.eq.t = flight.t;
+            }
+        }
         if (outcome == RRV__FLIGHT_ABSORBED) break;
         if (outcome == RRV__FLIGHT_CUT) {
             ++ctx->stats.paths_cut;
@@ -9181,6 +9434,17 @@ static rrv_result rrv__render_context(const rrv_scene *scene, rrv__context *ctx,
                    (scene->settings.emission_nee == RRV_EMISSION_NEE_ON ||
                     (scene->settings.emission_nee == RRV_EMISSION_NEE_DEFAULT && scene->light_count == 0 &&
                      scene->environment.kind == RRV_ENV_NONE));
+    /* Equiangular samples where some light shape can take them: none
+       elsewhere, so such scenes render as before, draw for draw. */
+    if (!ctx->bends && ctx->sample_lights && scene->settings.equiangular != RRV_EQUIANGULAR_OFF) {
+        int l, aims = 0;
+        ctx->equiangular = scene->settings.equiangular == RRV_EQUIANGULAR_ON ? 2 : 1;
+        for (l = 0; l < scene->light_count; ++l)
+            for (i = 0; i < scene->medium_count; ++i)
+                aims |= rrv__medium_scatters(&scene->media[i]) &&
+                        rrv__equi_aims_at(ctx, &scene->shapes[scene->lights[l]], &scene->media[i]);
+        if (!aims) ctx->equiangular = 0;
+    }
     /* without a medium that refracts every connection is straight: no
        curved NEE, so such a scene renders as classic does, draw for draw */
     for (i = 0; i < scene->medium_count && !rrv__medium_refracts(&scene->media[i]); ++i) {}
@@ -9566,6 +9830,7 @@ static const rrv__sf_key rrv__sf_render_keys[] = {
     {"manifoldsolver", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "lm|dogleg"},
     {"transmittance", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "ratio|residual|march"},
     {"noisethreshold", RRV__SF_NUM, 1, 0, 0.0, 1e6, NULL},
+    {"equiangular", RRV__SF_CHOICE, 1, 0, RRV__SF_ANY, "on|off"},
 };
 /* Choice index -> enum, spelled out so reordering an enum in api.h cannot
    silently change what a word means. */
@@ -9922,6 +10187,8 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
                             (int)s->manifold_gauge);
     if ((unsigned)s->transmittance > (unsigned)RRV_TRANSMITTANCE_MARCH)
         return rrv__ck_fail(ck, RRV_OK, "transmittance %d is not one of rrv_transmittance", (int)s->transmittance);
+    if ((unsigned)s->equiangular > (unsigned)RRV_EQUIANGULAR_OFF)
+        return rrv__ck_fail(ck, RRV_OK, "equiangular %d is not one of rrv_equiangular", (int)s->equiangular);
     if ((unsigned)s->manifold_solver > (unsigned)RRV_MANIFOLD_SOLVER_DOGLEG)
         return rrv__ck_fail(ck, RRV_OK, "manifold_solver %d is not one of rrv_manifold_solver",
                             (int)s->manifold_solver);
@@ -17489,6 +17756,7 @@ static rrv_result rrv__sf_st_render(rrv__sf_parser *p)
         s->transmittance = kinds[sl[18].choice];
     }
     if (sl[19].given) s->noise_threshold = sl[19].v[0];
+    if (sl[20].given) s->equiangular = sl[20].choice == 0 ? RRV_EQUIANGULAR_ON : RRV_EQUIANGULAR_OFF;
     rrv__sf_ck(p, &ck, "render");
     rrv__sf_ck(p, &ambient, "ambient");
     return rrv__settings_check(&ck, &ambient, s);
@@ -18536,6 +18804,24 @@ and BOUNDS (moved here from the manual at the top, word for word)
      inside hot air lights a room too (scenes/pyro.rrv's kind); a walk
      stops at a sharp face, past which the paths keep weight 1. Measured on
      test/bench/campfire.rrv (test/bench/RESULTS.md, "Fire as a light").
+
+   EQUIANGULAR SAMPLING (rrv_settings.equiangular, scene `render
+   equiangular on|off`; by default toward the light shapes whose centre
+   lies in a scattering medium's box, nowhere else)
+     The classic integrator also draws one distance a segment through a
+     scattering medium by the equiangular density toward a light's centre
+     (1 / r^2 from it), connects it to the light as straight NEE does, and
+     weighs it by the power heuristic against the free flight's light
+     sample and phase sample; the free flight's density, which a
+     heterogeneous medium does not give in closed form, enters the weights
+     as sigma exp(-sigma (t - a)) of the local mean extinction (any shared
+     function of t keeps the sum unbiased; the derivation above
+     rrv__light_centre). Segments whose ray meets two scattering media's
+     boxes, and the refracting integrators, keep free flights alone.
+     Measured (test/bench/RESULTS.md, "Equiangular samples"): a lamp in fog
+     3.3x the efficiency of free flights alone; forced on toward a light
+     outside dense smoke 0.81x, hence the default. Scenes where it stays
+     off render as before, draw for draw.
 
    BOUNDARIES (design decisions)
      Faces of refractive media (a medium's box; the sphere of a Luneburg or
