@@ -188,7 +188,8 @@ static void weights_sum_to_one(void)
    and here 1 (every cluster has weight, so a super-cluster in front has a
    cluster in front); each cluster is drawn, and nothing is drawn, as
    often as those masses say (within 4 standard errors of the binomial
-   count, plus 2 draws). The density is the same read before and after the
+   count, plus 2 draws), and so are the cells expected 5 times or more
+   (Pearson's X^2 within 4 standard deviations of its chi^2). The density is the same read before and after the
    sampler keeps a super-cluster's norm. */
 static void density_matches_the_sampler(void)
 {
@@ -203,8 +204,8 @@ static void density_matches_the_sampler(void)
         rrv__context ctx;
         rrv__rng rng;
         rrv__path path;
-        int vertex, worst_cluster = -1;
-        double worst = 0;
+        int vertex, worst_cluster = -1, cells_checked = 0;
+        double worst = 0, worst_cell = 0;
         if (!s) return;
         /* one path for every vertex: what it keeps of one must not leak
            into the next */
@@ -222,7 +223,14 @@ static void density_matches_the_sampler(void)
             const int n = 100000;
             double *mass = (double *)calloc((size_t)e->clusters, sizeof *mass), total = 0, expected = 0;
             int *hits = (int *)calloc((size_t)e->clusters, sizeof *hits), none = 0, i, c, k, grid;
-            if (!mass || !hits) { free(mass); free(hits); CHECK(0); break; }
+            double *cell_mass = (double *)calloc(e->cells, sizeof *cell_mass);
+            int *cell_hits = (int *)calloc(e->cells, sizeof *cell_hits);
+            size_t cell;
+            if (!mass || !hits || !cell_mass || !cell_hits) {
+                free(mass); free(hits); free(cell_mass); free(cell_hits);
+                CHECK(0);
+                break;
+            }
             memset(&v, 0, sizeof v);
             v.surface = vertex < 4 || vertex == 6;
             switch (vertex) {
@@ -256,7 +264,9 @@ static void density_matches_the_sampler(void)
                                                  g->lo.z + (iz + 0.5) * g->cell.z);
                             c = g->first_cluster + ((iz / RRV__EMIT_BLOCK) * g->nc[1] + iy / RRV__EMIT_BLOCK) * g->nc[0] +
                                 ix / RRV__EMIT_BLOCK;
-                            mass[c] += rrv__emission_pdf(e, g->medium, &path.emit, y) / g->inv_volume;
+                            cell = g->first + ((size_t)iz * (size_t)g->n[1] + (size_t)iy) * (size_t)g->n[0] + (size_t)ix;
+                            cell_mass[cell] = rrv__emission_pdf(e, g->medium, &path.emit, y) / g->inv_volume;
+                            mass[c] += cell_mass[cell];
                         }
             }
             for (c = 0; c < e->clusters; ++c) total += mass[c];
@@ -286,8 +296,10 @@ static void density_matches_the_sampler(void)
                 for (k = 0; k < 3; ++k) {
                     idx[k] = (int)((rrv__axis(y, k) - rrv__axis(g->lo, k)) / rrv__axis(g->cell, k));
                     if (idx[k] > g->n[k] - 1) idx[k] = g->n[k] - 1;
-                    idx[k] /= RRV__EMIT_BLOCK;
                 }
+                ++cell_hits[g->first + ((size_t)idx[2] * (size_t)g->n[1] + (size_t)idx[1]) * (size_t)g->n[0] +
+                            (size_t)idx[0]];
+                for (k = 0; k < 3; ++k) idx[k] /= RRV__EMIT_BLOCK;
                 ++hits[g->first_cluster + (idx[2] * g->nc[1] + idx[1]) * g->nc[0] + idx[0]];
                 if (i < 2000) {
                     /* the kept norm is the norm */
@@ -308,10 +320,31 @@ static void density_matches_the_sampler(void)
                        c < e->clusters ? "cluster" : "nothing", c, got, n * P, sd);
                 if (z > worst) { worst = z; worst_cluster = c; }
             }
+            {
+                /* and the cells the sampler should pick at least 5 times in
+                   n: Pearson's X^2 over them, about chi^2 with as many
+                   degrees of freedom (mean k, standard deviation sqrt(2k)) */
+                double X2 = 0, z;
+                int cells_in = 0;
+                for (cell = 0; cell < e->cells; ++cell) {
+                    double expect = n * cell_mass[cell];
+                    if (!(expect >= 5.0)) continue;
+                    ++cells_in;
+                    X2 += (cell_hits[cell] - expect) * (cell_hits[cell] - expect) / expect;
+                }
+                z = (X2 - cells_in) / sqrt(2.0 * cells_in);
+                CHECKF(cells_in > 100 && z <= 4.0, "scene %d vertex %d: X^2 %g over %d cells", scene, vertex, X2,
+                       cells_in);
+                if (z > worst_cell) worst_cell = z;
+                cells_checked += cells_in;
+            }
             free(mass);
             free(hits);
+            free(cell_mass);
+            free(cell_hits);
         }
-        printf("  scene %d: worst |z| %.2f (cluster %d)\n", scene, worst, worst_cluster);
+        printf("  scene %d: worst |z| %.2f (cluster %d); cells (%d): worst X^2 z %.2f\n", scene, worst, worst_cluster,
+               cells_checked, worst_cell);
         rrv_scene_free(s);
     }
 }
