@@ -4676,7 +4676,7 @@ static void rrv__medium_Le(const rrv_scene *scene, const rrv_medium *m, rrv_vec3
        S = sum_s W_s G_s,  S_s = sum over s's clusters of W_c G_c.
    Two levels, since the pick costs a G per candidate at every vertex:
    with one level, 64 of them on test/bench/campfire.rrv, near a third of
-   a render's time at maxdepth 32; with two, 8 + 8 (campfire 4.2x -> 5.0x
+   a render's time at maxdepth 32; with two, 8 + 8 (campfire 4.3x -> 5.0x
    over paths alone there, RESULTS.md). S_s of a super-cluster the sampler
    did not pick is summed only when a forward path's collision or the aim
    asks for the density there, and kept for the vertex.
@@ -9354,8 +9354,8 @@ static rrv_result rrv__render_context(const rrv_scene *scene, rrv__context *ctx,
     nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : RRV_NEE_SHOOT;
     ctx->sample_lights = !ctx->bends || nee != RRV_NEE_NONE;
     /* By default only where emissive media are the only lights: there it
-       pays (test/bench/campfire.rrv: 9.8x the efficiency at maxdepth 1,
-       4.2x at the default 32), while beside an area light and a sky (scenes/fire.rrv) the
+       pays (test/bench/campfire.rrv: 15x the efficiency at maxdepth 1,
+       5.8x at the default 32), while beside an area light and a sky (scenes/fire.rrv) the
        extra shadow ray a vertex cost more than the variance it saved
        (0.46x classic, 0.70x refractive; test/bench/RESULTS.md, "Fire as a light"). */
     ctx->emission = ctx->sample_lights && scene->emitters &&
