@@ -515,7 +515,8 @@ typedef enum rrv_sampler {
    Both are unbiased; they differ in variance per unit of work. */
 typedef enum rrv_transmittance {
     RRV_TRANSMITTANCE_DEFAULT = 0, /* RATIO (test/bench/RESULTS.md, "Transmittance":
-                                      MARCH wins per shadow ray, not per render) */
+                                      MARCH wins per shadow ray, not per render),
+                                      RESIDUAL for emission NEE's shadow rays */
     RRV_TRANSMITTANCE_RATIO,       /* ratio tracking against the majorant grid */
     RRV_TRANSMITTANCE_RESIDUAL,    /* residual ratio tracking: the majorant grid's
                                       minorant integrated exactly, ratio tracking of
@@ -4685,44 +4686,61 @@ static void rrv__medium_Le(const rrv_scene *scene, const rrv_medium *m, rrv_vec3
    feature between the octants' centres keeps some weight; one distribution
    over the cells of every emissive medium, normalised (pmf). Blocks of up
    to RRV__EMIT_BLOCK^3 cells are clusters, with the sum W_c of their
-   cells' pmf, a centre and a radius. From a vertex x a cluster is picked
-   in proportion to W_c G_c(x), G_c = 1 / max(|x - centre|^2, radius^2)
+   cells' pmf, a centre, a radius and half-extents; blocks of up to
+   RRV__EMIT_PAIR^3 clusters are super-clusters, with W_s = sum W_c alike.
+   G(x) = 1 / max(|x - centre|^2, radius^2) of a cluster or super-cluster
    (light falls off as 1 / r^2, and a flame a metre across seen from a
    metre away spans a factor of 9 in it; at a surface times a bound of the
-   cosine), a cell of it by its pmf and a
-   point uniformly in that cell: density
-       p_nee(y) = G_c(x) pmf(cell) / (S(x) volume(cell)),  S = sum_c W_c G_c.
+   cosine). From a vertex x a super-cluster s is picked in proportion to
+   W_s G_s(x), a cluster c of it in proportion to W_c G_c(x), a cell of it
+   by its pmf and a point uniformly in that cell: density
+       p_nee(y) = [W_s G_s(x) / S(x)] [G_c(x) / S_s(x)] pmf(cell) / volume(cell),
+       S = sum_s W_s G_s,  S_s = sum over s's clusters of W_c G_c.
+   Two levels, since the pick costs a G per candidate at every vertex:
+   with one level, 64 of them on test/bench/campfire.rrv, near a third of
+   a render's time at maxdepth 32; with two, 8 + 8 (campfire 4.3x -> 5.0x
+   over paths alone there, RESULTS.md). S_s of a super-cluster the sampler
+   did not pick is summed only when a forward path's collision or the aim
+   asks for the density there, and kept for the vertex.
    The weights steer samples only: any weights leave the estimate unbiased,
    since a cell the grid gives no weight is left to the paths alone (their
    MIS weight there is 1, rrv__emission_forward_weight), and the forward
    paths and the samples read the density through the one lookup,
-   rrv__emission_pdf, with the S of their vertex. */
+   rrv__emission_pdf, with the S and S_s of their vertex
+   (test/test_emission.c checks it against the sampler's draws). */
 #define RRV__EMIT_CELLS 32
 #define RRV__EMIT_BLOCK 8
+#define RRV__EMIT_PAIR 2    /* clusters per axis in a super-cluster */
+#define RRV__EMIT_KEEP 64   /* super-clusters whose W_s G_s a vertex keeps */
+#define RRV__EMIT_SUPER_KEEP 32 /* and whose norm S_s (bits of a uint32_t) */
 #define RRV__EMIT_TABLE 256 /* temperatures in the blackbody envelope */
 
 typedef struct rrv__emitter_grid {
     int medium;           /* in scene->media */
-    int n[3], nc[3];      /* cells and clusters per axis */
+    int n[3], nc[3], ns[3]; /* cells, clusters and super-clusters per axis */
     rrv_vec3 lo, cell, inv_cell;
     double inv_volume;    /* 1 / a cell's volume */
     size_t first;         /* its first cell in the scene's pmf */
-    int first_cluster;
+    int first_cluster, first_super;
 } rrv__emitter_grid;
 
+/* A cluster of cells, or a super-cluster of clusters. */
 typedef struct rrv__emit_cluster {
     rrv_vec3 centre;
     double radius2;       /* half its diagonal, squared */
-    double radius;        /* and not squared (a sqrt less a vertex and cluster) */
-    double weight;        /* W_c: the sum of its cells' pmf */
-    size_t begin, end;    /* its cells in order[] */
+    rrv_vec3 half;        /* half its extent along each axis */
+    double weight;        /* W_c: the sum of its cells' pmf (W_s: of its clusters') */
+    size_t begin, end;    /* its cells in order[] (its clusters in member[]) */
 } rrv__emit_cluster;
 
 struct rrv__emitters {
-    int count, clusters;
+    int count, clusters, supers;
     rrv__emitter_grid *grid;
     int *of_medium;       /* a medium's grid, -1 where it does not emit */
     rrv__emit_cluster *cluster;
+    rrv__emit_cluster *super;
+    int *member;          /* the clusters of weight, super-cluster by super-cluster */
+    int *super_of;        /* per cluster */
     size_t cells;
     double *pmf;          /* per cell, in the grids' order (x fastest) */
     double *cdf;          /* cells + 1: pmf summed in order[]'s order, cluster by cluster */
@@ -4736,6 +4754,9 @@ static void rrv__emitters_free(struct rrv__emitters *e)
     RRV_FREE(e->grid);
     RRV_FREE(e->of_medium);
     RRV_FREE(e->cluster);
+    RRV_FREE(e->super);
+    RRV_FREE(e->member);
+    RRV_FREE(e->super_of);
     RRV_FREE(e->pmf);
     RRV_FREE(e->cdf);
     RRV_FREE(e->order);
@@ -4760,6 +4781,87 @@ static double rrv__temperature_bound(const rrv_medium *m, rrv_vec3 lo, rrv_vec3 
         T = rrv__maxd(T, (f - m->temperatureoffset) * m->temperaturescale);
     }
     return T;
+}
+
+/* The clusters: blocks of RRV__EMIT_BLOCK^3 cells, each with its cells
+   listed in order[] and their pmf summed in cdf[]. */
+static void rrv__emit_clusters(struct rrv__emitters *e)
+{
+    size_t at = 0;
+    int i, a;
+    e->cdf[0] = 0;
+    for (i = 0; i < e->count; ++i) {
+        const rrv__emitter_grid *g = &e->grid[i];
+        int cx, cy, cz, x, y, z;
+        for (cz = 0; cz < g->nc[2]; ++cz)
+            for (cy = 0; cy < g->nc[1]; ++cy)
+                for (cx = 0; cx < g->nc[0]; ++cx) {
+                    rrv__emit_cluster *c = &e->cluster[g->first_cluster + (cz * g->nc[1] + cy) * g->nc[0] + cx];
+                    int b0[3], b1[3];
+                    rrv_vec3 clo, chi;
+                    b0[0] = cx * RRV__EMIT_BLOCK; b0[1] = cy * RRV__EMIT_BLOCK; b0[2] = cz * RRV__EMIT_BLOCK;
+                    for (a = 0; a < 3; ++a) b1[a] = b0[a] + RRV__EMIT_BLOCK < g->n[a] ? b0[a] + RRV__EMIT_BLOCK : g->n[a];
+                    clo = rrv__v3(g->lo.x + b0[0] * g->cell.x, g->lo.y + b0[1] * g->cell.y, g->lo.z + b0[2] * g->cell.z);
+                    chi = rrv__v3(g->lo.x + b1[0] * g->cell.x, g->lo.y + b1[1] * g->cell.y, g->lo.z + b1[2] * g->cell.z);
+                    c->centre = rrv__scale(rrv__add(clo, chi), 0.5);
+                    c->half = rrv__scale(rrv__sub(chi, clo), 0.5);
+                    c->radius2 = rrv__dot(c->half, c->half);
+                    c->begin = at;
+                    c->weight = 0;
+                    for (z = b0[2]; z < b1[2]; ++z)
+                        for (y = b0[1]; y < b1[1]; ++y)
+                            for (x = b0[0]; x < b1[0]; ++x) {
+                                size_t cell = g->first + ((size_t)z * (size_t)g->n[1] + (size_t)y) * (size_t)g->n[0] + (size_t)x;
+                                e->order[at] = cell;
+                                e->cdf[at + 1] = e->cdf[at] + e->pmf[cell];
+                                c->weight += e->pmf[cell];
+                                ++at;
+                            }
+                    c->end = at;
+                }
+    }
+}
+
+/* The super-clusters: blocks of RRV__EMIT_PAIR^3 clusters, each with its
+   clusters of weight listed in member[]. */
+static void rrv__emit_supers(struct rrv__emitters *e)
+{
+    size_t at = 0;
+    int i, a;
+    for (i = 0; i < e->count; ++i) {
+        const rrv__emitter_grid *g = &e->grid[i];
+        int sx, sy, sz, cx, cy, cz;
+        for (sz = 0; sz < g->ns[2]; ++sz)
+            for (sy = 0; sy < g->ns[1]; ++sy)
+                for (sx = 0; sx < g->ns[0]; ++sx) {
+                    int index = g->first_super + (sz * g->ns[1] + sy) * g->ns[0] + sx, b0[3], b1[3], e1[3];
+                    rrv__emit_cluster *sc = &e->super[index];
+                    rrv_vec3 slo, shi;
+                    b0[0] = sx * RRV__EMIT_PAIR; b0[1] = sy * RRV__EMIT_PAIR; b0[2] = sz * RRV__EMIT_PAIR;
+                    for (a = 0; a < 3; ++a) {
+                        b1[a] = b0[a] + RRV__EMIT_PAIR < g->nc[a] ? b0[a] + RRV__EMIT_PAIR : g->nc[a];
+                        e1[a] = b1[a] * RRV__EMIT_BLOCK < g->n[a] ? b1[a] * RRV__EMIT_BLOCK : g->n[a];
+                    }
+                    slo = rrv__v3(g->lo.x + b0[0] * RRV__EMIT_BLOCK * g->cell.x, g->lo.y + b0[1] * RRV__EMIT_BLOCK * g->cell.y,
+                                  g->lo.z + b0[2] * RRV__EMIT_BLOCK * g->cell.z);
+                    shi = rrv__v3(g->lo.x + e1[0] * g->cell.x, g->lo.y + e1[1] * g->cell.y, g->lo.z + e1[2] * g->cell.z);
+                    sc->centre = rrv__scale(rrv__add(slo, shi), 0.5);
+                    sc->half = rrv__scale(rrv__sub(shi, slo), 0.5);
+                    sc->radius2 = rrv__dot(sc->half, sc->half);
+                    sc->begin = at;
+                    sc->weight = 0;
+                    for (cz = b0[2]; cz < b1[2]; ++cz)
+                        for (cy = b0[1]; cy < b1[1]; ++cy)
+                            for (cx = b0[0]; cx < b1[0]; ++cx) {
+                                int c = g->first_cluster + (cz * g->nc[1] + cy) * g->nc[0] + cx;
+                                e->super_of[c] = index;
+                                if (!(e->cluster[c].weight > 0)) continue;
+                                e->member[at++] = c;
+                                sc->weight += e->cluster[c].weight;
+                            }
+                    sc->end = at;
+                }
+    }
 }
 
 static rrv_result rrv__build_emitters(rrv_scene *scene, rrv_error *err)
@@ -4801,6 +4903,9 @@ static rrv_result rrv__build_emitters(rrv_scene *scene, rrv_error *err)
         g->first_cluster = e->clusters;
         for (a = 0; a < 3; ++a) g->nc[a] = (g->n[a] + RRV__EMIT_BLOCK - 1) / RRV__EMIT_BLOCK;
         e->clusters += g->nc[0] * g->nc[1] * g->nc[2];
+        g->first_super = e->supers;
+        for (a = 0; a < 3; ++a) g->ns[a] = (g->nc[a] + RRV__EMIT_PAIR - 1) / RRV__EMIT_PAIR;
+        e->supers += g->ns[0] * g->ns[1] * g->ns[2];
         if (m->blackbody_emission) T_top = rrv__maxd(T_top, rrv__temperature_bound(m, m->lo, m->hi));
     }
     e->cells = cells;
@@ -4808,7 +4913,10 @@ static rrv_result rrv__build_emitters(rrv_scene *scene, rrv_error *err)
     e->pmf = (double *)RRV_MALLOC(cells * sizeof *e->pmf);
     e->order = (size_t *)RRV_MALLOC(cells * sizeof *e->order);
     e->cluster = (rrv__emit_cluster *)RRV_MALLOC((size_t)e->clusters * sizeof *e->cluster);
-    if (!e->cdf || !e->pmf || !e->order || !e->cluster)
+    e->super = (rrv__emit_cluster *)RRV_MALLOC((size_t)e->supers * sizeof *e->super);
+    e->member = (int *)RRV_MALLOC((size_t)e->clusters * sizeof *e->member);
+    e->super_of = (int *)RRV_MALLOC((size_t)e->clusters * sizeof *e->super_of);
+    if (!e->cdf || !e->pmf || !e->order || !e->cluster || !e->super || !e->member || !e->super_of)
         return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
     /* e->bytes stays 0 until the grid is complete and counted */
     /* the largest channel of B at any temperature up to table entry k
@@ -4872,41 +4980,11 @@ static rrv_result rrv__build_emitters(rrv_scene *scene, rrv_error *err)
         return RRV_OK;
     }
     for (at = 0; at < cells; ++at) e->pmf[at] /= total;
-    /* the clusters, their cells listed block by block */
-    at = 0;
-    e->cdf[0] = 0;
-    for (i = 0; i < e->count; ++i) {
-        const rrv__emitter_grid *g = &e->grid[i];
-        int cx, cy, cz, x, y, z;
-        for (cz = 0; cz < g->nc[2]; ++cz)
-            for (cy = 0; cy < g->nc[1]; ++cy)
-                for (cx = 0; cx < g->nc[0]; ++cx) {
-                    rrv__emit_cluster *c = &e->cluster[g->first_cluster + (cz * g->nc[1] + cy) * g->nc[0] + cx];
-                    int b0[3], b1[3];
-                    rrv_vec3 clo, chi;
-                    b0[0] = cx * RRV__EMIT_BLOCK; b0[1] = cy * RRV__EMIT_BLOCK; b0[2] = cz * RRV__EMIT_BLOCK;
-                    for (a = 0; a < 3; ++a) b1[a] = b0[a] + RRV__EMIT_BLOCK < g->n[a] ? b0[a] + RRV__EMIT_BLOCK : g->n[a];
-                    clo = rrv__v3(g->lo.x + b0[0] * g->cell.x, g->lo.y + b0[1] * g->cell.y, g->lo.z + b0[2] * g->cell.z);
-                    chi = rrv__v3(g->lo.x + b1[0] * g->cell.x, g->lo.y + b1[1] * g->cell.y, g->lo.z + b1[2] * g->cell.z);
-                    c->centre = rrv__scale(rrv__add(clo, chi), 0.5);
-                    c->radius2 = 0.25 * rrv__dot(rrv__sub(chi, clo), rrv__sub(chi, clo));
-                    c->radius = sqrt(c->radius2);
-                    c->begin = at;
-                    c->weight = 0;
-                    for (z = b0[2]; z < b1[2]; ++z)
-                        for (y = b0[1]; y < b1[1]; ++y)
-                            for (x = b0[0]; x < b1[0]; ++x) {
-                                size_t cell = g->first + ((size_t)z * (size_t)g->n[1] + (size_t)y) * (size_t)g->n[0] + (size_t)x;
-                                e->order[at] = cell;
-                                e->cdf[at + 1] = e->cdf[at] + e->pmf[cell];
-                                c->weight += e->pmf[cell];
-                                ++at;
-                            }
-                    c->end = at;
-                }
-    }
+    rrv__emit_clusters(e);
+    rrv__emit_supers(e);
     e->bytes = sizeof *e + (size_t)scene->medium_count * (sizeof *e->grid + sizeof *e->of_medium) +
-               (size_t)e->clusters * sizeof *e->cluster + (cells + 1) * sizeof *e->cdf +
+               (size_t)e->clusters * (sizeof *e->cluster + sizeof *e->member + sizeof *e->super_of) +
+               (size_t)e->supers * sizeof *e->super + (cells + 1) * sizeof *e->cdf +
                cells * (sizeof *e->pmf + sizeof *e->order);
     scene->bytes += e->bytes;
     return RRV_OK;
@@ -4919,50 +4997,97 @@ typedef struct rrv__emit_from {
     int on, surface;
     rrv_vec3 x;              /* where the path restarted */
     rrv_vec3 n;              /* surface: facing the path's side */
+    rrv_vec3 n_abs;          /* its components' magnitudes */
     rrv_vec3 d_in;           /* medium: the arriving direction */
     double g;
     double S;                /* rrv__emission_norm at x */
+    uint32_t known;          /* bit s: S_s[s] holds super-cluster s's norm at x */
+    double S_s[RRV__EMIT_SUPER_KEEP];
     rrv_vec3 w0;             /* the direction sampled there */
     double p_w0;             /* rrv__emission_dir_density of w0; < 0 until asked */
     int jumped;              /* the path crossed a sharp face since x */
     int aim;                 /* a walk of rrv__emission_aim: it collects past r* alone */
 } rrv__emit_from;
 
-/* G_c(x) of the comment above; at a surface vertex also the cosine toward
-   the cluster's bounding sphere, (n.d + radius) / |d| clamped to [0, 1]: no
-   point of a cluster it makes 0 lies in front of the surface, where alone
-   the vertex's cosine lobe (and so its integrand) is nonzero. */
+/* G_c(x) of the comment above (G_s of a super-cluster alike); at a surface
+   vertex also a bound of the cosine toward the cluster's box, (n.d + h) / |d|
+   clamped to [0, 1], h = |n| . half-extents the farthest the box reaches
+   in front of the centre along n: it is 0 exactly when no point of the
+   box lies in front of the surface, where alone the vertex's cosine lobe
+   (and so its integrand) is nonzero. The box's, not its bounding
+   sphere's: a super-cluster's sphere reaches in front where all its
+   clusters lie behind, and a sample drawn there would find nothing. */
 static double rrv__emit_cluster_g(const rrv__emit_cluster *c, const rrv__emit_from *from)
 {
     rrv_vec3 d = rrv__sub(c->centre, from->x);
     double d2 = rrv__dot(d, d);
-    if (from->surface && d2 > c->radius2) {
-        double facing = rrv__dot(from->n, d) + c->radius;
+    if (from->surface) {
+        double facing = rrv__dot(from->n, d) + rrv__dot(from->n_abs, c->half);
         if (!(facing > 0)) return 0.0;
-        return 1.0 / d2 * rrv__clamp(facing / sqrt(d2), 0.0, 1.0);
+        if (d2 <= c->radius2) return 1.0 / c->radius2;
+        /* a bound of 1 needs no root */
+        if (facing * facing >= d2) return 1.0 / d2;
+        return facing / (d2 * sqrt(d2));
     }
     return 1.0 / rrv__maxd(d2, c->radius2);
 }
 
-/* S(x): what normalises the clusters' W_c G_c(x). With q, also each
-   W_c G_c into it (the first RRV__EMIT_KEEP clusters), for the sampler. */
-#define RRV__EMIT_KEEP 64
-static double rrv__emission_norm(const struct rrv__emitters *e, const rrv__emit_from *from, double *q)
+/* S(x): what normalises the super-clusters' W_s G_s(x). With q, also each
+   W_s G_s into it (the first RRV__EMIT_KEEP super-clusters), for the
+   sampler. A new vertex forgets the norms of super-clusters. */
+static double rrv__emission_norm(const struct rrv__emitters *e, rrv__emit_from *from, double *q)
 {
     double S = 0;
-    int c;
-    for (c = 0; c < e->clusters; ++c) {
-        double qc = e->cluster[c].weight > 0 ? e->cluster[c].weight * rrv__emit_cluster_g(&e->cluster[c], from) : 0.0;
-        if (q && c < RRV__EMIT_KEEP) q[c] = qc;
-        S += qc;
+    int s;
+    from->known = 0;
+    for (s = 0; s < e->supers; ++s) {
+        double qs = e->super[s].weight > 0 ? e->super[s].weight * rrv__emit_cluster_g(&e->super[s], from) : 0.0;
+        if (q && s < RRV__EMIT_KEEP) q[s] = qs;
+        S += qs;
     }
     return S;
+}
+
+/* S_s(x): what normalises the W_c G_c(x) of super-cluster s's clusters,
+   summed in one order by the sampler and the density alike, so that both
+   see the same number; kept for the vertex (the first
+   RRV__EMIT_SUPER_KEEP super-clusters). With q, also each W_c G_c, in
+   member[]'s order (RRV__EMIT_PAIR^3 at most). */
+static double rrv__emission_super_norm(const struct rrv__emitters *e, rrv__emit_from *from, int s, double *q)
+{
+    const rrv__emit_cluster *sc = &e->super[s];
+    double S = 0;
+    size_t i;
+    if (!q && s < RRV__EMIT_SUPER_KEEP && (from->known >> s & 1u)) return from->S_s[s];
+    for (i = sc->begin; i < sc->end; ++i) {
+        const rrv__emit_cluster *c = &e->cluster[e->member[i]];
+        double qc = c->weight * rrv__emit_cluster_g(c, from);
+        if (q) q[i - sc->begin] = qc;
+        S += qc;
+    }
+    if (s < RRV__EMIT_SUPER_KEEP) {
+        from->S_s[s] = S;
+        from->known |= 1u << s;
+    }
+    return S;
+}
+
+/* The probability that the sampler picks cluster c from x, times S(x):
+   W_s G_s(x) G_c(x) W_c / S_s(x) of its super-cluster s, over W_c (the
+   cell's pmf completes it); 0 where s has nothing in front of a surface. */
+static double rrv__emission_cluster_share(const struct rrv__emitters *e, rrv__emit_from *from, int c)
+{
+    int s = e->super_of[c];
+    double S_s = rrv__emission_super_norm(e, from, s, NULL);
+    if (!(S_s > 0)) return 0.0;
+    return e->super[s].weight * rrv__emit_cluster_g(&e->super[s], from) * rrv__emit_cluster_g(&e->cluster[c], from) /
+           S_s;
 }
 
 /* The density, per unit volume, with which next-event estimation from x
    (S = rrv__emission_norm(e, x)) picks y in medium mi (rrv__emitter_sample);
    0 where it never does. */
-static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, const rrv__emit_from *from, rrv_vec3 y)
+static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, rrv__emit_from *from, rrv_vec3 y)
 {
     const rrv__emitter_grid *g;
     size_t cell;
@@ -4979,30 +5104,50 @@ static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, const rrv
         if (idx[a] > g->n[a] - 1) idx[a] = g->n[a] - 1;
     }
     cell = g->first + ((size_t)idx[2] * (size_t)g->n[1] + (size_t)idx[1]) * (size_t)g->n[0] + (size_t)idx[0];
+    if (!(e->pmf[cell] > 0)) return 0.0;
     cluster = g->first_cluster + ((idx[2] / RRV__EMIT_BLOCK) * g->nc[1] + idx[1] / RRV__EMIT_BLOCK) * g->nc[0] +
               idx[0] / RRV__EMIT_BLOCK;
-    return rrv__emit_cluster_g(&e->cluster[cluster], from) * e->pmf[cell] / from->S * g->inv_volume;
+    return rrv__emission_cluster_share(e, from, cluster) * e->pmf[cell] / from->S * g->inv_volume;
 }
 
 /* A point of an emissive medium seen from x from five uniform numbers: a
-   cluster by W_c G_c(x), a cell of it by its pmf, a point uniform in the
-   cell. Returns the medium's index, or -1 if nothing was picked. */
-static int rrv__emitter_sample(const struct rrv__emitters *e, const rrv__emit_from *from, const double *q,
+   super-cluster by W_s G_s(x) and a cluster of it by W_c G_c(x), both from
+   u[0] (what is left of it past the first pick picks the second), a cell
+   of the cluster by its pmf, a point uniform in the cell. q: the
+   super-clusters' W_s G_s, or NULL. Returns the medium's index, or -1 if
+   nothing was picked. */
+static int rrv__emitter_sample(const struct rrv__emitters *e, rrv__emit_from *from, const double *q,
                                const double u[5], rrv_vec3 *y)
 {
     const rrv__emitter_grid *g;
     const rrv__emit_cluster *c = NULL;
     size_t lo, hi, cell, rest;
-    double target = u[0] * from->S, sum = 0, v;
-    int i;
-    for (i = 0; i < e->clusters; ++i) {
-        if (!(e->cluster[i].weight > 0)) continue;
-        c = &e->cluster[i];
-        sum += q && i < RRV__EMIT_KEEP ? q[i] : c->weight * rrv__emit_cluster_g(c, from);
+    double target = u[0] * from->S, sum = 0, qs = 0, qc[RRV__EMIT_PAIR * RRV__EMIT_PAIR * RRV__EMIT_PAIR], S_s, v;
+    int i, s = -1;
+    for (i = 0; i < e->supers; ++i) {
+        if (!(e->super[i].weight > 0)) continue;
+        s = i;
+        qs = q && i < RRV__EMIT_KEEP ? q[i] : e->super[i].weight * rrv__emit_cluster_g(&e->super[i], from);
+        sum += qs;
+        if (target < sum) break;
+    }
+    if (s < 0 || !(qs > 0)) return -1;
+    S_s = rrv__emission_super_norm(e, from, s, qc);
+    if (!(S_s > 0)) return -1;
+    /* u[0]'s place within the super-cluster's share, in [0, 1) */
+    v = (target - (sum - qs)) / qs;
+    v = v > 0 ? (v < 1 ? v : 1.0 - DBL_EPSILON / 2) : 0.0;
+    target = v * S_s;
+    sum = 0;
+    for (lo = e->super[s].begin; lo < e->super[s].end; ++lo) {
+        c = &e->cluster[e->member[lo]];
+        sum += qc[lo - e->super[s].begin];
         if (target < sum) break;
     }
     if (!c) return -1;
-    /* the last cell of the cluster with cdf[k] <= v < cdf[k + 1] */
+    /* the last cell of the cluster with cdf[k] <= v < cdf[k + 1] (an alias
+       table saved 2 % of the time but lost the stratification of u[1]
+       over the cells: 1.17x the error at maxdepth 1, RESULTS.md) */
     v = e->cdf[c->begin] + u[1] * (e->cdf[c->end] - e->cdf[c->begin]);
     lo = c->begin;
     hi = c->end;
@@ -7298,7 +7443,7 @@ static int rrv__chord_meets_refraction(const rrv_scene *scene, rrv_vec3 a, rrv_v
    the integral of p_nee(x + r w) r^2 dr from r* on. p_nee is constant
    in a cell of the emission grid, so each cell the line crosses from a to
    b adds p_nee (b^3 - a^3) / 3; 0 where no refracting box is on the line. */
-static double rrv__emission_dir_density(const rrv_scene *scene, const rrv__emit_from *from, rrv_vec3 w)
+static double rrv__emission_dir_density(const rrv_scene *scene, rrv__emit_from *from, rrv_vec3 w)
 {
     const struct rrv__emitters *e = scene->emitters;
     double r_star = DBL_MAX, sum = 0.0, t0, t1;
@@ -7312,8 +7457,8 @@ static double rrv__emission_dir_density(const rrv_scene *scene, const rrv__emit_
     for (i = 0; i < e->count; ++i) {
         const rrv__emitter_grid *g = &e->grid[i];
         rrv_vec3 hi = rrv__v3(g->lo.x + g->n[0] * g->cell.x, g->lo.y + g->n[1] * g->cell.y, g->lo.z + g->n[2] * g->cell.z);
-        int idx[3], step[3], a;
-        double next[3], delta[3], t, part = 0.0;
+        int idx[3], step[3], a, last = -1;
+        double next[3], delta[3], t, part = 0.0, share = 0.0;
         if (!rrv__ray_box_span(from->x, w, g->lo, hi, &t0, &t1)) continue;
         if (t0 < r_star) t0 = r_star;
         if (!(t0 < t1)) continue;
@@ -7336,8 +7481,12 @@ static double rrv__emission_dir_density(const rrv_scene *scene, const rrv__emit_
             size_t cell = g->first + ((size_t)idx[2] * (size_t)g->n[1] + (size_t)idx[1]) * (size_t)g->n[0] + (size_t)idx[0];
             int cluster = g->first_cluster + ((idx[2] / RRV__EMIT_BLOCK) * g->nc[1] + idx[1] / RRV__EMIT_BLOCK) * g->nc[0] +
                           idx[0] / RRV__EMIT_BLOCK;
-            if (b > t && e->pmf[cell] > 0)
-                part += rrv__emit_cluster_g(&e->cluster[cluster], from) * e->pmf[cell] * (b - t) * (b * b + b * t + t * t);
+            if (b > t && e->pmf[cell] > 0) {
+                /* a line stays in a cluster for several cells */
+                if (cluster != last) share = rrv__emission_cluster_share(e, from, cluster);
+                last = cluster;
+                part += share * e->pmf[cell] * (b - t) * (b * b + b * t + t * t);
+            }
             t = b > t ? b : t;
             if (next[axis] >= t1) break;
             idx[axis] += step[axis];
@@ -7381,7 +7530,7 @@ static double rrv__emission_mis(double a, double b)
    connection x -> y is not made (see above). A chord through refracting
    air its callers turn away first (it is aimed, or the path's past r*).
    *pdf_dir: the vertex's p(w). */
-static int rrv__emission_densities(const rrv__context *ctx, const rrv__emit_from *from, int mi, rrv_vec3 y,
+static int rrv__emission_densities(const rrv__context *ctx, rrv__emit_from *from, int mi, rrv_vec3 y,
                                    const rrv__coeffs *c, double *p_nee, double *p_fwd, double *pdf_dir, double *r)
 {
     rrv_vec3 w = rrv__sub(y, from->x);
@@ -8588,6 +8737,7 @@ static void rrv__emission_from_vertex(const rrv__context *ctx, rrv__emit_from *f
     from->surface = v->surface;
     from->x = x;
     from->n = v->n;
+    from->n_abs = rrv__v3(fabs(v->n.x), fabs(v->n.y), fabs(v->n.z));
     from->d_in = v->d_in;
     from->g = v->g;
     from->S = rrv__emission_norm(ctx->scene->emitters, from, q);
@@ -8672,6 +8822,29 @@ static void rrv__emission_aim(rrv__context *ctx, rrv__path *path, rrv_vec3 x, rr
     for (c = 0; c < 3; ++c) path->L[c] += walk.L[c];
 }
 
+/* Visibility times transmittance of an emission sample's shadow ray. Under
+   the default estimator, residual tracking: the ray ends inside the
+   emitter, whose dense core the minorant covers, and on
+   test/bench/campfire.rrv it lowered the error at equal time (maxdepth
+   32, 5.0x -> 5.7x over paths alone; RESULTS.md, 2026-12-05). A scene's
+   own choice stands. */
+static void rrv__emission_transmittance(rrv__context *ctx, rrv_vec3 x, const rrv__light_sample *ls, rrv__rng *rng,
+                                        double T[3])
+{
+    rrv__hit hit;
+    double tmax = ls->dist * (1.0 - 1e-7);
+    if (ctx->scene->settings.transmittance != RRV_TRANSMITTANCE_DEFAULT) {
+        rrv__light_transmittance(ctx, x, ls, rng, T);
+        return;
+    }
+    ++ctx->stats.paths;
+    if (rrv__intersect_scene(ctx->scene, x, ls->wi, tmax, &hit)) {
+        T[0] = T[1] = T[2] = 0;
+        return;
+    }
+    rrv__residual_tracking_transmittance(ctx, x, ls->wi, tmax, rng, T);
+}
+
 /* Next-event estimation toward emissive media (section comment above
    rrv__chord_meets_refraction) from the vertex x. It also records the
    vertex, so that the emission the path then collects takes the
@@ -8720,7 +8893,7 @@ static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, co
     if (!rrv__emission_densities(ctx, from, mi, y, &c, &p_nee, &p_fwd, &pdf_dir, &r)) return;
     ls.wi = rrv__scale(rrv__sub(y, x), 1.0 / r);
     ls.dist = r;
-    rrv__light_transmittance(ctx, x, &ls, rng, T);
+    rrv__emission_transmittance(ctx, x, &ls, rng, T);
     if (!rrv__nonzero3(T)) return;
     if (ctx->bends) {
         double eta = 1.0 + rrv__scene_refractivity(scene, y, NULL);
@@ -8744,6 +8917,14 @@ static void rrv__vertex_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, cons
     /* the light sample's draws vary in count (shadow walks, solver trials):
        streams of their own keep the vertex's direction at fixed dimensions */
     rng->stream = RRV__STREAM_LIGHT;
+    if (ctx->emission && !ctx->partition && !rrv__light_choices(ctx->scene)) {
+        /* no light to draw (fire alone lights the scene): the emitters'
+           pick takes the first pair, and three numbers go unhashed */
+        rng->next[RRV__STREAM_LIGHT] = 0;
+        rrv__emission_nee(ctx, path, x, v, rng);
+        rng->stream = RRV__STREAM_DIRECTION;
+        return;
+    }
     /* the light's choice takes the second coordinate of the first pair, so
        that the point on it gets the second pair whole */
     rng->next[RRV__STREAM_LIGHT] = 1;
@@ -9426,8 +9607,8 @@ static rrv_result rrv__render_context(const rrv_scene *scene, rrv__context *ctx,
     nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : RRV_NEE_SHOOT;
     ctx->sample_lights = !ctx->bends || nee != RRV_NEE_NONE;
     /* By default only where emissive media are the only lights: there it
-       pays (test/bench/campfire.rrv: 9.8x the efficiency at maxdepth 1,
-       4.2x at the default 32), while beside an area light and a sky (scenes/fire.rrv) the
+       pays (test/bench/campfire.rrv: 15x the efficiency at maxdepth 1,
+       5.8x at the default 32), while beside an area light and a sky (scenes/fire.rrv) the
        extra shadow ray a vertex cost more than the variance it saved
        (0.46x classic, 0.70x refractive; test/bench/RESULTS.md, "Fire as a light"). */
     ctx->emission = ctx->sample_lights && scene->emitters &&
@@ -18774,8 +18955,10 @@ and BOUNDS (moved here from the manual at the top, word for word)
      majorants (at most 32 cells along a medium's longest side, each
      weighted by its sigma_a Le at the centres of its octants, floored at
      a thousandth of a bound of it; blocks of 8^3 cells picked by their
-     weight over max(r^2, radius^2) from the vertex), joined to the vertex
-     by a straight shadow ray with ratio-tracked transmittance (not from
+     weight over max(r^2, radius^2) from the vertex, in two steps: first
+     one of the blocks of 2^3 such blocks, then a block in it), joined to the vertex by a straight
+     shadow ray whose transmittance is residual-tracked under the default
+     estimator (a scene's `transmittance` choice stands) (not from
      vertices scattering inside an emitter's box, where the path's own
      collisions, which follow the transmittance, do better), and weighed
      by the power heuristic against the emission the path collects at its
@@ -19014,7 +19197,10 @@ and BOUNDS (moved here from the manual at the top, word for word)
      ratio tracking's variance x cost on plume, pyro and haze, but in whole
      renders shadow rays are a small part of the noise and march's extra work
      about cancels its gain, so ratio stays the default
-     (test/bench/RESULTS.md, "Transmittance"). Where a cell's density is
+     (test/bench/RESULTS.md, "Transmittance"), except for the shadow rays
+     of emission NEE, which end inside the emitter's dense core that the
+     minorant covers: residual there (campfire at maxdepth 32, 5.0x -> 5.7x
+     over paths alone; RESULTS.md, "Emission NEE's cost per vertex"). Where a cell's density is
      constant, residual and march are exact there. March's estimates are
      signed (rarely negative); they are added as they are. Refracting media:
      every straight chord of a bent shadow ray is estimated the same way.

@@ -177,6 +177,178 @@ static void weights_sum_to_one(void)
     rrv_scene_free(s);
 }
 
+/* The density the forward paths and the aim read (rrv__emission_pdf) is the
+   one the sampler draws by, two levels of clusters and all. From surface
+   and medium vertices, some whose plane cuts the flame (super-clusters
+   partly behind it), of the campfire and of it with a second emitter whose
+   grid splits unevenly into clusters and super-clusters: the sum of the
+   density over every cell (times the cell's volume) is, to rounding
+   (1e-12), the probability that the sampler picks anything (short of 1 by
+   the super-clusters whose clusters of weight all lie behind a surface),
+   and here 1 (every cluster has weight, so a super-cluster in front has a
+   cluster in front); each cluster is drawn, and nothing is drawn, as
+   often as those masses say (within 4 standard errors of the binomial
+   count, plus 2 draws), and so are the cells expected 5 times or more
+   (Pearson's X^2 within 4 standard deviations of its chi^2). The density is the same read before and after the
+   sampler keeps a super-cluster's norm. */
+static void density_matches_the_sampler(void)
+{
+    static const char *const ember =
+        "medium ember box 1.0 0 -1.6 1.75 0.3 -0.6 sigma_a 2 2 2 sigma_s 0 0 0 Le 1 0.5 0.2 Lescale 3\n"
+        "density ember blob center 1.3 0.1 -1.2 radius 0.2 weight 1\n"
+        "density ember blob center 1.6 0.15 -0.8 radius 0.15 weight 0.6\n";
+    int scene;
+    for (scene = 0; scene < 2; ++scene) {
+        rrv_scene *s = load(campfire, "classic", "", scene ? ember : "");
+        const struct rrv__emitters *e;
+        rrv__context ctx;
+        rrv__rng rng;
+        rrv__path path;
+        int vertex, worst_cluster = -1, cells_checked = 0;
+        double worst = 0, worst_cell = 0;
+        if (!s) return;
+        /* one path for every vertex: what it keeps of one must not leak
+           into the next */
+        memset(&path, 0, sizeof path);
+        e = s->emitters;
+        CHECK(e != NULL && e->count == 1 + scene);
+        if (!e || e->count != 1 + scene) { rrv_scene_free(s); return; }
+        /* the ember's 24 x 10 x 32 cells: 3 x 2 x 4 clusters, 2 x 1 x 2 super-clusters */
+        if (scene) CHECK(e->clusters == 64 + 24 && e->supers == 8 + 4 && e->grid[1].ns[0] == 2 && e->grid[1].ns[1] == 1);
+        context_for(s, &ctx, 0);
+        rrv__rng_seed(&rng, 31, 32, 33 + scene);
+        for (vertex = 0; vertex < 7; ++vertex) {
+            rrv__vertex_bsdf v;
+            rrv_vec3 x;
+            const int n = 100000;
+            double *mass = (double *)calloc((size_t)e->clusters, sizeof *mass), total = 0, expected = 0;
+            int *hits = (int *)calloc((size_t)e->clusters, sizeof *hits), none = 0, i, c, k, grid;
+            double *cell_mass = (double *)calloc(e->cells, sizeof *cell_mass);
+            int *cell_hits = (int *)calloc(e->cells, sizeof *cell_hits);
+            size_t cell;
+            if (!mass || !hits || !cell_mass || !cell_hits) {
+                free(mass); free(hits); free(cell_mass); free(cell_hits);
+                CHECK(0);
+                break;
+            }
+            memset(&v, 0, sizeof v);
+            v.surface = vertex < 4 || vertex == 6;
+            switch (vertex) {
+            case 0: /* the floor beside the flame */
+                v.n = rrv__v3(0, 1, 0); x = rrv__v3(0.9, 1e-6, -0.4); break;
+            case 1: /* the wall behind it */
+                v.n = rrv__v3(0, 0, -1); x = rrv__v3(0.2, 0.8, 1.2 - 1e-6); break;
+            case 2: /* a surface whose plane cuts the flame through its middle */
+                v.n = rrv__normalize(rrv__v3(-1, 0.3, 0.2)); x = rrv__v3(0.05, 0.7, 0.1); break;
+            case 3: /* and one that sees little of it */
+                v.n = rrv__normalize(rrv__v3(0.3, -1, 0.1)); x = rrv__v3(-0.4, 1.25, -0.5); break;
+            case 4: /* scattering in the air beside the flame */
+                v.g = 0.3; v.d_in = rrv__normalize(rrv__v3(0.2, 1, -0.1)); x = rrv__v3(-0.9, 0.3, 0.2); break;
+            case 5: /* and inside its box */
+                v.g = -0.2; v.d_in = rrv__normalize(rrv__v3(1, 0, 0.3)); x = rrv__v3(0.05, 0.35, 0.02); break;
+            default: /* facing away from the flame's part x < 0.04, whose
+                        super-clusters' bounding spheres reach in front of
+                        the surface while all their clusters lie behind it */
+                v.n = rrv__v3(1, 0, 0); x = rrv__v3(0.22, 0.33, -0.3); break;
+            }
+            rrv__emission_from_vertex(&ctx, &path.emit, x, &v, NULL);
+            /* the density's mass per cluster, summed over the cells (the
+               density is constant in a cell), before any draw */
+            for (grid = 0; grid < e->count; ++grid) {
+                const rrv__emitter_grid *g = &e->grid[grid];
+                int ix, iy, iz;
+                for (iz = 0; iz < g->n[2]; ++iz)
+                    for (iy = 0; iy < g->n[1]; ++iy)
+                        for (ix = 0; ix < g->n[0]; ++ix) {
+                            rrv_vec3 y = rrv__v3(g->lo.x + (ix + 0.5) * g->cell.x, g->lo.y + (iy + 0.5) * g->cell.y,
+                                                 g->lo.z + (iz + 0.5) * g->cell.z);
+                            c = g->first_cluster + ((iz / RRV__EMIT_BLOCK) * g->nc[1] + iy / RRV__EMIT_BLOCK) * g->nc[0] +
+                                ix / RRV__EMIT_BLOCK;
+                            cell = g->first + ((size_t)iz * (size_t)g->n[1] + (size_t)iy) * (size_t)g->n[0] + (size_t)ix;
+                            cell_mass[cell] = rrv__emission_pdf(e, g->medium, &path.emit, y) / g->inv_volume;
+                            mass[c] += cell_mass[cell];
+                        }
+            }
+            for (c = 0; c < e->clusters; ++c) total += mass[c];
+            /* what the sampler can pick: each super-cluster's share unless
+               all its clusters are behind the surface */
+            for (c = 0; c < e->supers; ++c) {
+                const rrv__emit_cluster *sc = &e->super[c];
+                size_t m;
+                double front = 0;
+                for (m = sc->begin; m < sc->end; ++m) front += rrv__emit_cluster_g(&e->cluster[e->member[m]], &path.emit);
+                if (sc->weight > 0 && front > 0) expected += sc->weight * rrv__emit_cluster_g(sc, &path.emit);
+            }
+            expected /= path.emit.S;
+            CHECKF(fabs(total - expected) <= 1e-12, "scene %d vertex %d: the density sums to %.17g, draws %.17g",
+                   scene, vertex, total, expected);
+            CHECKF(fabs(total - 1.0) <= 1e-12, "scene %d vertex %d: the density sums to %.17g", scene, vertex, total);
+            for (i = 0; i < n; ++i) {
+                double u[5], p_before, p_after;
+                rrv_vec3 y;
+                int mi, idx[3];
+                const rrv__emitter_grid *g;
+                for (k = 0; k < 5; ++k) u[k] = rrv__uniform(&rng);
+                if (i % 1000 == 999) path.emit.known = 0;
+                mi = rrv__emitter_sample(e, &path.emit, NULL, u, &y);
+                if (mi < 0) { ++none; continue; }
+                g = &e->grid[e->of_medium[mi]];
+                for (k = 0; k < 3; ++k) {
+                    idx[k] = (int)((rrv__axis(y, k) - rrv__axis(g->lo, k)) / rrv__axis(g->cell, k));
+                    if (idx[k] > g->n[k] - 1) idx[k] = g->n[k] - 1;
+                }
+                ++cell_hits[g->first + ((size_t)idx[2] * (size_t)g->n[1] + (size_t)idx[1]) * (size_t)g->n[0] +
+                            (size_t)idx[0]];
+                for (k = 0; k < 3; ++k) idx[k] /= RRV__EMIT_BLOCK;
+                ++hits[g->first_cluster + (idx[2] * g->nc[1] + idx[1]) * g->nc[0] + idx[0]];
+                if (i < 2000) {
+                    /* the kept norm is the norm */
+                    p_after = rrv__emission_pdf(e, mi, &path.emit, y);
+                    path.emit.known = 0;
+                    p_before = rrv__emission_pdf(e, mi, &path.emit, y);
+                    CHECKF(p_before == p_after && p_before > 0, "scene %d vertex %d: density %.17g, kept %.17g",
+                           scene, vertex, p_before, p_after);
+                    if (p_before != p_after) break;
+                }
+            }
+            for (c = 0; c <= e->clusters; ++c) {
+                double P = c < e->clusters ? mass[c] : fmax(1.0 - total, 0.0);
+                int got = c < e->clusters ? hits[c] : none;
+                /* 2 draws more for the counts near 0 the normal misjudges */
+                double sd = sqrt(n * P * (1 - P)), z = (fabs(got - n * P) - 2.0) / (sd > 0 ? sd : 1e-300);
+                CHECKF(z <= 4.0, "scene %d vertex %d %s %d: %d draws, expected %g +- %g", scene, vertex,
+                       c < e->clusters ? "cluster" : "nothing", c, got, n * P, sd);
+                if (z > worst) { worst = z; worst_cluster = c; }
+            }
+            {
+                /* and the cells the sampler should pick at least 5 times in
+                   n: Pearson's X^2 over them, about chi^2 with as many
+                   degrees of freedom (mean k, standard deviation sqrt(2k)) */
+                double X2 = 0, z;
+                int cells_in = 0;
+                for (cell = 0; cell < e->cells; ++cell) {
+                    double expect = n * cell_mass[cell];
+                    if (!(expect >= 5.0)) continue;
+                    ++cells_in;
+                    X2 += (cell_hits[cell] - expect) * (cell_hits[cell] - expect) / expect;
+                }
+                z = (X2 - cells_in) / sqrt(2.0 * cells_in);
+                CHECKF(cells_in > 100 && z <= 4.0, "scene %d vertex %d: X^2 %g over %d cells", scene, vertex, X2,
+                       cells_in);
+                if (z > worst_cell) worst_cell = z;
+                cells_checked += cells_in;
+            }
+            free(mass);
+            free(hits);
+            free(cell_mass);
+            free(cell_hits);
+        }
+        printf("  scene %d: worst |z| %.2f (cluster %d); cells (%d): worst X^2 z %.2f\n", scene, worst, worst_cluster,
+               cells_checked, worst_cell);
+        rrv_scene_free(s);
+    }
+}
+
 /* The aim's density of directions (rrv__emission_dir_density) is the
    density of the directions to the sampled points whose chords meet
    refracting air: over the sphere it integrates to the share of samples
@@ -555,6 +727,7 @@ static void keys_and_messages(void)
 int main(void)
 {
     RUN(weights_sum_to_one);
+    RUN(density_matches_the_sampler);
     RUN(aim_density_integrates_to_its_share);
     RUN(nee_matches_forward_in_blocks);
     RUN(slab_irradiance_closed_form);
