@@ -4783,6 +4783,19 @@ static double rrv__temperature_bound(const rrv_medium *m, rrv_vec3 lo, rrv_vec3 
     return T;
 }
 
+/* Grid g's cell corner (i, j, k), and a cluster's or super-cluster's box. */
+static rrv_vec3 rrv__emit_corner(const rrv__emitter_grid *g, int i, int j, int k)
+{
+    return rrv__v3(g->lo.x + i * g->cell.x, g->lo.y + j * g->cell.y, g->lo.z + k * g->cell.z);
+}
+
+static void rrv__emit_cluster_box(rrv__emit_cluster *c, rrv_vec3 lo, rrv_vec3 hi)
+{
+    c->centre = rrv__scale(rrv__add(lo, hi), 0.5);
+    c->half = rrv__scale(rrv__sub(hi, lo), 0.5);
+    c->radius2 = rrv__dot(c->half, c->half);
+}
+
 /* The clusters: blocks of RRV__EMIT_BLOCK^3 cells, each with its cells
    listed in order[] and their pmf summed in cdf[]. */
 static void rrv__emit_clusters(struct rrv__emitters *e)
@@ -4798,14 +4811,9 @@ static void rrv__emit_clusters(struct rrv__emitters *e)
                 for (cx = 0; cx < g->nc[0]; ++cx) {
                     rrv__emit_cluster *c = &e->cluster[g->first_cluster + (cz * g->nc[1] + cy) * g->nc[0] + cx];
                     int b0[3], b1[3];
-                    rrv_vec3 clo, chi;
                     b0[0] = cx * RRV__EMIT_BLOCK; b0[1] = cy * RRV__EMIT_BLOCK; b0[2] = cz * RRV__EMIT_BLOCK;
                     for (a = 0; a < 3; ++a) b1[a] = b0[a] + RRV__EMIT_BLOCK < g->n[a] ? b0[a] + RRV__EMIT_BLOCK : g->n[a];
-                    clo = rrv__v3(g->lo.x + b0[0] * g->cell.x, g->lo.y + b0[1] * g->cell.y, g->lo.z + b0[2] * g->cell.z);
-                    chi = rrv__v3(g->lo.x + b1[0] * g->cell.x, g->lo.y + b1[1] * g->cell.y, g->lo.z + b1[2] * g->cell.z);
-                    c->centre = rrv__scale(rrv__add(clo, chi), 0.5);
-                    c->half = rrv__scale(rrv__sub(chi, clo), 0.5);
-                    c->radius2 = rrv__dot(c->half, c->half);
+                    rrv__emit_cluster_box(c, rrv__emit_corner(g, b0[0], b0[1], b0[2]), rrv__emit_corner(g, b1[0], b1[1], b1[2]));
                     c->begin = at;
                     c->weight = 0;
                     for (z = b0[2]; z < b1[2]; ++z)
@@ -4836,18 +4844,15 @@ static void rrv__emit_supers(struct rrv__emitters *e)
                 for (sx = 0; sx < g->ns[0]; ++sx) {
                     int index = g->first_super + (sz * g->ns[1] + sy) * g->ns[0] + sx, b0[3], b1[3], e1[3];
                     rrv__emit_cluster *sc = &e->super[index];
-                    rrv_vec3 slo, shi;
                     b0[0] = sx * RRV__EMIT_PAIR; b0[1] = sy * RRV__EMIT_PAIR; b0[2] = sz * RRV__EMIT_PAIR;
                     for (a = 0; a < 3; ++a) {
                         b1[a] = b0[a] + RRV__EMIT_PAIR < g->nc[a] ? b0[a] + RRV__EMIT_PAIR : g->nc[a];
                         e1[a] = b1[a] * RRV__EMIT_BLOCK < g->n[a] ? b1[a] * RRV__EMIT_BLOCK : g->n[a];
                     }
-                    slo = rrv__v3(g->lo.x + b0[0] * RRV__EMIT_BLOCK * g->cell.x, g->lo.y + b0[1] * RRV__EMIT_BLOCK * g->cell.y,
-                                  g->lo.z + b0[2] * RRV__EMIT_BLOCK * g->cell.z);
-                    shi = rrv__v3(g->lo.x + e1[0] * g->cell.x, g->lo.y + e1[1] * g->cell.y, g->lo.z + e1[2] * g->cell.z);
-                    sc->centre = rrv__scale(rrv__add(slo, shi), 0.5);
-                    sc->half = rrv__scale(rrv__sub(shi, slo), 0.5);
-                    sc->radius2 = rrv__dot(sc->half, sc->half);
+                    rrv__emit_cluster_box(sc,
+                                          rrv__emit_corner(g, b0[0] * RRV__EMIT_BLOCK, b0[1] * RRV__EMIT_BLOCK,
+                                                           b0[2] * RRV__EMIT_BLOCK),
+                                          rrv__emit_corner(g, e1[0], e1[1], e1[2]));
                     sc->begin = at;
                     sc->weight = 0;
                     for (cz = b0[2]; cz < b1[2]; ++cz)

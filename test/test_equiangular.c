@@ -190,6 +190,21 @@ static void matches_free_flights_in_blocks(void)
     rrv_scene_free(off);
 }
 
+/* What rrv_render_rect would set ctx.equiangular to for the scene text, or
+   -1 if it does not parse (then e says why). */
+static int equiangular_of(const char *text, rrv_error *e)
+{
+    rrv_scene *s = NULL;
+    rrv__context ctx;
+    rrv__camera_frame frame;
+    int mode = -1;
+    if (rrv_scene_parse(text, strlen(text), "out.rrv", ".", NULL, &s, e) != RRV_OK) return -1;
+    if (rrv__render_context(s, &ctx, &frame, e) == RRV_OK) mode = ctx.equiangular;
+    rrv__solver_release(&ctx);
+    rrv_scene_free(s);
+    return mode;
+}
+
 /* The default aims at lights inside a scattering medium's box only, and
    a scene without one renders as it did (no equiangular samples at all);
    the key's words and its error. */
@@ -201,41 +216,30 @@ static void default_and_keys(void)
         "quad origin -1 4 -1 u 2 0 0 v 0 0 2 L 5 5 5\n"
         "medium fog box -1 0 -1 1 2 1 sigma_a 0 0 0 sigma_s 1 1 1\n"
         "density fog constant 1\n";
-    char text[1024];
-    rrv_scene *s;
-    rrv_error e;
+    char text[2048];
+    rrv_scene *s = load_fog("");
     rrv__context ctx;
-    rrv__camera_frame frame;
-    s = load_fog("");
+    rrv_error e;
     if (s) {
         CHECK(s->settings.equiangular == RRV_EQUIANGULAR_DEFAULT);
-        CHECK(rrv__render_context(s, &ctx, &frame, &e) == RRV_OK && ctx.equiangular == 1);
-        /* the sphere and the triangle lie in the fog's box, all three lights in its box */
+        memset(&ctx, 0, sizeof ctx);
+        ctx.scene = s;
+        ctx.equiangular = 1;
+        /* the sphere's centre lies in the fog's box, not in the smoke's */
         CHECK(rrv__equi_aims_at(&ctx, &s->shapes[s->lights[0]], &s->media[0]));
         CHECK(!rrv__equi_aims_at(&ctx, &s->shapes[s->lights[0]], &s->media[1]));
-        rrv__solver_release(&ctx);
         rrv_scene_free(s);
     }
-    s = NULL;
+    snprintf(text, sizeof text, fog_lamps, "");
+    CHECK(equiangular_of(text, &e) == 1);
     snprintf(text, sizeof text, outside, "");
-    CHECK(rrv_scene_parse(text, strlen(text), "out.rrv", ".", NULL, &s, &e) == RRV_OK);
-    if (s) {
-        CHECK(rrv__render_context(s, &ctx, &frame, &e) == RRV_OK && ctx.equiangular == 0);
-        rrv__solver_release(&ctx);
-        rrv_scene_free(s);
-    }
-    s = NULL;
+    CHECK(equiangular_of(text, &e) == 0);
     snprintf(text, sizeof text, outside, "equiangular on");
-    CHECK(rrv_scene_parse(text, strlen(text), "out.rrv", ".", NULL, &s, &e) == RRV_OK);
-    if (s) {
-        CHECK(s->settings.equiangular == RRV_EQUIANGULAR_ON);
-        CHECK(rrv__render_context(s, &ctx, &frame, &e) == RRV_OK && ctx.equiangular == 2);
-        rrv__solver_release(&ctx);
-        rrv_scene_free(s);
-    }
-    s = NULL;
+    CHECK(equiangular_of(text, &e) == 2);
+    snprintf(text, sizeof text, outside, "equiangular off");
+    CHECK(equiangular_of(text, &e) == 0);
     snprintf(text, sizeof text, outside, "equiangular sometimes");
-    CHECK(rrv_scene_parse(text, strlen(text), "out.rrv", ".", NULL, &s, &e) == RRV_ERROR_PARSE);
+    CHECK(equiangular_of(text, &e) == -1);
     CHECKF(e.line == 2 && strstr(e.message, "equiangular") != NULL, "%d: %s", e.line, e.message);
 }
 
