@@ -9,7 +9,7 @@ python3-openvdb for /usr/bin/python3, and build/ref_compare
   python3 test/bench/cycles_compare.py [--blender blender] [--work DIR]
       [--agree-spp 256] [--agree-seeds 8] [--agree-step 0.1] [--block 4]
       [--ref-spp 4096] [--rrv-spp 1,2,...,512] [--cycles-spp 1,2,...,256]
-      [--repeats 3] [--skip-agree] [--skip-timing]
+      [--repeats 3] [--seed-offset 0] [--skip-agree] [--skip-timing]
 
 The twin scene is test/bench/cycles_twin.py (run inside Blender), its grid
 scenes/tools/plume_vdb.py's .vdb.
@@ -203,7 +203,7 @@ def timing(a):
     times, errors = {}, {}
     for spp in sorted(set(sum(methods.values(), []))):
         for rep in range(a.repeats):
-            seed = 100 * spp + rep + 1
+            seed = a.seed_offset + 100 * spp + rep + 1
             for m, spps in methods.items():
                 if spp not in spps:
                     continue
@@ -253,6 +253,7 @@ def main():
     ap.add_argument("--rrv-spp", default="1,2,4,8,16,32,64,128,256,512")
     ap.add_argument("--cycles-spp", default="1,2,4,8,16,32,64,128,256")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--seed-offset", type=int, default=0, help="added to the sweep's seeds, for a second run")
     ap.add_argument("--skip-agree", action="store_true")
     ap.add_argument("--reuse", action="store_true", help="keep the agreement renders already in --work")
     ap.add_argument("--skip-timing", action="store_true")
