@@ -32,7 +32,7 @@ sync: sync = (median time at 1 spp) - (time per sample, from the medians at
 the largest and the smallest spp). The MSE is the mean over the repeats,
 less the reference's own noise (ref_compare --floor). The time to reach an
 RMSE comes from log-log interpolation between the sweep's points."""
-import argparse, math, os, resource, statistics, struct, subprocess, sys, zlib
+import argparse, math, os, resource, statistics, struct, subprocess, zlib
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 RRV = os.path.join(ROOT, "rrv")
@@ -200,6 +200,7 @@ def timing(a):
     methods = {"rrv (sobol)": [int(s) for s in a.rrv_spp.split(",")],
                "Cycles": [int(s) for s in a.cycles_spp.split(",")],
                "rrv, march": [int(s) for s in a.rrv_spp.split(",")]}
+    short = {"rrv (sobol)": "rrv", "Cycles": "cycles", "rrv, march": "rrv_march"}
     times, errors = {}, {}
     for spp in sorted(set(sum(methods.values(), []))):
         for rep in range(a.repeats):
@@ -207,7 +208,7 @@ def timing(a):
             for m, spps in methods.items():
                 if spp not in spps:
                     continue
-                out = os.path.join(a.work, "%s_%d.exr" % (m.split()[0].lower() + str(len(m)), spp))
+                out = os.path.join(a.work, "%s_%d.exr" % (short[m], spp))
                 if m == "Cycles":
                     t = twin(a, out, spp, seed, 256, 1.0)
                 else:
