@@ -19,21 +19,11 @@ Needs Debian's python3-openvdb, so run it with /usr/bin/python3.
 
 usage: plume_vdb.py [IN.vol] [OUT.vdb] [--corner]
        defaults: scenes/assets/plume.vol, plume.vdb"""
-import os, struct, sys
+import os, sys
 
 import pyopenvdb
 
-
-def read_gridvol(path):
-    with open(path, "rb") as f:
-        data = f.read()
-    if data[:3] != b"VOL" or data[3] != 3:
-        raise SystemExit("%s: not a version-3 gridvol file" % path)
-    encoding, nx, ny, nz, channels = struct.unpack_from("<5i", data, 4)
-    box = struct.unpack_from("<6f", data, 24)
-    if encoding != 1 or channels != 1:
-        raise SystemExit("%s: need one float32 channel" % path)
-    return (nx, ny, nz), box, struct.unpack_from("<%df" % (nx * ny * nz), data, 48)
+from plume_pbrt import read_gridvol  # the same .vol reader, beside this file
 
 
 def main():

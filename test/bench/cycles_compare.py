@@ -34,6 +34,8 @@ less the reference's own noise (ref_compare --floor). The time to reach an
 RMSE comes from log-log interpolation between the sweep's points."""
 import argparse, math, os, resource, statistics, struct, subprocess, zlib
 
+from pbrt_compare import mse, time_at  # the same MSE tool and log-log reading
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 RRV = os.path.join(ROOT, "rrv")
 COMPARE = os.path.join(ROOT, "build", "ref_compare")
@@ -155,21 +157,6 @@ def agreement(a):
               "chi^2 %.1f (mean %d, sd %.1f), mean z %+.3f"
               % (max(map(abs, z)), sum(abs(x) > 4 for x in z), sum(x * x for x in z), len(z),
                  math.sqrt(2 * len(z)), statistics.mean(z)), flush=True)
-
-
-def mse(ref, img):
-    out = subprocess.run([COMPARE, ref, img], check=True, capture_output=True, text=True).stdout.split()
-    return float(out[out.index("mse") + 1])
-
-
-def time_at(points, level):
-    """The time at which the (time, MSE) curve reaches level, log-log."""
-    points = sorted(p for p in points if p[1] > 0)
-    for (t0, e0), (t1, e1) in zip(points, points[1:]):
-        if e0 >= level >= e1 and e0 > e1:
-            f = (math.log(level) - math.log(e0)) / (math.log(e1) - math.log(e0))
-            return math.exp(math.log(t0) + f * (math.log(t1) - math.log(t0)))
-    return float("nan")
 
 
 def slope(points):
