@@ -1450,14 +1450,14 @@ static int scene_hash(const input_list *inputs, const rrv_scene *scene, char out
     snprintf(text, sizeof text,
              "rrv %d.%d.%d spp %d depth %d seed %" PRIu64 " integrator %d nee %d bend %.17g mu_eta %.17g "
              "step %.17g refraction %d stepper %d ambient %.17g majorant %d ior %d bake %d gauge %d trials %d "
-             "drop %.17g sampler %d emission %d solver %d transmittance %d equiangular %d",
+             "drop %.17g sampler %d emission %d solver %d transmittance %d equiangular %d lights %d",
              RRV_VERSION_MAJOR, RRV_VERSION_MINOR, RRV_VERSION_PATCH, st->spp, st->max_depth, (uint64_t)st->seed,
              (int)st->integrator, (int)st->nee, st->bend_tolerance, st->mu_eta, st->step, (int)st->refraction,
              (int)st->stepper, st->ambient_ior, st->majorant_cells, (int)st->ior_interpolation,
              st->max_bake_samples, (int)st->manifold_gauge, st->manifold_trials, st->manifold_drop,
              /* the default is sobol: parts that name it and parts that do not agree */
              (int)(st->sampler == RRV_SAMPLER_DEFAULT ? RRV_SAMPLER_SOBOL : st->sampler), (int)st->emission_nee,
-             (int)st->manifold_solver, (int)st->transmittance, (int)st->equiangular);
+             (int)st->manifold_solver, (int)st->transmittance, (int)st->equiangular, (int)st->light_sampler);
     hash_bytes(&hs, text, strlen(text));
     snprintf(out, 17, "%016" PRIx64, hs.h);
     return 1;

@@ -93,6 +93,10 @@
 #include "test_equiangular.c"
 #undef main
 
+#define main test_lights_main
+#include "test_lights.c"
+#undef main
+
 /* test_lm.c asks for an older POSIX than the one above; the system headers
    are in by now, so the macro only has to be put back for the files after. */
 #undef _POSIX_C_SOURCE
@@ -121,6 +125,7 @@ int main(int argc, char **argv)
     failed |= test_nee_main();
     failed |= test_emission_main();
     failed |= test_equiangular_main();
+    failed |= test_lights_main();
     failed |= test_lm_main();
     failed |= test_parser_main(argc, argv);
     failed |= test_transmittance_main();
