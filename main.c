@@ -1758,6 +1758,32 @@ static int parse_render_options(int argc, char **argv, render_options *opt)
 
 static const char *const face_names[7] = {"-x", "+x", "-y", "+y", "-z", "+z", "sphere"};
 
+/* Where the light samples go (LIGHT SAMPLING in rrv.h's manual): each
+   light shape's share and the sky's, from the running sums the power
+   sampler picks by (every choice alike under uniform). */
+static void print_light_samples(const rrv_scene *scene)
+{
+    static const char *const kinds[] = {"sphere", "quad", "triangle"};
+    int choices = scene->light_count + (scene->environment.kind != RRV_ENV_NONE ? 1 : 0), i;
+    int uniform = scene->settings.light_sampler == RRV_LIGHT_SAMPLER_UNIFORM;
+    double total = !uniform && scene->light_cdf ? scene->light_cdf[choices - 1] : 0;
+    if (!choices || (!uniform && !(total > 0))) return;
+    printf("light samples (%s):", uniform ? "uniform" : "power");
+    for (i = 0; i < choices; ++i) {
+        double p = uniform ? 1.0 / choices
+                           : (scene->light_cdf[i] - (i ? scene->light_cdf[i - 1] : 0.0)) / total;
+        if (i < scene->light_count) {
+            int kind = (int)scene->shapes[scene->lights[i]].kind;
+            printf("%s shape %d (%s) %.3g %%", i ? "," : "", scene->lights[i],
+                   kind >= 0 && kind < 3 ? kinds[kind] : "shape", 100 * p);
+        } else {
+            printf("%s sky %.3g %%%s", i ? "," : "", 100 * p,
+                   p > 0 ? "" : " (its light left to the paths' own directions)");
+        }
+    }
+    printf("\n");
+}
+
 /* The largest IOR jump over every medium's faces, its medium and face, and
    how many faces jump: a sharp interface (glass) the user may not have meant. */
 static double largest_face_jump(const rrv_scene *scene, int *medium, int *face, int *faces)
@@ -3236,6 +3262,7 @@ static int command_info(int argc, char **argv)
            kind_counts[RRV_SHAPE_SPHERE], kind_counts[RRV_SHAPE_QUAD],
            kind_counts[RRV_SHAPE_TRIANGLE]);
     printf("lights: %d\n", scene->light_count);
+    print_light_samples(scene);
     printf("media: %d\n", scene->medium_count);
     for (i = 0; i < scene->medium_count; ++i) print_medium(scene, i);
     printf("bvh_nodes: %d\n", scene->bvh_node_count);

@@ -866,6 +866,8 @@ static void info_describes_scene(void)
     CHECKF(key_number(last_run.out, "spp") == 4, "%s", last_run.out);
     CHECKF(key_number(last_run.out, "shapes") == 2, "%s", last_run.out);
     CHECKF(key_number(last_run.out, "lights") == 1, "%s", last_run.out);
+    /* where the light samples go: the one light shape takes them all */
+    CHECKF(strstr(last_run.out, "\nlight samples (power): shape 1 (quad) 100 %") != NULL, "%s", last_run.out);
     CHECKF(key_number(last_run.out, "media") == 1, "%s", last_run.out);
     CHECKF(strstr(last_run.out, "fog: box") != NULL, "%s", last_run.out);
     /* the coefficients, and no channel groups for a grey medium */
