@@ -487,8 +487,9 @@ typedef enum rrv_manifold_gauge {
    toward their emission, MIS with the emission paths collect; manual,
    EMISSIVE MEDIA AS LIGHTS). */
 typedef enum rrv_emission_nee {
-    RRV_EMISSION_NEE_DEFAULT = 0, /* ON where emissive media are the only
-                                     lights (no light shapes, no sky), else OFF */
+    RRV_EMISSION_NEE_DEFAULT = 0, /* ON where there is no light shape (under
+                                     the uniform light sampler, no sky either),
+                                     else OFF */
     RRV_EMISSION_NEE_ON,
     RRV_EMISSION_NEE_OFF          /* emission only where paths collect it */
 } rrv_emission_nee;
@@ -7844,12 +7845,20 @@ static int rrv__light_choices(const rrv_scene *scene)
    2.0x and scenes/plume.rrv 1.5x the efficiency without them, test/bench/
    RESULTS.md, "Light sampling"). So, as pbrt-v4 leaves a uniform sky to
    BSDF sampling, the sky weighs 0 beside a light shape, and the path's own
-   directions take all of its light (their MIS weight is then 1). Alone it
-   is sampled as before, so sky-lit scenes keep their light samples. */
+   directions take all of its light (their MIS weight is then 1); beside
+   emissive media and no light shape the emitters take the samples instead
+   (rrv__emitters_take_samples). Alone it is sampled as before, so
+   sky-lit scenes keep their light samples. */
+static int rrv__emitters_take_samples(const rrv_scene *scene)
+{
+    return scene->settings.light_sampler == RRV_LIGHT_SAMPLER_POWER && scene->light_count == 0 && scene->emitters &&
+           scene->settings.emission_nee != RRV_EMISSION_NEE_OFF;
+}
+
 static double rrv__light_weight(const rrv_scene *scene, const rrv_shape *s)
 {
     if (scene->settings.light_sampler == RRV_LIGHT_SAMPLER_UNIFORM) return 1.0;
-    if (!s) return scene->light_count ? 0.0 : 1.0;
+    if (!s) return scene->light_count || rrv__emitters_take_samples(scene) ? 0.0 : 1.0;
     return rrv__shape_area(s) * (s->L[0] + s->L[1] + s->L[2]) / 3.0;
 }
 
@@ -7857,8 +7866,8 @@ static double rrv__light_weight(const rrv_scene *scene, const rrv_shape *s)
 static double rrv__light_prob(const rrv_scene *scene, const rrv_shape *s)
 {
     int choices = rrv__light_choices(scene);
-    if (scene->settings.light_sampler == RRV_LIGHT_SAMPLER_UNIFORM || !scene->light_cdf) return 1.0 / choices;
-    return rrv__light_weight(scene, s) / scene->light_cdf[choices - 1];
+    if (scene->settings.light_sampler == RRV_LIGHT_SAMPLER_UNIFORM) return 1.0 / choices;
+    return scene->light_cdf ? rrv__light_weight(scene, s) / scene->light_cdf[choices - 1] : 0.0;
 }
 
 static rrv_result rrv__build_light_cdf(rrv_scene *scene, rrv_error *err)
@@ -7866,15 +7875,19 @@ static rrv_result rrv__build_light_cdf(rrv_scene *scene, rrv_error *err)
     int choices = rrv__light_choices(scene), i;
     double sum = 0;
     if (!choices || scene->settings.light_sampler == RRV_LIGHT_SAMPLER_UNIFORM) return RRV_OK;
+    for (i = 0; i < choices; ++i)
+        sum += rrv__light_weight(scene, i < scene->light_count ? &scene->shapes[scene->lights[i]] : NULL);
+    /* only a sky, and the emitters take the samples: nothing to pick */
+    if (sum == 0) return RRV_OK;
+    if (!(sum > 0) || !(sum < DBL_MAX))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "the lights' total power is %g", sum);
     scene->light_cdf = (double *)RRV_MALLOC((size_t)choices * sizeof(double));
     if (!scene->light_cdf) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
-    for (i = 0; i < choices; ++i) {
+    for (sum = 0, i = 0; i < choices; ++i) {
         sum += rrv__light_weight(scene, i < scene->light_count ? &scene->shapes[scene->lights[i]] : NULL);
         scene->light_cdf[i] = sum;
     }
     scene->bytes += (size_t)choices * sizeof(double);
-    if (!(sum > 0) || !(sum < DBL_MAX))
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "the lights' total power is %g", sum);
     return RRV_OK;
 }
 
@@ -7921,8 +7934,8 @@ static int rrv__light_pick(const rrv_scene *scene, const rrv__light_draw *draw)
 {
     int choices = rrv__light_choices(scene), pick, hi;
     double target;
-    if (!choices) return -1;
-    if (scene->settings.light_sampler == RRV_LIGHT_SAMPLER_UNIFORM || !scene->light_cdf) {
+    if (!choices || (scene->settings.light_sampler == RRV_LIGHT_SAMPLER_POWER && !scene->light_cdf)) return -1;
+    if (scene->settings.light_sampler == RRV_LIGHT_SAMPLER_UNIFORM) {
         pick = (int)(draw->u * choices);
         return pick >= choices ? choices - 1 : pick;
     }
@@ -7938,6 +7951,14 @@ static int rrv__light_pick(const rrv_scene *scene, const rrv__light_draw *draw)
        choice with a weight */
     while (pick > 0 && !(scene->light_cdf[pick] > scene->light_cdf[pick - 1])) --pick;
     return pick;
+}
+
+/* Whether the pick names nothing whatever the draw: no light at all, or
+   only a sky the emitters took the samples from. */
+static int rrv__light_pick_none(const rrv_scene *scene)
+{
+    return !rrv__light_choices(scene) ||
+           (scene->settings.light_sampler == RRV_LIGHT_SAMPLER_POWER && !scene->light_cdf);
 }
 
 /* The point of a quad or triangle light that (u1, u2) names, uniform in area. */
@@ -8993,7 +9014,7 @@ static void rrv__vertex_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, cons
     /* the light sample's draws vary in count (shadow walks, solver trials):
        streams of their own keep the vertex's direction at fixed dimensions */
     rng->stream = RRV__STREAM_LIGHT;
-    if (ctx->emission && !ctx->partition && !rrv__light_choices(ctx->scene)) {
+    if (ctx->emission && !ctx->partition && rrv__light_pick_none(ctx->scene)) {
         /* no light to draw (fire alone lights the scene): the emitters'
            pick takes the first pair, and three numbers go unhashed */
         rng->next[RRV__STREAM_LIGHT] = 0;
@@ -9437,8 +9458,6 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
         }
         scene->bytes += (size_t)n * sizeof(int);
     }
-    res = rrv__build_light_cdf(scene, err);
-    if (res != RRV_OK) return res;
     res = rrv__build_bvh(scene, err);
     if (res != RRV_OK) return res;
     for (i = 0; i < scene->medium_count; ++i) {
@@ -9457,6 +9476,8 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
         if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
     }
     res = rrv__build_emitters(scene, err);
+    if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
+    res = rrv__build_light_cdf(scene, err);
     if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
     for (i = 0; i < scene->medium_count && !(scene->media[i].blackbody_emission && rrv__medium_emits_somewhere(&scene->media[i])); ++i) {}
     if (i < scene->medium_count) {
@@ -9687,15 +9708,17 @@ static rrv_result rrv__render_context(const rrv_scene *scene, rrv__context *ctx,
        aiming stays unbiased at about straight's cost */
     nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : RRV_NEE_SHOOT;
     ctx->sample_lights = !ctx->bends || nee != RRV_NEE_NONE;
-    /* By default only where emissive media are the only lights: there it
-       pays (test/bench/campfire.rrv: 15x the efficiency at maxdepth 1,
-       5.8x at the default 32), while beside an area light and a sky (scenes/fire.rrv) the
-       extra shadow ray a vertex cost more than the variance it saved
-       (0.46x classic, 0.70x refractive; test/bench/RESULTS.md, "Fire as a light"). */
+    /* By default only where no light shape is: there it pays
+       (test/bench/campfire.rrv: 15x the efficiency at maxdepth 1, 5.8x at
+       the default 32; under a night sky, where the power light sampler
+       gives it the sky's samples, 8.1x on the lit surfaces), while beside
+       an area light and a sky (scenes/fire.rrv) the extra shadow ray a
+       vertex cost more than the variance it saved (0.46x classic, 0.70x
+       refractive; test/bench/RESULTS.md, "Fire as a light"). */
     ctx->emission = ctx->sample_lights && scene->emitters &&
                    (scene->settings.emission_nee == RRV_EMISSION_NEE_ON ||
                     (scene->settings.emission_nee == RRV_EMISSION_NEE_DEFAULT && scene->light_count == 0 &&
-                     scene->environment.kind == RRV_ENV_NONE));
+                     (scene->environment.kind == RRV_ENV_NONE || rrv__emitters_take_samples(scene))));
     /* Equiangular samples where some light shape can take them: none
        elsewhere, so such scenes render as before, draw for draw. */
     if (!ctx->bends && ctx->sample_lights && scene->settings.equiangular != RRV_EQUIANGULAR_OFF) {
@@ -19031,9 +19054,9 @@ and BOUNDS (moved here from the manual at the top, word for word)
      a cell (measured in test/bench/RESULTS.md, "Weak connections"), so it is off.
 
    EMISSIVE MEDIA AS LIGHTS (rrv_settings.emission_nee, scene `render
-   emissionnee on|off`; by default on where emissive media are the only
-   lights, i.e. the scene has no light shapes and no sky: there it pays,
-   beside other lights it measured a loss)
+   emissionnee on|off`; by default on where the scene has no light shape,
+   a sky or not (under `lightsampler uniform`, only without a sky): there
+   it pays, beside light shapes it measured a loss)
      Media that emit (Le, or a blackbody temperature) are sampled as lights
      at every real vertex, as the area lights are: a point y of an emissive
      medium is drawn from an emission grid prepare builds beside the
@@ -19096,7 +19119,8 @@ and BOUNDS (moved here from the manual at the top, word for word)
      A vertex's one light sample goes to one light, picked by `power` in
      proportion to its power (area times mean radiance; quads and
      triangles emit on one side), and the sky only where there is no light
-     shape: the sky's samples go in uniform directions, which a vertex's
+     shape and no emissive medium to take them (EMISSIVE MEDIA AS LIGHTS):
+     the sky's samples go in uniform directions, which a vertex's
      own phase or cosine sample matches or beats, so beside a light shape
      they only took its samples away, and the paths' own directions reach
      the sky with MIS weight 1 (pbrt-v4 leaves a uniform sky to BSDF

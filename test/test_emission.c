@@ -482,7 +482,9 @@ static void block_stats(rrv_scene *s, int batches, int spp, double mean[BW * BH]
 /* The flame lights the wall and floor: with emission NEE the same blocks as
    the forward paths alone, within 4 standard errors of their difference,
    on the classic integrator and on the refractive one with a refracting box
-   of hot air over the flame (straight connections only outside it). */
+   of hot air over the flame (straight connections only outside it), and
+   under a night sky, where by default the flame takes the light samples
+   the sky would have had (and without emission NEE the sky takes them). */
 static void nee_matches_forward_in_blocks(void)
 {
     static const char *const haze =
@@ -497,13 +499,25 @@ static void nee_matches_forward_in_blocks(void)
         "amplitude 600 base 0 temperatureoffset -300 blackbody off\n"
         "ior haze gas iorscale 300\n"
         "ambient ior 1.0876\n";
+    static const char *const sky = "environment constant L 0.03 0.04 0.08\n";
     int variant, k;
-    for (variant = 0; variant < 3; ++variant) {
-        const char *integrator = variant ? "refractive" : "classic", *extra = variant == 2 ? around : variant ? haze : "";
+    for (variant = 0; variant < 4; ++variant) {
+        const char *integrator = variant == 1 || variant == 2 ? "refractive" : "classic";
+        const char *extra = variant == 3 ? sky : variant == 2 ? around : variant ? haze : "";
         rrv_scene *on = load(campfire, integrator, "", extra);
         rrv_scene *off = load(campfire, integrator, "emissionnee off", extra);
         double m_on[BW * BH], s_on[BW * BH], m_off[BW * BH], s_off[BW * BH], worst = 0, rel = 0;
         if (!on || !off) { rrv_scene_free(on); rrv_scene_free(off); return; }
+        if (variant == 3) {
+            rrv__context ctx;
+            rrv__camera_frame frame;
+            rrv_error e;
+            CHECK(rrv__render_context(on, &ctx, &frame, &e) == RRV_OK && ctx.emission && rrv__light_pick_none(on));
+            rrv__solver_release(&ctx);
+            CHECK(rrv__render_context(off, &ctx, &frame, &e) == RRV_OK && !ctx.emission &&
+                  rrv__light_prob(off, NULL) == 1.0);
+            rrv__solver_release(&ctx);
+        }
         block_stats(on, 16, 16, m_on, s_on);
         block_stats(off, 16, 128, m_off, s_off);
         for (k = 0; k < BW * BH; ++k) {
@@ -516,7 +530,11 @@ static void nee_matches_forward_in_blocks(void)
         /* resolving power: a bias of a tenth would show */
         CHECKF(rel < 0.025, "%s: the forward blocks' relative error %g is too large to see a bias", integrator, rel);
         printf("  %s%s: worst |z| %.2f, forward blocks within %.1f%%\n", integrator,
-               variant == 2 ? ", hot air behind the flame's front half" : variant ? ", hot air over the flame" : "", worst, 100 * rel);
+               variant == 3   ? ", under a sky"
+               : variant == 2 ? ", hot air behind the flame's front half"
+               : variant      ? ", hot air over the flame"
+                              : "",
+               worst, 100 * rel);
         rrv_scene_free(on);
         rrv_scene_free(off);
     }

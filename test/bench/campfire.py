@@ -9,6 +9,8 @@ medians. The reference of each maxdepth is a render with emission NEE at
 
 --hot-air puts the flame in a box of hot, refracting air (the refractive
 integrator; every connection to the flame then goes through refraction).
+--sky "R G B" puts it under a constant sky of that radiance: "paths only"
+then samples the sky as a light, the default gives the flame its samples.
 """
 import argparse, os, re, resource, statistics, subprocess, sys, tempfile
 
@@ -42,15 +44,18 @@ def main():
     ap.add_argument('--spp-on', type=int, default=16)
     ap.add_argument('--spp-off', type=int, default=96)
     ap.add_argument('--hot-air', action='store_true')
+    ap.add_argument('--sky', default='', help='a constant sky\'s radiance, "R G B"')
     ap.add_argument('--extra', default='', help='more render keys for the NEE runs, e.g. "transmittance residual"')
     a = ap.parse_args()
     text = open(os.path.join(HERE, 'campfire.rrv')).read()
     if a.hot_air:
         text = text.replace('integrator classic', 'integrator refractive') + HOT_AIR
+    if a.sky:
+        text += 'environment constant L %s\n' % a.sky
     tmp = tempfile.mkdtemp(prefix='campfire')
     flame = os.path.join(tmp, 'flame.rrv')
     with open(flame, 'w') as f:
-        f.write(re.sub(r'(?m)^quad .*\n', '', text))
+        f.write(re.sub(r'(?m)^(quad|environment) .*\n', '', text))
     render(a.rrv, flame, os.path.join(tmp, 'mask.pfm'), 64, 1)
     mask = read_pfm(os.path.join(tmp, 'mask.pfm'))
     lit = [i for i in range(len(mask) // 3) if mask[3 * i] + mask[3 * i + 1] + mask[3 * i + 2] == 0]
