@@ -9711,7 +9711,8 @@ static rrv_result rrv__render_context(const rrv_scene *scene, rrv__context *ctx,
     /* By default only where no light shape is: there it pays
        (test/bench/campfire.rrv: 15x the efficiency at maxdepth 1, 5.8x at
        the default 32; under a night sky, where the power light sampler
-       gives it the sky's samples, 8.1x on the lit surfaces), while beside
+       gives it the sky's samples, 15x, 7.3x and 6.9x at maxdepth 1, 2 and
+       32 on the lit surfaces), while beside
        an area light and a sky (scenes/fire.rrv) the extra shadow ray a
        vertex cost more than the variance it saved (0.46x classic, 0.70x
        refractive; test/bench/RESULTS.md, "Fire as a light"). */
@@ -19404,10 +19405,13 @@ VERSION HISTORY
             light shapes in proportion to their power, the sky only where
             it is the only light (smoke 2.0x, plume 1.5x the efficiency;
             renders of scenes with a sky and a light shape change, within
-            their noise); equiangular samples toward lights inside media
-            (render equiangular); emission NEE picks a cluster in two
-            levels and tracks its shadow rays with residual ratio tracking;
-            the Sobol sampler a little cheaper (renders identical)
+            their noise); where there is no light shape, emissive media
+            take the samples a sky would have had (emission NEE on by
+            default under a sky too); equiangular samples toward lights
+            inside media (render equiangular); emission NEE picks a
+            cluster in two levels and tracks its shadow rays with residual
+            ratio tracking; the Sobol sampler a little cheaper (renders
+            identical)
      0.12.0 fire lights a room with less noise: in media that emit, real
             collisions scatter weighted by the albedo and the roulette
             spares their vertices (renders of emissive media change, within
