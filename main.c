@@ -1765,7 +1765,7 @@ static void print_light_samples(const rrv_scene *scene)
 {
     static const char *const kinds[] = {"sphere", "quad", "triangle"};
     int choices = scene->light_count + (scene->environment.kind != RRV_ENV_NONE ? 1 : 0), i;
-    int uniform = scene->settings.light_sampler == RRV_LIGHT_SAMPLER_UNIFORM;
+    int uniform = !scene->light_power;
     double total = !uniform && scene->light_cdf ? scene->light_cdf[choices - 1] : 0;
     if (!uniform && !scene->light_count && scene->emitters && scene->settings.emission_nee != RRV_EMISSION_NEE_OFF) {
         /* no light shape: the emissive media take the samples, the sky none */

@@ -574,7 +574,7 @@ typedef struct rrv_settings {
     double noise_threshold; /* adaptive sampling's relative error, for the client to
                                pass to rrv_render_rect_adaptive; 0 = off (uniform) */
     rrv_equiangular equiangular; /* classic integrator */
-    rrv_light_sampler light_sampler;
+    rrv_light_sampler light_sampler; /* used by prepare */
 } rrv_settings;
 
 struct rrv__majorant_grid;
@@ -635,6 +635,8 @@ typedef struct rrv_scene {
     int *lights; int light_count;          /* indices of emissive shapes */
     double *light_cdf;                     /* running sums of the pick's weights over
                                               the lights, then the sky (rrv__light_pick) */
+    int light_power;                       /* settings.light_sampler was power */
+    double sky_weight;                     /* the sky's weight in that pick */
     struct rrv__bvh_node *bvh; int bvh_node_count;
     int *bvh_prims;                        /* shape indices in leaf order */
     double ambient_ior;                    /* the IOR outside every medium:
@@ -7851,14 +7853,18 @@ static int rrv__light_choices(const rrv_scene *scene)
    sky-lit scenes keep their light samples. */
 static int rrv__emitters_take_samples(const rrv_scene *scene)
 {
-    return scene->settings.light_sampler == RRV_LIGHT_SAMPLER_POWER && scene->light_count == 0 && scene->emitters &&
+    return scene->light_power && scene->light_count == 0 && scene->emitters &&
            scene->settings.emission_nee != RRV_EMISSION_NEE_OFF;
 }
 
+/* The pick, its probabilities and the sky's weight are those prepare saw
+   (light_power, sky_weight): a setting edited since changes nothing until
+   the scene is prepared again, so the pick and the densities the
+   estimators divide by always agree. */
 static double rrv__light_weight(const rrv_scene *scene, const rrv_shape *s)
 {
-    if (scene->settings.light_sampler == RRV_LIGHT_SAMPLER_UNIFORM) return 1.0;
-    if (!s) return scene->light_count || rrv__emitters_take_samples(scene) ? 0.0 : 1.0;
+    if (!scene->light_power) return 1.0;
+    if (!s) return scene->sky_weight;
     return rrv__shape_area(s) * (s->L[0] + s->L[1] + s->L[2]) / 3.0;
 }
 
@@ -7866,7 +7872,7 @@ static double rrv__light_weight(const rrv_scene *scene, const rrv_shape *s)
 static double rrv__light_prob(const rrv_scene *scene, const rrv_shape *s)
 {
     int choices = rrv__light_choices(scene);
-    if (scene->settings.light_sampler == RRV_LIGHT_SAMPLER_UNIFORM) return 1.0 / choices;
+    if (!scene->light_power) return 1.0 / choices;
     return scene->light_cdf ? rrv__light_weight(scene, s) / scene->light_cdf[choices - 1] : 0.0;
 }
 
@@ -7874,7 +7880,9 @@ static rrv_result rrv__build_light_cdf(rrv_scene *scene, rrv_error *err)
 {
     int choices = rrv__light_choices(scene), i;
     double sum = 0;
-    if (!choices || scene->settings.light_sampler == RRV_LIGHT_SAMPLER_UNIFORM) return RRV_OK;
+    scene->light_power = scene->settings.light_sampler == RRV_LIGHT_SAMPLER_POWER;
+    scene->sky_weight = scene->light_count || rrv__emitters_take_samples(scene) ? 0.0 : 1.0;
+    if (!choices || !scene->light_power) return RRV_OK;
     for (i = 0; i < choices; ++i)
         sum += rrv__light_weight(scene, i < scene->light_count ? &scene->shapes[scene->lights[i]] : NULL);
     /* only a sky, and the emitters take the samples: nothing to pick */
@@ -7934,8 +7942,8 @@ static int rrv__light_pick(const rrv_scene *scene, const rrv__light_draw *draw)
 {
     int choices = rrv__light_choices(scene), pick, hi;
     double target;
-    if (!choices || (scene->settings.light_sampler == RRV_LIGHT_SAMPLER_POWER && !scene->light_cdf)) return -1;
-    if (scene->settings.light_sampler == RRV_LIGHT_SAMPLER_UNIFORM) {
+    if (!choices || (scene->light_power && !scene->light_cdf)) return -1;
+    if (!scene->light_power) {
         pick = (int)(draw->u * choices);
         return pick >= choices ? choices - 1 : pick;
     }
@@ -7958,7 +7966,7 @@ static int rrv__light_pick(const rrv_scene *scene, const rrv__light_draw *draw)
 static int rrv__light_pick_none(const rrv_scene *scene)
 {
     return !rrv__light_choices(scene) ||
-           (scene->settings.light_sampler == RRV_LIGHT_SAMPLER_POWER && !scene->light_cdf);
+           (scene->light_power && !scene->light_cdf);
 }
 
 /* The point of a quad or triangle light that (u1, u2) names, uniform in area. */
@@ -7990,7 +7998,7 @@ static int rrv__sample_light(const rrv_scene *scene, rrv_vec3 p, const rrv__ligh
         ls->pdf = RRV__INV_4PI * rrv__light_prob(scene, NULL);
         rrv__environment_L(&scene->environment, ls->wi, ls->L);
         ls->point = rrv__madd(p, ls->wi, 1e30);
-        return ls->L[0] > 0 || ls->L[1] > 0 || ls->L[2] > 0;
+        return ls->pdf > 0 && (ls->L[0] > 0 || ls->L[1] > 0 || ls->L[2] > 0);
     } else {
         const rrv_shape *s = &scene->shapes[scene->lights[pick]];
         rrv_vec3 q, nq;
@@ -8010,6 +8018,7 @@ static int rrv__sample_light(const rrv_scene *scene, rrv_vec3 p, const rrv__ligh
             disc = s->radius * s->radius - dc * dc * sin_t * sin_t;
             ls->dist = b - sqrt(fmax(0.0, disc));
             ls->pdf = rrv__light_prob(scene, s) / (2.0 * RRV__PI * one_minus_cos_max);
+            if (!(ls->pdf > 0)) return 0;
             q = rrv__madd(p, ls->wi, ls->dist);
         } else {
             q = rrv__area_light_point(s, u1, u2);

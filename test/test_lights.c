@@ -231,6 +231,29 @@ static void power_matches_uniform_in_blocks(void)
     rrv_scene_free(uniform);
 }
 
+/* The pick and the densities are those the scene was prepared with: a
+   sampler changed in the settings since moves neither (they would
+   disagree, and the estimate be biased, if one followed the setting and
+   the other the prepared table), and preparing again takes it up. */
+static void prepared_sampler_holds(void)
+{
+    rrv_scene *s = lights_load(lights_scene, "");
+    rrv__light_draw draw = {0.3, 0.5, 0.5};
+    double p0, p1;
+    rrv_error e;
+    int pick;
+    if (!s) return;
+    p0 = rrv__light_prob(s, &s->shapes[s->lights[0]]);
+    pick = rrv__light_pick(s, &draw);
+    s->settings.light_sampler = RRV_LIGHT_SAMPLER_UNIFORM;
+    CHECK(rrv__light_prob(s, &s->shapes[s->lights[0]]) == p0 && rrv__light_pick(s, &draw) == pick);
+    CHECK(rrv__light_prob(s, NULL) == 0.0);
+    CHECK(rrv_scene_prepare(s, &e) == RRV_OK);
+    p1 = rrv__light_prob(s, &s->shapes[s->lights[0]]);
+    CHECKF(p1 == 0.25 && rrv__light_prob(s, NULL) == 0.25, "after prepare: %g, sky %g", p1, rrv__light_prob(s, NULL));
+    rrv_scene_free(s);
+}
+
 /* The key's default, its words and its error. */
 static void lights_default_and_keys(void)
 {
@@ -259,6 +282,7 @@ int main(void)
     RUN(densities_integrate_to_solid_angles);
     RUN(a_sky_alone_is_sampled);
     RUN(power_matches_uniform_in_blocks);
+    RUN(prepared_sampler_holds);
     RUN(lights_default_and_keys);
     return CHECK_EXIT_CODE();
 }
