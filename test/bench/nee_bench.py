@@ -56,6 +56,10 @@ MODES = [
     ("manifold iso", "manifold", "manifoldgauge iso"),
     ("manifold chord M=1", "manifold", "manifoldgauge chord manifoldtrials 1"),
     ("manifold chord M=4", "manifold", "manifoldgauge chord manifoldtrials 4"),
+    # the chain without the comb planes across which eta changes by less than
+    # the drop (biased: the planes' bending is left out of the connection)
+    ("manifold dogleg drop 1e-5", "manifold", "manifoldgauge chord manifoldsolver dogleg manifolddrop 0.00001"),
+    ("manifold dogleg drop 1e-4", "manifold", "manifoldgauge chord manifoldsolver dogleg manifolddrop 0.0001"),
 ]
 
 
