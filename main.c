@@ -1767,7 +1767,7 @@ static void print_light_samples(const rrv_scene *scene)
     int choices = scene->light_count + (scene->environment.kind != RRV_ENV_NONE ? 1 : 0), i;
     int uniform = !scene->light_power;
     double total = !uniform && scene->light_cdf ? scene->light_cdf[choices - 1] : 0;
-    if (!uniform && !scene->light_count && scene->emitters && scene->settings.emission_nee != RRV_EMISSION_NEE_OFF) {
+    if (!uniform && !scene->light_count && scene->emitters && scene->sky_weight == 0) {
         /* no light shape: the emissive media take the samples, the sky none */
         printf("light samples (power): the emissive media 100 %%%s\n",
                choices ? ", sky 0 % (its light left to the paths' own directions)" : "");

@@ -7883,19 +7883,22 @@ static rrv_result rrv__build_light_cdf(rrv_scene *scene, rrv_error *err)
     scene->light_power = scene->settings.light_sampler == RRV_LIGHT_SAMPLER_POWER;
     scene->sky_weight = scene->light_count || rrv__emitters_take_samples(scene) ? 0.0 : 1.0;
     if (!choices || !scene->light_power) return RRV_OK;
-    for (i = 0; i < choices; ++i)
-        sum += rrv__light_weight(scene, i < scene->light_count ? &scene->shapes[scene->lights[i]] : NULL);
-    /* only a sky, and the emitters take the samples: nothing to pick */
-    if (sum == 0) return RRV_OK;
-    if (!(sum > 0) || !(sum < DBL_MAX))
-        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "the lights' total power is %g", sum);
     scene->light_cdf = (double *)RRV_MALLOC((size_t)choices * sizeof(double));
     if (!scene->light_cdf) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
-    for (sum = 0, i = 0; i < choices; ++i) {
+    scene->bytes += (size_t)choices * sizeof(double);
+    for (i = 0; i < choices; ++i) {
         sum += rrv__light_weight(scene, i < scene->light_count ? &scene->shapes[scene->lights[i]] : NULL);
         scene->light_cdf[i] = sum;
     }
-    scene->bytes += (size_t)choices * sizeof(double);
+    if (sum == 0) {
+        /* only a sky, and the emitters take the samples: nothing to pick */
+        scene->bytes -= (size_t)choices * sizeof(double);
+        RRV_FREE(scene->light_cdf);
+        scene->light_cdf = NULL;
+        return RRV_OK;
+    }
+    if (!(sum > 0) || !(sum < DBL_MAX))
+        return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "the lights' total power is %g", sum);
     return RRV_OK;
 }
 
