@@ -5,6 +5,7 @@
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
+#include "blocks.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -178,47 +179,22 @@ static void a_sky_alone_is_sampled(void)
     rrv_scene_free(s);
 }
 
-/* Block means of R + G + B over `batches` independent sample ranges: each
-   of the 2 x 2 blocks' mean and standard error. */
-static void lights_blocks(rrv_scene *s, int batches, int spp, double mean[4], double se[4])
-{
-    int w = s->camera.width, h = s->camera.height, b, i, k;
-    float *img = (float *)malloc(sizeof(float) * 3 * (size_t)w * (size_t)h);
-    double sum[4] = {0}, sum2[4] = {0};
-    for (b = 0; b < batches; ++b) {
-        double block[4] = {0};
-        memset(img, 0, sizeof(float) * 3 * (size_t)w * (size_t)h);
-        CHECK(rrv_render_rect(s, 0, 0, w, h, b * spp, (b + 1) * spp, img, w, NULL, NULL) == RRV_OK);
-        for (i = 0; i < w * h; ++i)
-            block[(i / w) * 2 / h * 2 + (i % w) * 2 / w] += (img[3 * i] + img[3 * i + 1] + img[3 * i + 2]) / spp;
-        for (k = 0; k < 4; ++k) {
-            sum[k] += block[k];
-            sum2[k] += block[k] * block[k];
-        }
-    }
-    for (k = 0; k < 4; ++k) {
-        mean[k] = sum[k] / batches;
-        se[k] = sqrt(fmax(sum2[k] / batches - mean[k] * mean[k], 0.0) / (batches - 1));
-    }
-    free(img);
-}
-
 /* The power sampler (no sky samples beside the light shapes) and the
    uniform one render the same blocks within 4 standard errors of their
    difference, each block known to 1.5 %; different seeds. */
 static void power_matches_uniform_in_blocks(void)
 {
     rrv_scene *power = lights_load(lights_scene, "seed 3"), *uniform = lights_load(lights_scene, "lightsampler uniform seed 4");
-    double m0[4], s0[4], m1[4], s1[4], worst = 0, rel = 0;
+    double m0[BW * BH], s0[BW * BH], m1[BW * BH], s1[BW * BH], worst = 0, rel = 0;
     int k;
     if (!power || !uniform) {
         rrv_scene_free(power);
         rrv_scene_free(uniform);
         return;
     }
-    lights_blocks(uniform, 16, 480, m0, s0);
-    lights_blocks(power, 16, 480, m1, s1);
-    for (k = 0; k < 4; ++k) {
+    block_stats(uniform, 16, 480, m0, s0);
+    block_stats(power, 16, 480, m1, s1);
+    for (k = 0; k < BW * BH; ++k) {
         double z = (m1[k] - m0[k]) / sqrt(s0[k] * s0[k] + s1[k] * s1[k]);
         CHECKF(fabs(z) <= 4.0, "block %d: %g +- %g power, %g +- %g uniform (z = %.2f)", k, m1[k], s1[k], m0[k], s0[k],
                z);
