@@ -552,7 +552,8 @@ typedef struct rrv_settings {
     double bend_tolerance;/* refractive: radians of bending per event (default 0.01) */
     double mu_eta;        /* refractive: fixed refraction event rate, 1/m; 0 = automatic */
     rrv_refraction_scheme refraction; /* refractive */
-    double step;          /* eikonal: step length h, m */
+    double step;          /* eikonal: step length h, m; 0 (the default): placed by the
+                             field's bounds (STEPS in the manual) */
     rrv_stepper stepper;  /* eikonal */
     double ambient_ior;   /* IOR outside every medium, >= 1; 0 = the gas at its
                              ambient state (BOUNDARIES in the manual), else 1 */
@@ -5677,6 +5678,17 @@ static void rrv__walker_advance(rrv__walker *w, rrv__rng *rng, uint64_t *events)
     w->t_event = DBL_MAX;
 }
 
+/* Where rrv_settings.step is 0 (automatic), the eikonal march places its
+   steps by the field (rrv__eikonal_step_length); what else reads the step
+   (the work bounds, shoot's coarse stage, the manifold chain's planes, the
+   reach a march looks ahead) takes this fixed length instead. */
+#define RRV__STEP_FALLBACK 0.01
+
+static double rrv__step(const rrv_scene *scene)
+{
+    return scene->settings.step > 0 ? scene->settings.step : RRV__STEP_FALLBACK;
+}
+
 /* >> 8 refraction: eikonal marching, supports and faces, the comb ============ */
 
 /* ---- eikonal: marching the ray equation d/ds(eta dx/ds) = grad eta ------------- */
@@ -6117,7 +6129,7 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikona
        unit, so nothing bounds its chord by the step (in a smooth field it
        falls short of it but for terms of fifth order; test_grin saw none
        longer), and a chord beyond reach is looked along after all */
-    b->safe_reach = scene->settings.step * (1.0 + 1.0 / 16) + 2 * RRV__EDGE_NUDGE;
+    b->safe_reach = rrv__step(scene) * (1.0 + 1.0 / 16) + 2 * RRV__EDGE_NUDGE;
     b->safe_surface_free = 0;
     for (i = 0; b->sole_support && i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i], *s = b->sole_support;
@@ -6406,7 +6418,7 @@ static inline double rrv__comb_spacing(const rrv_scene *scene, const rrv__bender
         return rrv__rate_distance(m->majorant, x, d, inv_d, tau, b->inv_tolerance, entering);
     }
     *medium = NULL;
-    return fmin(scene->settings.step, 1.0);
+    return fmin(rrv__step(scene), 1.0);
 }
 
 /* The kick at comb point x, standing for the length h_bar around it (half
@@ -6735,38 +6747,47 @@ static void rrv__eikonal_view(const rrv__bender *b, rrv_vec3 x, rrv_vec3 d, doub
     }
 }
 
-/* Bend-bounded eikonal steps (a measurement build; 0, fixed steps, by
-   default): with RRV__EIKONAL_STEP_BEND = K > 0, a step in a box support
-   with a gradient bound runs until the integral along its line of the
-   cells' bounds on |grad r| reaches K bend tolerances (the bound on how far
-   it turns the ray), at most RRV__EIKONAL_STEP_CAP times the scene's step.
-   The length is a continuous function of the ray (the integral of a
-   piecewise constant bound along a line moves continuously with the line),
-   so the march stays a continuous map for shoot's Newton; its derivative
-   is left out of the Jacobi field, as moving a step's end along the curve
-   leaves the curve as it was to the order of the stepper's error. Not
-   ready as a default (test/bench/RESULTS.md, "flat cells"): without a cap
-   in cells a weak field's steps span its features, and with steps that
-   long the left-out derivative shows in the Jacobi fields. */
-#ifndef RRV__EIKONAL_STEP_BEND
-#define RRV__EIKONAL_STEP_BEND 0.0
-#endif
-#ifndef RRV__EIKONAL_STEP_CAP
-#define RRV__EIKONAL_STEP_CAP 64.0
-#endif
+/* Steps placed by the field (rrv_settings.step 0, the default; a given
+   step is fixed, as references want). In a box support with gradient
+   bounds (the bender's sole support), a step from x along d runs until the
+   integral along its line of the majorant cells' bounds on |grad r| (how
+   fast the ray can turn, per metre) reaches RRV__STEP_BEND bend
+   tolerances, and at most RRV__STEP_CELLS of the cells' shortest side, so
+   that a weak field's steps still sample its features at the scale its
+   bounds resolve; elsewhere (sphere supports, overlapping media) the fixed
+   RRV__STEP_FALLBACK. So the march takes few steps across weak heat and
+   many where the bound says the ray turns fast: the rule optical-design
+   codes use, kept per cell.
+   The length is a continuous function of the ray: the integral of a
+   piecewise constant bound along a line moves continuously with the line,
+   so the march stays a continuous map for shoot's Newton. With grad it
+   also returns its derivative with respect to x (grad[0..2]) and d
+   (grad[3..5]): the integral I(h) = sum over the line's cells of rate_i
+   times their length moves by (rate_before - rate_after) dt_f at each face
+   crossed at t_f = (plane - x_a) / d_a, and by rate_end dh at the end, so
+   dh = -(sum of those) / rate_end; 0 where the cap holds it. Shoot's Jacobi
+   fields move the step's end along the curve by dh (rrv__shoot_plan), as
+   they do where a face cuts a step. */
+#define RRV__STEP_BEND 1.0
+#define RRV__STEP_CELLS 1.0
 
-static double rrv__eikonal_step_length(const rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
+static double rrv__eikonal_step_length(const rrv__bender *b, const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d,
+                                       double grad[6])
 {
     const struct rrv__majorant_grid *g;
-    const double step = scene->settings.step;
-    double budget, cap, xs[3], ds[3], lo[3], cs[3], t_next[3], t = 0;
+    double budget, cap, xs[3], ds[3], lo[3], cs[3], t_next[3], t = 0, dI[6] = {0, 0, 0, 0, 0, 0};
     ptrdiff_t stride[3], idx = 0;
-    int cell[3], dir[3], a;
-    if (!(RRV__EIKONAL_STEP_BEND > 0) || !b->eikonal || !b->sole_support) return step;
+    int cell[3], dir[3], a, k;
+    if (grad)
+        for (k = 0; k < 6; ++k) grad[k] = 0;
+    if (scene->settings.step > 0) return scene->settings.step;
+    if (!b->eikonal || !b->sole_support || scene->settings.stepper == RRV_STEPPER_LEAPFROG)
+        return RRV__STEP_FALLBACK;
     g = b->sole_support->majorant;
-    if (!g || !g->grad_max || !rrv__inside_box(x, g->lo, g->hi)) return step;
-    budget = RRV__EIKONAL_STEP_BEND * scene->settings.bend_tolerance;
-    cap = RRV__EIKONAL_STEP_CAP * step;
+    if (!g || !g->grad_max || !rrv__inside_box(x, g->lo, g->hi)) return RRV__STEP_FALLBACK;
+    budget = RRV__STEP_BEND * scene->settings.bend_tolerance;
+    cap = RRV__STEP_CELLS * g->cell_min;
+    if (!(cap > RRV__STEP_FALLBACK)) return RRV__STEP_FALLBACK;
     xs[0] = x.x; xs[1] = x.y; xs[2] = x.z;
     ds[0] = d.x; ds[1] = d.y; ds[2] = d.z;
     lo[0] = g->lo.x; lo[1] = g->lo.y; lo[2] = g->lo.z;
@@ -6789,16 +6810,27 @@ static double rrv__eikonal_step_length(const rrv__bender *b, const rrv_scene *sc
         }
     }
     for (;;) {
-        double face, rate = g->grad_max[idx];
+        double face, rate = g->grad_max[idx], next_rate;
         a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
         face = t_next[a];
-        if (rate > 0 && rate * (face - t) >= budget) return fmin(cap, t + budget / rate);
+        if (rate > 0 && rate * (face - t) >= budget) {
+            double h = t + budget / rate;
+            if (!(h < cap)) return cap;
+            if (!(h > RRV__STEP_FALLBACK)) return RRV__STEP_FALLBACK;
+            if (grad)
+                for (k = 0; k < 6; ++k) grad[k] = -dI[k] / rate;
+            return h;
+        }
         budget -= rate * (face - t);
         if (!(face < cap)) return cap;
         t = face;
         cell[a] += dir[a];
         if (cell[a] < 0 || cell[a] >= g->n[a]) return cap;
         idx += stride[a];
+        next_rate = g->grad_max[idx];
+        /* dt_f / dx_a = -1 / d_a, dt_f / dd_a = -t_f / d_a */
+        dI[a] -= (rate - next_rate) / ds[a];
+        dI[3 + a] -= (rate - next_rate) * face / ds[a];
         t_next[a] = (lo[a] + (cell[a] + (ds[a] > 0)) * cs[a] - xs[a]) / ds[a];
     }
 }
@@ -6856,7 +6888,7 @@ static void rrv__plan_segment(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o
 {
     rrv__support_view view;
     double reach = b->eikonal ? rrv__safe_reach(b, scene, o) : 0;
-    double step = b->eikonal ? rrv__eikonal_step_length(b, scene, o, *d) : 0;
+    double step = b->eikonal ? rrv__eikonal_step_length(b, scene, o, *d, NULL) : 0;
     b->line_d = *d;
     rrv__reciprocals(*d, b->line_inv);
     if (b->eikonal && rrv__safe_for_step(step, reach)) rrv__safe_view(b, reach, &view);
@@ -8251,7 +8283,7 @@ static double rrv__crossing_work(const rrv_scene *scene, rrv_integrator integrat
         if (!rrv__medium_refracts(m) || integrator == RRV_INTEGRATOR_CLASSIC) {
             rate = 0;
         } else if (integrator == RRV_INTEGRATOR_EIKONAL) {
-            rate = 4.0 / st->step;
+            rate = 4.0 / rrv__step(scene);
         } else {
             double mu_eta = st->mu_eta > 0 ? st->mu_eta : g->grad_peak / st->bend_tolerance;
             if (comb)
@@ -10441,7 +10473,6 @@ static void rrv__settings_def(rrv_settings *s)
     if (s->spp == 0) s->spp = 16;
     if (s->max_depth == 0) s->max_depth = 32;
     if (s->bend_tolerance == 0.0) s->bend_tolerance = 0.01;
-    if (s->step == 0.0) s->step = 0.01;
 }
 
 static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
@@ -10458,7 +10489,7 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
         return rrv__ck_fail(ck, RRV_OK, "bendtolerance must be at least 0.0001, got %g",
                             s->bend_tolerance);
     RRV__CK(rrv__ck_key(ck, &k[5], s->mu_eta));
-    RRV__CK(rrv__ck_key(ck, &k[6], s->step));
+    if (s->step != 0.0) RRV__CK(rrv__ck_key(ck, &k[6], s->step)); /* 0: placed by the field */
     if ((unsigned)s->stepper > (unsigned)RRV_STEPPER_RK4)
         return rrv__ck_fail(ck, RRV_OK, "stepper %d is not one of rrv_stepper", (int)s->stepper);
     if ((unsigned)s->refraction > (unsigned)RRV_REFRACTION_COMB)
@@ -11530,6 +11561,37 @@ static double rrv__eikonal_step_controlled_staged(const rrv_scene *scene, rrv_st
     return h;
 }
 
+/* How a step's length moves with the ray's two angles (dh[0..1]), from
+   its derivative with respect to the start point and direction
+   (rrv__eikonal_step_length's grad) and the Jacobi field J there, times
+   scale (a step halved by the stepper's control is that share of it). */
+static void rrv__step_length_moves(const rrv__jacobi *J, const double grad[6], double scale, double dh[2])
+{
+    int j;
+    for (j = 0; j < 2; ++j)
+        dh[j] = scale * (grad[0] * J->x[j].x + grad[1] * J->x[j].y + grad[2] * J->x[j].z +
+                         grad[3] * J->d[j].x + grad[4] * J->d[j].y + grad[5] * J->d[j].z);
+}
+
+/* A step's end moved along the curve by dh: the Jacobi field J1 at the end
+   gains the curve's direction and its turning (the gradient of eta across
+   it, over eta) times dh. */
+static int rrv__step_end_moves(const rrv_scene *scene, const rrv__bender *b, rrv_vec3 o, rrv_vec3 d, double len,
+                               const double dh[2], rrv__jacobi *J1)
+{
+    rrv_vec3 g1, kappa;
+    double eta1;
+    int j;
+    if (dh[0] == 0 && dh[1] == 0) return 1;
+    eta1 = rrv__eta_gradient(scene, rrv__madd(o, d, len), &g1);
+    kappa = rrv__scale(rrv__madd(g1, b->next_d, -rrv__dot(b->next_d, g1)), 1.0 / eta1);
+    for (j = 0; j < 2; ++j) {
+        J1->x[j] = rrv__madd(J1->x[j], b->next_d, dh[j]);
+        J1->d[j] = rrv__madd(J1->d[j], kappa, dh[j]);
+    }
+    return 1;
+}
+
 /* rrv__plan_segment for a shot's eikonal bender, with the Jacobi field:
    the same segment, direction and bender state bit for bit (it follows
    rrv__plan_segment's eikonal branch and rrv__eikonal_plan, and
@@ -11552,12 +11614,13 @@ static double rrv__eikonal_step_controlled_staged(const rrv_scene *scene, rrv_st
 static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, rrv_vec3 *d, const rrv__jacobi *J,
                            rrv__jacobi *J1)
 {
-    const double nudge = RRV__EDGE_NUDGE, step = rrv__eikonal_step_length(b, scene, o, *d);
+    double step_grad[6];
+    const double nudge = RRV__EDGE_NUDGE, step = rrv__eikonal_step_length(b, scene, o, *d, step_grad);
     const rrv_stepper stepper = scene->settings.stepper;
     rrv__support_view view, along;
     rrv__step_stages st;
-    rrv_vec3 d_start = *d, x1, chord, g1, kappa;
-    double h, first, len, eta1, dh[2], nd, asked, scale = 1.0, slack, reach = rrv__safe_reach(b, scene, o);
+    rrv_vec3 d_start = *d, x1, chord;
+    double h, first, len, dh[2], nd, asked, scale = 1.0, slack, reach = rrv__safe_reach(b, scene, o);
     int j, halvings, again = 0, seen = !rrv__safe_for_step(step, reach);
     b->line_d = *d;
     rrv__reciprocals(*d, b->line_inv);
@@ -11597,7 +11660,11 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
     b->end = RRV__END_STEP;
     *J1 = *J;
     rrv__step_stages_jacobi(&st, stepper, d_start, J1);
-    if (!(h < step)) return 1;
+    if (!(h < step)) {
+        /* the whole step, whose length the field placed (it moves with the ray) */
+        rrv__step_length_moves(J, step_grad, 1.0, dh);
+        return rrv__step_end_moves(scene, b, o, *d, len, dh, J1);
+    }
     /* which cut made h: told apart by its length, as a step of the first
        cut rounded differently would be */
     asked = h;
@@ -11610,7 +11677,10 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
         scale *= 0.5;
     }
     if (fabs(asked - first) <= slack) {
-        if (!(view.t_face - nudge < step)) return 1; /* halved, not cut */
+        if (!(view.t_face - nudge < step)) { /* halved, not cut */
+            rrv__step_length_moves(J, step_grad, scale, dh);
+            return rrv__step_end_moves(scene, b, o, *d, len, dh, J1);
+        }
         nd = rrv__dot(view.normal, d_start);
         if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
         for (j = 0; j < 2; ++j)
@@ -11626,13 +11696,7 @@ static int rrv__shoot_plan(rrv__bender *b, const rrv_scene *scene, rrv_vec3 o, r
         if (!(fabs(nd) > 1e-9 * rrv__length(view.normal))) return 0;
         for (j = 0; j < 2; ++j) dh[j] = -rrv__dot(view.normal, J1->x[j]) / nd;
     }
-    eta1 = rrv__eta_gradient(scene, rrv__madd(o, *d, len), &g1);
-    kappa = rrv__scale(rrv__madd(g1, b->next_d, -rrv__dot(b->next_d, g1)), 1.0 / eta1);
-    for (j = 0; j < 2; ++j) {
-        J1->x[j] = rrv__madd(J1->x[j], b->next_d, dh[j]);
-        J1->d[j] = rrv__madd(J1->d[j], kappa, dh[j]);
-    }
-    return 1;
+    return rrv__step_end_moves(scene, b, o, *d, len, dh, J1);
 }
 
 enum { RRV__SHOT_REACHED, RRV__SHOT_MISSED, RRV__SHOT_INTERFACE, RRV__SHOT_BLOCKED };
@@ -11949,7 +12013,7 @@ static rrv_vec3 rrv__solver_seed(rrv_vec3 x0, rrv_vec3 y, rrv__rng *rng)
    lens's peak |grad eta| is 2 per metre). */
 static double rrv__solve_coarse_step(const rrv_scene *scene, double eta_floor)
 {
-    double step = scene->settings.step, coarse = RRV__SOLVE_COARSE * step, peak = 0;
+    double step = rrv__step(scene), coarse = RRV__SOLVE_COARSE * step, peak = 0;
     int i;
     for (i = 0; i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i];
@@ -12901,7 +12965,7 @@ static void rrv__chain_setup(const rrv_scene *scene, rrv_vec3 x0, rrv_vec3 y, rr
                              double u, rrv__chain *ch)
 {
     rrv_vec3 d = rrv__sub(y, x0);
-    double L = rrv__length(d), lo = DBL_MAX, hi = -DBL_MAX, h = scene->settings.step, prev_eta = 0;
+    double L = rrv__length(d), lo = DBL_MAX, hi = -DBL_MAX, h = rrv__step(scene), prev_eta = 0;
     long count, i;
     int m;
     ch->n = 0;

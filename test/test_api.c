@@ -48,7 +48,7 @@ static void test_zero_means_default(void)
     CHECK(s->camera.fov == 40 && s->camera.up.y == 1 && s->camera.width == 8);
     CHECK(rrv_scene_set_settings(s, &set, &err) == RRV_OK);
     CHECK(s->settings.spp == 16 && s->settings.max_depth == 32 && s->settings.bend_tolerance == 0.01 &&
-          s->settings.step == 0.01 && s->settings.ambient_ior == 0 &&
+          s->settings.step == 0 && s->settings.ambient_ior == 0 &&
           s->settings.integrator == RRV_INTEGRATOR_DEFAULT);
     mat.kind = RRV_MATERIAL_CHECKER;
     CHECK(rrv_scene_add_material(s, &mat, &i, &err) == RRV_OK && i == 0);

@@ -801,7 +801,12 @@ static void test_luneburg_two_point(void)
 
 /* Two Gaussian blobs of IOR (eta up to 1.5) in a box, no density; at the
    box faces they are below 1e-10, no interface. */
-static rrv_scene *blob_scene(double step, rrv_stepper stepper)
+static rrv_scene *blob_scene_weighted(double step, rrv_stepper stepper, double weight);
+
+static rrv_scene *blob_scene(double step, rrv_stepper stepper) { return blob_scene_weighted(step, stepper, 1.0); }
+
+/* Two blobs of IOR (weights 0.5 and -0.2 times `weight`) in a 4 m box. */
+static rrv_scene *blob_scene_weighted(double step, rrv_stepper stepper, double weight)
 {
     rrv_scene *s = tb_scene(4, 4);
     rrv_medium *m = tb_medium(s, rrv__v3(-2, -2, -2), rrv__v3(2, 2, 2), 0.0, 0.0);
@@ -811,10 +816,10 @@ static rrv_scene *blob_scene(double step, rrv_stepper stepper)
     b = tb_blobs(&m->ior, 2);
     b[0].center = rrv__v3(0.1, -0.05, 0);
     b[0].radius = 0.3;
-    b[0].weight = 0.5;
+    b[0].weight = 0.5 * weight;
     b[1].center = rrv__v3(-0.2, 0.2, 0.3);
     b[1].radius = 0.2;
-    b[1].weight = -0.2;
+    b[1].weight = -0.2 * weight;
     s->settings.integrator = RRV_INTEGRATOR_EIKONAL;
     s->settings.step = step;
     s->settings.stepper = stepper;
@@ -1097,7 +1102,7 @@ static void test_manifold_reciprocity(void)
 /* The Jacobi field carried through the discrete steps against central
    differences of the traced endpoint (both projected on the plane
    perpendicular to the arriving chord, the part that J_perp is). */
-static void jacobian_against_differences(rrv_scene *s, rrv_vec3 x0, rrv_vec3 w, rrv_vec3 y, const rrv_vec3 *plane,
+static long jacobian_against_differences(rrv_scene *s, rrv_vec3 x0, rrv_vec3 w, rrv_vec3 y, const rrv_vec3 *plane,
                                          const char *name)
 {
     rrv__context ctx;
@@ -1109,7 +1114,7 @@ static void jacobian_against_differences(rrv_scene *s, rrv_vec3 x0, rrv_vec3 w, 
     rrv__frame(w, &e1, &e2);
     rrv__shoot(&ctx, x0, w, e1, e2, y, plane, NULL, NULL, &base);
     CHECKF(base.status == RRV__SHOT_REACHED, "%s: the shot did not reach y's plane", name);
-    if (base.status != RRV__SHOT_REACHED) return;
+    if (base.status != RRV__SHOT_REACHED) return 0;
     for (j = 0; j < 2; ++j) {
         rrv_vec3 ej = j ? e2 : e1, wp = rrv__normalize(rrv__madd(w, ej, eps)), wm = rrv__normalize(rrv__madd(w, ej, -eps));
         rrv_vec3 t1, t2, fd, an;
@@ -1132,6 +1137,7 @@ static void jacobian_against_differences(rrv_scene *s, rrv_vec3 x0, rrv_vec3 w, 
         CHECKF(err < 1e-5, "%s, column %d: Jacobi field %g %g %g, differences %g %g %g", name, j, an.x, an.y, an.z, fd.x,
                fd.y, fd.z);
     }
+    return base.segments;
 }
 
 static void test_jacobian_against_differences(void)
@@ -1148,6 +1154,32 @@ static void test_jacobian_against_differences(void)
     rrv_scene_free(a);
     rrv_scene_free(b);
     rrv_scene_free(c);
+}
+
+/* Steps placed by the field (no step given): each step's length moves with
+   the ray, and the Jacobi field moves its end along the curve by that
+   much (rrv__step_end_moves). Against central differences as above, where
+   the steps are long and vary: fails with the move left out (the columns
+   off by ~1e-3). The steps must be the field's: fewer than at 0.01 (226 against 419). */
+static void test_jacobian_with_placed_steps(void)
+{
+    rrv_scene *fixed = blob_scene_weighted(0.01, RRV_STEPPER_RK4, 0.1);
+    rrv_scene *a = blob_scene_weighted(0, RRV_STEPPER_RK4, 0.1), *b = blob_scene_weighted(0, RRV_STEPPER_LEAPFROG, 0.1);
+    rrv_vec3 w = rrv__normalize(rrv__v3(0.12, 0.05, 1.0)), light = rrv__normalize(rrv__v3(0.1, -0.2, -1.0));
+    long n_fixed = jacobian_against_differences(fixed, rrv__v3(0.05, -0.1, -2.5), w, rrv__v3(0.4, 0.3, 3.0), NULL,
+                                                "blobs, RK4 at 0.01");
+    long n = jacobian_against_differences(a, rrv__v3(0.05, -0.1, -2.5), w, rrv__v3(0.4, 0.3, 3.0), NULL,
+                                          "blobs, RK4, placed");
+    CHECKF(n > 0 && 4 * n < 3 * n_fixed, "placed steps: %ld segments against %ld at h = 0.01", n, n_fixed);
+    /* leapfrog keeps the fixed step (the move is RK4's to first order only) */
+    CHECK(jacobian_against_differences(b, rrv__v3(0.05, -0.1, -2.5), w, rrv__v3(0.4, 0.3, 3.0), NULL,
+                                       "blobs, leapfrog") == n_fixed);
+    jacobian_against_differences(a, rrv__v3(0.2, 0.1, -0.3), w, rrv__v3(0.1, 0.2, 0.6), NULL, "blobs, inside, placed");
+    jacobian_against_differences(a, rrv__v3(0.05, -0.1, -2.5), w, rrv__v3(0.4, 0.3, 3.0), &light,
+                                 "blobs, light plane, placed");
+    rrv_scene_free(fixed);
+    rrv_scene_free(a);
+    rrv_scene_free(b);
 }
 
 /* Reciprocity of the connection density. Etendue n^2 dA dw is conserved:
@@ -1977,7 +2009,7 @@ static void test_weak_class_flat_support(void)
    cells whose bound on |grad r| is 0. */
 static const char flat_haze_text[] =
     "camera eye 0.5 -2 0.5  look 0.5 0.5 0.5  up 0 0 1  resolution 8 8\n"
-    "render integrator eikonal\n"
+    "render integrator eikonal step 0.01\n"
     "ambient ior 1.0292\n"
     "quad origin 0.2 1.6 0.2  u 0.6 0 0  v 0 0 0.6  L 1 1 1\n"
     "medium h box 0 0 0 1 1 1  sigma_a 0 0 0  sigma_s 0 0 0\n"
@@ -2129,6 +2161,7 @@ int main(void)
     NEE_RUN(test_lens_caustic_manifold);
     NEE_RUN(test_luneburg_two_point);
     NEE_RUN(test_jacobian_against_differences);
+    NEE_RUN(test_jacobian_with_placed_steps);
     NEE_RUN(test_reciprocity);
     NEE_RUN(test_manifold_luneburg_two_point);
     NEE_RUN(test_manifold_straight_chains);

@@ -353,7 +353,7 @@ static void test_defaults_and_values(void)
     CHECK(s->settings.spp == 16 && s->settings.max_depth == 32 && s->settings.seed == 0);
     CHECK(s->settings.integrator == RRV_INTEGRATOR_DEFAULT && s->settings.stepper == RRV_STEPPER_DEFAULT);
     CHECK(s->settings.refraction == RRV_REFRACTION_DEFAULT && s->settings.majorant_cells == 0);
-    CHECK(s->settings.bend_tolerance == 0.01 && s->settings.mu_eta == 0 && s->settings.step == 0.01);
+    CHECK(s->settings.bend_tolerance == 0.01 && s->settings.mu_eta == 0 && s->settings.step == 0);
     /* no `ambient`: the air around gas b, at its ambient state, iorscale 1 */
     CHECK(s->settings.ambient_ior == 0 && s->ambient_ior == 1.0 + (1.000292 - 1.0));
     CHECK(s->shape_count == 2 && s->material_count == 2);
