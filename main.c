@@ -3261,6 +3261,12 @@ static int command_info(int argc, char **argv)
         printf("integrator: %s (the default for this scene)\n", integrator_name(rrv_scene_integrator(scene)));
     else
         printf("integrator: %s\n", integrator_name(scene->settings.integrator));
+    if (rrv_scene_integrator(scene) == RRV_INTEGRATOR_EIKONAL) {
+        if (scene->settings.step > 0)
+            printf("step: %g m\n", scene->settings.step);
+        else
+            printf("step: placed by the field (a turn of %g rad a step at most)\n", scene->settings.bend_tolerance);
+    }
     printf("ambient ior: %.9g%s\n", scene->ambient_ior,
            scene->settings.ambient_ior != 0 ? "" : scene->ambient_ior != 1 ? " (the gas at its ambient state)" : "");
     printf("materials: %d\n", scene->material_count);

@@ -1,4 +1,4 @@
-/* rrv.h 0.13.0 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.14.0 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -88,8 +88,8 @@
                  rrv_settings.refraction: COMB (default: leapfrog kicks at
                  spaced points, second order), POISSON (the paper's Snell at
                  every null event) or MIDPOINT (both first order).
-     eikonal     the ray equation d/ds(eta dx/ds) = grad eta marched by RK4
-                 or leapfrog, step rrv_settings.step: the reference.
+     eikonal     d/ds(eta dx/ds) = grad eta marched by RK4 or leapfrog, steps
+                 of rrv_settings.step or, none given, placed by the field.
    NEXT-EVENT ESTIMATION (rrv_settings.nee; refractive and eikonal only:
    classic's straight shadow rays are exact for straight rays)
      DEFAULT SHOOT on eikonal, AIM on refractive. STRAIGHT: a straight shadow
@@ -208,7 +208,7 @@
 #endif
 
 #define RRV_VERSION_MAJOR 0
-#define RRV_VERSION_MINOR 13
+#define RRV_VERSION_MINOR 14
 #define RRV_VERSION_PATCH 0
 
 #ifndef RRV_DEF
@@ -757,7 +757,7 @@ RRV_DEF const char *rrv_nanovdb_type_name(rrv_nanovdb_type type);
    and NanoVDB buffers too): the caller keeps what it passed.
    Defaults a zero asks for:
      camera    up (0,1,0), fov 40, 320 x 240 (eye and look have none)
-     settings  spp 16, max_depth 32, bend_tolerance 0.01, step 0.01,
+     settings  spp 16, max_depth 32, bend_tolerance 0.01, step placed,
                ambient_ior from the gas, else 1 (BOUNDARIES); the enums'
                zero members are the defaults (integrator: chosen from
                the scene, INTEGRATORS)
@@ -19477,6 +19477,10 @@ and BOUNDS (moved here from the manual at the top, word for word)
 ------------------------------------------------------------------------------
 VERSION HISTORY
 ------------------------------------------------------------------------------
+     0.14.0 eikonal steps placed by the field where no step is given
+            (a bend tolerance of turn each, at most a majorant cell, at
+            least 0.01 m; shoot's Jacobi fields follow the steps' lengths):
+            heat_shadow 2x the efficiency; a given step is fixed as before
      0.13.0 light samples by power (render lightsampler power|uniform):
             light shapes in proportion to their power, the sky only where
             it is the only light (smoke 2.0x, plume 1.5x the efficiency;
