@@ -13723,6 +13723,15 @@ static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, r
     return found;
 }
 
+/* Does the solved chain reach the light y from the side it emits on (the
+   normal ny, cross(e1, e2) of a quad or triangle)? A root that arrives
+   from behind carries no light: forward paths that hit a light's back
+   collect none either. */
+static int rrv__chain_meets_front(const rrv__chain *ch, rrv_vec3 ny)
+{
+    return rrv__dot(rrv__sub(ch->x[ch->n + 1], ch->x[ch->n]), ny) < 0;
+}
+
 /* One trial of the 1/p estimate: a fresh solve that comes back to the
    root w0. */
 typedef struct rrv__manifold_recurrence {
@@ -13764,7 +13773,7 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
     rrv__chain_setup(scene, x0, y, ny, st->manifold_gauge == RRV_GAUGE_ISO, st->manifold_drop, rrv__uniform(rng),
                      ch);
     if (st->manifold_trials <= 0) {
-        if (!rrv__manifold_try(ctx, ch, rng, &root)) return;
+        if (!rrv__manifold_try(ctx, ch, rng, &root) || !rrv__chain_meets_front(ch, ny)) return;
         rrv__manifold_recurrence again;
         double inverse_p;
         long count;
@@ -13780,7 +13789,7 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
     }
     for (trial = 0; trial < st->manifold_trials; ++trial) {
         int i;
-        if (!rrv__manifold_try(ctx, ch, rng, &root)) continue;
+        if (!rrv__manifold_try(ctx, ch, rng, &root) || !rrv__chain_meets_front(ch, ny)) continue;
         for (i = 0; i < nroots; ++i)
             if (rrv__length(rrv__sub(roots[i], root.w0)) < RRV__SOLVE_SAME_ROOT) break;
         if (i < nroots || nroots == RRV__MANIFOLD_ROOTS) continue;
