@@ -10128,6 +10128,11 @@ typedef struct rrv__sf_slot {
 #define RRV__SF_ANY RRV__SF_NO_LO, RRV__SF_NO_HI
 #define RRV__SF_NN 0.0, RRV__SF_NO_HI /* >= 0 (or > 0 with RRV__SF_GT) */
 #define RRV__SF_UNIT 0.0, 1.0
+/* Positions and sizes in the scene, within 1e150 m as the camera's are: a
+   squared distance then never overflows (a sphere of radius 1e200 had an
+   infinite r^2 and vanished from the picture). */
+#define RRV__SF_WORLD -1e150, 1e150
+#define RRV__SF_SIZE 0.0, 1e150
 
 static const rrv__sf_key rrv__sf_camera_keys[] = {
     /* The renderer squares distances from the camera in double precision,
@@ -10192,20 +10197,20 @@ static const rrv__sf_key rrv__sf_checker_keys[] = {
         "scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL                                               \
     }
 static const rrv__sf_key rrv__sf_sphere_keys[] = {
-    {"center", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_NN, NULL},
+    {"center", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_WORLD, NULL},
+    {"radius", RRV__SF_NUM, 1, RRV__SF_REQ | RRV__SF_GT, RRV__SF_SIZE, NULL},
     RRV__SF_SHAPE_TAIL,
 };
 static const rrv__sf_key rrv__sf_quad_keys[] = {
-    {"origin", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"u", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"v", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"origin", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_WORLD, NULL},
+    {"u", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_WORLD, NULL},
+    {"v", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_WORLD, NULL},
     RRV__SF_SHAPE_TAIL,
 };
 static const rrv__sf_key rrv__sf_triangle_keys[] = {
-    {"p0", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"p1", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
-    {"p2", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"p0", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_WORLD, NULL},
+    {"p1", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_WORLD, NULL},
+    {"p2", RRV__SF_NUM, 3, RRV__SF_REQ, RRV__SF_WORLD, NULL},
     RRV__SF_SHAPE_TAIL,
 };
 static const rrv__sf_key rrv__sf_mesh_keys[] = {
@@ -10227,7 +10232,7 @@ static const rrv__sf_key rrv__sf_env_gradient_keys[] = {
     {"scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},
 };
 static const rrv__sf_key rrv__sf_medium_keys[] = {
-    {"box", RRV__SF_NUM, 6, RRV__SF_REQ, RRV__SF_ANY, NULL},
+    {"box", RRV__SF_NUM, 6, RRV__SF_REQ, RRV__SF_WORLD, NULL},
     {"sigma_a", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
     {"sigma_s", RRV__SF_NUM, 3, 0, RRV__SF_NN, NULL},
     {"scale", RRV__SF_NUM, 1, 0, RRV__SF_NN, NULL},

@@ -223,6 +223,7 @@ static const struct corpus_case {
     rrv_result code;
 } corpus_cases[] = {
     {"albedo_mix", RRV_ERROR_PARSE},       {"bad_choice", RRV_ERROR_PARSE},
+    {"sphere_huge", RRV_ERROR_PARSE},      {"box_huge", RRV_ERROR_PARSE},
     {"emissionnee_choice", RRV_ERROR_PARSE}, {"cellcentered_choice", RRV_ERROR_PARSE},
     {"bad_obj_line", RRV_ERROR_PARSE},     {"blob_mix", RRV_ERROR_PARSE},
     {"box_empty", RRV_ERROR_PARSE},        {"camera_up_parallel", RRV_ERROR_PARSE},
