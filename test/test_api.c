@@ -110,9 +110,9 @@ static int same_render(rrv_scene *a, rrv_scene *b)
 }
 
 /* No integrator key: classic where nothing refracts (the same render bit
-   for bit), eikonal where a clear refracting medium sees a small light,
-   the comb otherwise (a large light, a smoke in the plume's box, an
-   explicit nee other than shoot). */
+   for bit), eikonal where a clear refracting medium without sharp faces
+   sees a small light, the comb otherwise (a large light, a smoke in the
+   plume's box, an explicit nee other than shoot, faces that are jumps). */
 static void test_default_integrator(void)
 {
     struct {
@@ -133,6 +133,8 @@ static void test_default_integrator(void)
         {"medium smoke box 2 0 -1 3 2 1\ndensity smoke constant 0.1", 1, RRV_INTEGRATOR_EIKONAL},
         /* the IOR of a bare gas box equals the ambient one it sets: inert */
         {"", 2, RRV_INTEGRATOR_CLASSIC},
+        /* an ambient of 1 makes the plume's faces jumps shooting does not cross */
+        {"ambient ior 1", 1, RRV_INTEGRATOR_REFRACTIVE},
     };
     int k;
     for (k = 0; k < (int)(sizeof cases / sizeof cases[0]); ++k) {
