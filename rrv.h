@@ -2322,7 +2322,9 @@ static double rrv__field_eval(const rrv_field *f, rrv_vec3 p, int channel, doubl
 /* The samples [a, b] (per axis, inclusive) of a grid whose cells touch the
    box [lo, hi]; 0 if the box misses the grid. Trilinear values never exceed
    those samples, so their max bounds the field over the box. A box that
-   reaches into a cell by less than 1e-9 of it is taken not to: majorant
+   reaches into a cell by less than 1e-9 of it is taken not to (unless the
+   box is itself that thin, a medium inside one voxel of a huge grid, where
+   skipping it would leave the medium empty): majorant
    cells aligned with the voxels otherwise pick up their neighbours' samples
    through the rounding of their corners (a single voxel of 1e8 then spread
    its majorant over 4^3 voxels of nothing), and what the sliver misses is
@@ -2339,6 +2341,10 @@ static int rrv__grid_span(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, int a[3],
     for (c = 0; c < 3; ++c) {
         double s = (dim[c] - 1) / (ghi[c] - glo[c]);
         double fa = floor((blo[c] - glo[c]) * s + 1e-9), fb = ceil((bhi[c] - glo[c]) * s - 1e-9);
+        if (fa > fb) { /* the box is itself a sliver: all of it counts */
+            fa = floor((blo[c] - glo[c]) * s);
+            fb = ceil((bhi[c] - glo[c]) * s);
+        }
         if (!(fb >= 0) || !(fa <= dim[c] - 1)) return 0;
         a[c] = fa < 0 ? 0 : (int)fa;
         b[c] = fb > dim[c] - 1 ? dim[c] - 1 : (int)fb;
@@ -2347,7 +2353,8 @@ static int rrv__grid_span(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi, int a[3],
 }
 
 /* Whether the box reaches into the grid's box by more than 1e-9 of a voxel
-   on every axis (the sliver rule of rrv__grid_span, here for the grid's own
+   on every axis, or by 1e-9 of the box where the box is thinner than a
+   voxel (the sliver rule of rrv__grid_span, here for the grid's own
    faces): a majorant cell just outside a grid whose faces it shares would
    otherwise take the density on the face, and a ray through that cell,
    where the density is 0, pays null collisions at that rate. */
@@ -2358,7 +2365,8 @@ static int rrv__grid_reaches(const rrv_grid *g, rrv_vec3 lo, rrv_vec3 hi)
         double glo = rrv__axis(g->lo, a), ghi = rrv__axis(g->hi, a);
         int voxels = (a == 0 ? g->nx : a == 1 ? g->ny : g->nz) - 1;
         double overlap = rrv__mind(rrv__axis(hi, a), ghi) - rrv__maxd(rrv__axis(lo, a), glo);
-        if (!(overlap > 1e-9 * (ghi - glo) / voxels)) return 0;
+        double extent = rrv__axis(hi, a) - rrv__axis(lo, a);
+        if (!(overlap > 1e-9 * rrv__mind((ghi - glo) / voxels, extent))) return 0;
     }
     return 1;
 }

@@ -251,6 +251,29 @@ static void test_transmittance_grid_ramp(void)
     rrv_scene_free(s);
 }
 
+/* A medium inside one voxel of a grid a million million times its size
+   (a grid file's box in the wrong unit): the majorant cells, each far
+   thinner than the voxel's 1e-9 sliver, still take the voxel's value.
+   They took none, and the medium rendered as empty. */
+static void test_transmittance_inside_one_huge_voxel(void)
+{
+    rrv_scene *s = tb_scene(4, 4);
+    rrv_error err;
+    rrv_medium *m = tb_medium(s, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1), 0.0, 1.0);
+    rrv_grid *g = &m->density.grid;
+    int i;
+    m->density.kind = RRV_FIELD_GRID;
+    g->nx = g->ny = g->nz = 4;
+    g->channels = 1;
+    g->lo = rrv__v3(-1e12, -1e12, -1e12);
+    g->hi = rrv__v3(1e12, 1e12, 1e12);
+    g->data = (float *)malloc(64 * sizeof(float));
+    for (i = 0; i < 64; ++i) g->data[i] = 0.75f;
+    CHECK(rrv_scene_prepare(s, &err) == RRV_OK);
+    check_transmittance(s, rrv__v3(-3, 0.2, 0.1), rrv__v3(1, 0, 0), DBL_MAX, 1.5, "inside one huge voxel");
+    rrv_scene_free(s);
+}
+
 /* ---- channel groups: one majorant per group of channels -------------------- */
 
 static void test_channel_groups(void)
@@ -1025,6 +1048,7 @@ int main(int argc, char **argv)
     RUN(test_transmittance_homogeneous);
     RUN(test_transmittance_gaussian_blob);
     RUN(test_transmittance_grid_ramp);
+    RUN(test_transmittance_inside_one_huge_voxel);
     RUN(test_channel_groups);
     RUN(test_channel_groups_overlapping_media);
     RUN(test_channel_groups_bound_work);
