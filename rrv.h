@@ -9433,6 +9433,46 @@ static void rrv__scene_release_prepared(rrv_scene *scene)
     scene->prepared = 0;
 }
 
+/* The least value a field of the gas state can take in a medium's box:
+   blobs by rrv__field_lower, which places each at its nearest or farthest
+   point of the box (summing the weights alone would refuse two cold spots
+   far apart), every other kind by the range of its values. */
+static double rrv__gas_field_least(const rrv_medium *m, const rrv_field *f, double ambient)
+{
+    double lo, hi;
+    if (f->kind == RRV_FIELD_BLOBS) return rrv__field_lower(f, m->lo, m->hi);
+    rrv__field_range(f, ambient, &lo, &hi);
+    return lo;
+}
+
+/* The gas relation divides by T and scales by P: a medium whose IOR comes
+   from its gas state needs both above 0 throughout its box. Checked before
+   the IOR's range, which would otherwise report the pole at T = 0 as an IOR
+   of thousands and take a negative pressure for a plausible IOR below 1. */
+static rrv_result rrv__check_gas_state(const rrv_scene *scene, const rrv_medium *m, rrv_error *err)
+{
+    static const char *const stmt[2] = {"temperature", "pressure"};
+    double least[2];
+    int k;
+    if (!m->ior_from_gas) return RRV_OK;
+    least[0] = (rrv__gas_field_least(m, &m->temperature, m->temperatureoffset + m->T_ref / m->temperaturescale) -
+                m->temperatureoffset) * m->temperaturescale;
+    least[1] = rrv__gas_field_least(m, &m->pressure, m->P_ref);
+    for (k = 0; k < 2; ++k) {
+        int at = 2 + k;
+        const char *unit = k ? "Pa" : "K";
+        if (least[k] > 0) continue;
+        if (m->source[at][0])
+            return rrv__fail(err, m->line[at] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[at],
+                             "%s: grid \"%s\" gives medium \"%s\" a %s down to %g %s; its IOR comes from the gas, "
+                             "which needs it above 0", stmt[k], m->source[at], m->name, stmt[k], least[k], unit);
+        return rrv__fail(err, m->line[at] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[at],
+                         "%s: medium \"%s\" may reach a %s of %g %s; its IOR comes from the gas, which needs it "
+                         "above 0", stmt[k], m->name, stmt[k], least[k], unit);
+    }
+    return RRV_OK;
+}
+
 /* The limits of BOUNDS for one medium, with the scene line of the statement
    that broke each (the later of the lines involved). */
 static rrv_result rrv__check_medium(const rrv_scene *scene, const rrv_medium *m, rrv_error *err)
@@ -9440,6 +9480,7 @@ static rrv_result rrv__check_medium(const rrv_scene *scene, const rrv_medium *m,
     static const char *const stmt[5] = {"medium", "density", "temperature", "pressure", "ior"};
     double a, b;
     int c, at;
+    rrv_result gas;
     for (c = 0; c < 3; ++c)
         if (!((m->sigma_a[c] + m->sigma_s[c]) * m->scale <= DBL_MAX))
             return rrv__fail(err, m->line[0] ? RRV_ERROR_PARSE : RRV_ERROR_ARGUMENT, scene->path, m->line[0],
@@ -9459,6 +9500,8 @@ static rrv_result rrv__check_medium(const rrv_scene *scene, const rrv_medium *m,
                          "above the %g rrv accepts",
                          stmt[at], m->name, a, rrv__medium_size(m), RRV_MAX_OPTICAL_DEPTH);
     }
+    gas = rrv__check_gas_state(scene, m, err);
+    if (gas != RRV_OK) return gas;
     if (!rrv__medium_ior_ok(m, &a, &b)) {
         at = 4;
         if (m->ior_from_gas) {

@@ -264,7 +264,7 @@ static const struct corpus_case {
     /* refused by the limits of BOUNDS (rrv.h) */
     {"bound_ambient", RRV_ERROR_PARSE},    {"bound_bendtolerance", RRV_ERROR_PARSE},
     {"bound_dense_grid", RRV_ERROR_PARSE}, {"bound_extinction", RRV_ERROR_PARSE},
-    {"bound_fisheye", RRV_ERROR_PARSE},    {"bound_gas_cold", RRV_ERROR_PARSE},
+    {"bound_fisheye", RRV_ERROR_PARSE},    {"bound_gas_cold", RRV_ERROR_PARSE}, {"bound_gas_cold_grid", RRV_ERROR_PARSE}, {"bound_gas_pressure", RRV_ERROR_PARSE},
     {"bound_ior_alternating", RRV_ERROR_PARSE}, {"bound_ior_blob", RRV_ERROR_PARSE},
     {"bound_ior_nonpositive", RRV_ERROR_PARSE}, {"bound_ior_shell", RRV_ERROR_PARSE},
     {"bound_ior_slab", RRV_ERROR_PARSE},   {"bound_light", RRV_ERROR_PARSE},

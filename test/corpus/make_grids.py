@@ -56,6 +56,8 @@ def main():
     corpus("bound_dense", header() + samples([3e38] * 8))
     corpus("bound_ior_alternating", header() + samples([1e9, 0.0] * 4))
     corpus("bound_ior_nonpositive", header() + samples([-1.0, -2.0] * 4))
+    # a temperature grid in kelvin whose cold corner is at 0 K
+    corpus("bound_gas_cold_grid", header() + samples([0.0, 300.0, 310.0, 320.0] * 2))
 
 
 if __name__ == "__main__":
