@@ -13851,11 +13851,11 @@ static int rrv__chain_meets_front(const rrv__chain *ch, rrv_vec3 ny)
    (rrv__shoot_mis_weight) with the chain's own |det| = 1 / density; the
    forward path takes one minus shoot's weight from the shot along its own
    direction (rrv__solver_forward_weight), which agrees with the chain's
-   wherever the two models of the ray do. Near a caustic |det| -> 0, the
-   forward path takes the connection and the estimate stays below
-   1 / (2 pdf_dir): with the chain alone (weight 1, as on the comb, whose
-   forward paths have no det to weigh by) a pixel of the fire caustic had
-   5.5x shoot's variance, from fireflies at its caustics. */
+   wherever the two models of the ray do (within 2e-3 under a plume,
+   test_nee). Near a caustic |det| -> 0, the forward path takes the
+   connection and the estimate stays below 1 / (2 pdf_dir), as shoot's
+   does. On the comb, whose forward paths have no det to weigh by, the
+   chain keeps its paths alone (weight 1). */
 static double rrv__manifold_mis_weight(const rrv__context *ctx, double density, double pdf_area, double pdf_dir)
 {
     if (!ctx->eikonal) return 1.0;
