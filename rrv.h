@@ -13047,9 +13047,9 @@ static void rrv__chain_move(const rrv_scene *scene, rrv__chain *ch, const rrv_ve
    has one box support, the planes are spaced as the eikonal's steps are
    placed along the chord (rrv__field_step_length): the fire caustic's
    chains went from 304 planes at the fixed 0.01 m to 54, each solve 5x
-   cheaper (test/bench/RESULTS.md, "The paper's solver"). With drop > 0 a plane is left out
-   where eta along the chord changes by less than drop across it (faster,
-   biased). ISO leaves out planes where the chord has no isosurface. */
+   cheaper (test/bench/RESULTS.md, "The paper's solver"). With drop > 0 a
+   plane is left out where eta along the chord changes by less than drop
+   across it (faster, biased). ISO leaves out planes where the chord has no isosurface. */
 static void rrv__chain_setup(const rrv_scene *scene, rrv_vec3 x0, rrv_vec3 y, rrv_vec3 ny, int iso, double drop,
                              double u, rrv__chain *ch)
 {
