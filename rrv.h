@@ -7063,6 +7063,7 @@ typedef struct rrv__context {
     double trap_length;      /* rrv__trap_length: a ray's run through the supports */
     uint64_t sample_bound;   /* rrv__sample_bound: loop iterations and collisions of a camera path */
     struct rrv__chain *chain; /* nee manifold's scratch (rrv__chain_new), NULL otherwise */
+    struct rrv__chain *coarse_chain; /* its coarse stage's (rrv__manifold_try), NULL: none */
     rrv_render_stats stats;
 } rrv__context;
 
@@ -12081,10 +12082,11 @@ static rrv_vec3 rrv__solver_seed(rrv_vec3 x0, rrv_vec3 y, rrv__rng *rng)
     return rrv__sample_uniform_sphere(u1, u2);
 }
 
-/* The step of a solve's coarse stage: RRV__SOLVE_COARSE times the scene's,
-   but no longer than turns a ray at the steepest gradient of any support
-   by RRV__SOLVE_COARSE_BEND radians (|d'| = |grad_perp eta| / eta), and
-   never shorter than the scene's. The coarse stage only has to land its
+/* The step of a solve's coarse stage: RRV__SOLVE_COARSE times step (the
+   scene's for shoot, a chain's mean spacing for manifold), but no longer
+   than turns a ray at the steepest gradient of any support by bend
+   radians (|d'| = |grad_perp eta| / eta; shoot's RRV__SOLVE_COARSE_BEND),
+   and never shorter than step. The coarse stage only has to land its
    root in the basin where the polish at the scene's step converges in a
    shot or two. Longer is not safe: a root whose basin the coarse stage
    never converges to has probability zero, a bias, not noise. At 32x the
@@ -12096,16 +12098,21 @@ static rrv_vec3 rrv__solver_seed(rrv_vec3 x0, rrv_vec3 y, rrv__rng *rng)
    (eikonal, nee shoot, 64x48 crop, 8 spp, one thread) 8x took 1.45 s of
    CPU and the scene's own step 1.03 s; the cap gives 0.3 there (the
    lens's peak |grad eta| is 2 per metre). */
-static double rrv__solve_coarse_step(const rrv_scene *scene, double eta_floor)
+static double rrv__coarse_of(const rrv_scene *scene, double step, double bend, double eta_floor)
 {
-    double step = rrv__step(scene), coarse = RRV__SOLVE_COARSE * step, peak = 0;
+    double coarse = RRV__SOLVE_COARSE * step, peak = 0;
     int i;
     for (i = 0; i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i];
         if (rrv__medium_refracts(m) && m->majorant && m->majorant->grad_peak > peak) peak = m->majorant->grad_peak;
     }
-    if (peak > 0) coarse = rrv__mind(coarse, RRV__SOLVE_COARSE_BEND * eta_floor / peak);
+    if (peak > 0) coarse = rrv__mind(coarse, bend * eta_floor / peak);
     return rrv__maxd(coarse, step);
+}
+
+static double rrv__solve_coarse_step(const rrv_scene *scene, double eta_floor)
+{
+    return rrv__coarse_of(scene, rrv__step(scene), RRV__SOLVE_COARSE_BEND, eta_floor);
 }
 
 /* The last polish of one connection's solves (rrv__solve_shot_seeded):
@@ -13050,12 +13057,12 @@ static void rrv__chain_move(const rrv_scene *scene, rrv__chain *ch, const rrv_ve
    cheaper (test/bench/RESULTS.md, "The paper's solver"). With drop > 0 a
    plane is left out where eta along the chord changes by less than drop
    across it (faster, biased). ISO leaves out planes where the chord has no isosurface. */
-static void rrv__chain_setup(const rrv_scene *scene, rrv_vec3 x0, rrv_vec3 y, rrv_vec3 ny, int iso, double drop,
-                             double u, rrv__chain *ch)
+static void rrv__chain_setup_spaced(const rrv_scene *scene, rrv_vec3 x0, rrv_vec3 y, rrv_vec3 ny, int iso,
+                                    double drop, double u, double spacing, rrv__chain *ch)
 {
     rrv_vec3 d = rrv__sub(y, x0);
-    double L = rrv__length(d), lo = DBL_MAX, hi = -DBL_MAX, h = rrv__step(scene), prev_eta = 0;
-    const rrv_medium *sole = scene->settings.step > 0 ? NULL : rrv__sole_support(scene);
+    double L = rrv__length(d), lo = DBL_MAX, hi = -DBL_MAX, h = spacing > 0 ? spacing : rrv__step(scene), prev_eta = 0;
+    const rrv_medium *sole = scene->settings.step > 0 || spacing > 0 ? NULL : rrv__sole_support(scene);
     long count, i;
     int m;
     ch->n = 0;
@@ -13116,6 +13123,12 @@ static void rrv__chain_setup(const rrv_scene *scene, rrv_vec3 x0, rrv_vec3 y, rr
         ++ch->n;
     }
     ch->x[ch->n + 1] = y;
+}
+
+static void rrv__chain_setup(const rrv_scene *scene, rrv_vec3 x0, rrv_vec3 y, rrv_vec3 ny, int iso, double drop,
+                             double u, rrv__chain *ch)
+{
+    rrv__chain_setup_spaced(scene, x0, y, ny, iso, drop, u, 0.0, ch);
 }
 
 /* Seeds the chain from a direction w at x0: a parabola from x0 to y that
@@ -13806,27 +13819,151 @@ static rrv_vec3 rrv__chain_seed_direction(const rrv__chain *ch, rrv__rng *rng)
     return rrv__sample_uniform_sphere(u1, u2);
 }
 
-/* One solve from a fresh seed (a chain traced from a direction of
-   rrv__chain_seed_direction and aimed at y, or the parabola from it where
-   no trace reaches y), counted in the stats; its iterations are the
-   aim's traces and the solve's evaluations. */
-static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, rrv__mroot *root)
+/* The last polish of one connection's chain solves: the snapped coarse
+   root it started from and what it returned (rrv__manifold_try). */
+#define RRV__COARSE_MAX (RRV__CHAIN_MAX / RRV__SOLVE_COARSE)
+typedef struct rrv__chain_memo {
+    int valid, found, n;
+    double seed[RRV__COARSE_MAX][3];
+    rrv__mroot root;
+} rrv__chain_memo;
+
+/* The coarse chain's inner vertices relative to x0 in the chord's frame
+   (along c, c1, c2), each snapped to a lattice of 2^-20 m: two solves
+   that converged to one root (to 1e-9) snap to the same numbers but for
+   one in a few hundred, which only polishes again. */
+static void rrv__chain_snap(const rrv__chain *coarse, double (*key)[3])
 {
-    int found = 0, k, iterations = 0;
+    const double per = 1048576.0;
+    int k;
+    for (k = 1; k <= coarse->n; ++k) {
+        rrv_vec3 o = rrv__sub(coarse->x[k], coarse->x[0]);
+        key[k - 1][0] = floor(rrv__dot(o, coarse->c) * per + 0.5) / per;
+        key[k - 1][1] = floor(rrv__dot(o, coarse->c1) * per + 0.5) / per;
+        key[k - 1][2] = floor(rrv__dot(o, coarse->c2) * per + 0.5) / per;
+    }
+}
+
+/* Seeds ch (same x0, y and so the same chord frame) on the cubic through
+   the m snapped coarse vertices key (rrv__chain_snap) and the ends: the
+   offset from the chord as a function of t along it, Hermite with
+   centred-difference slopes, ISO vertices then projected. */
+static void rrv__chain_seed_between(const rrv_scene *scene, rrv__chain *ch, const double (*key)[3], int m)
+{
+    double L = rrv__length(rrv__sub(ch->x[ch->n + 1], ch->x[0]));
+    int k, j = 0;
+    ch->failed = 0;
+    for (k = 1; k <= ch->n; ++k) {
+        double t = ch->t[k - 1], ta, tb, oa[2], ob[2], sa[2], sb[2], h, s, h00, h10, h01, h11, o[2];
+        int a;
+        while (j < m && key[j][0] <= t) ++j; /* t lies between knots j - 1 and j (0 and m + 1 the ends) */
+        for (a = 0; a < 2; ++a) {
+            double tp, op, tn, on;
+            ta = j == 0 ? 0.0 : key[j - 1][0];
+            oa[a] = j == 0 ? 0.0 : key[j - 1][1 + a];
+            tb = j == m ? L : key[j][0];
+            ob[a] = j == m ? 0.0 : key[j][1 + a];
+            tp = j <= 1 ? 0.0 : key[j - 2][0];
+            op = j <= 1 ? 0.0 : key[j - 2][1 + a];
+            tn = j + 1 >= m ? L : key[j + 1][0];
+            on = j + 1 >= m ? 0.0 : key[j + 1][1 + a];
+            sa[a] = j == 0 ? (ob[a] - oa[a]) / fmax(tb - ta, 1e-12) : (ob[a] - op) / fmax(tb - tp, 1e-12);
+            sb[a] = j == m ? (ob[a] - oa[a]) / fmax(tb - ta, 1e-12) : (on - oa[a]) / fmax(tn - ta, 1e-12);
+        }
+        h = fmax(tb - ta, 1e-12);
+        s = fmin(fmax((t - ta) / h, 0.0), 1.0);
+        h00 = (1 + 2 * s) * (1 - s) * (1 - s);
+        h10 = s * (1 - s) * (1 - s);
+        h01 = s * s * (3 - 2 * s);
+        h11 = s * s * (s - 1);
+        for (a = 0; a < 2; ++a) o[a] = h00 * oa[a] + h10 * h * sa[a] + h01 * ob[a] + h11 * h * sb[a];
+        ch->x[k] = rrv__madd(rrv__madd(rrv__madd(ch->x[0], ch->c, t), ch->c1, o[0]), ch->c2, o[1]);
+        if (ch->iso && !rrv__project_iso(scene, &ch->x[k], ch->level[k])) ch->failed = 1;
+    }
+}
+
+static int rrv__chain_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroot *root)
+{
+    return scene->settings.manifold_solver == RRV_MANIFOLD_SOLVER_DOGLEG ? rrv__manifold_dogleg(scene, ch, root)
+                                                                        : rrv__manifold_solve(scene, ch, root);
+}
+
+/* Seeds ch from direction w (a chain traced from w and aimed at y, or the
+   parabola from it where no trace reaches y) and solves it; *evaluations
+   gets the aim's traces and the solve's evaluations. */
+static int rrv__chain_solve_from(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, rrv__mroot *root,
+                                 int *evaluations)
+{
+    int aimed, found;
+    if (!rrv__chain_aim(scene, ch, w, &aimed)) rrv__chain_seed(scene, ch, w);
+    found = rrv__chain_solve(scene, ch, root);
+    *evaluations += root->iterations + aimed;
+    return found;
+}
+
+/* One seed's solve. Most take two stages, as shoot's solve does with its
+   coarse steps: the coarse chain (ctx->coarse_chain, planes about
+   RRV__SOLVE_COARSE times as far apart) is aimed and solved from the seed
+   w; then the fine chain is seeded on the cubic through the coarse root's
+   vertices, snapped to a lattice (rrv__chain_snap,
+   rrv__chain_seed_between), and solved from there. From raw seeds the
+   lens caustic's fine chains took 16.9 evaluations of 101 planes, 10 of
+   them the aim's traces; the polish takes about 5, and the coarse stage
+   costs a fraction of one fine evaluation per evaluation.
+   The map from seed to root stays deterministic. A seed whose coarse
+   solve fails is solved on the fine chain directly, as is every seed in a
+   share RRV__CHAIN_DIRECT drawn per seed: so every root the fine chain
+   reaches from some seed keeps a nonzero probability, however the coarse
+   chain's roots differ from it. The polish is a function of the snapped
+   coarse root alone (test_manifold_memo_is_exact), so where a try's
+   coarse root snaps onto the memo's, the memo's result is the polish's,
+   bit for bit: a trial of 1/p that comes back to the root costs a coarse
+   solve. */
+#define RRV__CHAIN_DIRECT 0.0625
+static int rrv__chain_try_once(rrv__context *ctx, rrv__chain *ch, rrv_vec3 w, rrv__rng *rng, rrv__chain_memo *memo,
+                               rrv__mroot *root, int *evaluations)
+{
+    const rrv_scene *scene = ctx->scene;
+    rrv__chain *coarse = ctx->coarse_chain;
+    rrv__mroot near;
+    double key[RRV__COARSE_MAX][3];
+    int found;
+    if (!coarse || coarse->n == 0 || rrv__uniform(rng) < RRV__CHAIN_DIRECT ||
+        !rrv__chain_solve_from(scene, coarse, w, &near, evaluations))
+        return rrv__chain_solve_from(scene, ch, w, root, evaluations);
+    rrv__chain_snap(coarse, key);
+    if (memo && memo->valid && memo->n == coarse->n &&
+        !memcmp(key, memo->seed, (size_t)coarse->n * sizeof key[0])) {
+        *root = memo->root;
+        return memo->found;
+    }
+    rrv__chain_seed_between(scene, ch, (const double (*)[3])key, coarse->n);
+    found = !ch->failed && rrv__chain_solve(scene, ch, root);
+    *evaluations += root->iterations;
+    if (memo) {
+        memo->valid = 1;
+        memo->found = found;
+        memo->n = coarse->n;
+        memcpy(memo->seed, key, (size_t)coarse->n * sizeof key[0]);
+        memo->root = *root;
+    }
+    return found;
+}
+
+/* One solve from fresh seeds of rrv__chain_seed_direction, counted in the
+   stats. On return with the memo's result (a trial), ch is left as it
+   was: only the root's direction and density are read then. */
+static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, rrv__chain_memo *memo,
+                             rrv__mroot *root)
+{
+    int found = 0, k, evaluations = 0;
     /* up to RRV__SOLVE_RESTARTS seeds, as shoot's solve: a solve that
        fails is not a return to the root, so each failure of the trials
        that estimate 1/p doubled a connection's weight or more (on the
        fire caustic 1.7 % of connections, 40x shoot's variance a sample) */
-    for (k = 0; k < RRV__SOLVE_RESTARTS && !found; ++k) {
-        rrv_vec3 w = rrv__chain_seed_direction(ch, rng);
-        int aimed;
-        if (!rrv__chain_aim(ctx->scene, ch, w, &aimed)) rrv__chain_seed(ctx->scene, ch, w);
-        found = ctx->scene->settings.manifold_solver == RRV_MANIFOLD_SOLVER_DOGLEG
-                    ? rrv__manifold_dogleg(ctx->scene, ch, root)
-                    : rrv__manifold_solve(ctx->scene, ch, root);
-        iterations += root->iterations + aimed;
-    }
-    root->iterations = iterations;
+    for (k = 0; k < RRV__SOLVE_RESTARTS && !found; ++k)
+        found = rrv__chain_try_once(ctx, ch, rrv__chain_seed_direction(ch, rng), rng, memo, root, &evaluations);
+    root->iterations = evaluations;
     ++ctx->stats.solves;
     ctx->stats.solve_iterations += (uint64_t)root->iterations;
     if (found) {
@@ -13868,13 +14005,42 @@ static double rrv__manifold_mis_weight(const rrv__context *ctx, double density, 
 typedef struct rrv__manifold_recurrence {
     rrv__context *ctx;
     rrv_vec3 w0;
+    rrv__chain_memo *memo;
 } rrv__manifold_recurrence;
 static int rrv__manifold_recurs(void *user, rrv__rng *rng)
 {
     rrv__manifold_recurrence *t = (rrv__manifold_recurrence *)user;
     rrv__mroot again;
-    return rrv__manifold_try(t->ctx, t->ctx->chain, rng, &again) &&
+    return rrv__manifold_try(t->ctx, t->ctx->chain, rng, t->memo, &again) &&
            rrv__length(rrv__sub(again.w0, t->w0)) < RRV__SOLVE_SAME_ROOT;
+}
+
+/* Sets up ctx->coarse_chain for the chain just set up in ctx->chain (light
+   normal ny, comb offset u): even planes RRV__SOLVE_COARSE times the fine
+   chain's mean spacing apart, but no farther than turns a ray by
+   RRV__CHAIN_COARSE_BEND at the steepest gradient (rrv__coarse_of); no
+   planes (no coarse stage) where that leaves more than half of the fine
+   chain's. The bend's cap keeps the coarse chain's roots and basins close
+   to the fine one's where several roots compete: on the lens caustic at
+   shoot's 0.6 rad (13 planes, 0.16 rad a plane) the seeds found the roots
+   in other proportions, and the estimate of 1/p had 1.6x the variance a
+   sample, more than the 1.4x the coarse stage saved in time; at 0.1 (20
+   planes) efficiency was the fine chain's alone. On the fire caustic and
+   the heat shadow, one root a connection, the cap does not bind. */
+#define RRV__CHAIN_COARSE_BEND 0.1
+static void rrv__chain_setup_coarse(rrv__context *ctx, rrv_vec3 ny, double u)
+{
+    const rrv__chain *ch = ctx->chain;
+    rrv__chain *coarse = ctx->coarse_chain;
+    double spacing;
+    if (!coarse) return;
+    coarse->n = 0;
+    if (ch->n < 4) return;
+    spacing = rrv__coarse_of(ctx->scene, (ch->hi - ch->lo) / ch->n, RRV__CHAIN_COARSE_BEND,
+                             ctx->eta_floor > 0 ? ctx->eta_floor : 1.0);
+    rrv__chain_setup_spaced(ctx->scene, ch->x[0], ch->x[ch->n + 1], ny, ch->iso, ctx->scene->settings.manifold_drop,
+                            u, spacing, coarse);
+    if (2 * coarse->n > ch->n) coarse->n = 0;
 }
 
 /* Curved NEE from x0 by the manifold walk. The light point y and the
@@ -13893,24 +14059,28 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
     const rrv_settings *st = &scene->settings;
     rrv__chain *ch = ctx->chain;
     rrv__mroot root;
+    rrv__chain_memo memo;
     rrv_vec3 y, ny, roots[RRV__MANIFOLD_ROOTS];
-    double pdf_area, carried[3], k;
+    double pdf_area, carried[3], k, offset;
     const rrv_shape *s = rrv__pick_area_light(scene, draw, x0, 0, &y, &ny, &pdf_area);
     int c, nroots = 0, trial;
     double to_y;
     if (!s || !ch) return;
     to_y = rrv__length(rrv__sub(y, x0));
     if (!(to_y > 0) || rrv__weak_chord(ctx, x0, rrv__scale(rrv__sub(y, x0), 1.0 / to_y), to_y)) return;
-    rrv__chain_setup(scene, x0, y, ny, st->manifold_gauge == RRV_GAUGE_ISO, st->manifold_drop, rrv__uniform(rng),
-                     ch);
+    offset = rrv__uniform(rng);
+    rrv__chain_setup(scene, x0, y, ny, st->manifold_gauge == RRV_GAUGE_ISO, st->manifold_drop, offset, ch);
+    rrv__chain_setup_coarse(ctx, ny, offset);
+    memo.valid = 0;
     if (st->manifold_trials <= 0) {
-        if (!rrv__manifold_try(ctx, ch, rng, &root) || !rrv__chain_meets_front(ch, ny)) return;
+        if (!rrv__manifold_try(ctx, ch, rng, &memo, &root) || !rrv__chain_meets_front(ch, ny)) return;
         rrv__manifold_recurrence again;
         double inverse_p;
         long count;
         if (!rrv__chain_carry(ctx, ch, v, rng, carried)) return;
         again.ctx = ctx;
         again.w0 = root.w0;
+        again.memo = &memo;
         inverse_p = rrv__inverse_probability(rng, RRV__SOLVE_TRIALS, rrv__manifold_recurs, &again, &count);
         ctx->stats.solve_trials += (uint64_t)count;
         ++ctx->stats.solve_connections;
@@ -13921,7 +14091,7 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
     }
     for (trial = 0; trial < st->manifold_trials; ++trial) {
         int i;
-        if (!rrv__manifold_try(ctx, ch, rng, &root) || !rrv__chain_meets_front(ch, ny)) continue;
+        if (!rrv__manifold_try(ctx, ch, rng, NULL, &root) || !rrv__chain_meets_front(ch, ny)) continue;
         for (i = 0; i < nroots; ++i)
             if (rrv__length(rrv__sub(roots[i], root.w0)) < RRV__SOLVE_SAME_ROOT) break;
         if (i < nroots || nroots == RRV__MANIFOLD_ROOTS) continue;
@@ -13940,10 +14110,17 @@ static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, c
 static int rrv__solver_setup(rrv__context *ctx)
 {
     if (ctx->shoot || ctx->manifold) rrv__cone_setup(ctx);
-    return !ctx->manifold || (ctx->chain = rrv__chain_new(RRV__CHAIN_MAX)) != NULL;
+    if (!ctx->manifold) return 1;
+    ctx->chain = rrv__chain_new(RRV__CHAIN_MAX);
+    ctx->coarse_chain = rrv__chain_new(RRV__COARSE_MAX);
+    return ctx->chain && ctx->coarse_chain;
 }
 
-static void rrv__solver_release(rrv__context *ctx) { rrv__chain_delete(ctx->chain); }
+static void rrv__solver_release(rrv__context *ctx)
+{
+    rrv__chain_delete(ctx->chain);
+    rrv__chain_delete(ctx->coarse_chain);
+}
 
 static void rrv__solver_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                             const rrv__light_draw *draw, rrv__rng *rng)

@@ -1504,6 +1504,64 @@ static void test_manifold_bad_chains(void)
 /* A render context whose chain cannot be allocated: rrv_render_rect says
    so (RRV_ERROR_MEMORY) and adds nothing; the next render, allocations
    granted, works. */
+/* A chain try's coarse stage (rrv__chain_try_once): where a trial's
+   coarse root snaps onto the last polish's, the memo stands for the
+   polish. That is exact only if a polish is a function of its snapped
+   seed alone, so here each trial of the lens caustic's connections is run
+   twice from one random state, with the memo and without (NULL: always
+   polished), and the two must return the same root bit for bit: found,
+   w0 and density. The memo must have stood for polishes (the run with it
+   took fewer evaluations) in at least a fifth of the trials, and the
+   coarse chain must have at most half the fine one's planes. */
+static void test_manifold_memo_is_exact(void)
+{
+    rrv_scene *s = NULL;
+    rrv__context ctx;
+    rrv__rng rng;
+    int k, trial, coarse = 0, trials = 0, hits = 0, differ = 0;
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
+    solver_context(&ctx, s);
+    ctx.partition = ctx.manifold = 1;
+    ctx.eta_floor = 1.0;
+    ctx.chain = rrv__chain_new(RRV__CHAIN_MAX);
+    ctx.coarse_chain = rrv__chain_new(RRV__COARSE_MAX);
+    rrv__rng_seed(&rng, 91, 0, 0);
+    for (k = 0; ctx.chain && ctx.coarse_chain && k < 200; ++k) {
+        rrv_vec3 x0 = rrv__v3(1.2 * rrv__uniform(&rng) - 0.6, 1e-5, 1.2 * rrv__uniform(&rng) - 0.6);
+        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5), ny = rrv__v3(0, -1, 0);
+        double u = rrv__uniform(&rng);
+        rrv__chain_memo memo;
+        rrv__mroot root;
+        rrv__chain_setup(s, x0, y, ny, 0, 0.0, u, ctx.chain);
+        rrv__chain_setup_coarse(&ctx, ny, u);
+        if (ctx.coarse_chain->n == 0) continue;
+        ++coarse;
+        CHECKF(2 * ctx.coarse_chain->n <= ctx.chain->n, "coarse chain: %d planes against the fine %d",
+               ctx.coarse_chain->n, ctx.chain->n);
+        memo.valid = 0;
+        if (!rrv__manifold_try(&ctx, ctx.chain, &rng, &memo, &root)) continue;
+        for (trial = 0; trial < 8; ++trial) {
+            rrv__rng again = rng;
+            rrv__mroot a, b;
+            int fa = rrv__manifold_try(&ctx, ctx.chain, &rng, &memo, &a);
+            int fb = rrv__manifold_try(&ctx, ctx.chain, &again, NULL, &b);
+            ++trials;
+            if (a.iterations < b.iterations) ++hits;
+            if (fa != fb || (fa && (a.w0.x != b.w0.x || a.w0.y != b.w0.y || a.w0.z != b.w0.z ||
+                                    a.density != b.density)))
+                ++differ;
+        }
+    }
+    SAY("  memo: %d connections with a coarse stage, %d trials, memo for the polish in %d, %d differ\n", coarse,
+        trials, hits, differ);
+    CHECKF(coarse > 100 && trials > 800, "%d connections with a coarse stage, %d trials", coarse, trials);
+    CHECKF(differ == 0, "%d of %d trials returned another root with the memo", differ, trials);
+    CHECKF(hits * 5 >= trials, "the memo stood for %d polishes of %d trials", hits, trials);
+    rrv__chain_delete(ctx.chain);
+    rrv__chain_delete(ctx.coarse_chain);
+    rrv_scene_free(s);
+}
+
 static void test_manifold_out_of_memory(void)
 {
     rrv_scene *s = NULL;
@@ -2303,6 +2361,7 @@ int main(void)
     NEE_RUN(test_manifold_chain_lengths);
     NEE_RUN(test_manifold_bad_chains);
     NEE_RUN(test_manifold_out_of_memory);
+    NEE_RUN(test_manifold_memo_is_exact);
     NEE_RUN(test_shoot_mis_weights_sum_to_one);
     NEE_RUN(test_weak_class_shared);
     NEE_RUN(test_weak_class_flat_support);
