@@ -14023,10 +14023,11 @@ static int rrv__manifold_recurs(void *user, rrv__rng *rng)
    chain's. The bend's cap keeps the coarse chain's roots and basins close
    to the fine one's where several roots compete: on the lens caustic at
    shoot's 0.6 rad (13 planes, 0.16 rad a plane) the seeds found the roots
-   in other proportions, and the estimate of 1/p had 1.6x the variance a
-   sample, more than the 1.4x the coarse stage saved in time; at 0.1 (20
-   planes) efficiency was the fine chain's alone. On the fire caustic and
-   the heat shadow, one root a connection, the cap does not bind. */
+   in other proportions, and the estimate of 1/p gained more variance
+   than the coarse stage saved time (efficiency 16.6 against 27.1 without
+   it); at 0.1 (20 planes) 17.4 against 11.4 (test/bench/RESULTS.md,
+   "Two-stage chain solves"). On the fire caustic and the heat shadow,
+   one root a connection, the cap does not bind. */
 #define RRV__CHAIN_COARSE_BEND 0.1
 static void rrv__chain_setup_coarse(rrv__context *ctx, rrv_vec3 ny, double u)
 {
@@ -19388,7 +19389,7 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  fails. `manifoldsolver dogleg` solves by the earlier
                  trust-region Gauss-Newton instead (Newton's step by
                  block Thomas inside the radius, Powell's dogleg outside;
-                 faster on the lens caustic, test/bench/RESULTS.md). The density
+                 faster on every scene measured, test/bench/RESULTS.md). The density
                  dw0/dA_y from block Thomas elimination of J (the
                  generalised geometry term of Specular Manifold Sampling). Seeds: a direction from a
                  mixture of Gaussians around the chord (0.02 rad half the
@@ -19396,7 +19397,16 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  the planes by the chain's own rule and aimed at y by
                  shooting (at most 16 steps; a parabola where no trace
                  reaches y's plane); the first solve and every trial draw
-                 from that one distribution. `manifoldtrials 0` (default, unbiased
+                 from that one distribution. A seed is solved in two stages
+                 where that saves work, as shoot's are: first on a coarse
+                 chain (planes 8x as far apart, at most 0.1 rad of bend a
+                 plane), then on the fine one from the cubic through the
+                 coarse root's vertices snapped to a 2^-20 m lattice; a seed
+                 whose coarse solve fails, and one in 16 at random, is solved
+                 on the fine chain directly, so no root of the fine chain
+                 loses its probability. A trial whose coarse root snaps onto
+                 the last polished one takes that polish's result: exact,
+                 as a polish depends on the snapped root alone. `manifoldtrials 0` (default, unbiased
                  for the chain model): 1/p by repeating solves until the
                  root recurs (initial directions within 1e-5), beyond 64
                  trials by Russian roulette (trial i made with probability
