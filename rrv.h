@@ -13527,6 +13527,12 @@ static void rrv__chain_swap(rrv__chain *ch)
    direction 6e-8 off at 1e-12, 6e-11 at 1e-15. */
 #define RRV__LM_LAMBDA 1e-15
 #define RRV__LM_LAMBDA_MAX 1e12 /* damping beyond which the chain is stuck */
+/* Evaluations without |r| halving after which a solve has stalled: from
+   raw seeds on the heat shadow every solve that failed had reached a
+   local minimum of |r|^2 (|r| ~ 0.3) and spent the 40 evaluations there,
+   the last 24 or more without |r| halving, while 2 % of those that
+   converged went 12 or more without (test/bench/RESULTS.md). */
+#define RRV__LM_STALL 12
 
 /* Levenberg-Marquardt on the chain from its seeded positions (the paper's
    solver): minimises |r|^2 over the vertices' gauge coordinates by steps
@@ -13561,8 +13567,9 @@ static void rrv__chain_swap(rrv__chain *ch)
    singular there (rrv__chain_density). */
 static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroot *root)
 {
-    int it = 1, k, n = ch->n;
+    int it = 1, k, n = ch->n, halved_at = 1;
     double largest, norm = rrv__chain_eval(scene, ch, 1, &largest), lambda = RRV__LM_LAMBDA, nu = 2.0, refused = 0;
+    double halved_norm = norm;
     root->iterations = 1;
     if (!(norm < DBL_MAX)) return 0;
     for (k = 1; k <= n; ++k) ch->scl[k][0] = ch->scl[k][1] = 0;
@@ -13573,6 +13580,12 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
             return rrv__chain_physical(scene, ch) && rrv__chain_density(ch, root);
         }
         if (it >= RRV__MANIFOLD_ITERATIONS) break;
+        if (norm <= 0.5 * halved_norm) {
+            halved_norm = norm;
+            halved_at = it;
+        } else if (it - halved_at >= RRV__LM_STALL) {
+            break;
+        }
         rrv__chain_normal(ch);
         for (k = 1; k <= n; ++k) {
             ch->scl[k][0] = fmax(ch->scl[k][0], ch->nd[k][0]);
@@ -19383,7 +19396,8 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  tridiagonal with 2x2 blocks, so J^T J is block
                  pentadiagonal and is factored by a block LDL^T in O(n); a
                  refused step re-factors with the new lambda and evaluates
-                 nothing again; at most 40 evaluations. A root that is not a
+                 nothing again; at most 40 evaluations, and 12 in a row
+                 without |r| halving (a local minimum). A root that is not a
                  physical path (a segment against its kick, a sharp
                  interface crossed) or where J is singular (a caustic)
                  fails. `manifoldsolver dogleg` solves by the earlier
