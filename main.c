@@ -783,25 +783,73 @@ static int finish_stdout(int code)
 
 static int default_thread_count(void);
 
+/* The set-up's progress on a terminal: a scene of heavy noise can spend a
+   minute in its bakes and majorant grids (each one rrv_load_options.
+   parallel_for call, a task a slice), and a silent minute looks like a
+   hang. A line appears once a call has run a second, with that call's
+   slices and the time they leave (a step: one grid, baked or bounded); the
+   load clears it. */
+typedef struct setup_meter {
+    int show;           /* stderr is a terminal and the render is not -q */
+    int call;           /* parallel_for calls so far */
+    int drawn;          /* a line is on the terminal */
+    double call_start, last_draw;
+} setup_meter;
+static setup_meter setup_progress;
+
+static void setup_progress_start(void)
+{
+    ++setup_progress.call;
+    setup_progress.call_start = seconds_now();
+}
+
+/* A task of count finished, done in all; with the pool's lock held. */
+static void setup_progress_step(int done, int count)
+{
+    double now, elapsed;
+    char elapsed_text[32], eta_text[32];
+    if (!setup_progress.show) return;
+    now = seconds_now();
+    elapsed = now - setup_progress.call_start;
+    if (elapsed < 1.0 || now - setup_progress.last_draw < 0.1 || done >= count) return;
+    setup_progress.last_draw = now;
+    format_duration(elapsed, elapsed_text, sizeof elapsed_text);
+    format_duration(elapsed * (count - done) / done, eta_text, sizeof eta_text);
+    fprintf(stderr, "\rpreparing the scene: step %d, %d of %d slices, elapsed %s, eta %s   ", setup_progress.call,
+            done, count, elapsed_text, eta_text);
+    fflush(stderr);
+    setup_progress.drawn = 1;
+}
+
+static void setup_progress_clear(void)
+{
+    if (setup_progress.drawn) fprintf(stderr, "\r%78s\r", "");
+    setup_progress.drawn = 0;
+    setup_progress.call = 0;
+}
+
 #if RRV_THREADS
 /* The tasks of one rrv_load_options.parallel_for call, handed out in turn. */
 typedef struct setup_pool {
     void (*task)(void *, int);
     void *ctx;
-    int count, next;
+    int count, next, done;
     pthread_mutex_t lock;
 } setup_pool;
 
 static void *setup_worker(void *arg)
 {
     setup_pool *pool = (setup_pool *)arg;
+    int finished = 0;
     for (;;) {
         int i;
         pthread_mutex_lock(&pool->lock);
+        if (finished) setup_progress_step(++pool->done, pool->count);
         i = pool->next++;
         pthread_mutex_unlock(&pool->lock);
         if (i >= pool->count) return NULL;
         pool->task(pool->ctx, i);
+        finished = 1;
     }
 }
 #endif
@@ -819,12 +867,16 @@ static void setup_parallel_for(void *user, int count, void (*task)(void *, int),
     pthread_t ids[MAX_THREADS];
     setup_pool pool;
     int started = 0;
+#endif
+    setup_progress_start();
+#if RRV_THREADS
     if (threads > count) threads = count;
     if (threads > 1 && pthread_mutex_init(&pool.lock, NULL) == 0) {
         pool.task = task;
         pool.ctx = ctx;
         pool.count = count;
         pool.next = 0;
+        pool.done = 0;
         while (started < threads - 1 && pthread_create(&ids[started], NULL, setup_worker, &pool) == 0) ++started;
         setup_worker(&pool);
         for (i = 0; i < started; ++i) pthread_join(ids[i], NULL);
@@ -833,7 +885,10 @@ static void setup_parallel_for(void *user, int count, void (*task)(void *, int),
     }
 #endif
     (void)threads;
-    for (i = 0; i < count; ++i) task(ctx, i);
+    for (i = 0; i < count; ++i) {
+        task(ctx, i);
+        setup_progress_step(i + 1, count);
+    }
 }
 
 /* inputs, if not NULL, collects every file the load read, the scene first.
@@ -855,9 +910,11 @@ static int load_scene(const char *path, size_t max_grid_bytes, input_list *input
     }
     *scene = NULL;
     if (rrv_scene_load(path, &options, scene, &err) != RRV_OK) {
+        setup_progress_clear();
         print_library_error(&err);
         return 0;
     }
+    setup_progress_clear();
     if (inputs && inputs->out_of_memory) {
         fprintf(stderr, "rrv: out of memory\n");
         rrv_scene_free(*scene);
@@ -1878,6 +1935,7 @@ static int render_load(render_options *opt, const arg_cursor *args, input_list *
         return usage_error(args, "-o and --png name the same file \"%s\"", opt->png_path);
     if (!check_output(opt->pfm_path) || (opt->png_path && !check_output(opt->png_path)))
         return EXIT_IO;
+    setup_progress.show = !opt->quiet && isatty(2);
     if (!load_scene(opt->scene_path, opt->max_grid_bytes, inputs, scene, opt->threads)) {
         free_inputs(inputs);
         *scene = NULL;
@@ -2058,6 +2116,7 @@ static int render_run(const render_options *opt, const rrv_scene *scene, int is_
     job->tile_stride = tile_stride(job->tiles_x, job->tile_count / job->tiles_x);
     job->failure = RRV_OK;
     job->failure_error.message[0] = '\0';
+    setup_progress_clear(); /* a prepare again for the command line's options may have drawn */
     job->show_progress = !opt->quiet && isatty(2);
     if (job->show_progress) {
         job->tile_seconds = (double *)malloc((size_t)job->tile_count * sizeof *job->tile_seconds);

@@ -14127,7 +14127,11 @@ static int rrv__solver_setup(rrv__context *ctx)
     if (!ctx->manifold) return 1;
     ctx->chain = rrv__chain_new(RRV__CHAIN_MAX);
     ctx->coarse_chain = rrv__chain_new(RRV__COARSE_MAX);
-    return ctx->chain && ctx->coarse_chain;
+    if (ctx->chain && ctx->coarse_chain) return 1;
+    /* the caller releases nothing of a context whose setup failed */
+    rrv__solver_release(ctx);
+    ctx->chain = ctx->coarse_chain = NULL;
+    return 0;
 }
 
 static void rrv__solver_release(rrv__context *ctx)
