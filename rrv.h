@@ -5315,6 +5315,18 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
         rrv__clip_axis(o->y, inv[1], m->lo.y, m->hi.y, &t0, &t1);
         rrv__clip_axis(o->z, inv[2], m->lo.z, m->hi.z, &t0, &t1);
     }
+    if (!(with_refraction && g->grad_max)) {
+        /* A gridvol density is 0 outside its own box, which may be far
+           thinner than a majorant cell: a fuzzed grid 3e-20 m thick
+           lent its cells' bound (1e10 per metre) to rays that met no
+           density at all, and every walk ran to its cap of 2^22 events */
+        const rrv_field *density = rrv__field_of(m, RRV__DENSITY);
+        if (density->kind == RRV_FIELD_GRID) {
+            rrv__clip_axis(o->x, inv[0], density->grid.lo.x, density->grid.hi.x, &t0, &t1);
+            rrv__clip_axis(o->y, inv[1], density->grid.lo.y, density->grid.hi.y, &t0, &t1);
+            rrv__clip_axis(o->z, inv[2], density->grid.lo.z, density->grid.hi.z, &t0, &t1);
+        }
+    }
     if (!(t0 < t1)) return 0;
     it->grid = g;
     it->with_refraction = with_refraction && g->grad_max != NULL;
