@@ -2636,6 +2636,13 @@ struct rrv__majorant_grid {
     size_t bytes;          /* heap bytes built for this medium (grids, bakes) */
     int empty;             /* no extinction anywhere: density tracking can skip it */
     int surface_free;      /* no surface reaches into the box: chords inside need no ray cast */
+    /* Where the density can be nonzero, when that is less than the box: a
+       gridvol's own box (0 outside it), which may be far thinner than a
+       cell. Density walks clip to it (rrv__majorant_iterator_start): a
+       fuzzed grid 3e-20 m thick lent its cells' bound (1e10 per metre) to
+       rays that met no density, and every walk ran to 2^22 events. */
+    int density_clipped;
+    rrv_vec3 density_lo, density_hi;
     int ior_inert;         /* the IOR is the ambient one throughout: the medium does not refract */
     rrv_field baked[RRV__FIELD_KINDS]; /* kind GRID where a noise field was baked */
     rrv_grid refraction;   /* 4 channels, r and grad r, where r comes from a grid;
@@ -4427,6 +4434,18 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
             hi.z >= m->lo.z)
             g->surface_free = 0;
     }
+    {
+        const rrv_field *density = rrv__field_of(m, RRV__DENSITY);
+        g->density_lo = m->lo;
+        g->density_hi = m->hi;
+        if (density->kind == RRV_FIELD_GRID) {
+            const rrv_grid *d = &density->grid;
+            g->density_lo = rrv__v3(rrv__maxd(m->lo.x, d->lo.x), rrv__maxd(m->lo.y, d->lo.y), rrv__maxd(m->lo.z, d->lo.z));
+            g->density_hi = rrv__v3(rrv__mind(m->hi.x, d->hi.x), rrv__mind(m->hi.y, d->hi.y), rrv__mind(m->hi.z, d->hi.z));
+        }
+        g->density_clipped = !rrv__inside_box(m->lo, g->density_lo, g->density_hi) ||
+                             !rrv__inside_box(m->hi, g->density_lo, g->density_hi);
+    }
     m->majorant = g;
     return RRV_OK;
 }
@@ -5315,17 +5334,10 @@ static int rrv__majorant_iterator_start(rrv__majorant_iterator *it, const rrv_me
         rrv__clip_axis(o->y, inv[1], m->lo.y, m->hi.y, &t0, &t1);
         rrv__clip_axis(o->z, inv[2], m->lo.z, m->hi.z, &t0, &t1);
     }
-    if (!(with_refraction && g->grad_max)) {
-        /* A gridvol density is 0 outside its own box, which may be far
-           thinner than a majorant cell: a fuzzed grid 3e-20 m thick
-           lent its cells' bound (1e10 per metre) to rays that met no
-           density at all, and every walk ran to its cap of 2^22 events */
-        const rrv_field *density = rrv__field_of(m, RRV__DENSITY);
-        if (density->kind == RRV_FIELD_GRID) {
-            rrv__clip_axis(o->x, inv[0], density->grid.lo.x, density->grid.hi.x, &t0, &t1);
-            rrv__clip_axis(o->y, inv[1], density->grid.lo.y, density->grid.hi.y, &t0, &t1);
-            rrv__clip_axis(o->z, inv[2], density->grid.lo.z, density->grid.hi.z, &t0, &t1);
-        }
+    if (g->density_clipped && !(with_refraction && g->grad_max)) {
+        rrv__clip_axis(o->x, inv[0], g->density_lo.x, g->density_hi.x, &t0, &t1);
+        rrv__clip_axis(o->y, inv[1], g->density_lo.y, g->density_hi.y, &t0, &t1);
+        rrv__clip_axis(o->z, inv[2], g->density_lo.z, g->density_hi.z, &t0, &t1);
     }
     if (!(t0 < t1)) return 0;
     it->grid = g;
@@ -13845,10 +13857,12 @@ static rrv_vec3 rrv__chain_seed_direction(const rrv__chain *ch, rrv__rng *rng)
 }
 
 /* The last polish of one connection's chain solves: the snapped coarse
-   root it started from and what it returned (rrv__manifold_try). */
+   root it started from and what it returned (rrv__manifold_try). It lives
+   for one connection, whose coarse chain (and so the key's length) is
+   fixed. */
 #define RRV__COARSE_MAX (RRV__CHAIN_MAX / RRV__SOLVE_COARSE)
 typedef struct rrv__chain_memo {
-    int valid, found, n;
+    int valid, found;
     double seed[RRV__COARSE_MAX][3];
     rrv__mroot root;
 } rrv__chain_memo;
@@ -13869,39 +13883,48 @@ static void rrv__chain_snap(const rrv__chain *coarse, double (*key)[3])
     }
 }
 
+/* Knot i of the cubic below: x0 (i <= 0), the m snapped coarse vertices
+   key (1..m) or y (i > m), L = |y - x0|. Returns t along the chord, the
+   offset from it in o. */
+static double rrv__chain_knot(const double (*key)[3], int m, double L, int i, double o[2])
+{
+    if (i <= 0 || i > m) {
+        o[0] = o[1] = 0.0;
+        return i <= 0 ? 0.0 : L;
+    }
+    o[0] = key[i - 1][1];
+    o[1] = key[i - 1][2];
+    return key[i - 1][0];
+}
+
 /* Seeds ch (same x0, y and so the same chord frame) on the cubic through
-   the m snapped coarse vertices key (rrv__chain_snap) and the ends: the
-   offset from the chord as a function of t along it, Hermite with
-   centred-difference slopes, ISO vertices then projected. */
+   the knots (rrv__chain_knot): the offset from the chord as a function
+   of t along it, Hermite with centred-difference slopes (one-sided at
+   the ends), ISO vertices then projected. */
 static void rrv__chain_seed_between(const rrv_scene *scene, rrv__chain *ch, const double (*key)[3], int m)
 {
     double L = rrv__length(rrv__sub(ch->x[ch->n + 1], ch->x[0]));
     int k, j = 0;
     ch->failed = 0;
     for (k = 1; k <= ch->n; ++k) {
-        double t = ch->t[k - 1], ta, tb, oa[2], ob[2], sa[2], sb[2], h, s, h00, h10, h01, h11, o[2];
+        double t = ch->t[k - 1], oa[2], ob[2], op[2], on[2], o[2], ta, tb, tp, tn, h, s, h00, h10, h01, h11;
         int a;
-        while (j < m && key[j][0] <= t) ++j; /* t lies between knots j - 1 and j (0 and m + 1 the ends) */
-        for (a = 0; a < 2; ++a) {
-            double tp, op, tn, on;
-            ta = j == 0 ? 0.0 : key[j - 1][0];
-            oa[a] = j == 0 ? 0.0 : key[j - 1][1 + a];
-            tb = j == m ? L : key[j][0];
-            ob[a] = j == m ? 0.0 : key[j][1 + a];
-            tp = j <= 1 ? 0.0 : key[j - 2][0];
-            op = j <= 1 ? 0.0 : key[j - 2][1 + a];
-            tn = j + 1 >= m ? L : key[j + 1][0];
-            on = j + 1 >= m ? 0.0 : key[j + 1][1 + a];
-            sa[a] = j == 0 ? (ob[a] - oa[a]) / fmax(tb - ta, 1e-12) : (ob[a] - op) / fmax(tb - tp, 1e-12);
-            sb[a] = j == m ? (ob[a] - oa[a]) / fmax(tb - ta, 1e-12) : (on - oa[a]) / fmax(tn - ta, 1e-12);
-        }
+        while (j < m && key[j][0] <= t) ++j; /* t lies between knots j and j + 1 */
+        ta = rrv__chain_knot(key, m, L, j, oa);
+        tb = rrv__chain_knot(key, m, L, j + 1, ob);
+        tp = rrv__chain_knot(key, m, L, j - 1, op);
+        tn = rrv__chain_knot(key, m, L, j + 2, on);
         h = fmax(tb - ta, 1e-12);
         s = fmin(fmax((t - ta) / h, 0.0), 1.0);
         h00 = (1 + 2 * s) * (1 - s) * (1 - s);
         h10 = s * (1 - s) * (1 - s);
         h01 = s * s * (3 - 2 * s);
         h11 = s * s * (s - 1);
-        for (a = 0; a < 2; ++a) o[a] = h00 * oa[a] + h10 * h * sa[a] + h01 * ob[a] + h11 * h * sb[a];
+        for (a = 0; a < 2; ++a) {
+            double sa = j == 0 ? (ob[a] - oa[a]) / h : (ob[a] - op[a]) / fmax(tb - tp, 1e-12);
+            double sb = j == m ? (ob[a] - oa[a]) / h : (on[a] - oa[a]) / fmax(tn - ta, 1e-12);
+            o[a] = h00 * oa[a] + h10 * h * sa + h01 * ob[a] + h11 * h * sb;
+        }
         ch->x[k] = rrv__madd(rrv__madd(rrv__madd(ch->x[0], ch->c, t), ch->c1, o[0]), ch->c2, o[1]);
         if (ch->iso && !rrv__project_iso(scene, &ch->x[k], ch->level[k])) ch->failed = 1;
     }
@@ -13957,8 +13980,7 @@ static int rrv__chain_try_once(rrv__context *ctx, rrv__chain *ch, rrv_vec3 w, rr
         !rrv__chain_solve_from(scene, coarse, w, &near, evaluations))
         return rrv__chain_solve_from(scene, ch, w, root, evaluations);
     rrv__chain_snap(coarse, key);
-    if (memo && memo->valid && memo->n == coarse->n &&
-        !memcmp(key, memo->seed, (size_t)coarse->n * sizeof key[0])) {
+    if (memo && memo->valid && !memcmp(key, memo->seed, (size_t)coarse->n * sizeof key[0])) {
         *root = memo->root;
         return memo->found;
     }
@@ -13968,7 +13990,6 @@ static int rrv__chain_try_once(rrv__context *ctx, rrv__chain *ch, rrv_vec3 w, rr
     if (memo) {
         memo->valid = 1;
         memo->found = found;
-        memo->n = coarse->n;
         memcpy(memo->seed, key, (size_t)coarse->n * sizeof key[0]);
         memo->root = *root;
     }
