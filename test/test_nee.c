@@ -837,7 +837,8 @@ static int manifold_root(const rrv_scene *s, rrv_vec3 x0, rrv_vec3 y, rrv_vec3 n
     int k;
     rrv__chain_setup(s, x0, y, ny, iso, 0.0, u, ch);
     for (k = 0; k < tries; ++k) {
-        rrv_vec3 w = rrv__chain_seed_direction(ch, rng);
+        int on_chord;
+        rrv_vec3 w = rrv__chain_seed_direction(ch, rng, &on_chord);
         int aimed;
         if (!rrv__chain_aim(s, ch, w, &aimed)) rrv__chain_seed(s, ch, w);
         if (rrv__manifold_solve(s, ch, root)) return 1;
@@ -1539,7 +1540,7 @@ static void test_manifold_memo_is_exact(void)
         ++coarse;
         CHECKF(2 * ctx.coarse_chain->n <= ctx.chain->n, "coarse chain: %d planes against the fine %d",
                ctx.coarse_chain->n, ctx.chain->n);
-        memo.valid = 0;
+        rrv__chain_memo_clear(&memo);
         if (!rrv__manifold_try(&ctx, ctx.chain, &rng, &memo, &root)) continue;
         for (trial = 0; trial < 8; ++trial) {
             rrv__rng again = rng;
