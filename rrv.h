@@ -12983,7 +12983,8 @@ static void rrv__chain_vertex(const rrv_scene *scene, rrv__chain *ch, int k, int
         rrv_vec3 pa = rrv__scale(rrv__madd(ch->c, wi, -ci), 1.0 / la);
         rrv_vec3 pb = rrv__scale(rrv__madd(ch->c, wo, -co), 1.0 / lb);
         rrv_vec3 dep[3], dh[3], base[3][2];
-        double *out[3], back, ahead, fa, fb, wr = rrv__dot(wo, r), t_wi[2], t_g[2], t_wo[2];
+        rrv_vec3 t_H[2];
+        double *out[3], back, ahead, fa, fb, turn = -rrv__dot(wo, r) / lp, t_wi[2], t_g[2], t_wo[2];
         rrv__chain_reach(ch, k, &back, &ahead);
         /* h_bar = back / ci + ahead / co, dci = c^T dwi, c^T Pa = (c - ci wi)^T / la */
         fa = -back / (ci * ci);
@@ -12995,6 +12996,8 @@ static void rrv__chain_vertex(const rrv_scene *scene, rrv__chain *ch, int k, int
         dep[1] = rrv__scale(ch->gm[k - 1], ch->wb[k - 1]);
         dep[2] = rrv__v3(0, 0, 0);
         for (j = 0; j < 2; ++j) {
+            /* H is symmetric: t^T H b = (H t) . b */
+            t_H[j] = rrv__scale(rrv__mat_apply(H, t[j]), h_bar);
             t_wi[j] = rrv__dot(t[j], wi);
             t_g[j] = rrv__dot(t[j], ch->g[k]);
             t_wo[j] = rrv__dot(t[j], wo);
@@ -13009,19 +13012,21 @@ static void rrv__chain_vertex(const rrv_scene *scene, rrv__chain *ch, int k, int
         base[2][0] = k < ch->n ? ch->b1[k + 1] : ch->s1;
         base[2][1] = k < ch->n ? ch->b2[k + 1] : ch->s2;
         for (q = 0; q < 3; ++q) {
-            /* d(wi) = sw Pa dx, d(wo) = sb Pb dx over x_k-1, x_k, x_k+1 */
-            double sw = q == 0 ? -1.0 : q == 1 ? 1.0 : 0.0, sb = q == 0 ? 0.0 : q == 1 ? -1.0 : 1.0;
+            /* d(wi) = sw Pa dx, d(wo) = sb Pb dx over x_k-1, x_k, x_k+1;
+               the Pa term carries ep / la, and all of dp is scaled by
+               -(wo.r) / |p| */
+            double swa = (q == 0 ? -1.0 : q == 1 ? 1.0 : 0.0) * ep / la, sbb = (q == 0 ? 0.0 : q == 1 ? -1.0 : 1.0) / lb;
             int m;
             if (!out[q]) continue;
             for (m = 0; m < 2; ++m) {
-                rrv_vec3 bm = base[q][m], Hb = q == 1 ? rrv__mat_apply(H, bm) : rrv__v3(0, 0, 0);
+                rrv_vec3 bm = base[q][m];
                 double wi_b = rrv__dot(wi, bm), wo_b = rrv__dot(wo, bm), dep_b = rrv__dot(dep[q], bm);
                 double dh_b = rrv__dot(dh[q], bm);
                 for (j = 0; j < 2; ++j) {
                     double t_b = rrv__dot(t[j], bm);
-                    double t_dp = ep * sw * (t_b - t_wi[j] * wi_b) / la + t_wi[j] * dep_b + t_g[j] * dh_b +
-                                  (q == 1 ? h_bar * rrv__dot(t[j], Hb) : 0.0);
-                    out[q][2 * j + m] = sb * (t_b - t_wo[j] * wo_b) / lb - wr * t_dp / lp;
+                    double t_dp = swa * (t_b - t_wi[j] * wi_b) + t_wi[j] * dep_b + t_g[j] * dh_b +
+                                  (q == 1 ? rrv__dot(t_H[j], bm) : 0.0);
+                    out[q][2 * j + m] = sbb * (t_b - t_wo[j] * wo_b) + turn * t_dp;
                 }
             }
         }
@@ -19491,9 +19496,11 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  block Thomas inside the radius, Powell's dogleg outside;
                  faster on every scene measured, test/bench/RESULTS.md). The density
                  dw0/dA_y from block Thomas elimination of J (the
-                 generalised geometry term of Specular Manifold Sampling). Seeds: a direction from a
-                 mixture of Gaussians around the chord (0.02 rad half the
-                 time, 0.2 rad 3 in 8) and uniform (1 in 8), traced through
+                 generalised geometry term of Specular Manifold Sampling). Seeds: the chord
+                 itself 7 times in 8 (its solve is deterministic, kept for
+                 the connection: trials that draw it again cost nothing),
+                 else a mixture of Gaussians around the chord (0.02 rad
+                 half the time, 0.2 rad 3 in 8) and uniform, traced through
                  the planes by the chain's own rule and aimed at y by
                  shooting (at most 16 steps; a parabola where no trace
                  reaches y's plane); the first solve and every trial draw
@@ -19505,8 +19512,8 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  whose coarse solve fails, and one in 16 at random, is solved
                  on the fine chain directly, so no root of the fine chain
                  loses its probability. A trial whose coarse root snaps onto
-                 the last polished one takes that polish's result: exact,
-                 as a polish depends on the snapped root alone. `manifoldtrials 0` (default, unbiased
+                 the first root's takes that polish's result: exact, as a
+                 polish depends on the snapped root alone. `manifoldtrials 0` (default, unbiased
                  for the chain model): 1/p by repeating solves until the
                  root recurs (initial directions within 1e-5), beyond 64
                  trials by Russian roulette (trial i made with probability
