@@ -13865,16 +13865,20 @@ static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__
    times in eight) or uniform (one in eight), so every root's basin keeps
    a nonzero probability. The chord's share is the point of it: a solve
    from the chord is deterministic, so the root it reaches (on the lens
-   caustic the one through the lens, which carries nearly all the light)
-   has p >= 7/8, its 1/p estimate is 1 in most connections, and a trial
-   that draws the chord again is the memo's (rrv__manifold_try) and costs
-   nothing. Measured on the lens caustic (64x48 crop, 4 spp, 4 seeds):
-   the variance a sample fell from 0.032 to 0.018 (nee shoot: 0.015) and
-   the time 2.2x; at a share of 3/4 the variance was the same and the
-   time 1.23x longer. The price is paid where a connection has two roots
-   of like weight and the chord finds one: the other's p is 1/8 of what
-   it was, and its share of the variance up to 8x. */
-#define RRV__CHAIN_ON_CHORD 0.875
+   caustic mostly the one through the lens, which carries nearly all the
+   light) has p >= 3/4, its 1/p estimate is 1 in most connections, and a
+   trial that draws the chord again is the memo's (rrv__manifold_try) and
+   costs nothing. Measured on the lens caustic (64x48 crop, 4 spp, 4
+   seeds): without it the variance a sample was 0.032 and the time 3.96 s,
+   at 3/4 0.019 and 2.19 s, at 7/8 0.018 and 1.78 s (nee shoot 0.015, 1.31
+   s). 3/4 all the same: where a connection has two roots of like weight
+   and the chord finds one, the other's p shrinks by the random share (at
+   the lens's rim, a root through the lens of density 0.025 beside the
+   chord's of 0.02, found 4 times in 100 at 7/8), and its 1/p estimate's
+   variance grows as fast as 1/p^3 once it passes RRV__SOLVE_TRIALS into
+   Russian roulette; in the equal-time bench 3/4 and 7/8 did as well
+   (test/bench/RESULTS.md). */
+#define RRV__CHAIN_ON_CHORD 0.75
 static rrv_vec3 rrv__chain_seed_direction(const rrv__chain *ch, rrv__rng *rng, int *on_chord)
 {
     double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng);
@@ -13904,7 +13908,8 @@ typedef struct rrv__chain_memo {
 } rrv__chain_memo;
 static void rrv__chain_memo_clear(rrv__chain_memo *memo)
 {
-    memo->valid = memo->chord_valid[0] = memo->chord_valid[1] = 0;
+    memset(memo->chord_valid, 0, sizeof memo->chord_valid);
+    memo->valid = 0;
 }
 
 /* The coarse chain's inner vertices relative to x0 in the chord's frame
@@ -19497,7 +19502,7 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  faster on every scene measured, test/bench/RESULTS.md). The density
                  dw0/dA_y from block Thomas elimination of J (the
                  generalised geometry term of Specular Manifold Sampling). Seeds: the chord
-                 itself 7 times in 8 (its solve is deterministic, kept for
+                 itself 3 times in 4 (its solve is deterministic, kept for
                  the connection: trials that draw it again cost nothing),
                  else a mixture of Gaussians around the chord (0.02 rad
                  half the time, 0.2 rad 3 in 8) and uniform, traced through
