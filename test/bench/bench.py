@@ -356,6 +356,9 @@ def main():
             ("refractive comb, nee aim", ["--integrator", "refractive", "--nee", "aim"],
              (16, 64) if quick else (16, 64, 256)),
             ("eikonal RK4, nee shoot", ["--integrator", "eikonal", "--nee", "shoot"],
+             (1, 4) if quick else (1, 4, 16)),
+            # the paper's refractive ratio tracking with forward paths by MIS
+            ("eikonal, nee manifold", ["--integrator", "eikonal", "--nee", "manifold"],
              (1, 4) if quick else (1, 4, 16))]
     b.sweep("lens_caustic", lens, ())
     fcaustic = [("eikonal RK4 h=0.05, nee none", ["--integrator", "eikonal", "--nee", "none"],
