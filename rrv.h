@@ -13895,7 +13895,7 @@ static rrv_vec3 rrv__chain_seed_direction(const rrv__chain *ch, rrv__rng *rng, i
 /* What one connection's chain solves already know (rrv__manifold_try):
    the polish of the first root found, keyed by the snapped coarse root it
    started from, and the result of a try from the chord, which is
-   deterministic, with and without the coarse stage (by `direct`). It
+   deterministic. It
    lives for one connection, whose coarse chain (and so the key's length)
    is fixed. */
 #define RRV__COARSE_MAX (RRV__CHAIN_MAX / RRV__SOLVE_COARSE)
@@ -13903,13 +13903,12 @@ typedef struct rrv__chain_memo {
     int valid, found;
     double seed[RRV__COARSE_MAX][3];
     rrv__mroot root;
-    int chord_valid[2], chord_found[2];
-    rrv__mroot chord_root[2];
+    int chord_valid, chord_found;
+    rrv__mroot chord_root;
 } rrv__chain_memo;
 static void rrv__chain_memo_clear(rrv__chain_memo *memo)
 {
-    memset(memo->chord_valid, 0, sizeof memo->chord_valid);
-    memo->valid = 0;
+    memo->valid = memo->chord_valid = 0;
 }
 
 /* The coarse chain's inner vertices relative to x0 in the chord's frame
@@ -14055,17 +14054,21 @@ static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, r
     for (k = 0; k < RRV__SOLVE_RESTARTS && !found; ++k) {
         int on_chord;
         rrv_vec3 w = rrv__chain_seed_direction(ch, rng, &on_chord);
-        int direct = !ctx->coarse_chain || ctx->coarse_chain->n == 0 || rrv__uniform(rng) < RRV__CHAIN_DIRECT;
-        if (on_chord && memo && memo->chord_valid[direct]) {
-            *root = memo->chord_root[direct];
-            found = memo->chord_found[direct];
+        /* the chord is never solved directly: the share of random seeds
+           that are keeps every root of the fine chain reachable, and a
+           direct solve costs some five of a coarse one and its polish */
+        int direct = !ctx->coarse_chain || ctx->coarse_chain->n == 0 ||
+                     (rrv__uniform(rng) < RRV__CHAIN_DIRECT && !on_chord);
+        if (on_chord && memo && memo->chord_valid) {
+            *root = memo->chord_root;
+            found = memo->chord_found;
             continue;
         }
         found = rrv__chain_try_once(ctx, ch, w, direct, memo, root, &evaluations);
         if (on_chord && memo) {
-            memo->chord_valid[direct] = 1;
-            memo->chord_found[direct] = found;
-            memo->chord_root[direct] = *root;
+            memo->chord_valid = 1;
+            memo->chord_found = found;
+            memo->chord_root = *root;
         }
     }
     root->iterations = evaluations;
