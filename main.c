@@ -898,6 +898,7 @@ static int load_scene(const char *path, size_t max_grid_bytes, input_list *input
 {
     rrv_load_options options;
     rrv_error err;
+    int loaded;
     memset(&options, 0, sizeof options);
     memset(&err, 0, sizeof err);
     options.max_grid_bytes = max_grid_bytes;
@@ -909,12 +910,12 @@ static int load_scene(const char *path, size_t max_grid_bytes, input_list *input
         options.on_input_user = inputs;
     }
     *scene = NULL;
-    if (rrv_scene_load(path, &options, scene, &err) != RRV_OK) {
-        setup_progress_clear();
+    loaded = rrv_scene_load(path, &options, scene, &err) == RRV_OK;
+    setup_progress_clear();
+    if (!loaded) {
         print_library_error(&err);
         return 0;
     }
-    setup_progress_clear();
     if (inputs && inputs->out_of_memory) {
         fprintf(stderr, "rrv: out of memory\n");
         rrv_scene_free(*scene);

@@ -4440,8 +4440,8 @@ static rrv_result rrv__build_majorant(const rrv_scene *scene, rrv_medium *m, siz
         g->density_hi = m->hi;
         if (density->kind == RRV_FIELD_GRID) {
             const rrv_grid *d = &density->grid;
-            g->density_lo = rrv__v3(rrv__maxd(m->lo.x, d->lo.x), rrv__maxd(m->lo.y, d->lo.y), rrv__maxd(m->lo.z, d->lo.z));
-            g->density_hi = rrv__v3(rrv__mind(m->hi.x, d->hi.x), rrv__mind(m->hi.y, d->hi.y), rrv__mind(m->hi.z, d->hi.z));
+            g->density_lo = rrv__vmax(m->lo, d->lo);
+            g->density_hi = rrv__vmin(m->hi, d->hi);
         }
         g->density_clipped = !rrv__inside_box(m->lo, g->density_lo, g->density_hi) ||
                              !rrv__inside_box(m->hi, g->density_lo, g->density_hi);
@@ -12745,8 +12745,6 @@ static void rrv__m3_mul(const double P[9], const double Q[9], double M[9])
             M[3 * i + j] = s;
         }
 }
-/* The 2x2 block t_k . (M b_l). */
-
 /* The normal of the IOR's isosurface at x, whose tangent plane is the
    ISO gauge's: grad eta / |grad eta| in general; for a profile with a
    sphere support (Luneburg, fish-eye) the radial direction, which is that
@@ -13895,9 +13893,8 @@ static rrv_vec3 rrv__chain_seed_direction(const rrv__chain *ch, rrv__rng *rng, i
 /* What one connection's chain solves already know (rrv__manifold_try):
    the polish of the first root found, keyed by the snapped coarse root it
    started from, and the result of a try from the chord, which is
-   deterministic. It
-   lives for one connection, whose coarse chain (and so the key's length)
-   is fixed. */
+   deterministic. It lives for one connection, whose coarse chain (and so
+   the key's length) is fixed. */
 #define RRV__COARSE_MAX (RRV__CHAIN_MAX / RRV__SOLVE_COARSE)
 typedef struct rrv__chain_memo {
     int valid, found;
@@ -14003,8 +14000,8 @@ static int rrv__chain_solve_from(const rrv_scene *scene, rrv__chain *ch, rrv_vec
    them the aim's traces; the polish takes about 5, and the coarse stage
    costs a fraction of one fine evaluation per evaluation.
    The map from seed to root stays deterministic. A seed whose coarse
-   solve fails is solved on the fine chain directly, as is every seed in a
-   share RRV__CHAIN_DIRECT (direct, drawn per seed by the caller): so every
+   solve fails is solved on the fine chain directly, as is every random
+   seed in a share RRV__CHAIN_DIRECT (direct, drawn by the caller): so every
    root the fine chain reaches from some seed keeps a nonzero probability,
    however the coarse chain's roots differ from it. The polish is a
    function of the snapped coarse root alone (test_manifold_memo_is_exact),
@@ -19517,7 +19514,7 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  chain (planes 8x as far apart, at most 0.1 rad of bend a
                  plane), then on the fine one from the cubic through the
                  coarse root's vertices snapped to a 2^-20 m lattice; a seed
-                 whose coarse solve fails, and one in 16 at random, is solved
+                 whose coarse solve fails, and one random seed in 16, is solved
                  on the fine chain directly, so no root of the fine chain
                  loses its probability. A trial whose coarse root snaps onto
                  the first root's takes that polish's result: exact, as a
