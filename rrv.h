@@ -12162,9 +12162,10 @@ static rrv_vec3 rrv__snap_direction(rrv_vec3 w)
         rrv__v3(floor(w.x * per + 0.5) / per, floor(w.y * per + 0.5) / per, floor(w.z * per + 0.5) / per));
 }
 
-/* A solve from seeds of rrv__solver_seed: up to RRV__SOLVE_RESTARTS of
-   them, the next drawn when the last failed, so that a solve fails only
-   when all did. Each seed is first converged (to 1e-6) with the longer
+/* A solve from seeds of rrv__solver_seed (rrv__solve_shot_seeded): up to
+   RRV__SOLVE_RESTARTS of them, the next drawn when the last failed, so
+   that a solve fails only when all did. Each seed (rrv__solve_shot_one,
+   which adds its shots to *shots) is first converged (to 1e-6) with the longer
    eikonal steps of rrv__solve_coarse_step, a small part of the work a
    shot, and the camera rays' steps then polish that root (two or three
    shots), from
@@ -12179,39 +12180,44 @@ static rrv_vec3 rrv__snap_direction(rrv_vec3 w)
    coarse solve each. With kept, the chords of the last shot taken are
    kept there (those of the root where one was found by shooting).
    root->iterations counts the shots taken. */
-static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv__rng *rng,
-                                  rrv__polish_memo *memo, rrv__chords *kept, rrv__root *root)
+static int rrv__solve_shot_one(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv_vec3 seed,
+                               rrv__polish_memo *memo, rrv__chords *kept, rrv__root *root, int *shots)
 {
     rrv_scene coarse_scene = *ctx->scene;
     rrv__context coarse = *ctx;
     rrv__root near;
-    int k, shots = 0, found = 0;
-    /* a context set up by hand (tests) may leave eta_floor 0 */
-    coarse_scene.settings.step = rrv__solve_coarse_step(ctx->scene, ctx->eta_floor > 0 ? ctx->eta_floor : 1.0);
-    coarse.scene = &coarse_scene;
-    for (k = 0; k < RRV__SOLVE_RESTARTS && !found; ++k) {
-        rrv_vec3 seed = rrv__solver_seed(x0, y, rng);
-        if (ctx->eikonal) {
-            int near_found = rrv__solve_shot_to(&coarse, x0, y, plane, seed, 1e-6, NULL, &near);
-            shots += near.iterations;
-            if (!near_found) continue;
-            seed = rrv__snap_direction(near.ahead);
-            if (memo && memo->valid && seed.x == memo->seed.x && seed.y == memo->seed.y && seed.z == memo->seed.z) {
-                found = memo->found;
-                *root = memo->root;
-                if (kept) kept->n = -1; /* not shot here */
-                continue;
-            }
-        }
-        found = rrv__solve_shot(ctx, x0, y, plane, seed, kept, root);
-        shots += root->iterations;
-        if (memo && ctx->eikonal) {
-            memo->valid = 1;
-            memo->seed = seed;
-            memo->found = found;
-            memo->root = *root;
+    int found;
+    if (ctx->eikonal) {
+        /* a context set up by hand (tests) may leave eta_floor 0 */
+        coarse_scene.settings.step = rrv__solve_coarse_step(ctx->scene, ctx->eta_floor > 0 ? ctx->eta_floor : 1.0);
+        coarse.scene = &coarse_scene;
+        found = rrv__solve_shot_to(&coarse, x0, y, plane, seed, 1e-6, NULL, &near);
+        *shots += near.iterations;
+        if (!found) return 0;
+        seed = rrv__snap_direction(near.ahead);
+        if (memo && memo->valid && seed.x == memo->seed.x && seed.y == memo->seed.y && seed.z == memo->seed.z) {
+            *root = memo->root;
+            if (kept) kept->n = -1; /* not shot here */
+            return memo->found;
         }
     }
+    found = rrv__solve_shot(ctx, x0, y, plane, seed, kept, root);
+    *shots += root->iterations;
+    if (memo && ctx->eikonal) {
+        memo->valid = 1;
+        memo->seed = seed;
+        memo->found = found;
+        memo->root = *root;
+    }
+    return found;
+}
+
+static int rrv__solve_shot_seeded(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 y, const rrv_vec3 *plane, rrv__rng *rng,
+                                  rrv__polish_memo *memo, rrv__chords *kept, rrv__root *root)
+{
+    int k, shots = 0, found = 0;
+    for (k = 0; k < RRV__SOLVE_RESTARTS && !found; ++k)
+        found = rrv__solve_shot_one(ctx, x0, y, plane, rrv__solver_seed(x0, y, rng), memo, kept, root, &shots);
     root->iterations = shots;
     return found;
 }
@@ -12361,62 +12367,115 @@ static int rrv__shot_recurs(void *user, rrv__rng *rng)
    1/|det| bounded. A sphere's points are those x0 sees straight
    (rrv__pick_area_light): bent paths to its far side are the forward
    path's alone. The sky is left to forward paths. */
+/* What root carries from light point y to x0 per unit of its weight, into
+   out (0 and no light where it carries none): the BSDF, the transmittance
+   (the kept chords of its own solve, else a shot along it) and the
+   measure's change, with shoot's MIS weight. */
+static int rrv__shoot_carried(rrv__context *ctx, const rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                              rrv_vec3 y, rrv_vec3 ny, const rrv_vec3 *plane, double pdf_area,
+                              const rrv__root *root, const rrv__chords *kept, rrv__rng *rng, double out[3])
+{
+    double T[3], f[3], det, k;
+    int c;
+    if (!root->curved || !(det = rrv__root_det_on_light(root, plane, ny))) return 0;
+    rrv__vertex_eval(v, root->w0, f);
+    if (!(rrv__max3(f) > 0)) return 0;
+    if (kept->n > 0) {
+        /* the root's own chords: its last shot in the solve */
+        if (!rrv__kept_transmittance(ctx, kept, rng, T) || !rrv__nonzero3(T)) return 0;
+    } else {
+        rrv__shot shot;
+        rrv_vec3 e1, e2;
+        rrv__frame(root->w0, &e1, &e2);
+        rrv__shoot(ctx, x0, root->w0, e1, e2, y, plane, rng, T, &shot);
+        if (shot.status != RRV__SHOT_REACHED || !rrv__nonzero3(T)) return 0;
+    }
+    /* dw0 = dA_y / |det J_plane| (= dA_y |cos theta_y| / |det J_perp|) */
+    k = rrv__shoot_mis_weight(pdf_area, det, rrv__vertex_pdf(v, root->w0)) / (fabs(det) * pdf_area) *
+        rrv__eta_scale(ctx, y) * rrv__path_mis(path);
+    for (c = 0; c < 3; ++c) out[c] = f[c] * T[c] * k;
+    return 1;
+}
+
+#define RRV__SHOOT_RANDOM 0.5 /* the random try's probability (rrv__shoot_nee) */
+
+/* A solve's work, into the stats. */
+static void rrv__shoot_stats(rrv__context *ctx, int found, int shots, const rrv__root *root)
+{
+    ++ctx->stats.solves;
+    ++ctx->stats.solve_trials;
+    ctx->stats.solve_iterations += (uint64_t)shots;
+    if (!found) return;
+    ++ctx->stats.solves_converged;
+    ctx->stats.solve_segments += (uint64_t)root->segments;
+}
+
+/* The estimate of one connection toward light point y (rrv__shoot_nee):
+   the roots it counts, at most two, with their weights and what each
+   carries (rrv__shoot_carried); returns how many. */
+static int rrv__shoot_estimate(rrv__context *ctx, const rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
+                               rrv_vec3 y, rrv_vec3 ny, const rrv_vec3 *plane, double pdf_area, rrv__rng *rng,
+                               rrv__root root[2], double weight[2], double carried[2][3])
+{
+    rrv__polish_memo memo;
+    rrv__chords kept;
+    rrv__root chord;
+    rrv__shot_recurrence t;
+    long count;
+    int n = 0, shots = 0, chord_found, found;
+    memo.valid = 0;
+    ++ctx->stats.solve_connections;
+    chord_found = rrv__solve_shot_one(ctx, x0, y, plane, rrv__normalize(rrv__sub(y, x0)), &memo, &kept, &chord, &shots);
+    rrv__shoot_stats(ctx, chord_found, shots, &chord);
+    if (chord_found && rrv__shoot_carried(ctx, path, x0, v, y, ny, plane, pdf_area, &chord, &kept, rng, carried[0])) {
+        root[0] = chord;
+        weight[n++] = 1.0;
+    }
+    if (!(rrv__uniform(rng) < RRV__SHOOT_RANDOM)) return n;
+    found = rrv__solve_shot_seeded(ctx, x0, y, plane, rng, &memo, &kept, &root[n]);
+    rrv__shoot_stats(ctx, found, root[n].iterations, &root[n]);
+    /* a random try that lands on the chord's root counts nothing */
+    if (!found || (chord_found && rrv__length(rrv__sub(root[n].w0, chord.w0)) < RRV__SOLVE_SAME_ROOT) ||
+        !rrv__shoot_carried(ctx, path, x0, v, y, ny, plane, pdf_area, &root[n], &kept, rng, carried[n]))
+        return n;
+    t.ctx = ctx;
+    t.x0 = x0;
+    t.y = y;
+    t.plane = plane;
+    t.w0 = root[n].w0;
+    t.memo = &memo;
+    weight[n] = rrv__inverse_probability(rng, RRV__SOLVE_TRIALS, rrv__shot_recurs, &t, &count) / RRV__SHOOT_RANDOM;
+    ctx->stats.solve_trials += (uint64_t)count;
+    return n + 1;
+}
+
+/* Curved NEE from vertex x0 by shooting: a point y uniform on one area
+   light and two tries that split the roots of the two-point problem
+   between them, as nee manifold's do (rrv__manifold_estimate): one from
+   the chord's direction (a deterministic map, so its root counts once,
+   weight 1), and with probability RRV__SHOOT_RANDOM (s) one from random
+   seeds, whose root, if not the chord's, counts 1/(s q), 1/q estimated
+   by repeating random solves until it recurs (rrv__inverse_probability:
+   E = 1/q exactly). E = f(r_c) + sum over r != r_c of s q_r f(r) / (s
+   q_r), every root once (test_shoot_estimate_is_unbiased). */
 static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                            const rrv__light_draw *draw, rrv__rng *rng)
 {
-    const rrv_scene *scene = ctx->scene;
-    long count;
-    int c;
-    rrv_vec3 y, ny, e1, e2;
-    rrv__root root;
-    rrv__polish_memo memo;
-    rrv__chords kept;
-    double pdf_area, T[3], f[3], k, inverse_p, det;
-    const rrv_shape *s = rrv__pick_area_light(scene, draw, x0, 1, &y, &ny, &pdf_area);
+    rrv_vec3 y, ny;
+    rrv__root roots[2];
+    double pdf_area, carried[2][3], weight[2];
+    const rrv_shape *s = rrv__pick_area_light(ctx->scene, draw, x0, 1, &y, &ny, &pdf_area);
     /* a sphere's solve aims through y across the arriving chord (rrv__shoot_plane) */
     const rrv_vec3 *plane = s ? rrv__shoot_plane(s, &ny) : NULL;
+    int n, i, c;
     if (!s) return;
     {
         double to_y = rrv__length(rrv__sub(y, x0));
         if (!(to_y > 0) || rrv__weak_chord(ctx, x0, rrv__scale(rrv__sub(y, x0), 1.0 / to_y), to_y)) return;
     }
-    ++ctx->stats.solves;
-    memo.valid = 0;
-    if (!rrv__solve_shot_seeded(ctx, x0, y, plane, rng, &memo, &kept, &root)) {
-        ctx->stats.solve_iterations += (uint64_t)root.iterations;
-        return;
-    }
-    ctx->stats.solve_iterations += (uint64_t)root.iterations;
-    ++ctx->stats.solves_converged;
-    ctx->stats.solve_segments += (uint64_t)root.segments;
-    if (!root.curved || !(det = rrv__root_det_on_light(&root, plane, ny)) ) return;
-    rrv__vertex_eval(v, root.w0, f);
-    if (!(rrv__max3(f) > 0)) return;
-    if (kept.n > 0) {
-        /* the root's own chords: its last shot in the solve */
-        if (!rrv__kept_transmittance(ctx, &kept, rng, T) || !rrv__nonzero3(T)) return;
-    } else {
-        rrv__shot shot;
-        rrv__frame(root.w0, &e1, &e2);
-        rrv__shoot(ctx, x0, root.w0, e1, e2, y, plane, rng, T, &shot);
-        if (shot.status != RRV__SHOT_REACHED || !rrv__nonzero3(T)) return;
-    }
-    {
-        rrv__shot_recurrence t;
-        t.ctx = ctx;
-        t.x0 = x0;
-        t.y = y;
-        t.plane = plane;
-        t.w0 = root.w0;
-        t.memo = &memo;
-        inverse_p = rrv__inverse_probability(rng, RRV__SOLVE_TRIALS, rrv__shot_recurs, &t, &count);
-    }
-    ctx->stats.solve_trials += (uint64_t)count;
-    ++ctx->stats.solve_connections;
-    /* dw0 = dA_y / |det J_plane| (= dA_y |cos theta_y| / |det J_perp|) */
-    k = rrv__shoot_mis_weight(pdf_area, det, rrv__vertex_pdf(v, root.w0)) / (fabs(det) * pdf_area) * inverse_p *
-        rrv__eta_scale(ctx, y) * rrv__path_mis(path);
-    for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * f[c] * T[c] * s->L[c] * k;
+    n = rrv__shoot_estimate(ctx, path, x0, v, y, ny, plane, pdf_area, rng, roots, weight, carried);
+    for (i = 0; i < n; ++i)
+        for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * carried[i][c] * s->L[c] * weight[i];
 }
 
 
@@ -13857,32 +13916,14 @@ static int rrv__chain_carry(rrv__context *ctx, const rrv__chain *ch, const rrv__
 }
 
 
-/* The seed's initial direction, from one distribution for the first solve
-   and every trial: the chord itself RRV__CHAIN_ON_CHORD of the time, else
-   a Gaussian around it of 0.02 rad (half the time), of 0.2 rad (three
-   times in eight) or uniform (one in eight), so every root's basin keeps
-   a nonzero probability. The chord's share is the point of it: a solve
-   from the chord is deterministic, so the root it reaches (on the lens
-   caustic mostly the one through the lens, which carries nearly all the
-   light) has p >= 3/4, its 1/p estimate is 1 in most connections, and a
-   trial that draws the chord again is the memo's (rrv__manifold_try) and
-   costs nothing. Measured on the lens caustic (64x48 crop, 4 spp, 4
-   seeds): without it the variance a sample was 0.032 and the time 3.96 s,
-   at 3/4 0.019 and 2.19 s, at 7/8 0.018 and 1.78 s (nee shoot 0.015, 1.31
-   s). 3/4 all the same: where a connection has two roots of like weight
-   and the chord finds one, the other's p shrinks by the random share (at
-   the lens's rim, a root through the lens of density 0.025 beside the
-   chord's of 0.02, found 4 times in 100 at 7/8), and its 1/p estimate's
-   variance grows as fast as 1/p^3 once it passes RRV__SOLVE_TRIALS into
-   Russian roulette; in the equal-time bench 3/4 and 7/8 did as well
-   (test/bench/RESULTS.md). */
-#define RRV__CHAIN_ON_CHORD 0.75
-static rrv_vec3 rrv__chain_seed_direction(const rrv__chain *ch, rrv__rng *rng, int *on_chord)
+/* A random seed's initial direction: a Gaussian around the chord of 0.02
+   rad (half the time), of 0.2 rad (three times in eight) or uniform (one
+   in eight), so every root's basin keeps a nonzero probability. The chord
+   itself is not among them: it is the seed of the connection's
+   deterministic try (rrv__manifold_nee). */
+static rrv_vec3 rrv__chain_seed_direction(const rrv__chain *ch, rrv__rng *rng)
 {
     double u = rrv__uniform(rng), u1 = rrv__uniform(rng), u2 = rrv__uniform(rng);
-    *on_chord = u < RRV__CHAIN_ON_CHORD;
-    if (*on_chord) return ch->c;
-    u = (u - RRV__CHAIN_ON_CHORD) / (1.0 - RRV__CHAIN_ON_CHORD);
     if (u < 0.875) {
         double rad = (u < 0.5 ? 0.02 : 0.2) * sqrt(-2.0 * log(1.0 - u1)), phi = 2.0 * RRV__PI * u2;
         return rrv__normalize(rrv__add(ch->c, rrv__add(rrv__scale(ch->c1, rad * cos(phi)), rrv__scale(ch->c2, rad * sin(phi)))));
@@ -13891,21 +13932,23 @@ static rrv_vec3 rrv__chain_seed_direction(const rrv__chain *ch, rrv__rng *rng, i
 }
 
 /* What one connection's chain solves already know (rrv__manifold_try):
-   the polish of the first root found, keyed by the snapped coarse root it
-   started from, and the result of a try from the chord, which is
-   deterministic. It lives for one connection, whose coarse chain (and so
-   the key's length) is fixed. */
+   the polishes of the first two roots found (the chord's and the random
+   try's), each keyed by the snapped coarse root it started from. It lives
+   for one connection, whose coarse chain (and so the key's length) is
+   fixed. */
 #define RRV__COARSE_MAX (RRV__CHAIN_MAX / RRV__SOLVE_COARSE)
+#define RRV__MEMO_SLOTS 2
 typedef struct rrv__chain_memo {
-    int valid, found;
-    double seed[RRV__COARSE_MAX][3];
-    rrv__mroot root;
-    int chord_valid, chord_found;
-    rrv__mroot chord_root;
+    int used;
+    struct {
+        int found;
+        double seed[RRV__COARSE_MAX][3];
+        rrv__mroot root;
+    } slot[RRV__MEMO_SLOTS];
 } rrv__chain_memo;
 static void rrv__chain_memo_clear(rrv__chain_memo *memo)
 {
-    memo->valid = memo->chord_valid = 0;
+    memo->used = 0;
 }
 
 /* The coarse chain's inner vertices relative to x0 in the chord's frame
@@ -14005,10 +14048,11 @@ static int rrv__chain_solve_from(const rrv_scene *scene, rrv__chain *ch, rrv_vec
    root the fine chain reaches from some seed keeps a nonzero probability,
    however the coarse chain's roots differ from it. The polish is a
    function of the snapped coarse root alone (test_manifold_memo_is_exact),
-   so where a try's coarse root snaps onto the memo's, the memo's result
-   is the polish's, bit for bit. The memo keeps the first root found, the
-   one whose 1/p the trials estimate: a trial that comes back to it costs
-   a coarse solve, whatever other roots the trials between found. */
+   so where a try's coarse root snaps onto one of the memo's, the memo's
+   result is the polish's, bit for bit. The memo keeps the first roots
+   found, the chord's and the random try's whose 1/p the trials estimate:
+   a trial that comes back to either costs a coarse solve, whatever other
+   roots the trials between found. */
 #define RRV__CHAIN_DIRECT 0.0625
 static int rrv__chain_try_once(rrv__context *ctx, rrv__chain *ch, rrv_vec3 w, int direct, rrv__chain_memo *memo,
                                rrv__mroot *root, int *evaluations)
@@ -14017,56 +14061,51 @@ static int rrv__chain_try_once(rrv__context *ctx, rrv__chain *ch, rrv_vec3 w, in
     rrv__chain *coarse = ctx->coarse_chain;
     rrv__mroot near;
     double key[RRV__COARSE_MAX][3];
-    int found;
+    int found, i;
     if (direct || !rrv__chain_solve_from(scene, coarse, w, &near, evaluations))
         return rrv__chain_solve_from(scene, ch, w, root, evaluations);
     rrv__chain_snap(coarse, key);
-    if (memo && memo->valid && !memcmp(key, memo->seed, (size_t)coarse->n * sizeof key[0])) {
-        *root = memo->root;
-        return memo->found;
-    }
+    for (i = 0; memo && i < memo->used; ++i)
+        if (!memcmp(key, memo->slot[i].seed, (size_t)coarse->n * sizeof key[0])) {
+            *root = memo->slot[i].root;
+            return memo->slot[i].found;
+        }
     rrv__chain_seed_between(scene, ch, (const double (*)[3])key, coarse->n);
     found = !ch->failed && rrv__chain_solve(scene, ch, root);
     *evaluations += root->iterations;
-    if (memo && (!memo->valid || !memo->found)) {
-        memo->valid = 1;
-        memo->found = found;
-        memcpy(memo->seed, key, (size_t)coarse->n * sizeof key[0]);
-        memo->root = *root;
+    if (memo && found && memo->used < RRV__MEMO_SLOTS) {
+        i = memo->used++;
+        memo->slot[i].found = found;
+        memcpy(memo->slot[i].seed, key, (size_t)coarse->n * sizeof key[0]);
+        memo->slot[i].root = *root;
     }
     return found;
 }
 
-/* One solve from fresh seeds of rrv__chain_seed_direction, counted in the
-   stats. On return with the memo's result (a trial), ch is left as it
-   was: only the root's direction and density are read then. */
+/* One solve, counted in the stats: from the chord (from_chord; one seed,
+   deterministic) or from fresh seeds of rrv__chain_seed_direction. On
+   return with the memo's result, ch is left as it was: only the root's
+   direction and density are read then. */
 static int rrv__manifold_try(rrv__context *ctx, rrv__chain *ch, rrv__rng *rng, rrv__chain_memo *memo,
-                             rrv__mroot *root)
+                             int from_chord, rrv__mroot *root)
 {
-    int found = 0, k, evaluations = 0;
-    /* up to RRV__SOLVE_RESTARTS seeds, as shoot's solve: a solve that
-       fails is not a return to the root, so each failure of the trials
-       that estimate 1/p doubled a connection's weight or more (on the
-       fire caustic 1.7 % of connections, 40x shoot's variance a sample) */
-    for (k = 0; k < RRV__SOLVE_RESTARTS && !found; ++k) {
-        int on_chord;
-        rrv_vec3 w = rrv__chain_seed_direction(ch, rng, &on_chord);
-        /* the chord is never solved directly: the share of random seeds
-           that are keeps every root of the fine chain reachable, and a
-           direct solve costs some five of a coarse one and its polish */
-        int direct = !ctx->coarse_chain || ctx->coarse_chain->n == 0 ||
-                     (rrv__uniform(rng) < RRV__CHAIN_DIRECT && !on_chord);
-        if (on_chord && memo && memo->chord_valid) {
-            *root = memo->chord_root;
-            found = memo->chord_found;
-            continue;
-        }
+    int found = 0, k, evaluations = 0, coarse = ctx->coarse_chain && ctx->coarse_chain->n > 0;
+    if (from_chord) {
+        /* never solved directly where a coarse stage exists: the random
+           seeds' direct share keeps every root of the fine chain
+           reachable, and a direct solve costs some five of a coarse one
+           and its polish */
+        found = rrv__chain_try_once(ctx, ch, ch->c, !coarse, memo, root, &evaluations);
+    }
+    /* up to RRV__SOLVE_RESTARTS random seeds, as shoot's solve: a solve
+       that fails is not a return to the root, so each failure of the
+       trials that estimate 1/p doubled a connection's weight or more (on
+       the fire caustic 1.7 % of connections, 40x shoot's variance a
+       sample) */
+    for (k = 0; !from_chord && k < RRV__SOLVE_RESTARTS && !found; ++k) {
+        rrv_vec3 w = rrv__chain_seed_direction(ch, rng);
+        int direct = !coarse || rrv__uniform(rng) < RRV__CHAIN_DIRECT;
         found = rrv__chain_try_once(ctx, ch, w, direct, memo, root, &evaluations);
-        if (on_chord && memo) {
-            memo->chord_valid = 1;
-            memo->chord_found = found;
-            memo->chord_root = *root;
-        }
     }
     root->iterations = evaluations;
     ++ctx->stats.solves;
@@ -14105,8 +14144,8 @@ static double rrv__manifold_mis_weight(const rrv__context *ctx, double density, 
     return rrv__shoot_mis_weight(pdf_area, 1.0 / density, pdf_dir);
 }
 
-/* One trial of the 1/p estimate: a fresh solve that comes back to the
-   root w0. */
+/* One trial of the 1/q estimate: a fresh solve from random seeds that
+   comes back to the root w0. */
 typedef struct rrv__manifold_recurrence {
     rrv__context *ctx;
     rrv_vec3 w0;
@@ -14116,7 +14155,7 @@ static int rrv__manifold_recurs(void *user, rrv__rng *rng)
 {
     rrv__manifold_recurrence *t = (rrv__manifold_recurrence *)user;
     rrv__mroot again;
-    return rrv__manifold_try(t->ctx, t->ctx->chain, rng, t->memo, &again) &&
+    return rrv__manifold_try(t->ctx, t->ctx->chain, rng, t->memo, 0, &again) &&
            rrv__length(rrv__sub(again.w0, t->w0)) < RRV__SOLVE_SAME_ROOT;
 }
 
@@ -14149,66 +14188,125 @@ static void rrv__chain_setup_coarse(rrv__context *ctx, rrv_vec3 ny, double u)
     if (2 * coarse->n > ch->n) coarse->n = 0;
 }
 
+/* The light of a solved root: its chain's transmittance carried, times
+   weight, into the path. */
+static void rrv__manifold_light(rrv__context *ctx, rrv__path *path, const rrv__vertex_bsdf *v, const rrv_shape *s,
+                                rrv_vec3 y, double pdf_area, const rrv__mroot *root, const double carried[3],
+                                double weight)
+{
+    double k = root->density / pdf_area * weight * rrv__eta_scale(ctx, y) * rrv__path_mis(path) *
+               rrv__manifold_mis_weight(ctx, root->density, pdf_area, rrv__vertex_pdf(v, root->w0));
+    int c;
+    for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * carried[c] * s->L[c] * k;
+}
+
+/* Does the chain as solved carry light (it meets the light's front, and
+   with v, rrv__chain_carry finds a way through; without v, carried 1)? */
+static int rrv__manifold_carries(rrv__context *ctx, const rrv__vertex_bsdf *v, rrv_vec3 ny, rrv__rng *rng,
+                                 double carried[3])
+{
+    if (!rrv__chain_meets_front(ctx->chain, ny)) return 0;
+    if (v) return rrv__chain_carry(ctx, ctx->chain, v, rng, carried);
+    carried[0] = carried[1] = carried[2] = 1.0;
+    return 1;
+}
+
+/* The unbiased estimate of one connection (ctx->chain and its coarse
+   stage set up, manifold_trials 0): the roots it counts, at most two,
+   with their weights and carried throughputs; returns how many. Two
+   tries split the roots between them:
+     the chord's: one solve seeded on the chord, a deterministic map, so
+       its root r_c (if it converges) is counted once with weight 1;
+     a random one, made with probability RRV__CHAIN_RANDOM (s): one solve
+       from random seeds, which reaches root r with probability q_r > 0.
+       A root other than r_c counts f(r) / (s q), 1/q estimated by
+       repeating random solves until r recurs (directions within
+       RRV__SOLVE_SAME_ROOT), beyond RRV__SOLVE_TRIALS of them by Russian
+       roulette (rrv__inverse_probability: E = 1/q exactly); r_c counts 0.
+   So E = f(r_c) + sum over r != r_c of s q_r f(r) / (s q_r) = sum over
+   all roots of f(r) (test_manifold_estimate_is_unbiased). The root
+   through a lens, the chord's nearly always, is counted without the
+   noise of a 1/p estimate, and the trials are made for the other roots
+   alone, found with the random seeds' whole probability rather than a
+   share of a mixture's. A root of small q found at all weighs 1/(s q):
+   the smaller s, the cheaper a connection and the louder those.
+   Measured on the lens caustic against one mixture of seeds (the chord
+   3/4 of the time) for the first solve and every trial: see
+   test/bench/RESULTS.md, "The chord's root counted once". */
+#define RRV__CHAIN_RANDOM 0.5
+static int rrv__manifold_estimate(rrv__context *ctx, const rrv__vertex_bsdf *v, rrv_vec3 ny, rrv__rng *rng,
+                                  rrv__mroot root[2], double weight[2], double carried[2][3])
+{
+    rrv__chain_memo memo;
+    rrv__manifold_recurrence again;
+    rrv__mroot chord;
+    double inverse_q;
+    long count;
+    int n = 0, chord_found;
+    rrv__chain_memo_clear(&memo);
+    chord_found = rrv__manifold_try(ctx, ctx->chain, rng, &memo, 1, &chord);
+    ctx->stats.solve_trials += 1;
+    if (chord_found && rrv__manifold_carries(ctx, v, ny, rng, carried[0])) {
+        root[0] = chord;
+        weight[n++] = 1.0;
+    }
+    if (RRV__CHAIN_RANDOM < 1.0 && !(rrv__uniform(rng) < RRV__CHAIN_RANDOM)) return n;
+    ctx->stats.solve_trials += 1;
+    /* a random try that lands on the chord's root may take its polish
+       from the memo (the chain then left elsewhere), but counts nothing */
+    if (!rrv__manifold_try(ctx, ctx->chain, rng, &memo, 0, &root[n]) ||
+        (chord_found && rrv__length(rrv__sub(root[n].w0, chord.w0)) < RRV__SOLVE_SAME_ROOT) ||
+        !rrv__manifold_carries(ctx, v, ny, rng, carried[n]))
+        return n;
+    again.ctx = ctx;
+    again.w0 = root[n].w0;
+    again.memo = &memo;
+    inverse_q = rrv__inverse_probability(rng, RRV__SOLVE_TRIALS, rrv__manifold_recurs, &again, &count);
+    ctx->stats.solve_trials += (uint64_t)count;
+    weight[n] = inverse_q / RRV__CHAIN_RANDOM;
+    return n + 1;
+}
+
 /* Curved NEE from x0 by the manifold walk. The light point y and the
    chain's comb offset are drawn once; conditioned on them the estimate is
-   unbiased for the chain model: unbiased mode (manifold_trials 0) repeats
-   independent solves until the first root comes back (directions within
-   RRV__SOLVE_SAME_ROOT), beyond RRV__SOLVE_TRIALS of them by Russian
-   roulette (rrv__inverse_probability: E = 1/p exactly); the
-   fixed-trial mode sums each distinct root found in M solves once (biased
-   low where a root's basin is small, Zeltner et al.'s biased SMS). The
-   partition of path space is shoot's (manual, NEXT-EVENT ESTIMATION). */
+   unbiased for the chain model (rrv__manifold_estimate). The fixed-trial
+   mode (manifold_trials M) makes the chord's try and M - 1 random ones
+   and sums each distinct root once (biased low where a root's basin is
+   small, Zeltner et al.'s biased SMS). The partition of path space is
+   shoot's (manual, NEXT-EVENT ESTIMATION). */
 static void rrv__manifold_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                               const rrv__light_draw *draw, rrv__rng *rng)
 {
     const rrv_scene *scene = ctx->scene;
     const rrv_settings *st = &scene->settings;
     rrv__chain *ch = ctx->chain;
-    rrv__mroot root;
-    rrv__chain_memo memo;
+    rrv__mroot root[2];
     rrv_vec3 y, ny, roots[RRV__MANIFOLD_ROOTS];
-    double pdf_area, carried[3], k, offset;
+    double pdf_area, carried[2][3], weight[2], offset, to_y;
     const rrv_shape *s = rrv__pick_area_light(scene, draw, x0, 0, &y, &ny, &pdf_area);
-    int c, nroots = 0, trial;
-    double to_y;
+    int nroots = 0, trial, i, n;
     if (!s || !ch) return;
     to_y = rrv__length(rrv__sub(y, x0));
     if (!(to_y > 0) || rrv__weak_chord(ctx, x0, rrv__scale(rrv__sub(y, x0), 1.0 / to_y), to_y)) return;
     offset = rrv__uniform(rng);
     rrv__chain_setup(scene, x0, y, ny, st->manifold_gauge == RRV_GAUGE_ISO, st->manifold_drop, offset, ch);
     rrv__chain_setup_coarse(ctx, ny, offset);
-    rrv__chain_memo_clear(&memo);
+    ++ctx->stats.solve_connections;
     if (st->manifold_trials <= 0) {
-        if (!rrv__manifold_try(ctx, ch, rng, &memo, &root) || !rrv__chain_meets_front(ch, ny)) return;
-        rrv__manifold_recurrence again;
-        double inverse_p;
-        long count;
-        if (!rrv__chain_carry(ctx, ch, v, rng, carried)) return;
-        again.ctx = ctx;
-        again.w0 = root.w0;
-        again.memo = &memo;
-        inverse_p = rrv__inverse_probability(rng, RRV__SOLVE_TRIALS, rrv__manifold_recurs, &again, &count);
-        ctx->stats.solve_trials += (uint64_t)count;
-        ++ctx->stats.solve_connections;
-        k = root.density / pdf_area * inverse_p * rrv__eta_scale(ctx, y) * rrv__path_mis(path) *
-            rrv__manifold_mis_weight(ctx, root.density, pdf_area, rrv__vertex_pdf(v, root.w0));
-        for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * carried[c] * s->L[c] * k;
+        n = rrv__manifold_estimate(ctx, v, ny, rng, root, weight, carried);
+        for (i = 0; i < n; ++i) rrv__manifold_light(ctx, path, v, s, y, pdf_area, &root[i], carried[i], weight[i]);
         return;
     }
     for (trial = 0; trial < st->manifold_trials; ++trial) {
-        int i;
-        if (!rrv__manifold_try(ctx, ch, rng, NULL, &root) || !rrv__chain_meets_front(ch, ny)) continue;
+        if (!rrv__manifold_try(ctx, ch, rng, NULL, trial == 0, &root[0]) || !rrv__chain_meets_front(ch, ny)) continue;
         for (i = 0; i < nroots; ++i)
-            if (rrv__length(rrv__sub(roots[i], root.w0)) < RRV__SOLVE_SAME_ROOT) break;
+            if (rrv__length(rrv__sub(roots[i], root[0].w0)) < RRV__SOLVE_SAME_ROOT) break;
         if (i < nroots || nroots == RRV__MANIFOLD_ROOTS) continue;
-        roots[nroots++] = root.w0;
-        if (!rrv__chain_carry(ctx, ch, v, rng, carried)) continue;
-        ctx->stats.solve_trials += (uint64_t)st->manifold_trials;
-        ++ctx->stats.solve_connections;
-        k = root.density / pdf_area * rrv__eta_scale(ctx, y) * rrv__path_mis(path) *
-            rrv__manifold_mis_weight(ctx, root.density, pdf_area, rrv__vertex_pdf(v, root.w0));
-        for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * carried[c] * s->L[c] * k;
+        roots[nroots++] = root[0].w0;
+        if (rrv__chain_carry(ctx, ch, v, rng, carried[0]))
+            rrv__manifold_light(ctx, path, v, s, y, pdf_area, &root[0], carried[0], 1.0);
     }
+    ctx->stats.solve_trials += (uint64_t)st->manifold_trials;
 }
 
 /* ---- the curved-NEE interface (declared at the head of the path tracer) ---------- */
@@ -19501,34 +19599,40 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  block Thomas inside the radius, Powell's dogleg outside;
                  faster on every scene measured, test/bench/RESULTS.md). The density
                  dw0/dA_y from block Thomas elimination of J (the
-                 generalised geometry term of Specular Manifold Sampling). Seeds: the chord
-                 itself 3 times in 4 (its solve is deterministic, kept for
-                 the connection: trials that draw it again cost nothing),
-                 else a mixture of Gaussians around the chord (0.02 rad
-                 half the time, 0.2 rad 3 in 8) and uniform, traced through
-                 the planes by the chain's own rule and aimed at y by
+                 generalised geometry term of Specular Manifold Sampling).
+                 Each connection makes two tries, which split the roots
+                 between them: one seeded on the chord (deterministic, so
+                 its root counts once, weight 1) and, half the time, one
+                 from random seeds (a mixture of Gaussians around the
+                 chord, 0.02 rad half the time and 0.2 rad 3 in 8, and
+                 uniform), whose root, if not the chord's, counts 2/q,
+                 q the random seeds' probability of reaching it: 1/q by
+                 repeating random solves until the root recurs (initial
+                 directions within 1e-5), beyond 64 trials by Russian
+                 roulette (trial i made with probability (64/i)^2,
+                 counted as its inverse): E = 1/q exactly, at most 129
+                 trials expected whatever q. A seed is traced through the
+                 planes by the chain's own rule and aimed at y by
                  shooting (at most 16 steps; a parabola where no trace
-                 reaches y's plane); the first solve and every trial draw
-                 from that one distribution. A seed is solved in two stages
-                 where that saves work, as shoot's are: first on a coarse
-                 chain (planes 8x as far apart, at most 0.1 rad of bend a
+                 reaches y's plane), then solved in two stages where that
+                 saves work, as shoot's are: first on a coarse chain
+                 (planes 8x as far apart, at most 0.1 rad of bend a
                  plane), then on the fine one from the cubic through the
-                 coarse root's vertices snapped to a 2^-20 m lattice; a seed
-                 whose coarse solve fails, and one random seed in 16, is solved
-                 on the fine chain directly, so no root of the fine chain
-                 loses its probability. A trial whose coarse root snaps onto
-                 the first root's takes that polish's result: exact, as a
-                 polish depends on the snapped root alone. `manifoldtrials 0` (default, unbiased
-                 for the chain model): 1/p by repeating solves until the
-                 root recurs (initial directions within 1e-5), beyond 64
-                 trials by Russian roulette (trial i made with probability
-                 (64/i)^2, counted as its inverse): E = 1/p exactly, at
-                 most 129 trials expected whatever p. The chain model
-                 itself is second order in its plane spacing: on the
+                 coarse root's vertices snapped to a 2^-20 m lattice; a
+                 seed whose coarse solve fails, and one random seed in 16,
+                 is solved on the fine chain directly, so no root of the
+                 fine chain loses its probability. A try whose coarse root
+                 snaps onto the chord's or the random try's takes that
+                 polish's result: exact, as a polish depends on the
+                 snapped root alone. `manifoldtrials 0` is this unbiased
+                 estimate (for the chain model; the default). The chain
+                 model itself is second order in its plane spacing: on the
                  Luneburg lens caustic at its 0.01 m spacing it renders 0.7 %
                  above forward paths, 0.2 % at 0.005, under 0.2 % on the heat
-                 caustics (test/bench/RESULTS.md). `manifoldtrials M`: M solves, each distinct root
-                 counted once (biased low where a root's basin is small).
+                 caustics (test/bench/RESULTS.md). `manifoldtrials M`: M
+                 solves, the chord's and M - 1 random ones, each distinct
+                 root counted once (biased low where a root's basin is
+                 small).
                  `manifolddrop D`: leave out comb planes across which eta
                  on the chord changes by less than D (faster, biased; 0, the
                  default, keeps all). Unsupported IORs as for shoot.

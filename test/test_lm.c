@@ -253,8 +253,7 @@ static void *solve_long_chain(void *user)
     rrv__chain_setup(lc->scene, x0, y, rrv__normalize(rrv__sub(y, x0)), 0, 0.0, 0.5, ch);
     lc->vertices = ch->n;
     for (k = 0; k < 8 && !lc->found; ++k) {
-        int on_chord;
-        rrv_vec3 w = rrv__chain_seed_direction(ch, &rng, &on_chord);
+        rrv_vec3 w = k == 0 ? ch->c : rrv__chain_seed_direction(ch, &rng);
         int aimed;
         if (!rrv__chain_aim(lc->scene, ch, w, &aimed)) rrv__chain_seed(lc->scene, ch, w);
         lc->found = rrv__manifold_solve(lc->scene, ch, &root);

@@ -830,15 +830,15 @@ static rrv_scene *blob_scene_weighted(double step, rrv_stepper stepper, double w
 /* ---- the solver: the manifold walk ------------------------------------------------ */
 
 /* Solves the chain x0 -> y (light frame from ny, comb offset u) from up to
-   `tries` seeds of the estimator's own distribution; 1 with the root. */
+   `tries` seeds, the estimator's own: the chord, then random ones; 1 with
+   the root. */
 static int manifold_root(const rrv_scene *s, rrv_vec3 x0, rrv_vec3 y, rrv_vec3 ny, int iso, double u, int tries,
                          rrv__rng *rng, rrv__chain *ch, rrv__mroot *root)
 {
     int k;
     rrv__chain_setup(s, x0, y, ny, iso, 0.0, u, ch);
     for (k = 0; k < tries; ++k) {
-        int on_chord;
-        rrv_vec3 w = rrv__chain_seed_direction(ch, rng, &on_chord);
+        rrv_vec3 w = k == 0 ? ch->c : rrv__chain_seed_direction(ch, rng);
         int aimed;
         if (!rrv__chain_aim(s, ch, w, &aimed)) rrv__chain_seed(s, ch, w);
         if (rrv__manifold_solve(s, ch, root)) return 1;
@@ -1503,11 +1503,8 @@ static void test_manifold_bad_chains(void)
     rrv_scene_free(s);
 }
 
-/* A render context whose chain cannot be allocated: rrv_render_rect says
-   so (RRV_ERROR_MEMORY) and adds nothing; the next render, allocations
-   granted, works. */
 /* A chain try's coarse stage (rrv__chain_try_once): where a trial's
-   coarse root snaps onto the last polish's, the memo stands for the
+   coarse root snaps onto one the memo keeps, the memo stands for the
    polish. That is exact only if a polish is a function of its snapped
    seed alone, so here each trial of the lens caustic's connections is run
    twice from one random state, with the memo and without (NULL: always
@@ -1541,12 +1538,14 @@ static void test_manifold_memo_is_exact(void)
         CHECKF(2 * ctx.coarse_chain->n <= ctx.chain->n, "coarse chain: %d planes against the fine %d",
                ctx.coarse_chain->n, ctx.chain->n);
         rrv__chain_memo_clear(&memo);
-        if (!rrv__manifold_try(&ctx, ctx.chain, &rng, &memo, &root)) continue;
+        /* the connection's own order: the chord's try fills the memo's
+           first slot, the random tries the second */
+        if (!rrv__manifold_try(&ctx, ctx.chain, &rng, &memo, 1, &root)) continue;
         for (trial = 0; trial < 8; ++trial) {
             rrv__rng again = rng;
             rrv__mroot a, b;
-            int fa = rrv__manifold_try(&ctx, ctx.chain, &rng, &memo, &a);
-            int fb = rrv__manifold_try(&ctx, ctx.chain, &again, NULL, &b);
+            int fa = rrv__manifold_try(&ctx, ctx.chain, &rng, &memo, 0, &a);
+            int fb = rrv__manifold_try(&ctx, ctx.chain, &again, NULL, 0, &b);
             ++trials;
             if (a.iterations < b.iterations) ++hits;
             if (fa != fb || (fa && (a.w0.x != b.w0.x || a.w0.y != b.w0.y || a.w0.z != b.w0.z ||
@@ -1564,6 +1563,155 @@ static void test_manifold_memo_is_exact(void)
     rrv_scene_free(s);
 }
 
+/* The census of a connection's roots: root w0 (value f) among the n
+   distinct ones so far (at most 8); its index, or -1 where the list is
+   full. */
+static int census_root(rrv_vec3 *w, double *f, int *count, int *n, rrv_vec3 w0, double value)
+{
+    int i;
+    for (i = 0; i < *n; ++i)
+        if (rrv__length(rrv__sub(w[i], w0)) < RRV__SOLVE_SAME_ROOT) return i;
+    if (*n == 8) return -1;
+    w[*n] = w0;
+    f[*n] = value;
+    count[*n] = 0;
+    return (*n)++;
+}
+
+/* An estimator's mean over draws (sums sum, sum2) against the census's
+   sum of its roots, within 4 standard errors. */
+static void check_connection_mean(int k, int n, double truth, double sum, double sum2, int draws)
+{
+    double mean = sum / draws, se = sqrt(fmax(sum2 / draws - mean * mean, 0.0) / draws);
+    SAY("  connection %d: %d roots, their sum %.5f, estimated %.5f +- %.5f\n", k, n, truth, mean, se);
+    CHECKF(fabs(mean - truth) < 4.0 * se + 1e-9 * truth, "connection %d: %d roots sum %.5f, estimated %.5f +- %.5f", k,
+           n, truth, mean, se);
+}
+
+/* rrv__manifold_estimate splits a connection's roots between the chord's
+   try (weight 1) and a random try (weight 1/(s q), the random seeds'
+   probability q of the root estimated by trials), so over its random
+   draws its mean of sum weight x density must be the sum of the densities
+   of every root of the chain that meets the light's front. Lens caustic
+   connections with two or more roots, each found by at least a tenth of
+   300 random tries (so no root the census misses weighs much), are
+   estimated 2000 times each: the mean must agree with the census's sum
+   within 4 standard errors. Counting the chord's root in the random try
+   as well, or leaving out the 1/s, moves the mean by far more. */
+static void test_manifold_estimate_is_unbiased(void)
+{
+    enum { CENSUS = 300, DRAWS = 2000, WANTED = 3 };
+    rrv_scene *s = NULL;
+    rrv__context ctx;
+    rrv__rng rng;
+    int k, used = 0;
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
+    solver_context(&ctx, s);
+    ctx.partition = ctx.manifold = 1;
+    ctx.eta_floor = 1.0;
+    ctx.chain = rrv__chain_new(RRV__CHAIN_MAX);
+    ctx.coarse_chain = rrv__chain_new(RRV__COARSE_MAX);
+    rrv__rng_seed(&rng, 17, 0, 0);
+    for (k = 0; ctx.chain && ctx.coarse_chain && k < 400 && used < WANTED; ++k) {
+        rrv_vec3 x0 = rrv__v3(1.2 * rrv__uniform(&rng) - 0.6, 1e-5, 1.2 * rrv__uniform(&rng) - 0.6);
+        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5), ny = rrv__v3(0, -1, 0);
+        rrv_vec3 w[8];
+        double density[8], truth = 0, sum = 0, sum2 = 0;
+        int count[8], n = 0, i, t, rare = 0;
+        double u = rrv__uniform(&rng);
+        rrv__chain_setup(s, x0, y, ny, 0, 0.0, u, ctx.chain);
+        rrv__chain_setup_coarse(&ctx, ny, u);
+        for (t = 0; t < CENSUS + 1; ++t) {
+            rrv__mroot root;
+            if (!rrv__manifold_try(&ctx, ctx.chain, &rng, NULL, t == 0, &root) ||
+                !rrv__chain_meets_front(ctx.chain, ny))
+                continue;
+            if ((i = census_root(w, density, count, &n, root.w0, root.density)) >= 0 && t > 0) ++count[i];
+        }
+        for (i = 0; i < n; ++i) {
+            truth += density[i];
+            if (count[i] < CENSUS / 10) rare = 1;
+        }
+        if (n < 2 || rare) continue;
+        ++used;
+        for (t = 0; t < DRAWS; ++t) {
+            rrv__mroot root[2];
+            double weight[2], carried[2][3], e = 0;
+            int m = rrv__manifold_estimate(&ctx, NULL, ny, &rng, root, weight, carried);
+            for (i = 0; i < m; ++i) e += weight[i] * root[i].density;
+            sum += e;
+            sum2 += e * e;
+        }
+        check_connection_mean(k, n, truth, sum, sum2, DRAWS);
+    }
+    CHECKF(used == WANTED, "%d connections with two roots of a tenth or more (wanted %d)", used, WANTED);
+    rrv__chain_delete(ctx.chain);
+    rrv__chain_delete(ctx.coarse_chain);
+    rrv_scene_free(s);
+}
+
+/* rrv__shoot_estimate splits the roots as the manifold walk's estimate
+   does (the chord's try weight 1, a random try's root 1/(s q)), so on lens
+   caustic connections with two or more roots, each found by at least a
+   tenth of 300 random solves, its mean of sum weight x carried (green)
+   over 2000 draws must be the sum of what each root carries, within 4
+   standard errors. */
+static void test_shoot_estimate_is_unbiased(void)
+{
+    enum { CENSUS = 300, DRAWS = 2000, WANTED = 3 };
+    rrv_scene *s = NULL;
+    rrv__context ctx;
+    rrv__rng rng;
+    rrv__vertex_bsdf vb;
+    rrv__path path;
+    const rrv_vec3 ny = rrv__v3(0, -1, 0);
+    int k, used = 0;
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
+    solver_context(&ctx, s);
+    ctx.eta_floor = 1.0;
+    white_floor_vertex(&vb);
+    rrv__rng_seed(&rng, 23, 0, 0);
+    rrv__path_start(&path, &rng);
+    for (k = 0; k < 400 && used < WANTED; ++k) {
+        rrv_vec3 x0 = rrv__v3(1.2 * rrv__uniform(&rng) - 0.6, 1e-5, 1.2 * rrv__uniform(&rng) - 0.6);
+        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5), w[8];
+        double carried_by[8], truth = 0, sum = 0, sum2 = 0;
+        int count[8], n = 0, i, t, rare = 0;
+        for (t = 0; t < CENSUS; ++t) {
+            rrv__polish_memo memo;
+            rrv__root root;
+            rrv__chords kept;
+            double carried[3];
+            memo.valid = 0;
+            kept.n = -1; /* shot along the root */
+            if (!rrv__solve_shot_seeded(&ctx, x0, y, &ny, &rng, &memo, NULL, &root) ||
+                !rrv__shoot_carried(&ctx, &path, x0, &vb, y, ny, &ny, 1.0, &root, &kept, &rng, carried))
+                continue;
+            if ((i = census_root(w, carried_by, count, &n, root.w0, carried[1])) >= 0) ++count[i];
+        }
+        for (i = 0; i < n; ++i) {
+            truth += carried_by[i];
+            if (count[i] < CENSUS / 10) rare = 1;
+        }
+        if (n < 2 || rare) continue;
+        ++used;
+        for (t = 0; t < DRAWS; ++t) {
+            rrv__root roots[2];
+            double weight[2], carried[2][3], e = 0;
+            int m = rrv__shoot_estimate(&ctx, &path, x0, &vb, y, ny, &ny, 1.0, &rng, roots, weight, carried);
+            for (i = 0; i < m; ++i) e += weight[i] * carried[i][1];
+            sum += e;
+            sum2 += e * e;
+        }
+        check_connection_mean(k, n, truth, sum, sum2, DRAWS);
+    }
+    CHECKF(used == WANTED, "%d connections with two roots of a tenth or more (wanted %d)", used, WANTED);
+    rrv_scene_free(s);
+}
+
+/* A render context whose chain cannot be allocated: rrv_render_rect says
+   so (RRV_ERROR_MEMORY) and adds nothing; the next render, allocations
+   granted, works. */
 static void test_manifold_out_of_memory(void)
 {
     rrv_scene *s = NULL;
@@ -2368,6 +2516,8 @@ int main(void)
     NEE_RUN(test_manifold_bad_chains);
     NEE_RUN(test_manifold_out_of_memory);
     NEE_RUN(test_manifold_memo_is_exact);
+    NEE_RUN(test_manifold_estimate_is_unbiased);
+    NEE_RUN(test_shoot_estimate_is_unbiased);
     NEE_RUN(test_shoot_mis_weights_sum_to_one);
     NEE_RUN(test_weak_class_shared);
     NEE_RUN(test_weak_class_flat_support);
