@@ -1900,7 +1900,7 @@ static void print_render_summary(int width, int height, int spp, double seconds,
     if (stats->trapped_paths > 0) fprintf(stderr, " (%" PRIu64 " of them trapped in a refracting medium)", stats->trapped_paths);
     if (stats->solves > 0) {
         double n = (double)stats->solves, conv = (double)stats->solves_converged;
-        fprintf(stderr, "; curved nee: %" PRIu64 " solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, "
+        fprintf(stderr, "; curved nee: %" PRIu64 " solves, %.1f%% converged, %.1f iterations, %.2f solves a connection, "
                 "%.0f segments a chain", stats->solves, 100.0 * conv / n, (double)stats->solve_iterations / n,
                 stats->solve_connections ? (double)stats->solve_trials / (double)stats->solve_connections : 0.0,
                 conv > 0 ? (double)stats->solve_segments / conv : 0.0);

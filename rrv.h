@@ -861,8 +861,9 @@ typedef struct rrv_render_stats {
     uint64_t solves_converged;
     uint64_t solve_iterations;  /* summed over the solves attempted */
     uint64_t solve_segments;    /* chain length: segments of converged shots, summed */
-    uint64_t solve_connections; /* curved connections made (a root found, counted) */
-    uint64_t solve_trials;      /* trials estimating 1/p, summed over those */
+    uint64_t solve_connections; /* curved connections tried (shoot, manifold) */
+    uint64_t solve_trials;      /* solves a connection made: its tries and the trials
+                                   estimating 1/q, summed over those */
     uint64_t solves_unsupported;/* vertices whose curved connections were left to
                                    forward paths because no curved NEE runs there:
                                    the Poisson and midpoint schemes, or (manifold) an
@@ -12331,8 +12332,8 @@ static double rrv__inverse_probability(rrv__rng *rng, int start, rrv__trial_func
     return estimate;
 }
 
-/* One trial of shoot's 1/p estimate: a fresh seeded solve toward the
-   same light point that comes back to the root w0. */
+/* One trial of shoot's 1/q estimate: a fresh solve from random seeds
+   toward the same light point that comes back to the root w0. */
 typedef struct rrv__shot_recurrence {
     rrv__context *ctx;
     rrv_vec3 x0, y, w0;
@@ -12353,20 +12354,6 @@ static int rrv__shot_recurs(void *user, rrv__rng *rng)
     return rrv__length(rrv__sub(again.w0, t->w0)) < RRV__SOLVE_SAME_ROOT;
 }
 
-/* Curved NEE from vertex x0: a point y sampled uniformly on one area light,
-   one root w0 of the two-point problem from a random seed, and its inverse
-   probability estimated by repeated trials until the same root comes back
-   (Specular Manifold Sampling, Zeltner et al. 2020), past
-   RRV__SOLVE_TRIALS of them by Russian roulette (rrv__inverse_probability):
-   E = 1/p exactly, so summed over roots the estimate is unbiased.
-   Only curved paths are counted here (part of them in a refraction support,
-   no sharp interface crossed): straight ones belong to straight NEE. Curved
-   paths to quad, triangle and sphere lights are shared with the forward
-   path by the power heuristic (rrv__shoot_mis_weight): near a caustic
-   |det| -> 0 and the forward path takes them, which keeps the estimate's
-   1/|det| bounded. A sphere's points are those x0 sees straight
-   (rrv__pick_area_light): bent paths to its far side are the forward
-   path's alone. The sky is left to forward paths. */
 /* What root carries from light point y to x0 per unit of its weight, into
    out (0 and no light where it carries none): the BSDF, the transmittance
    (the kept chords of its own solve, else a shot along it) and the
@@ -12423,6 +12410,7 @@ static int rrv__shoot_estimate(rrv__context *ctx, const rrv__path *path, rrv_vec
     rrv__shot_recurrence t;
     long count;
     int n = 0, shots = 0, chord_found, found;
+    double share;
     memo.valid = 0;
     ++ctx->stats.solve_connections;
     chord_found = rrv__solve_shot_one(ctx, x0, y, plane, rrv__normalize(rrv__sub(y, x0)), &memo, &kept, &chord, &shots);
@@ -12431,7 +12419,9 @@ static int rrv__shoot_estimate(rrv__context *ctx, const rrv__path *path, rrv_vec
         root[0] = chord;
         weight[n++] = 1.0;
     }
-    if (!(rrv__uniform(rng) < RRV__SHOOT_RANDOM)) return n;
+    /* where the chord's try failed, the random try is all there is */
+    share = chord_found ? RRV__SHOOT_RANDOM : 1.0;
+    if (share < 1.0 && !(rrv__uniform(rng) < share)) return n;
     found = rrv__solve_shot_seeded(ctx, x0, y, plane, rng, &memo, &kept, &root[n]);
     rrv__shoot_stats(ctx, found, root[n].iterations, &root[n]);
     /* a random try that lands on the chord's root counts nothing */
@@ -12444,7 +12434,7 @@ static int rrv__shoot_estimate(rrv__context *ctx, const rrv__path *path, rrv_vec
     t.plane = plane;
     t.w0 = root[n].w0;
     t.memo = &memo;
-    weight[n] = rrv__inverse_probability(rng, RRV__SOLVE_TRIALS, rrv__shot_recurs, &t, &count) / RRV__SHOOT_RANDOM;
+    weight[n] = rrv__inverse_probability(rng, RRV__SOLVE_TRIALS, rrv__shot_recurs, &t, &count) / share;
     ctx->stats.solve_trials += (uint64_t)count;
     return n + 1;
 }
@@ -12453,11 +12443,21 @@ static int rrv__shoot_estimate(rrv__context *ctx, const rrv__path *path, rrv_vec
    light and two tries that split the roots of the two-point problem
    between them, as nee manifold's do (rrv__manifold_estimate): one from
    the chord's direction (a deterministic map, so its root counts once,
-   weight 1), and with probability RRV__SHOOT_RANDOM (s) one from random
-   seeds, whose root, if not the chord's, counts 1/(s q), 1/q estimated
-   by repeating random solves until it recurs (rrv__inverse_probability:
-   E = 1/q exactly). E = f(r_c) + sum over r != r_c of s q_r f(r) / (s
-   q_r), every root once (test_shoot_estimate_is_unbiased). */
+   weight 1), and with probability RRV__SHOOT_RANDOM (s; 1 where the
+   chord's try failed) one from random seeds, whose root, if not the chord's, counts 1/(s q), 1/q estimated
+   by repeating random solves until it recurs (Specular Manifold
+   Sampling's estimate, Zeltner et al. 2020; past RRV__SOLVE_TRIALS
+   trials by Russian roulette, rrv__inverse_probability: E = 1/q exactly).
+   E = f(r_c) + sum over r != r_c of s q_r f(r) / (s q_r): every root once
+   (test_shoot_estimate_is_unbiased). Only curved paths are counted here
+   (part of them in a refraction support, no sharp interface crossed):
+   straight ones belong to straight NEE. Curved paths to quad, triangle
+   and sphere lights are shared with the forward path by the power
+   heuristic (rrv__shoot_mis_weight): near a caustic |det| -> 0 and the
+   forward path takes them, which keeps the estimate's 1/|det| bounded. A
+   sphere's points are those x0 sees straight (rrv__pick_area_light): bent
+   paths to its far side are the forward path's alone. The sky is left to
+   forward paths. */
 static void rrv__shoot_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                            const rrv__light_draw *draw, rrv__rng *rng)
 {
@@ -14217,8 +14217,10 @@ static int rrv__manifold_carries(rrv__context *ctx, const rrv__vertex_bsdf *v, r
    tries split the roots between them:
      the chord's: one solve seeded on the chord, a deterministic map, so
        its root r_c (if it converges) is counted once with weight 1;
-     a random one, made with probability RRV__CHAIN_RANDOM (s): one solve
-       from random seeds, which reaches root r with probability q_r > 0.
+     a random one, made with probability RRV__CHAIN_RANDOM (s; 1 where
+       the chord's try failed, a choice that depends on the connection
+       alone): one solve from random seeds, which reaches root r with
+       probability q_r > 0.
        A root other than r_c counts f(r) / (s q), 1/q estimated by
        repeating random solves until r recurs (directions within
        RRV__SOLVE_SAME_ROOT), beyond RRV__SOLVE_TRIALS of them by Russian
@@ -14240,7 +14242,7 @@ static int rrv__manifold_estimate(rrv__context *ctx, const rrv__vertex_bsdf *v, 
     rrv__chain_memo memo;
     rrv__manifold_recurrence again;
     rrv__mroot chord;
-    double inverse_q;
+    double inverse_q, share;
     long count;
     int n = 0, chord_found;
     rrv__chain_memo_clear(&memo);
@@ -14250,7 +14252,9 @@ static int rrv__manifold_estimate(rrv__context *ctx, const rrv__vertex_bsdf *v, 
         root[0] = chord;
         weight[n++] = 1.0;
     }
-    if (RRV__CHAIN_RANDOM < 1.0 && !(rrv__uniform(rng) < RRV__CHAIN_RANDOM)) return n;
+    /* where the chord's try failed, the random try is all there is */
+    share = chord_found ? RRV__CHAIN_RANDOM : 1.0;
+    if (share < 1.0 && !(rrv__uniform(rng) < share)) return n;
     ctx->stats.solve_trials += 1;
     /* a random try that lands on the chord's root may take its polish
        from the memo (the chain then left elsewhere), but counts nothing */
@@ -14263,7 +14267,7 @@ static int rrv__manifold_estimate(rrv__context *ctx, const rrv__vertex_bsdf *v, 
     again.memo = &memo;
     inverse_q = rrv__inverse_probability(rng, RRV__SOLVE_TRIALS, rrv__manifold_recurs, &again, &count);
     ctx->stats.solve_trials += (uint64_t)count;
-    weight[n] = inverse_q / RRV__CHAIN_RANDOM;
+    weight[n] = inverse_q / share;
     return n + 1;
 }
 
@@ -19552,15 +19556,23 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  fails); the density from the Jacobi field of the same
                  discrete steps, dw0 = dA_y / |det J_plane|
                  (= |cos theta_y| / |det J_perp|); visibility and
-                 ratio-tracked transmittance along every chord. Seeds:
-                 Gaussians of 0.05 rad (6 in 10) and 0.3 rad (3 in 10)
-                 around the straight direction or a uniform direction, so
-                 every root has a nonzero probability p; a solve tries up to
-                 3 seeds; 1/p is estimated by repeating independent solves
-                 until the same root (within 1e-5) comes back, past 64
-                 trials by Russian roulette as for MANIFOLD (Specular
-                 Manifold Sampling; E = 1/p exactly). A failed solve
-                 contributes zero. The derivative of grad eta has closed
+                 ratio-tracked transmittance along every chord. Two
+                 tries split the roots between them: one from the
+                 straight direction (deterministic: its root counts once,
+                 weight 1), and half the time (always where the first
+                 failed) one from random seeds (Gaussians of 0.05 rad, 6
+                 in 10, and 0.3 rad, 3 in 10, around the straight
+                 direction, or a uniform direction; up to 3 seeds), which
+                 reaches every root with some probability q > 0; its
+                 root, if not the first's, counts 1/(s q), s the random
+                 try's probability, 1/q estimated by repeating random
+                 solves until the same root (within 1e-5) comes back,
+                 past 64 trials by Russian roulette (Specular Manifold
+                 Sampling's estimate, E = 1/q exactly). So every root
+                 counts once in expectation, and the root nearest the
+                 straight line, usually the brightest, without the noise
+                 of a 1/p estimate. A failed solve contributes zero. The
+                 derivative of grad eta has closed
                  forms for the profiles and blobs; for grids (gridvol,
                  NanoVDB, baked noise, a gas through Hauf-Grigull) it is
                  the exact derivative of the blended gradient the rays
@@ -19602,11 +19614,12 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  generalised geometry term of Specular Manifold Sampling).
                  Each connection makes two tries, which split the roots
                  between them: one seeded on the chord (deterministic, so
-                 its root counts once, weight 1) and, half the time, one
-                 from random seeds (a mixture of Gaussians around the
-                 chord, 0.02 rad half the time and 0.2 rad 3 in 8, and
-                 uniform), whose root, if not the chord's, counts 2/q,
-                 q the random seeds' probability of reaching it: 1/q by
+                 its root counts once, weight 1) and, half the time
+                 (always where the first failed), one from random seeds
+                 (a mixture of Gaussians around the chord, 0.02 rad half
+                 the time and 0.2 rad 3 in 8, and uniform), whose root, if
+                 not the chord's, counts 1/(s q), s the random try's
+                 probability and q the random seeds' of reaching it: 1/q by
                  repeating random solves until the root recurs (initial
                  directions within 1e-5), beyond 64 trials by Russian
                  roulette (trial i made with probability (64/i)^2,

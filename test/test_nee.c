@@ -328,7 +328,7 @@ static void test_lens_caustic_shoot(void)
     render_blocks(s, &comb, RRV_NEE_NONE, 4, 640, x0, y0, x1, y1, BLOCK, a, NULL);
     render_blocks(s, &eikonal, RRV_NEE_SHOOT, 5, 24, x0, y0, x1, y1, BLOCK, b, &rs);
     peak = blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, "lens caustic, eikonal shoot");
-    SAY("  shoot: %llu solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, %.0f segments a chain\n",
+    SAY("  shoot: %llu solves, %.1f%% converged, %.1f iterations, %.2f solves a connection, %.0f segments a chain\n",
         (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)rs.solves,
         rs.solve_iterations / (double)rs.solves, rs.solve_trials / (double)rs.solve_connections,
         rs.solve_segments / (double)rs.solves_converged);
@@ -405,7 +405,7 @@ static void test_small_light_caustic_shoot(void)
     render_blocks(s, &comb, RRV_NEE_NONE, 51, 4096, x0, y0, x1, y1, BLOCK, a, NULL);
     render_blocks(s, &eikonal, RRV_NEE_SHOOT, 52, 16, x0, y0, x1, y1, BLOCK, b, &rs);
     peak = blocks_agree(a, b, BLOCKS_X, x0 / BLOCK, y0 / BLOCK, x1 / BLOCK, y1 / BLOCK, "small light, eikonal shoot");
-    SAY("  small light shoot: %llu solves, %.1f%% converged, %.1f iterations, %.2f trials a connection; %llu rays "
+    SAY("  small light shoot: %llu solves, %.1f%% converged, %.1f iterations, %.2f solves a connection; %llu rays "
         "toward the lens, %llu of them counted (roots of weak chords)\n",
         (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)rs.solves,
         rs.solve_iterations / (double)rs.solves, rs.solve_trials / (double)rs.solve_connections,
@@ -546,7 +546,7 @@ static double caustic_manifold_case(rrv_scene *s, const stats *ref, const method
         }
     }
     peak_ratio = stats_mean(&b[peak]) / stats_mean(&ref[peak]);
-    SAY("  %s: %llu solves, %.1f%% converged, %.1f iterations, %.2f trials a connection, %.0f segments a chain, "
+    SAY("  %s: %llu solves, %.1f%% converged, %.1f iterations, %.2f solves a connection, %.0f segments a chain, "
         "%d blocks beyond 4 se\n",
         name, (unsigned long long)rs.solves, 100.0 * rs.solves_converged / (double)rs.solves,
         rs.solve_iterations / (double)rs.solves, rs.solve_trials / (double)rs.solve_connections,
@@ -1503,6 +1503,30 @@ static void test_manifold_bad_chains(void)
     rrv_scene_free(s);
 }
 
+/* A solver context for the manifold walk on the caustic scene, its
+   chain and coarse chain allocated (NULL where refused). */
+static void manifold_context(rrv__context *ctx, const rrv_scene *s)
+{
+    solver_context(ctx, s);
+    ctx->partition = ctx->manifold = 1;
+    ctx->eta_floor = 1.0;
+    ctx->chain = rrv__chain_new(RRV__CHAIN_MAX);
+    ctx->coarse_chain = rrv__chain_new(RRV__COARSE_MAX);
+}
+
+/* A point of the caustic scene's floor under the lens, and one of its
+   light. */
+static rrv_vec3 lens_floor_point(rrv__rng *rng)
+{
+    double a = rrv__uniform(rng), b = rrv__uniform(rng);
+    return rrv__v3(1.2 * a - 0.6, 1e-5, 1.2 * b - 0.6);
+}
+static rrv_vec3 lens_light_point(rrv__rng *rng)
+{
+    double a = rrv__uniform(rng), b = rrv__uniform(rng);
+    return rrv__v3(a - 0.5, 3.0, b - 0.5);
+}
+
 /* A chain try's coarse stage (rrv__chain_try_once): where a trial's
    coarse root snaps onto one the memo keeps, the memo stands for the
    polish. That is exact only if a polish is a function of its snapped
@@ -1519,15 +1543,10 @@ static void test_manifold_memo_is_exact(void)
     rrv__rng rng;
     int k, trial, coarse = 0, trials = 0, hits = 0, differ = 0;
     if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
-    solver_context(&ctx, s);
-    ctx.partition = ctx.manifold = 1;
-    ctx.eta_floor = 1.0;
-    ctx.chain = rrv__chain_new(RRV__CHAIN_MAX);
-    ctx.coarse_chain = rrv__chain_new(RRV__COARSE_MAX);
+    manifold_context(&ctx, s);
     rrv__rng_seed(&rng, 91, 0, 0);
     for (k = 0; ctx.chain && ctx.coarse_chain && k < 200; ++k) {
-        rrv_vec3 x0 = rrv__v3(1.2 * rrv__uniform(&rng) - 0.6, 1e-5, 1.2 * rrv__uniform(&rng) - 0.6);
-        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5), ny = rrv__v3(0, -1, 0);
+        rrv_vec3 x0 = lens_floor_point(&rng), y = lens_light_point(&rng), ny = rrv__v3(0, -1, 0);
         double u = rrv__uniform(&rng);
         rrv__chain_memo memo;
         rrv__mroot root;
@@ -1578,11 +1597,25 @@ static int census_root(rrv_vec3 *w, double *f, int *count, int *n, rrv_vec3 w0, 
     return (*n)++;
 }
 
-/* An estimator's mean over draws (sums sum, sum2) against the census's
-   sum of its roots, within 4 standard errors. */
-static void check_connection_mean(int k, int n, double truth, double sum, double sum2, int draws)
+/* Is the census of n roots (values f, found count times in `tries`) one
+   to test on: two roots or more, none found by under a tenth of the
+   tries? *truth gets their sum. */
+static int census_usable(const double *f, const int *count, int n, int tries, double *truth)
 {
-    double mean = sum / draws, se = sqrt(fmax(sum2 / draws - mean * mean, 0.0) / draws);
+    int i, usable = n >= 2;
+    *truth = 0;
+    for (i = 0; i < n; ++i) {
+        *truth += f[i];
+        if (count[i] < tries / 10) usable = 0;
+    }
+    return usable;
+}
+
+/* An estimator's mean over its draws against the census's sum of its
+   roots, within 4 standard errors. */
+static void check_connection_mean(int k, int n, double truth, const stats *draws)
+{
+    double mean = stats_mean(draws), se = stats_se(draws);
     SAY("  connection %d: %d roots, their sum %.5f, estimated %.5f +- %.5f\n", k, n, truth, mean, se);
     CHECKF(fabs(mean - truth) < 4.0 * se + 1e-9 * truth, "connection %d: %d roots sum %.5f, estimated %.5f +- %.5f", k,
            n, truth, mean, se);
@@ -1606,18 +1639,14 @@ static void test_manifold_estimate_is_unbiased(void)
     rrv__rng rng;
     int k, used = 0;
     if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
-    solver_context(&ctx, s);
-    ctx.partition = ctx.manifold = 1;
-    ctx.eta_floor = 1.0;
-    ctx.chain = rrv__chain_new(RRV__CHAIN_MAX);
-    ctx.coarse_chain = rrv__chain_new(RRV__COARSE_MAX);
+    manifold_context(&ctx, s);
     rrv__rng_seed(&rng, 17, 0, 0);
     for (k = 0; ctx.chain && ctx.coarse_chain && k < 400 && used < WANTED; ++k) {
-        rrv_vec3 x0 = rrv__v3(1.2 * rrv__uniform(&rng) - 0.6, 1e-5, 1.2 * rrv__uniform(&rng) - 0.6);
-        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5), ny = rrv__v3(0, -1, 0);
+        rrv_vec3 x0 = lens_floor_point(&rng), y = lens_light_point(&rng), ny = rrv__v3(0, -1, 0);
         rrv_vec3 w[8];
-        double density[8], truth = 0, sum = 0, sum2 = 0;
-        int count[8], n = 0, i, t, rare = 0;
+        double density[8], truth;
+        int count[8], n = 0, i, t;
+        stats draws;
         double u = rrv__uniform(&rng);
         rrv__chain_setup(s, x0, y, ny, 0, 0.0, u, ctx.chain);
         rrv__chain_setup_coarse(&ctx, ny, u);
@@ -1628,21 +1657,17 @@ static void test_manifold_estimate_is_unbiased(void)
                 continue;
             if ((i = census_root(w, density, count, &n, root.w0, root.density)) >= 0 && t > 0) ++count[i];
         }
-        for (i = 0; i < n; ++i) {
-            truth += density[i];
-            if (count[i] < CENSUS / 10) rare = 1;
-        }
-        if (n < 2 || rare) continue;
+        if (!census_usable(density, count, n, CENSUS, &truth)) continue;
         ++used;
+        memset(&draws, 0, sizeof draws);
         for (t = 0; t < DRAWS; ++t) {
             rrv__mroot root[2];
             double weight[2], carried[2][3], e = 0;
             int m = rrv__manifold_estimate(&ctx, NULL, ny, &rng, root, weight, carried);
             for (i = 0; i < m; ++i) e += weight[i] * root[i].density;
-            sum += e;
-            sum2 += e * e;
+            stats_add(&draws, e);
         }
-        check_connection_mean(k, n, truth, sum, sum2, DRAWS);
+        check_connection_mean(k, n, truth, &draws);
     }
     CHECKF(used == WANTED, "%d connections with two roots of a tenth or more (wanted %d)", used, WANTED);
     rrv__chain_delete(ctx.chain);
@@ -1673,10 +1698,10 @@ static void test_shoot_estimate_is_unbiased(void)
     rrv__rng_seed(&rng, 23, 0, 0);
     rrv__path_start(&path, &rng);
     for (k = 0; k < 400 && used < WANTED; ++k) {
-        rrv_vec3 x0 = rrv__v3(1.2 * rrv__uniform(&rng) - 0.6, 1e-5, 1.2 * rrv__uniform(&rng) - 0.6);
-        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5), w[8];
-        double carried_by[8], truth = 0, sum = 0, sum2 = 0;
-        int count[8], n = 0, i, t, rare = 0;
+        rrv_vec3 x0 = lens_floor_point(&rng), y = lens_light_point(&rng), w[8];
+        double carried_by[8], truth;
+        int count[8], n = 0, i, t;
+        stats draws;
         for (t = 0; t < CENSUS; ++t) {
             rrv__polish_memo memo;
             rrv__root root;
@@ -1689,21 +1714,17 @@ static void test_shoot_estimate_is_unbiased(void)
                 continue;
             if ((i = census_root(w, carried_by, count, &n, root.w0, carried[1])) >= 0) ++count[i];
         }
-        for (i = 0; i < n; ++i) {
-            truth += carried_by[i];
-            if (count[i] < CENSUS / 10) rare = 1;
-        }
-        if (n < 2 || rare) continue;
+        if (!census_usable(carried_by, count, n, CENSUS, &truth)) continue;
         ++used;
+        memset(&draws, 0, sizeof draws);
         for (t = 0; t < DRAWS; ++t) {
             rrv__root roots[2];
             double weight[2], carried[2][3], e = 0;
             int m = rrv__shoot_estimate(&ctx, &path, x0, &vb, y, ny, &ny, 1.0, &rng, roots, weight, carried);
             for (i = 0; i < m; ++i) e += weight[i] * carried[i][1];
-            sum += e;
-            sum2 += e * e;
+            stats_add(&draws, e);
         }
-        check_connection_mean(k, n, truth, sum, sum2, DRAWS);
+        check_connection_mean(k, n, truth, &draws);
     }
     CHECKF(used == WANTED, "%d connections with two roots of a tenth or more (wanted %d)", used, WANTED);
     rrv_scene_free(s);
@@ -1772,8 +1793,7 @@ static void shoot_mis_weights_case(const char *text, size_t size, const char *na
     vb.g = 0.9;
     rrv__rng_seed(&rng, 41, 0, 0);
     for (k = 0; k < 600; ++k) {
-        rrv_vec3 x0 = rrv__v3(1.2 * rrv__uniform(&rng) - 0.6, 1e-5, 1.2 * rrv__uniform(&rng) - 0.6);
-        rrv_vec3 y = rrv__v3(rrv__uniform(&rng) - 0.5, 3.0, rrv__uniform(&rng) - 0.5), ny = rrv__v3(0, -1, 0);
+        rrv_vec3 x0 = lens_floor_point(&rng), y = lens_light_point(&rng), ny = rrv__v3(0, -1, 0);
         rrv__root root;
         double pdf, w_nee, w_fwd, pdf_area;
         if (light->kind == RRV_SHAPE_SPHERE) {
