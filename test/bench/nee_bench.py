@@ -10,7 +10,7 @@ time is printed beside it but not used).
 
     python3 test/bench/nee_bench.py [--seconds 20] [--ref-spp 4096] [--light 0.25]
         [--modes none,straight,shoot,aim] [--old PATH] [--old-modes shoot] [--ref-nee shoot]
-        [--scene fire_caustic] [--crop 48 40 112 88]
+        [--scene fire_caustic] [--crop 48 40 112 88] [--seed 11]
 
 --light S replaces the scene's 1 m square light by an S m square one with
 the same centre and power (radiance scaled by 1 / S^2): the smaller the
@@ -20,7 +20,10 @@ reference keeps the default). --modes runs only the named modes; --old
 also renders `shoot` (or the modes of --old-modes) with another build
 (rows "..., old build"), to compare versions on one reference. --scene
 takes another scene of scenes/ (its light is kept unless --light is
-given, which only the lens caustic supports), --crop another crop. --ref-nee renders the reference with
+given, which only the lens caustic supports), --crop another crop. --seed
+seeds the modes' renders (11 by default): repeated runs must take other
+seeds, or they repeat the same samples and their errors are not
+independent (a firefly in one is in all). --ref-nee renders the reference with
 another unbiased mode: with a small light `none` converges too slowly to
 serve (its RMSE is printed), and `shoot` is checked against `none` by
 test/test_nee.c.
@@ -124,6 +127,7 @@ def main():
     ap.add_argument("--old-modes", default="shoot", help="comma-separated modes the --old binary renders")
     ap.add_argument("--scene", default="lens_caustic", help="a scene of scenes/ (without .rrv)")
     ap.add_argument("--crop", nargs=4, default=None, help="x0 y0 x1 y1 of the crop rendered")
+    ap.add_argument("--seed", type=int, default=11, help="seed of the modes' renders (not the reference's)")
     args = ap.parse_args()
     global SCENE, CROP
     SCENE = os.path.join(ROOT, "scenes", args.scene + ".rrv")
@@ -160,7 +164,7 @@ def main():
         cpu, _, _ = render(scene, nee, 1, 7, out, rrv)  # calibrate: CPU seconds per spp
         spp = max(1, int(args.seconds / max(cpu, 1e-3)))
         out = os.path.join(work, "mode.pfm")
-        cpu, wall, summary = render(scene, nee, spp, 11, out, rrv)
+        cpu, wall, summary = render(scene, nee, spp, args.seed, out, rrv)
         e = rmse(read_pfm(out), ref)
         solver = summary.split("; ", 1)[1] if "; " in summary else ""
         mse = max(e * e - ref_mse, 1e-30)
