@@ -12384,7 +12384,19 @@ static int rrv__shoot_carried(rrv__context *ctx, const rrv__path *path, rrv_vec3
     return 1;
 }
 
-#define RRV__SHOOT_RANDOM 0.5 /* the random try's probability (rrv__shoot_nee) */
+/* The probability s of a connection's random try, after the chord's try
+   (rrv__shoot_estimate, rrv__manifold_estimate): RRV__RANDOM_TRY, or 1
+   where the chord's try failed and the random try is all there is (a
+   choice that depends on the connection alone, so 1/(s q) stays exact).
+   0: no random try this time. 1/2 measured best of 1/4, 1/2 and 1 on the
+   lens caustic for both (test/bench/RESULTS.md, "The chord's root counted
+   once"). */
+#define RRV__RANDOM_TRY 0.5
+static double rrv__random_try_share(int chord_found, rrv__rng *rng)
+{
+    if (!chord_found) return 1.0;
+    return rrv__uniform(rng) < RRV__RANDOM_TRY ? RRV__RANDOM_TRY : 0.0;
+}
 
 /* A solve's work, into the stats. */
 static void rrv__shoot_stats(rrv__context *ctx, int found, int shots, const rrv__root *root)
@@ -12419,9 +12431,7 @@ static int rrv__shoot_estimate(rrv__context *ctx, const rrv__path *path, rrv_vec
         root[0] = chord;
         weight[n++] = 1.0;
     }
-    /* where the chord's try failed, the random try is all there is */
-    share = chord_found ? RRV__SHOOT_RANDOM : 1.0;
-    if (share < 1.0 && !(rrv__uniform(rng) < share)) return n;
+    if (!(share = rrv__random_try_share(chord_found, rng))) return n;
     found = rrv__solve_shot_seeded(ctx, x0, y, plane, rng, &memo, &kept, &root[n]);
     rrv__shoot_stats(ctx, found, root[n].iterations, &root[n]);
     /* a random try that lands on the chord's root counts nothing */
@@ -12443,8 +12453,8 @@ static int rrv__shoot_estimate(rrv__context *ctx, const rrv__path *path, rrv_vec
    light and two tries that split the roots of the two-point problem
    between them, as nee manifold's do (rrv__manifold_estimate): one from
    the chord's direction (a deterministic map, so its root counts once,
-   weight 1), and with probability RRV__SHOOT_RANDOM (s; 1 where the
-   chord's try failed) one from random seeds, whose root, if not the chord's, counts 1/(s q), 1/q estimated
+   weight 1), and with probability s (rrv__random_try_share) one from
+   random seeds, whose root, if not the chord's, counts 1/(s q), 1/q estimated
    by repeating random solves until it recurs (Specular Manifold
    Sampling's estimate, Zeltner et al. 2020; past RRV__SOLVE_TRIALS
    trials by Russian roulette, rrv__inverse_probability: E = 1/q exactly).
@@ -14200,15 +14210,12 @@ static void rrv__manifold_light(rrv__context *ctx, rrv__path *path, const rrv__v
     for (c = 0; c < 3; ++c) path->L[c] += path->beta[c] * carried[c] * s->L[c] * k;
 }
 
-/* Does the chain as solved carry light (it meets the light's front, and
-   with v, rrv__chain_carry finds a way through; without v, carried 1)? */
+/* Does the chain as solved carry light (it meets the light's front and
+   rrv__chain_carry finds a way through)? */
 static int rrv__manifold_carries(rrv__context *ctx, const rrv__vertex_bsdf *v, rrv_vec3 ny, rrv__rng *rng,
                                  double carried[3])
 {
-    if (!rrv__chain_meets_front(ctx->chain, ny)) return 0;
-    if (v) return rrv__chain_carry(ctx, ctx->chain, v, rng, carried);
-    carried[0] = carried[1] = carried[2] = 1.0;
-    return 1;
+    return rrv__chain_meets_front(ctx->chain, ny) && rrv__chain_carry(ctx, ctx->chain, v, rng, carried);
 }
 
 /* The unbiased estimate of one connection (ctx->chain and its coarse
@@ -14217,10 +14224,9 @@ static int rrv__manifold_carries(rrv__context *ctx, const rrv__vertex_bsdf *v, r
    tries split the roots between them:
      the chord's: one solve seeded on the chord, a deterministic map, so
        its root r_c (if it converges) is counted once with weight 1;
-     a random one, made with probability RRV__CHAIN_RANDOM (s; 1 where
-       the chord's try failed, a choice that depends on the connection
-       alone): one solve from random seeds, which reaches root r with
-       probability q_r > 0.
+     a random one, made with probability s (rrv__random_try_share): one
+       solve from random seeds, which reaches root r with probability
+       q_r > 0.
        A root other than r_c counts f(r) / (s q), 1/q estimated by
        repeating random solves until r recurs (directions within
        RRV__SOLVE_SAME_ROOT), beyond RRV__SOLVE_TRIALS of them by Russian
@@ -14235,7 +14241,6 @@ static int rrv__manifold_carries(rrv__context *ctx, const rrv__vertex_bsdf *v, r
    Measured on the lens caustic against one mixture of seeds (the chord
    3/4 of the time) for the first solve and every trial: see
    test/bench/RESULTS.md, "The chord's root counted once". */
-#define RRV__CHAIN_RANDOM 0.5
 static int rrv__manifold_estimate(rrv__context *ctx, const rrv__vertex_bsdf *v, rrv_vec3 ny, rrv__rng *rng,
                                   rrv__mroot root[2], double weight[2], double carried[2][3])
 {
@@ -14252,9 +14257,7 @@ static int rrv__manifold_estimate(rrv__context *ctx, const rrv__vertex_bsdf *v, 
         root[0] = chord;
         weight[n++] = 1.0;
     }
-    /* where the chord's try failed, the random try is all there is */
-    share = chord_found ? RRV__CHAIN_RANDOM : 1.0;
-    if (share < 1.0 && !(rrv__uniform(rng) < share)) return n;
+    if (!(share = rrv__random_try_share(chord_found, rng))) return n;
     ctx->stats.solve_trials += 1;
     /* a random try that lands on the chord's root may take its polish
        from the memo (the chain then left elsewhere), but counts nothing */

@@ -1624,8 +1624,9 @@ static void check_connection_mean(int k, int n, double truth, const stats *draws
 /* rrv__manifold_estimate splits a connection's roots between the chord's
    try (weight 1) and a random try (weight 1/(s q), the random seeds'
    probability q of the root estimated by trials), so over its random
-   draws its mean of sum weight x density must be the sum of the densities
-   of every root of the chain that meets the light's front. Lens caustic
+   draws its mean of sum weight x density x carried (green, at a white
+   floor vertex) must be that sum over every root of the chain that meets
+   the light's front and carries light. Lens caustic
    connections with two or more roots, each found by at least a tenth of
    300 random tries (so no root the census misses weighs much), are
    estimated 2000 times each: the mean must agree with the census's sum
@@ -1637,14 +1638,16 @@ static void test_manifold_estimate_is_unbiased(void)
     rrv_scene *s = NULL;
     rrv__context ctx;
     rrv__rng rng;
+    rrv__vertex_bsdf vb;
     int k, used = 0;
     if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
     manifold_context(&ctx, s);
+    white_floor_vertex(&vb);
     rrv__rng_seed(&rng, 17, 0, 0);
     for (k = 0; ctx.chain && ctx.coarse_chain && k < 400 && used < WANTED; ++k) {
         rrv_vec3 x0 = lens_floor_point(&rng), y = lens_light_point(&rng), ny = rrv__v3(0, -1, 0);
         rrv_vec3 w[8];
-        double density[8], truth;
+        double value[8], truth;
         int count[8], n = 0, i, t;
         stats draws;
         double u = rrv__uniform(&rng);
@@ -1652,19 +1655,21 @@ static void test_manifold_estimate_is_unbiased(void)
         rrv__chain_setup_coarse(&ctx, ny, u);
         for (t = 0; t < CENSUS + 1; ++t) {
             rrv__mroot root;
+            double carried[3];
             if (!rrv__manifold_try(&ctx, ctx.chain, &rng, NULL, t == 0, &root) ||
-                !rrv__chain_meets_front(ctx.chain, ny))
+                !rrv__manifold_carries(&ctx, &vb, ny, &rng, carried))
                 continue;
-            if ((i = census_root(w, density, count, &n, root.w0, root.density)) >= 0 && t > 0) ++count[i];
+            i = census_root(w, value, count, &n, root.w0, root.density * carried[1]);
+            if (i >= 0 && t > 0) ++count[i];
         }
-        if (!census_usable(density, count, n, CENSUS, &truth)) continue;
+        if (!census_usable(value, count, n, CENSUS, &truth)) continue;
         ++used;
         memset(&draws, 0, sizeof draws);
         for (t = 0; t < DRAWS; ++t) {
             rrv__mroot root[2];
             double weight[2], carried[2][3], e = 0;
-            int m = rrv__manifold_estimate(&ctx, NULL, ny, &rng, root, weight, carried);
-            for (i = 0; i < m; ++i) e += weight[i] * root[i].density;
+            int m = rrv__manifold_estimate(&ctx, &vb, ny, &rng, root, weight, carried);
+            for (i = 0; i < m; ++i) e += weight[i] * root[i].density * carried[i][1];
             stats_add(&draws, e);
         }
         check_connection_mean(k, n, truth, &draws);
