@@ -11455,7 +11455,7 @@ RRV_DEF rrv_result rrv_scene_set_field(rrv_scene *scene, int medium, rrv_medium_
    its front (for two interior points, as in the tests: from the chord that
    passes y, in the plane through y perpendicular to it). Its Jacobian comes from
    the variational (Jacobi-field) equations of the very same discrete steps,
-   which need the Hessian of eta (rrv__scene_hessian). At the root
+   which need the Hessian of eta (rrv__eta_gradient_hessian). At the root
    dw0 = dA_y |cos theta_y| / |det J_perp|, J_perp the 2x2 derivative of the
    endpoint perpendicular to the arriving chord with respect to w0 per unit
    solid angle (r^2 I for straight rays: cos / r^2). */
@@ -11497,25 +11497,9 @@ static int rrv__solver_supports_scene(const rrv_scene *scene)
     return 1;
 }
 
-/* The derivative of the gradient of eta at p, taken where
-   rrv__scene_refractivity takes eta and its gradient from (row-major, d
-   grad_i / d x_j; not symmetric in grids, see the media section). */
-static void rrv__scene_hessian(const rrv_scene *scene, rrv_vec3 p, double H[9])
-{
-    double ambient_r = rrv__ambient_ior(scene) - 1.0;
-    int i, k;
-    for (i = scene->medium_count - 1; i >= 0; --i) {
-        const rrv_medium *m = &scene->media[i];
-        if (rrv__medium_refracts(m) && rrv__inside_box(p, m->lo, m->hi)) {
-            rrv__refractivity_hessian(m, p, ambient_r, H);
-            return;
-        }
-    }
-    for (k = 0; k < 9; ++k) H[k] = 0;
-}
-
 /* Eta, its gradient (rrv__eta_gradient's) and the gradient's derivative
-   (rrv__scene_hessian's) at p, the medium found once. */
+   at p (row-major, d grad_i / d x_j; not symmetric in grids, see the
+   media section), the medium found once. */
 static double rrv__eta_gradient_hessian(const rrv_scene *scene, rrv_vec3 p, rrv_vec3 *grad, double H[9])
 {
     double ambient_r = rrv__ambient_ior(scene) - 1.0;
@@ -12945,10 +12929,11 @@ static rrv_vec3 rrv__chain_gradient(const rrv_scene *scene, rrv_vec3 x, double h
                 phi = t * t * (3.0 - 2.0 * t);
                 dphi = -6.0 * t * (1.0 - t) / (2.0 * h); /* d phi / dr */
                 n = rrv__scale(d, 1.0 / r);
-                rrv__eta_gradient(scene, xc, &g);
-                if (dg) {
+                if (!dg) {
+                    rrv__eta_gradient(scene, xc, &g);
+                } else {
                     /* d g(xc) / dx = H(xc) dxc/dx, dxc/dx = (inside / r) (I - n n^T) outside */
-                    rrv__scene_hessian(scene, xc, H);
+                    rrv__eta_gradient_hessian(scene, xc, &g, H);
                     if (r > inside) {
                         rrv__m3_proj(P, n, inside / r);
                         rrv__m3_mul(H, P, dg);
@@ -12965,8 +12950,10 @@ static rrv_vec3 rrv__chain_gradient(const rrv_scene *scene, rrv_vec3 x, double h
         }
         break;
     }
-    rrv__eta_gradient(scene, x, &g);
-    if (dg) rrv__scene_hessian(scene, x, dg);
+    /* the gradient and its derivative from one lookup where the field
+       gives both at once */
+    if (dg) rrv__eta_gradient_hessian(scene, x, &g, dg);
+    else rrv__eta_gradient(scene, x, &g);
     return g;
 }
 

@@ -1,5 +1,5 @@
 /* The derivative of grad eta that curved next-event estimation (nee shoot,
-   nee manifold) propagates Jacobi fields with: rrv__scene_hessian and the
+   nee manifold) propagates Jacobi fields with: rrv__refractivity_hessian and the
    helpers behind it, for every kind of IOR, against central differences of
    rrv's own gradient (rrv__scene_refractivity, the one the rays use):
    - trilinear grids (an IOR grid, a gas whose temperature is a grid, a
@@ -23,6 +23,24 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+
+/* The derivative of grad eta at p from the per-medium function alone
+   (rrv__refractivity_hessian), where rrv__scene_refractivity takes the
+   gradient: the reference the fused rrv__eta_gradient_hessian is checked
+   against. */
+static void scene_hessian(const rrv_scene *scene, rrv_vec3 p, double H[9])
+{
+    double ambient_r = rrv__ambient_ior(scene) - 1.0;
+    int i, k;
+    for (i = scene->medium_count - 1; i >= 0; --i) {
+        const rrv_medium *m = &scene->media[i];
+        if (rrv__medium_refracts(m) && rrv__inside_box(p, m->lo, m->hi)) {
+            rrv__refractivity_hessian(m, p, ambient_r, H);
+            return;
+        }
+    }
+    for (k = 0; k < 9; ++k) H[k] = 0;
+}
 
 
 /* ---- fields to differentiate ------------------------------------------------------- */
@@ -262,7 +280,7 @@ static hessian_error check_hessian(const rrv_scene *s, rrv_vec3 origin, double c
             } while (rrv__dot(d, d) > 1.0);
             p = rrv__madd(origin, d, reach);
         }
-        rrv__scene_hessian(s, p, H);
+        scene_hessian(s, p, H);
         for (b = 0; b < 3; ++b) {
             rrv_vec3 eb = rrv__v3(b == 0, b == 1, b == 2);
             rrv_vec3 fd = rrv__scale(rrv__sub(gradient_at(s, rrv__madd(p, eb, delta)),
@@ -596,7 +614,7 @@ static void test_fused_fields_are_the_parts(void)
 }
 
 /* rrv__eta_gradient_hessian, which the Jacobi steps call, gives exactly
-   what rrv__eta_gradient and rrv__scene_hessian give, for every kind it
+   what rrv__eta_gradient and rrv__refractivity_hessian give, for every kind it
    dispatches on (the fused grid lookup, the cubic spline, an unbaked
    grid, a closed-form profile) and outside the media. */
 static void test_eta_gradient_hessian_is_both(void)
@@ -621,12 +639,12 @@ static void test_eta_gradient_hessian_is_both(void)
             double H[9], H_ref[9];
             double eta = rrv__eta_gradient_hessian(scenes[k], p, &g, H);
             double eta_ref = rrv__eta_gradient(scenes[k], p, &g_ref);
-            rrv__scene_hessian(scenes[k], p, H_ref);
+            scene_hessian(scenes[k], p, H_ref);
             outside += !rrv__inside_box(p, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1));
             same &= eta == eta_ref && g.x == g_ref.x && g.y == g_ref.y && g.z == g_ref.z;
             for (a = 0; a < 9; ++a) same &= H[a] == H_ref[a];
         }
-        CHECKF(same, "%s: rrv__eta_gradient_hessian differs from rrv__eta_gradient and rrv__scene_hessian", names[k]);
+        CHECKF(same, "%s: rrv__eta_gradient_hessian differs from rrv__eta_gradient and rrv__refractivity_hessian", names[k]);
         CHECKF(outside > 0, "%s: no point outside the medium", names[k]);
         rrv_scene_free(scenes[k]);
     }
