@@ -80,8 +80,8 @@
    the prepared scene by rrv_scene_integrator; the rule and why: NOTES)
      default     classic where no medium's IOR differs from the ambient IOR
                  (bit for bit the classic render); eikonal with nee SHOOT
-                 where the refracting media are clear, without sharp faces,
-                 and a light is small seen from them; else refractive, AIM.
+                 where the refracting media are clear and a light is small
+                 seen from them (NOTES); else refractive, AIM.
      classic     IOR 1 everywhere: delta tracking, ratio-tracked NEE with
                  MIS, spectral MIS for chromatic media. The production baseline.
      refractive  the same, rays bent inside media that carry an IOR; scheme
@@ -639,8 +639,10 @@ typedef struct rrv_scene {
     int light_power;                       /* settings.light_sampler was power */
     double sky_weight;                     /* the sky's weight in that pick */
     int sharp_faces;                       /* some refracting medium's face is a jump
-                                              shoot and manifold do not cross
-                                              (rrv_medium_face_jumps) */
+                                              (rrv_medium_face_jumps), which the
+                                              manifold walk does not cross */
+    int sharp_rims;                        /* some sphere support's surface is one,
+                                              which shots do not cross either */
     struct rrv__bvh_node *bvh; int bvh_node_count;
     int *bvh_prims;                        /* shape indices in leaf order */
     double ambient_ior;                    /* the IOR outside every medium:
@@ -6099,6 +6101,9 @@ typedef struct rrv__bender {
                           it, at face_at: the comb's first half kick there */
     rrv_vec3 face_at, face_grad;
     double face_jump;  /* the last face crossed: |r past - r behind| */
+    int refract_only;  /* a sharp face refracts the ray, never reflects it by chance
+                          (total reflection still reflects): nee shoot's shots,
+                          which carry the transmitted share (1 - F) as a weight */
     int skip_flat;     /* eikonal: cross cells without a gradient straight
                           (RRV__EIKONAL_SKIP; a test turns it off to compare) */
     int cell_face;     /* eikonal: the planned segment's face is one between
@@ -6166,6 +6171,7 @@ static void rrv__bender_start(rrv__bender *b, const rrv_scene *scene, int eikona
     b->holds_support = 0;
     b->inv_tolerance = 1.0 / scene->settings.bend_tolerance;
     b->skip_flat = RRV__EIKONAL_SKIP;
+    b->refract_only = 0;
     b->chord_inside = 0;
     b->safe_at = o;
     b->safe_inner2 = 0;
@@ -6296,7 +6302,7 @@ static rrv_vec3 rrv__cross_face(rrv__bender *b, const rrv_scene *scene, rrv_vec3
         rrv_vec3 n = (normal.x == 0) + (normal.y == 0) + (normal.z == 0) == 2 ? rrv__axis_unit(normal)
                                                                                : rrv__normalize(normal);
         nd = rrv__refract_at_null_event(d, r_before, r_after, n, &reflected);
-        if (!reflected) {
+        if (!reflected && !b->refract_only) {
             double cos_i = fabs(rrv__dot(n, d)), cos_t = fabs(rrv__dot(n, nd));
             if (rrv__uniform_walk(rng) < rrv__fresnel(1.0 + r_before, 1.0 + r_after, cos_i, cos_t)) reflected = 1;
         }
@@ -8907,7 +8913,7 @@ static void rrv__solver_release(rrv__context *ctx);
 static void rrv__solver_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                             const rrv__light_draw *draw, rrv__rng *rng);
 static double rrv__solver_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir,
-                                         const rrv_shape *s, rrv_vec3 x, int weak, int jumped);
+                                         const rrv_shape *s, rrv_vec3 x, int weak, int jumped, int mirrored);
 
 /* Curved NEE from a vertex (the light point of draw, straight NEE's), or
    the count of vertices that could not. */
@@ -9310,7 +9316,8 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
                                             rrv__emitter_pdf(s, cp->vertex, x, n) * rrv__light_prob(scene, s),
                                             cp->prev_pdf);
             else
-                w = rrv__solver_forward_weight(ctx, cp->vertex, cp->w0, cp->prev_pdf, s, x, weak, cp->jumped);
+                w = rrv__solver_forward_weight(ctx, cp->vertex, cp->w0, cp->prev_pdf, s, x, weak, cp->jumped,
+                                               cp->mirrored);
         }
         w *= rrv__eta_scale(ctx, x) * rrv__path_mis(&cp->path);
         for (c = 0; c < 3; ++c) cp->path.L[c] += cp->path.beta[c] * s->L[c] * w;
@@ -9669,10 +9676,11 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
         }
         if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
     }
-    scene->sharp_faces = 0;
-    for (i = 0; i < scene->medium_count && !scene->sharp_faces; ++i) {
+    scene->sharp_faces = scene->sharp_rims = 0;
+    for (i = 0; i < scene->medium_count; ++i) {
         double jump[7];
-        scene->sharp_faces = rrv_medium_face_jumps(scene, i, jump) > 0;
+        if (rrv_medium_face_jumps(scene, i, jump) > 0) scene->sharp_faces = 1;
+        if (jump[6] > 0) scene->sharp_rims = 1;
     }
     res = rrv__build_emitters(scene, err);
     if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
@@ -9797,10 +9805,10 @@ static int rrv__boxes_overlap(const rrv_medium *a, const rrv_medium *b)
 /* Shooting pays where its solves are few and the light it finds is
    focused: every refracting medium clear (no medium with extinction
    overlaps its box, so the only vertices that connect through it lie on
-   surfaces, and the caustic they see is sharp), no face a jump of the IOR
-   (shooting does not cross one: under a glass box none of its solves
-   converged, and aimed shadow rays took an eighth of the time for the
-   same noise) and some area light small
+   surfaces, and the caustic they see is sharp), no sphere support whose
+   surface is a jump of the IOR (shots refract at a box's sharp faces, not
+   at a sphere's: there aimed shadow rays took an eighth of the time for
+   the same noise) and some area light small
    from one of them (aimed shadow rays sample the straight cone of the
    light, which misses the bent rays' preimage once the light's angular
    size falls to the order of the bending). Elsewhere the comb with aimed
@@ -9837,7 +9845,7 @@ static rrv_integrator rrv__default_integrator(const rrv_scene *scene)
         }
     }
     if (!refracts) return RRV_INTEGRATOR_CLASSIC;
-    if (clear && small && !scene->sharp_faces && (scene->settings.nee == RRV_NEE_DEFAULT || scene->settings.nee == RRV_NEE_SHOOT) &&
+    if (clear && small && !scene->sharp_rims && (scene->settings.nee == RRV_NEE_DEFAULT || scene->settings.nee == RRV_NEE_SHOOT) &&
         rrv__solver_supports_scene(scene))
         return RRV_INTEGRATOR_EIKONAL;
     return RRV_INTEGRATOR_REFRACTIVE;
@@ -11855,6 +11863,7 @@ typedef struct rrv__shot {
     rrv_vec3 dir;      /* that chord's direction */
     rrv_vec3 de[2];    /* d(end)/d(angles of w0) */
     long segments;
+    double fresnel;    /* the share its sharp faces transmit: the product of 1 - F */
 } rrv__shot;
 
 /* The straight chords of one shot that reached y, kept so that the
@@ -11867,6 +11876,7 @@ typedef struct rrv__chords {
     int n;
     rrv_vec3 x[RRV__CHORDS_KEPT], d[RRV__CHORDS_KEPT];
     double len[RRV__CHORDS_KEPT];
+    double fresnel; /* the shot's: the share its sharp faces transmit */
 } rrv__chords;
 
 static void rrv__keep_chord(rrv__chords *kept, rrv_vec3 x, rrv_vec3 d, double len)
@@ -11876,6 +11886,49 @@ static void rrv__keep_chord(rrv__chords *kept, rrv_vec3 x, rrv_vec3 d, double le
     kept->x[kept->n] = x;
     kept->d[kept->n] = d;
     kept->len[kept->n++] = len;
+}
+
+/* A shot across a sharp interface at a box's face (at, met along unit d,
+   normal along an axis): Snell's law with the refractivities just behind
+   and just past it, as rrv__cross_face refracts, and the Jacobi field's
+   directions carried across. With mu = eta_behind / eta_past, c = -n.d
+   (n turned to face the ray) and k = sqrt(1 - mu^2 (1 - c^2)), the ray
+   leaves along d' = mu d + (mu c - k) n, so
+     dd' = dmu d + mu dd + (dmu c + mu dc - dk) n,
+     dc = -n.dd, dk = (mu^2 c dc - mu dmu (1 - c^2)) / k,
+   dmu from the two refractivities' gradients along the face point's move
+   (J1->x, already on the face; J->d the directions behind it). *share
+   gets the transmitted share 1 - F. 0 where the face reflects totally or
+   is a sphere's rim (a curved face: left to the forward paths, as every
+   sharp face was before 0.16.0). */
+static int rrv__shot_refracts(const rrv_scene *scene, rrv_vec3 at, rrv_vec3 d, rrv_vec3 normal, const rrv__jacobi *J,
+                              rrv__jacobi *J1, double *share)
+{
+    double gap = rrv__face_gap(at), r_behind, r_past, mu, c, k;
+    rrv_vec3 g_behind, g_past, n;
+    int j;
+    if ((normal.x == 0) + (normal.y == 0) + (normal.z == 0) != 2) return 0;
+    n = rrv__axis_unit(normal);
+    r_behind = rrv__scene_refractivity(scene, rrv__madd(at, d, -gap), &g_behind);
+    r_past = rrv__scene_refractivity(scene, rrv__madd(at, d, gap), &g_past);
+    mu = (1.0 + r_behind) / (1.0 + r_past);
+    c = -rrv__dot(n, d);
+    if (c < 0) {
+        n = rrv__scale(n, -1.0);
+        c = -c;
+    }
+    k = 1.0 - mu * mu * (1.0 - c * c);
+    if (!(k > 0)) return 0;
+    k = sqrt(k);
+    for (j = 0; j < 2; ++j) {
+        rrv_vec3 dx = J1->x[j], dd = J->d[j];
+        double dmu = (rrv__dot(g_behind, dx) * (1.0 + r_past) - (1.0 + r_behind) * rrv__dot(g_past, dx)) /
+                     ((1.0 + r_past) * (1.0 + r_past));
+        double dc = -rrv__dot(n, dd), dk = (mu * mu * c * dc - mu * dmu * (1.0 - c * c)) / k;
+        J1->d[j] = rrv__madd(rrv__madd(rrv__scale(d, dmu), dd, mu), n, dmu * c + mu * dc - dk);
+    }
+    *share = 1.0 - rrv__fresnel(1.0 + r_behind, 1.0 + r_past, c, k);
+    return 1;
 }
 
 /* Traces the ray from x0 along w0 (tangent basis e1, e2 of the two angles)
@@ -11898,12 +11951,17 @@ static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec
     int c;
     rrv__rng_seed(&fixed, 0, 0, 0);
     rrv__bender_start(&b, scene, 1, x0);
+    b.refract_only = 1;
+    out->fresnel = 1.0;
     J.x[0] = J.x[1] = rrv__v3(0, 0, 0);
     J.d[0] = e1;
     J.d[1] = e2;
     out->curved = rrv__in_support(scene, x0);
     if (T) T[0] = T[1] = T[2] = 1.0;
-    if (kept) kept->n = 0;
+    if (kept) {
+        kept->n = 0;
+        kept->fresnel = 1.0;
+    }
     for (n = 0; n < RRV__SOLVE_SEGMENTS; ++n) {
         rrv_vec3 dc[2];
         rrv__jacobi J1 = J;
@@ -11965,10 +12023,6 @@ static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec
             rrv__transmittance(ctx, x, d, len, rng, Ts);
             for (c = 0; c < 3; ++c) T[c] *= Ts[c];
         }
-        if (b.end == RRV__END_FACE && !b.cell_face && rrv__face_jumps(scene, rrv__madd(x, d, len), d)) {
-            out->status = RRV__SHOT_INTERFACE;
-            return;
-        }
         if (b.end == RRV__END_FACE) {
             /* The face point x + L d, L(x, d) its distance, moves on the face:
                dL = -N.(dx + L dd) / N.d. Not a small term: where the face
@@ -11981,9 +12035,26 @@ static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec
                 rrv_vec3 moved = rrv__madd(J.x[j], J.d[j], len);
                 J1.x[j] = rrv__madd(moved, d, -rrv__dot(b.normal, moved) / nd);
             }
+            /* a sharp interface: refracted (b.refract_only), its share
+               1 - F carried as a weight, the directions' field across it */
+            if (!b.cell_face && rrv__face_jumps(scene, rrv__madd(x, d, len), d)) {
+                double share;
+                if (!rrv__shot_refracts(scene, rrv__madd(x, d, len), d, b.normal, &J, &J1, &share)) {
+                    out->status = RRV__SHOT_INTERFACE;
+                    return;
+                }
+                out->fresnel *= share;
+                if (kept) kept->fresnel *= share;
+                if (T)
+                    for (c = 0; c < 3; ++c) T[c] *= share;
+            }
         }
         out->curved = 1;
         rrv__finish_segment(&b, scene, &x, &d, &fixed);
+        if (b.reflected) { /* totally, where the test above saw none: rounding */
+            out->status = RRV__SHOT_INTERFACE;
+            return;
+        }
         J = J1; /* a face without a jump leaves the direction as it was */
     }
     out->status = RRV__SHOT_MISSED;
@@ -12013,6 +12084,7 @@ static int rrv__kept_transmittance(rrv__context *ctx, const rrv__chords *kept, r
         rrv__transmittance(ctx, kept->x[i], kept->d[i], len, rng, Ts);
         for (c = 0; c < 3; ++c) T[c] *= Ts[c];
     }
+    for (c = 0; c < 3; ++c) T[c] *= kept->fresnel;
     return 1;
 }
 
@@ -14387,13 +14459,15 @@ static void rrv__solver_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, con
 
 /* A forward path from x0 (left along w0 with density pdf_dir) that hit
    light s at x, in a support's class (rrv__forward_weak gave weak, 0 or
-   2); jumped: it crossed a sharp interface, which no solver crosses. */
+   2); jumped: it crossed a sharp interface, which shots cross refracted
+   and chains not at all; mirrored: one reflected it, which no solver
+   does. */
 static double rrv__solver_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir,
-                                         const rrv_shape *s, rrv_vec3 x, int weak, int jumped)
+                                         const rrv_shape *s, rrv_vec3 x, int weak, int jumped, int mirrored)
 {
     if (weak == 2) /* a root no light sample stands for: the cones' (rrv__cone_nee) */
         return rrv__power_heuristic(pdf_dir, rrv__cone_pdf(ctx, x0, w0));
-    if (ctx->shoot && !jumped) return rrv__shoot_forward_weight(ctx, x0, w0, pdf_dir, s, x); /* MIS with shooting */
+    if (ctx->shoot && !mirrored) return rrv__shoot_forward_weight(ctx, x0, w0, pdf_dir, s, x); /* MIS with shooting */
     if (ctx->manifold && !jumped && s->kind != RRV_SHAPE_SPHERE) /* shoot's weight (rrv__manifold_mis_weight) */
         return ctx->eikonal ? rrv__shoot_forward_weight(ctx, x0, w0, pdf_dir, s, x) : 0.0;
     return 1.0;
@@ -14426,9 +14500,9 @@ static void rrv__solver_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, con
 /* no cones: a weak chord's other root is weighed against the density 0 of
    a direction no cone draws; no solver shares any other */
 static double rrv__solver_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, double pdf_dir,
-                                         const rrv_shape *s, rrv_vec3 x, int weak, int jumped)
+                                         const rrv_shape *s, rrv_vec3 x, int weak, int jumped, int mirrored)
 {
-    (void)ctx; (void)x0; (void)w0; (void)s; (void)x; (void)jumped;
+    (void)ctx; (void)x0; (void)w0; (void)s; (void)x; (void)jumped; (void)mirrored;
     return weak == 2 ? rrv__power_heuristic(pdf_dir, 0.0) : 1.0;
 }
 #endif /* RRV_NO_CURVED_NEE */
@@ -19567,8 +19641,9 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  light decides which estimators may make it: touching no
                  refraction support (box or profile sphere), or weak (below),
                  straight NEE and the forward path, by the power heuristic,
-                 as classic does; curved (part of it in a support, no sharp interface
-                 crossed) and ending on a quad, triangle or sphere light,
+                 as classic does; curved (part of it in a support, no sharp
+                 interface reflecting it) and ending on a quad, triangle or
+                 sphere light,
                  the curved connection and the forward path, by the power
                  heuristic on their solid-angle densities at the initial
                  direction w0: p_nee = |det J_plane| p_area(y) (NEE's
@@ -19581,9 +19656,14 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  the sum unbiased. Near a fold caustic det -> 0 and the
                  forward path takes the path, which bounds NEE's 1/|det|
                  (unweighted, its square is not integrable there).
-                 Everything else (across a sharp interface, to the sky, to
-                 the far side of a sphere light) only by forward paths,
-                 weight 1. The connection: a point y on a light (uniform
+                 Everything else (reflected at a sharp interface, to the
+                 sky, to the far side of a sphere light) only by forward
+                 paths, weight 1. A shot refracts at a box's sharp face by
+                 Snell's law, never reflects by chance, and carries the
+                 transmitted share 1 - F (Fresnel) as a weight, its Jacobi
+                 field through the refraction (rrv__shot_refracts); a
+                 forward path that only refracted there shares its light
+                 with shoot as anywhere else. The connection: a point y on a light (uniform
                  on a quad or triangle, p_area = 1 / (area x light
                  choices); on a sphere, where straight NEE's direction
                  in its cone meets the side x0 sees, p_area that density
@@ -19972,8 +20052,10 @@ and BOUNDS (moved here from the manual at the top, word for word)
      ambient one; eikonal with nee SHOOT where every refracting medium is
      clear (no medium with extinction overlaps its box), a light is small
      from one (its side, the square root of its area, or a sphere's disc's,
-     under 0.7 x its distance from the medium's box centre) and the IOR has
-     the Hessian shooting needs; refractive (the comb, nee AIM) otherwise.
+     under 0.7 x its distance from the medium's box centre), the IOR has
+     the Hessian shooting needs and no Luneburg or fish-eye sphere's
+     surface is a jump (shots refract at a box's sharp faces, not at a
+     sphere's); refractive (the comb, nee AIM) otherwise.
      An explicit `nee` other than shoot keeps the comb. Classic's chromatic
      media: channels whose extinctions differ more than 4x walk with
      majorants of their own (spectral MIS).
@@ -20084,10 +20166,13 @@ and BOUNDS (moved here from the manual at the top, word for word)
 ------------------------------------------------------------------------------
 VERSION HISTORY
 ------------------------------------------------------------------------------
-     0.16.0 nee aim crosses sharp interfaces (refracted as camera rays
-            are; a reflected ray is the forward path's): a hot-air box
-            whose faces miss the ambient IOR 8.8x the efficiency, blast
-            1.25x; the chain's gradient and its derivative from one lookup
+     0.16.0 nee aim and shoot cross a box's sharp interfaces (refracted
+            as camera rays are, shots weighted by 1 - F with their Jacobi
+            field through Snell's law; a reflected path is the forward
+            path's), and the default shoots under a small light whatever
+            the box's faces: a hot-air box whose faces miss the ambient
+            IOR 9.5x (aim), glass under a small light ~2000x; blast 1.16x;
+            the chain's gradient and its derivative from one lookup
      0.15.0 nee shoot and manifold split a connection's roots between a
             try from the chord (its root counted once, weight 1) and a
             random try (the others, 1/(s q)): shoot 1.8x (lens caustic)

@@ -110,9 +110,10 @@ static int same_render(rrv_scene *a, rrv_scene *b)
 }
 
 /* No integrator key: classic where nothing refracts (the same render bit
-   for bit), eikonal where a clear refracting medium without sharp faces
-   sees a small light, the comb otherwise (a large light, a smoke in the
-   plume's box, an explicit nee other than shoot, faces that are jumps). */
+   for bit), eikonal where a clear refracting medium without a sharp
+   sphere rim sees a small light (a box's sharp faces, which shots refract
+   at, allowed: glass too), the comb otherwise (a large light, a smoke in
+   the plume's box, an explicit nee other than shoot). */
 static void test_default_integrator(void)
 {
     struct {
@@ -137,15 +138,23 @@ static void test_default_integrator(void)
         {"medium smoke box 2 0 -1 3 2 1\ndensity smoke constant 0.1", 1, RRV_INTEGRATOR_EIKONAL},
         /* the IOR of a bare gas box equals the ambient one it sets: inert */
         {"", 2, RRV_INTEGRATOR_CLASSIC},
-        /* an ambient of 1 makes the plume's faces jumps shooting does not cross */
-        {"ambient ior 1", 1, RRV_INTEGRATOR_REFRACTIVE},
+        /* an ambient of 1 makes the plume's faces jumps, which shots refract at */
+        {"ambient ior 1", 1, RRV_INTEGRATOR_EIKONAL},
+        /* a glass box under a small light: shots refract at its faces */
+        {"", 4, RRV_INTEGRATOR_EIKONAL},
     };
     int k;
     for (k = 0; k < (int)(sizeof cases / sizeof cases[0]); ++k) {
         rrv_scene *s, *t;
         rrv_integrator got;
         rrv_error err;
-        if (cases[k].ior >= 2) {
+        if (cases[k].ior == 4) {
+            static const char glass[] = "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
+                                        "quad origin -0.1 3.5 -0.1 u 0.2 0 0 v 0 0 0.2 L 50 50 50\n"
+                                        "medium glass box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+                                        "ior glass constant 1.5\n";
+            CHECKF(rrv_scene_parse(glass, sizeof glass - 1, "glass", NULL, NULL, &s, &err) == RRV_OK, "%s", err.message);
+        } else if (cases[k].ior >= 2) {
             char text[512];
             double side = cases[k].ior == 2 ? 0.2 : atof(cases[k].extra);
             /* ior 2: a bare gas box under a small light; 3: a hot blob in

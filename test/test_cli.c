@@ -893,7 +893,7 @@ static void face_jumps_are_reported(void)
         "ior plume gas iorscale 100\n";
     static const char summary[] =
         "sharp IOR faces: eta jumps by 0.0292 at the -x face of medium \"plume\" (and at 5 more faces): "
-        "refracted and reflected there as glass; nee aim crosses them, shoot and manifold do not\n";
+        "refracted and reflected there as glass; nee shoot and aim refract there, manifold does not\n";
     char text[1024], arguments[3 * PATH_SIZE];
     const char *scene = tmp_path("plume.rrv"), *out = tmp_path("plume.pfm"), *line;
     int glass;
