@@ -1985,24 +1985,33 @@ static const char sharp_air_text[] =
     "temperature air blob center 0 1.4 0 radius 0.3 weight 600 base 300\n"
     "ior air gas iorscale 100\n";
 
-static void test_aim_across_sharp_faces(void)
+/* A scene whose first medium's faces jump by more than min_jump: nee
+   against nee none (1024 samples a pixel, method m both), every 4x4 block
+   within 4 standard errors; the render's stats into *rs. */
+static void sharp_faces_case(const char *text, size_t size, const char *name, double min_jump, const method *m,
+                             rrv_nee nee, int spp, rrv_render_stats *rs)
 {
     rrv_scene *s = NULL;
-    rrv_render_stats rs;
     stats a[NBLOCKS], b[NBLOCKS];
     double jump[7];
-    if (!(s = parse_text(sharp_air_text, sizeof sharp_air_text - 1, "sharp air"))) return;
-    CHECK(rrv_medium_face_jumps(s, 0, jump) > 0.02);
+    memset(rs, 0, sizeof *rs);
+    if (!(s = parse_text(text, size, name))) return;
+    CHECK(rrv_medium_face_jumps(s, 0, jump) > min_jump);
     memset(a, 0, sizeof a);
     memset(b, 0, sizeof b);
-    memset(&rs, 0, sizeof rs);
-    render_blocks(s, &comb, RRV_NEE_NONE, 71, 1024, 0, 0, 32, 24, BLOCK, a, NULL);
-    render_blocks(s, &comb, RRV_NEE_AIM, 72, 64, 0, 0, 32, 24, BLOCK, b, &rs);
+    render_blocks(s, m, RRV_NEE_NONE, 71, 1024, 0, 0, 32, 24, BLOCK, a, NULL);
+    render_blocks(s, m, nee, 72, spp, 0, 0, 32, 24, BLOCK, b, rs);
+    blocks_agree(a, b, BLOCKS_X, 0, 0, BLOCKS_X, BLOCKS_Y, name);
+    rrv_scene_free(s);
+}
+
+static void test_aim_across_sharp_faces(void)
+{
+    rrv_render_stats rs;
+    sharp_faces_case(sharp_air_text, sizeof sharp_air_text - 1, "sharp air, nee aim", 0.02, &comb, RRV_NEE_AIM, 64, &rs);
     SAY("  sharp air: %llu aimed rays, %.1f%% turned off their light\n", (unsigned long long)rs.aim_shots,
         100.0 * (double)rs.aim_missed / (double)rs.aim_shots);
     CHECK(rs.aim_shots > 1000);
-    blocks_agree(a, b, BLOCKS_X, 0, 0, BLOCKS_X, BLOCKS_Y, "sharp air, nee aim");
-    rrv_scene_free(s);
 }
 
 /* nee shoot across sharp interfaces: a glass box (IOR 1.5, Fresnel ~4 %
@@ -2022,20 +2031,12 @@ static const char glass_box_text[] =
 
 static void test_shoot_across_sharp_faces(void)
 {
-    rrv_scene *s = NULL;
     rrv_render_stats rs;
-    stats a[NBLOCKS], b[NBLOCKS];
-    if (!(s = parse_text(glass_box_text, sizeof glass_box_text - 1, "glass box"))) return;
-    memset(a, 0, sizeof a);
-    memset(b, 0, sizeof b);
-    memset(&rs, 0, sizeof rs);
-    render_blocks(s, &eikonal, RRV_NEE_NONE, 81, 1024, 0, 0, 32, 24, BLOCK, a, NULL);
-    render_blocks(s, &eikonal, RRV_NEE_SHOOT, 82, 32, 0, 0, 32, 24, BLOCK, b, &rs);
+    sharp_faces_case(glass_box_text, sizeof glass_box_text - 1, "glass box, nee shoot", 0.4, &eikonal, RRV_NEE_SHOOT,
+                     32, &rs);
     SAY("  glass box: %llu solves, %.1f%% converged\n", (unsigned long long)rs.solves,
         100.0 * (double)rs.solves_converged / (double)rs.solves);
     CHECK(rs.solves > 1000 && rs.solves_converged * 2 > rs.solves);
-    blocks_agree(a, b, BLOCKS_X, 0, 0, BLOCKS_X, BLOCKS_Y, "glass box, nee shoot");
-    rrv_scene_free(s);
 }
 
 /* nee aim's MIS: for light points y seen from floor points x0 under the
