@@ -448,7 +448,10 @@ static void aim_density_integrates_to_its_share(void)
 /* The flame lights the wall and floor: with emission NEE the same blocks as
    the forward paths alone, within 4 standard errors of their difference,
    on the classic integrator and on the refractive one with a refracting box
-   of hot air over the flame (straight connections only outside it), and
+   of hot air over the flame (straight connections only outside it), the
+   same box with an ambient IOR of 1 (its faces sharp, jumps of 0.088: an
+   aimed walk stops at one, and a path that crossed one keeps weight 1),
+   and
    under a night sky, where by default the flame takes the light samples
    the sky would have had (and without emission NEE the sky takes them). */
 static void nee_matches_forward_in_blocks(void)
@@ -465,11 +468,17 @@ static void nee_matches_forward_in_blocks(void)
         "amplitude 600 base 0 temperatureoffset -300 blackbody off\n"
         "ior haze gas iorscale 300\n"
         "ambient ior 1.0876\n";
+    static const char *const sharp =
+        "medium haze box -1.3 0.9 -1.0 1.3 3.4 1.0 sigma_a 0 0 0 sigma_s 0 0 0\n"
+        "temperature haze noise octaves 2 frequency 2.5 seed 5 falloff plume center 0 1.5 0 radius 0.9 "
+        "amplitude 600 base 0 temperatureoffset -300 blackbody off\n"
+        "ior haze gas iorscale 300\n"
+        "ambient ior 1\n";
     static const char *const sky = "environment constant L 0.03 0.04 0.08\n";
     int variant, k;
-    for (variant = 0; variant < 4; ++variant) {
-        const char *integrator = variant == 1 || variant == 2 ? "refractive" : "classic";
-        const char *extra = variant == 3 ? sky : variant == 2 ? around : variant ? haze : "";
+    for (variant = 0; variant < 5; ++variant) {
+        const char *integrator = variant == 1 || variant == 2 || variant == 4 ? "refractive" : "classic";
+        const char *extra = variant == 4 ? sharp : variant == 3 ? sky : variant == 2 ? around : variant ? haze : "";
         rrv_scene *on = load(campfire, integrator, "", extra);
         rrv_scene *off = load(campfire, integrator, "emissionnee off", extra);
         double m_on[BW * BH], s_on[BW * BH], m_off[BW * BH], s_off[BW * BH], worst = 0, rel = 0;
@@ -496,7 +505,8 @@ static void nee_matches_forward_in_blocks(void)
         /* resolving power: a bias of a tenth would show */
         CHECKF(rel < 0.025, "%s: the forward blocks' relative error %g is too large to see a bias", integrator, rel);
         printf("  %s%s: worst |z| %.2f, forward blocks within %.1f%%\n", integrator,
-               variant == 3   ? ", under a sky"
+               variant == 4   ? ", hot air with sharp faces"
+               : variant == 3 ? ", under a sky"
                : variant == 2 ? ", hot air behind the flame's front half"
                : variant      ? ", hot air over the flame"
                               : "",
