@@ -8446,15 +8446,6 @@ typedef struct rrv__vertex_bsdf {
    face_jump) one that curved connections cannot solve across? */
 static int rrv__jump_counts(double jump) { return jump > RRV__SOLVE_JUMP; }
 
-/* Does the refractivity jump across the face the ray along d meets at x? */
-static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
-{
-    double gap = rrv__face_gap(x);
-    double before = rrv__scene_refractivity(scene, rrv__madd(x, d, -gap), NULL);
-    double after = rrv__scene_refractivity(scene, rrv__madd(x, d, gap), NULL);
-    return fabs(after - before) > RRV__SOLVE_JUMP;
-}
-
 /* Is x inside a refraction support (where rays bend)? */
 static int rrv__in_support(const rrv_scene *scene, rrv_vec3 x)
 {
@@ -8547,56 +8538,37 @@ static double rrv__chord_bend(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, d
    real one turns by less than the bound, the same order as the bending
    one comb kick leaves out. */
 /* The chord's bound on bending (rrv__chord_bend, counted until it passes
-   stop) into *bound; 0 if the chord crosses a sharp interface. */
-static int rrv__chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop, double *bound)
-{
-    const rrv_scene *scene = ctx->scene;
-    double t = 0;
-    int faces;
-    rrv__support_view v;
-    *bound = 0;
-    rrv__look_along(scene, x, d, &v);
-    if (!v.inside && !(v.t_face < len)) return 1;
-    /* each support box has at most two faces and a sphere two more along
-       a line; more crossings than that are rounding: call it curved */
-    for (faces = 0; v.t_face < len - t; ++faces) {
-        rrv_vec3 at = rrv__madd(x, d, t + v.t_face);
-        if (faces >= 4 * scene->medium_count || rrv__face_jumps(scene, at, d)) return 0;
-        t += v.t_face + rrv__face_gap(at);
-        rrv__look_along(scene, rrv__madd(x, d, t), d, &v);
-    }
-    *bound = rrv__chord_bend(ctx, x, d, len, stop);
-    return 1;
-}
-
-/* rrv__chord_bound for nee aim, whose bent rays cross sharp interfaces
-   as camera rays do (refracted, or reflected with the Fresnel probability,
-   which leaves the path to the forward estimator): each sharp face the
-   chord crosses adds the turn Snell's law gives the chord there (a bound
-   of the same heuristic kind as the bend's: it sorts, and the forward path
-   sorts itself by the same function). 0 where the chord crosses more faces
-   than a line can or one reflects it totally. *sharp: it crossed a sharp
-   face, so the connection is not straight NEE's however little it bends. */
-static int rrv__aim_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop,
-                                double *bound, int *sharp)
+   stop) into *bound. A sharp interface on the chord: with sharp NULL
+   (shoot's classes) returns 0; else (nee aim, whose bent rays refract
+   there as camera rays do, a reflected one being the forward path's) sets
+   *sharp and adds the turn Snell's law gives the chord there (a bound of
+   the same heuristic kind as the bend's: it sorts, and the forward path
+   sorts itself by the same function), 0 only where a face reflects it
+   totally. */
+static int rrv__chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double stop, double *bound,
+                            int *sharp)
 {
     const rrv_scene *scene = ctx->scene;
     double t = 0, turn = 0;
     int faces;
     rrv__support_view v;
     *bound = 0;
-    *sharp = 0;
+    if (sharp) *sharp = 0;
     rrv__look_along(scene, x, d, &v);
     if (!v.inside && !(v.t_face < len)) return 1;
+    /* each support box has at most two faces and a sphere two more along
+       a line; more crossings than that are rounding: call it curved */
     for (faces = 0; v.t_face < len - t; ++faces) {
         rrv_vec3 at = rrv__madd(x, d, t + v.t_face);
-        double gap = rrv__face_gap(at);
-        double before = rrv__scene_refractivity(scene, rrv__madd(at, d, -gap), NULL);
-        double after = rrv__scene_refractivity(scene, rrv__madd(at, d, gap), NULL);
+        double gap = rrv__face_gap(at), before, after;
         if (faces >= 4 * scene->medium_count) return 0;
-        if (fabs(after - before) > RRV__SOLVE_JUMP) {
+        before = rrv__scene_refractivity(scene, rrv__madd(at, d, -gap), NULL);
+        after = rrv__scene_refractivity(scene, rrv__madd(at, d, gap), NULL);
+        if (rrv__jump_counts(fabs(after - before))) {
             int total;
-            rrv_vec3 out = rrv__refract_at_null_event(d, before, after, v.normal, &total);
+            rrv_vec3 out;
+            if (!sharp) return 0;
+            out = rrv__refract_at_null_event(d, before, after, v.normal, &total);
             if (total) return 0;
             turn += rrv__length(rrv__cross(d, out));
             *sharp = 1;
@@ -8611,7 +8583,7 @@ static int rrv__aim_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d,
 static int rrv__weak_chord_bound(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len, double *bound)
 {
     double tolerance = RRV__WEAK_BEND * ctx->scene->settings.bend_tolerance;
-    return rrv__chord_bound(ctx, x, d, len, tolerance, bound) && *bound <= tolerance;
+    return rrv__chord_bound(ctx, x, d, len, tolerance, bound, NULL) && *bound <= tolerance;
 }
 
 static int rrv__weak_chord(const rrv__context *ctx, rrv_vec3 x, rrv_vec3 d, double len)
@@ -8754,7 +8726,7 @@ static int rrv__aim_class(const rrv__context *ctx, const rrv_shape *s, rrv_vec3 
     double size = s->kind == RRV_SHAPE_SPHERE ? sqrt(RRV__PI) * s->radius : sqrt(rrv__shape_area(s));
     double reach = RRV__AIM_REACH * size / len, bound;
     int sharp;
-    if (!rrv__aim_chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound, &sharp)) return 2;
+    if (!rrv__chord_bound(ctx, x0, w, len, rrv__maxd(reach, tolerance), &bound, &sharp)) return 2;
     if (bound <= tolerance && !sharp) return 0;
     return bound <= reach ? 1 : 2;
 }
@@ -11898,19 +11870,22 @@ static void rrv__keep_chord(rrv__chords *kept, rrv_vec3 x, rrv_vec3 d, double le
      dc = -n.dd, dk = (mu^2 c dc - mu dmu (1 - c^2)) / k,
    dmu from the two refractivities' gradients along the face point's move
    (J1->x, already on the face; J->d the directions behind it). *share
-   gets the transmitted share 1 - F. 0 where the face reflects totally or
-   is a sphere's rim (a curved face: left to the forward paths, as every
-   sharp face was before 0.16.0). */
+   gets the transmitted share 1 - F. Returns 1 where the face is such a
+   jump (rrv__face_jumps's test, from the same two lookups), 0 where it
+   is none (nothing changed), -1 where the face reflects totally or is a
+   sphere's rim (a curved face: left to the forward paths, as every sharp
+   face was before 0.16.0). */
 static int rrv__shot_refracts(const rrv_scene *scene, rrv_vec3 at, rrv_vec3 d, rrv_vec3 normal, const rrv__jacobi *J,
                               rrv__jacobi *J1, double *share)
 {
     double gap = rrv__face_gap(at), r_behind, r_past, mu, c, k;
     rrv_vec3 g_behind, g_past, n;
     int j;
-    if ((normal.x == 0) + (normal.y == 0) + (normal.z == 0) != 2) return 0;
-    n = rrv__axis_unit(normal);
     r_behind = rrv__scene_refractivity(scene, rrv__madd(at, d, -gap), &g_behind);
     r_past = rrv__scene_refractivity(scene, rrv__madd(at, d, gap), &g_past);
+    if (!rrv__jump_counts(fabs(r_past - r_behind))) return 0;
+    if ((normal.x == 0) + (normal.y == 0) + (normal.z == 0) != 2) return -1;
+    n = rrv__axis_unit(normal);
     mu = (1.0 + r_behind) / (1.0 + r_past);
     c = -rrv__dot(n, d);
     if (c < 0) {
@@ -11918,7 +11893,7 @@ static int rrv__shot_refracts(const rrv_scene *scene, rrv_vec3 at, rrv_vec3 d, r
         c = -c;
     }
     k = 1.0 - mu * mu * (1.0 - c * c);
-    if (!(k > 0)) return 0;
+    if (!(k > 0)) return -1;
     k = sqrt(k);
     for (j = 0; j < 2; ++j) {
         rrv_vec3 dx = J1->x[j], dd = J->d[j];
@@ -12029,7 +12004,8 @@ static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec
                ends a gradient (a Luneburg sphere), entering earlier or later
                bends the ray by a finite amount (the saltation of the
                variational equations across a jump of grad eta). */
-            double nd = rrv__dot(b.normal, d);
+            double nd = rrv__dot(b.normal, d), share;
+            int jump;
             if (!(fabs(nd) > 1e-9 * rrv__length(b.normal))) break; /* grazing */
             for (j = 0; j < 2; ++j) {
                 rrv_vec3 moved = rrv__madd(J.x[j], J.d[j], len);
@@ -12037,12 +12013,12 @@ static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec
             }
             /* a sharp interface: refracted (b.refract_only), its share
                1 - F carried as a weight, the directions' field across it */
-            if (!b.cell_face && rrv__face_jumps(scene, rrv__madd(x, d, len), d)) {
-                double share;
-                if (!rrv__shot_refracts(scene, rrv__madd(x, d, len), d, b.normal, &J, &J1, &share)) {
-                    out->status = RRV__SHOT_INTERFACE;
-                    return;
-                }
+            jump = b.cell_face ? 0 : rrv__shot_refracts(scene, rrv__madd(x, d, len), d, b.normal, &J, &J1, &share);
+            if (jump < 0) {
+                out->status = RRV__SHOT_INTERFACE;
+                return;
+            }
+            if (jump) {
                 out->fresnel *= share;
                 if (kept) kept->fresnel *= share;
                 if (T)
@@ -13501,6 +13477,16 @@ typedef struct rrv__mroot {
     double density;   /* dw0 / dA_y, sr per m^2 */
     int iterations;
 } rrv__mroot;
+
+/* Does the refractivity jump across the face the ray along d meets at x (a chain's chords
+   must not cross one)? */
+static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
+{
+    double gap = rrv__face_gap(x);
+    double before = rrv__scene_refractivity(scene, rrv__madd(x, d, -gap), NULL);
+    double after = rrv__scene_refractivity(scene, rrv__madd(x, d, gap), NULL);
+    return fabs(after - before) > RRV__SOLVE_JUMP;
+}
 
 /* Is the converged chain a physical path, and no chord crosses a sharp
    interface? The constraint admits the direction opposite to the kicked
