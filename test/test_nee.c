@@ -1582,6 +1582,67 @@ static void test_manifold_memo_is_exact(void)
     rrv_scene_free(s);
 }
 
+/* The coarse stage's shot (rrv__chain_shoot) steers by the Jacobian
+   that rrv__chain_trace_jacobian carries through the planes: on lens
+   caustic connections (coarse chains, directions up to ~0.2 rad off the
+   chord, so many cross the rim's band) it must match central differences
+   of the miss by 1e-6 rad to 1e-5 of |J| (differences' own error ~1e-9),
+   and its miss must be rrv__chain_miss's for the same direction. The shot
+   from the chord must then meet y to 1e-9 of a spacing on at least 95 %
+   of them (Newton's quadratic convergence: the traces run to ~1e-15). */
+static void test_coarse_shot_jacobian(void)
+{
+    rrv_scene *s = NULL;
+    rrv__context ctx;
+    rrv__rng rng;
+    double worst = 0, worst_miss = 0;
+    int k, j, tried = 0, shot = 0;
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
+    manifold_context(&ctx, s);
+    rrv__rng_seed(&rng, 93, 0, 0);
+    for (k = 0; ctx.chain && ctx.coarse_chain && k < 200; ++k) {
+        rrv_vec3 x0 = lens_floor_point(&rng), y = lens_light_point(&rng), ny = rrv__v3(0, -1, 0), w, e1, e2;
+        double u = rrv__uniform(&rng), a = 0.2 * rrv__uniform(&rng), phi = 2.0 * RRV__PI * rrv__uniform(&rng);
+        double miss[2], J[4], plain[2], norm, eps = 1e-6;
+        rrv__chain *ch = ctx.coarse_chain;
+        int traces;
+        rrv__chain_setup(s, x0, y, ny, 0, 0.0, u, ctx.chain);
+        rrv__chain_setup_coarse(&ctx, ny, u);
+        if (ch->n == 0) continue;
+        w = rrv__normalize(rrv__add(ch->c, rrv__add(rrv__scale(ch->c1, a * cos(phi)), rrv__scale(ch->c2, a * sin(phi)))));
+        if (!rrv__chain_trace_jacobian(s, ch, w, miss, J) || !rrv__chain_miss(s, ch, w, plain)) continue;
+        ++tried;
+        worst_miss = fmax(worst_miss, fmax(fabs(miss[0] - plain[0]), fabs(miss[1] - plain[1])));
+        norm = sqrt(J[0] * J[0] + J[1] * J[1] + J[2] * J[2] + J[3] * J[3]);
+        rrv__frame(w, &e1, &e2);
+        for (j = 0; j < 2; ++j) {
+            rrv_vec3 e = j ? e2 : e1;
+            double mp[2], mm[2];
+            if (!rrv__chain_miss(s, ch, rrv__normalize(rrv__madd(w, e, eps)), mp) ||
+                !rrv__chain_miss(s, ch, rrv__normalize(rrv__madd(w, e, -eps)), mm))
+                continue;
+            worst = fmax(worst, fabs((mp[0] - mm[0]) / (2 * eps) - J[j]) / norm);
+            worst = fmax(worst, fabs((mp[1] - mm[1]) / (2 * eps) - J[2 + j]) / norm);
+        }
+        if (rrv__chain_shoot(s, ch, ch->c, &traces)) {
+            double m[2];
+            CHECK(rrv__chain_miss(s, ch, rrv__normalize(rrv__sub(ch->x[1], ch->x[0])), m));
+            CHECKF(sqrt(m[0] * m[0] + m[1] * m[1]) < 1e-9 * ch->h + 1e-12, "connection %d: the shot misses y by %g", k,
+                   sqrt(m[0] * m[0] + m[1] * m[1]));
+            ++shot;
+        }
+    }
+    SAY("  coarse shot: %d connections, Jacobian off by %.2g of |J|, miss by %.2g, %d shots met y\n", tried, worst,
+        worst_miss, shot);
+    CHECKF(tried > 100, "only %d connections traced", tried);
+    CHECKF(worst < 1e-5, "the traced Jacobian is off its differences by %g of |J|", worst);
+    CHECKF(worst_miss < 1e-12, "the traced miss is off rrv__chain_miss's by %g m", worst_miss);
+    CHECKF(shot * 100 >= 95 * tried, "%d of %d shots from the chord met y", shot, tried);
+    rrv__chain_delete(ctx.chain);
+    rrv__chain_delete(ctx.coarse_chain);
+    rrv_scene_free(s);
+}
+
 /* The census of a connection's roots: root w0 (value f) among the n
    distinct ones so far (at most 8); its index, or -1 where the list is
    full. */
@@ -2633,6 +2694,7 @@ int main(void)
     NEE_RUN(test_manifold_bad_chains);
     NEE_RUN(test_manifold_out_of_memory);
     NEE_RUN(test_manifold_memo_is_exact);
+    NEE_RUN(test_coarse_shot_jacobian);
     NEE_RUN(test_manifold_estimate_is_unbiased);
     NEE_RUN(test_shoot_estimate_is_unbiased);
     NEE_RUN(test_shoot_mis_weights_sum_to_one);
