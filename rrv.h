@@ -14238,16 +14238,18 @@ static int rrv__chain_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroot *
                                                                         : rrv__manifold_solve(scene, ch, root);
 }
 
-/* Seeds ch from direction w (a chain traced from w and aimed at y, or the
-   parabola from it where no trace reaches y) and solves it; *evaluations
-   gets the aim's traces and the solve's evaluations. */
-static int rrv__chain_solve_from(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, rrv__mroot *root,
+/* Seeds ch from direction w and solves it: with shoot, the chain shot
+   from w (rrv__chain_shoot); where that fails or without shoot, traced
+   from w and aimed at y, or the parabola from it where no trace reaches
+   y. *evaluations gets the traces and the solve's evaluations. */
+static int rrv__chain_solve_from(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, int shoot, rrv__mroot *root,
                                  int *evaluations)
 {
-    int aimed, found;
-    if (!rrv__chain_aim(scene, ch, w, &aimed)) rrv__chain_seed(scene, ch, w);
+    int traces = 0, aimed = 0, found;
+    if (!shoot || !rrv__chain_shoot(scene, ch, w, &traces))
+        if (!rrv__chain_aim(scene, ch, w, &aimed)) rrv__chain_seed(scene, ch, w);
     found = rrv__chain_solve(scene, ch, root);
-    *evaluations += root->iterations + aimed;
+    *evaluations += root->iterations + aimed + traces;
     return found;
 }
 
@@ -14286,8 +14288,8 @@ static int rrv__chain_try_once(rrv__context *ctx, rrv__chain *ch, rrv_vec3 w, in
         shot = rrv__chain_shoot(scene, coarse, w, &traces);
         *evaluations += traces;
     }
-    if (direct || (!shot && !rrv__chain_solve_from(scene, coarse, w, &near, evaluations)))
-        return rrv__chain_solve_from(scene, ch, w, root, evaluations);
+    if (direct || (!shot && !rrv__chain_solve_from(scene, coarse, w, 0, &near, evaluations)))
+        return rrv__chain_solve_from(scene, ch, w, 1, root, evaluations);
     rrv__chain_snap(coarse, key);
     for (i = 0; memo && i < memo->used; ++i)
         if (!memcmp(key, memo->slot[i].seed, (size_t)coarse->n * sizeof key[0])) {
