@@ -1643,6 +1643,52 @@ static void test_coarse_shot_jacobian(void)
     rrv_scene_free(s);
 }
 
+/* The dogleg takes its last Newton step unconfirmed where the step before
+   converged quadratically (rrv__newton_finishes): the chain it returns
+   must still be a root, re-evaluated there to RRV__MANIFOLD_TOL, and its
+   density (from the Jacobian one step back, < 1e-6 away) within 1e-4 of
+   the density taken at the root: measured up to 1.5e-5 where the chain
+   crosses the lens's rim band, whose smoothstep makes the density change
+   fastest, ~|step| elsewhere. Lens caustic connections from the chord
+   (coarse stage and polish), most of which end so. */
+static void test_dogleg_last_step(void)
+{
+    rrv_scene *s = NULL;
+    rrv__context ctx;
+    rrv__rng rng;
+    double worst_density = 0, worst_residual = 0;
+    int k, solved = 0, unconfirmed = 0;
+    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
+    s->settings.manifold_solver = RRV_MANIFOLD_SOLVER_DOGLEG;
+    manifold_context(&ctx, s);
+    rrv__rng_seed(&rng, 95, 0, 0);
+    for (k = 0; ctx.chain && k < 120; ++k) {
+        rrv_vec3 x0 = lens_floor_point(&rng), y = lens_light_point(&rng), ny = rrv__v3(0, -1, 0);
+        rrv__chain *ch = ctx.chain;
+        rrv__mroot root, again;
+        double largest = 0, confirmed, u = rrv__uniform(&rng);
+        int i;
+        rrv__chain_setup(s, x0, y, ny, 0, 0.0, u, ch);
+        rrv__chain_setup_coarse(&ctx, ny, u);
+        if (!rrv__manifold_try(&ctx, ch, &rng, NULL, 1, &root)) continue;
+        ++solved;
+        for (i = 1; i <= ch->n; ++i) largest = fmax(largest, fmax(fabs(ch->r[i][0]), fabs(ch->r[i][1])));
+        if (largest >= RRV__MANIFOLD_TOL) ++unconfirmed;
+        rrv__chain_eval(s, ch, 1, &confirmed);
+        worst_residual = fmax(worst_residual, confirmed);
+        if (rrv__chain_density(ch, &again)) worst_density = fmax(worst_density, fabs(root.density / again.density - 1));
+        else worst_density = 1;
+    }
+    SAY("  dogleg: %d solved, %d ended unconfirmed, residual there %.2g, density off by %.2g\n", solved, unconfirmed,
+        worst_residual, worst_density);
+    CHECKF(solved > 100 && unconfirmed * 2 > solved, "%d solved, %d ended on an unconfirmed step", solved, unconfirmed);
+    CHECKF(worst_residual < RRV__MANIFOLD_TOL, "a returned root's residual is %g", worst_residual);
+    CHECKF(worst_density < 1e-4, "a density is off the root's by %g", worst_density);
+    rrv__chain_delete(ctx.chain);
+    rrv__chain_delete(ctx.coarse_chain);
+    rrv_scene_free(s);
+}
+
 /* The census of a connection's roots: root w0 (value f) among the n
    distinct ones so far (at most 8); its index, or -1 where the list is
    full. */
@@ -2695,6 +2741,7 @@ int main(void)
     NEE_RUN(test_manifold_out_of_memory);
     NEE_RUN(test_manifold_memo_is_exact);
     NEE_RUN(test_coarse_shot_jacobian);
+    NEE_RUN(test_dogleg_last_step);
     NEE_RUN(test_manifold_estimate_is_unbiased);
     NEE_RUN(test_shoot_estimate_is_unbiased);
     NEE_RUN(test_shoot_mis_weights_sum_to_one);
