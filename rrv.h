@@ -13599,6 +13599,28 @@ static int rrv__face_jumps(const rrv_scene *scene, rrv_vec3 x, rrv_vec3 d)
     return fabs(after - before) > RRV__SOLVE_JUMP;
 }
 
+/* Can the chord from a to b cross a face of a refracting medium's box?
+   Not where both ends lie inside the box by more than a few face gaps,
+   nor where it misses the box grown by them: there the walk of its faces
+   in rrv__chain_physical cannot find a jump (the refractivity changes at
+   no other face), and a chain's inner chords, all inside the support's
+   box, skip it. */
+static int rrv__chord_may_cross_face(const rrv_scene *scene, rrv_vec3 a, rrv_vec3 b)
+{
+    double g = 4.0 * fmax(rrv__face_gap(a), rrv__face_gap(b)), t0, t1;
+    rrv_vec3 gv = rrv__v3(g, g, g);
+    int i;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        rrv_vec3 lo = rrv__add(m->lo, gv), hi = rrv__sub(m->hi, gv);
+        if (!rrv__medium_refracts(m)) continue;
+        if (rrv__inside_box(a, lo, hi) && rrv__inside_box(b, lo, hi)) continue;
+        if (rrv__ray_box_span(a, rrv__sub(b, a), rrv__sub(m->lo, gv), rrv__add(m->hi, gv), &t0, &t1) && t0 <= 1.0)
+            return 1;
+    }
+    return 0;
+}
+
 /* Is the converged chain a physical path, and no chord crosses a sharp
    interface? The constraint admits the direction opposite to the kicked
    one as well: a vertex must send the ray on forward. */
@@ -13618,6 +13640,7 @@ static int rrv__chain_physical(const rrv_scene *scene, const rrv__chain *ch)
         rrv_vec3 x = ch->x[k], d = rrv__sub(ch->x[k + 1], x);
         double len = rrv__length(d), done = 0;
         int faces;
+        if (!rrv__chord_may_cross_face(scene, x, ch->x[k + 1])) continue;
         d = rrv__scale(d, 1.0 / len);
         for (faces = 0; faces < 64; ++faces) {
             rrv__support_view view;
