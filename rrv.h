@@ -14307,9 +14307,9 @@ static int rrv__chain_solve_from(const rrv_scene *scene, rrv__chain *ch, rrv_vec
    then the fine chain is seeded on the cubic through the coarse root's
    vertices, snapped to a lattice (rrv__chain_snap,
    rrv__chain_seed_between), and solved from there. From raw seeds the
-   lens caustic's fine chains took 16.9 evaluations of 101 planes, 10 of
-   them the aim's traces; the polish takes about 5, and the coarse stage
-   costs a fraction of one fine evaluation per evaluation.
+   lens caustic's fine chains take 8 traces and 3 evaluations of 101
+   planes; the polish 3.5 evaluations, and the coarse shot 8.5 traces
+   of 30 planes.
    The map from seed to root stays deterministic. A seed whose coarse
    solve fails is solved on the fine chain directly, as is every random
    seed in a share RRV__CHAIN_DIRECT (direct, drawn by the caller): so every
@@ -19883,7 +19883,10 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  fails. `manifoldsolver dogleg` solves by the earlier
                  trust-region Gauss-Newton instead (Newton's step by
                  block Thomas inside the radius, Powell's dogleg outside;
-                 faster on every scene measured, test/bench/RESULTS.md). The density
+                 its last step is taken unconfirmed where the one before
+                 converged quadratically to a residual ~1e-3 of the
+                 tolerance; faster on every scene measured,
+                 test/bench/RESULTS.md). The density
                  dw0/dA_y from block Thomas elimination of J (the
                  generalised geometry term of Specular Manifold Sampling).
                  Each connection makes two tries, which split the roots
@@ -19899,12 +19902,15 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  roulette (trial i made with probability (64/i)^2,
                  counted as its inverse): E = 1/q exactly, at most 129
                  trials expected whatever q. A seed is traced through the
-                 planes by the chain's own rule and aimed at y by
-                 shooting (at most 16 steps; a parabola where no trace
-                 reaches y's plane), then solved in two stages where that
-                 saves work, as shoot's are: first on a coarse chain
-                 (planes 8x as far apart, at most 0.1 rad of bend a
-                 plane), then on the fine one from the cubic through the
+                 planes by the chain's own rule and shot at y (Newton on
+                 the initial direction, the Jacobian carried through the
+                 planes; at most 16 traces; where that fails, aimed by
+                 differences, or a parabola where no trace reaches y's
+                 plane), in two stages where that saves work, as shoot's
+                 are: first a coarse chain (planes 8x as far apart, at
+                 most 0.1 rad of bend a plane), whose shot to 1e-9 of a
+                 spacing is its root, then the fine one solved from the
+                 cubic through the
                  coarse root's vertices snapped to a 2^-20 m lattice; a
                  seed whose coarse solve fails, and one random seed in 16,
                  is solved on the fine chain directly, so no root of the
