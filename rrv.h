@@ -1,4 +1,4 @@
-/* rrv.h 0.16.0 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.17.0 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -208,7 +208,7 @@
 #endif
 
 #define RRV_VERSION_MAJOR 0
-#define RRV_VERSION_MINOR 16
+#define RRV_VERSION_MINOR 17
 #define RRV_VERSION_PATCH 0
 
 #ifndef RRV_DEF
@@ -20324,6 +20324,12 @@ and BOUNDS (moved here from the manual at the top, word for word)
 ------------------------------------------------------------------------------
 VERSION HISTORY
 ------------------------------------------------------------------------------
+     0.17.0 nee manifold's chains are seeded by shooting (Newton on the
+            initial direction with a Jacobi field through the planes): the
+            coarse stage's shot is its root; the dogleg's last step is
+            taken unconfirmed after quadratic convergence: lens caustic
+            1.45x the efficiency (dogleg), fire caustic and heat shadow
+            ahead of shoot
      0.16.0 nee aim and shoot cross a box's sharp interfaces (refracted
             as camera rays are, shots weighted by 1 - F with their Jacobi
             field through Snell's law; a reflected path is the forward
