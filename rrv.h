@@ -13874,6 +13874,21 @@ static void rrv__chain_swap(rrv__chain *ch)
    converged went 12 or more without (test/bench/RESULTS.md). */
 #define RRV__LM_STALL 12
 
+/* Does a Newton step from a chain whose largest residual is `largest`
+   finish the solve? Where the last step converged quadratically with
+   constant K (|r'| ~ K |r|^2; 0 when it was not a full, well-predicted
+   step), the next residual is about K largest^2: a thousandth of
+   RRV__MANIFOLD_TOL or less, and largest already under 1e-6, and the
+   step is taken without the evaluation that would confirm it (both
+   solvers; LM only where its damped step leaves the linear model as
+   small a residual). On the
+   lens caustic the polish's evaluations go 8e-3, 5e-5, 6e-9, 2e-14:
+   the last one only confirmed the root. */
+static int rrv__newton_finishes(double K, double largest)
+{
+    return K > 0 && largest < 1e-6 && K * largest * largest < 1e-3 * RRV__MANIFOLD_TOL;
+}
+
 /* Levenberg-Marquardt on the chain from its seeded positions (the paper's
    solver): minimises |r|^2 over the vertices' gauge coordinates by steps
    delta with (J^T J + lambda S) delta = -J^T r. S is Marquardt's scaling,
@@ -13909,7 +13924,7 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
 {
     int it = 1, k, n = ch->n, halved_at = 1;
     double largest, norm = rrv__chain_eval(scene, ch, 1, &largest), lambda = RRV__LM_LAMBDA, nu = 2.0, refused = 0;
-    double halved_norm = norm;
+    double halved_norm = norm, newton = 0;
     root->iterations = 1;
     if (!(norm < DBL_MAX)) return 0;
     for (k = 1; k <= n; ++k) ch->scl[k][0] = ch->scl[k][1] = 0;
@@ -13977,6 +13992,19 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
                 continue;
             }
             if (!(pred > 0) || !(pred < DBL_MAX)) goto failed; /* no step left that the model trusts */
+            if (rrv__newton_finishes(newton, largest) && !ch->iso) {
+                /* as the dogleg's last step, where the damped step leaves
+                   the linear model a residual as small: taken unconfirmed */
+                double (*e)[2] = ch->r_alt, worst = 0;
+                rrv__chain_apply(ch, ch->step, e, 0);
+                for (k = 1; k <= n; ++k)
+                    worst = fmax(worst, fmax(fabs(e[k][0] + ch->r[k][0]), fabs(e[k][1] + ch->r[k][1])));
+                if (worst < 1e-3 * RRV__MANIFOLD_TOL) {
+                    rrv__chain_move(scene, ch, ch->x, ch->b1, ch->b2, ch->step);
+                    root->iterations = it;
+                    return rrv__chain_physical(scene, ch) && rrv__chain_density(ch, root);
+                }
+            }
             memcpy(E, ch->E, sizeof E);
             rrv__chain_swap(ch);
             ch->x[0] = ch->xs[0];
@@ -13986,6 +14014,7 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
             ++it;
             if (trial < norm) {
                 double rho = (f2 - trial * trial) / pred, t = 2.0 * rho - 1.0;
+                newton = rho > 0.9 && rho < 1.1 ? tl / (largest * largest) : 0;
                 lambda *= fmax(1.0 / 3.0, 1.0 - t * t * t);
                 nu = 2.0;
                 norm = trial;
@@ -14009,18 +14038,6 @@ failed:
     return 0;
 }
 
-/* Does a Newton step from a chain whose largest residual is `largest`
-   finish the solve? Where the last step converged quadratically with
-   constant K (|r'| ~ K |r|^2; 0 when it was not a full, well-predicted
-   step), the next residual is about K largest^2: a thousandth of
-   RRV__MANIFOLD_TOL or less, and largest already under 1e-6, and the
-   step is taken without the evaluation that would confirm it. On the
-   lens caustic the polish's evaluations go 8e-3, 5e-5, 6e-9, 2e-14:
-   the last one only confirmed the root. */
-static int rrv__newton_finishes(double K, double largest)
-{
-    return K > 0 && largest < 1e-6 && K * largest * largest < 1e-3 * RRV__MANIFOLD_TOL;
-}
 
 /* Trust-region Gauss-Newton (Powell's dogleg) on the chain from its seeded
    positions, all in O(n): the Newton step J du = -r by block Thomas where
@@ -19883,10 +19900,10 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  fails. `manifoldsolver dogleg` solves by the earlier
                  trust-region Gauss-Newton instead (Newton's step by
                  block Thomas inside the radius, Powell's dogleg outside;
-                 its last step is taken unconfirmed where the one before
-                 converged quadratically to a residual ~1e-3 of the
-                 tolerance; faster on every scene measured,
-                 test/bench/RESULTS.md). The density
+                 faster on every scene measured, test/bench/RESULTS.md).
+                 Either takes its last step unconfirmed where the one
+                 before converged quadratically and the next residual is
+                 predicted ~1e-3 of the tolerance. The density
                  dw0/dA_y from block Thomas elimination of J (the
                  generalised geometry term of Specular Manifold Sampling).
                  Each connection makes two tries, which split the roots

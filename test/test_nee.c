@@ -1643,23 +1643,22 @@ static void test_coarse_shot_jacobian(void)
     rrv_scene_free(s);
 }
 
-/* The dogleg takes its last Newton step unconfirmed where the step before
-   converged quadratically (rrv__newton_finishes): the chain it returns
-   must still be a root, re-evaluated there to RRV__MANIFOLD_TOL, and its
-   density (from the Jacobian one step back, < 1e-6 away) within 1e-4 of
-   the density taken at the root: measured up to 1.5e-5 where the chain
-   crosses the lens's rim band, whose smoothstep makes the density change
-   fastest, ~|step| elsewhere. Lens caustic connections from the chord
-   (coarse stage and polish), most of which end so. */
-static void test_dogleg_last_step(void)
+/* Both solvers take their last Newton step unconfirmed where the step
+   before converged quadratically (rrv__newton_finishes; LM also where its
+   damped step leaves the linear model a residual as small): the chain
+   returned must still be a root, re-evaluated there to RRV__MANIFOLD_TOL,
+   and its density (from the Jacobian one step back, < 1e-6 away) within
+   1e-4 of the density taken at the root: measured up to 1.5e-5 where the
+   chain crosses the lens's rim band, whose smoothstep makes the density
+   change fastest, ~|step| elsewhere. Lens caustic connections from the
+   chord (coarse stage and polish), most of which end so. */
+static void last_step_case(rrv_scene *s, int solver, const char *name)
 {
-    rrv_scene *s = NULL;
     rrv__context ctx;
     rrv__rng rng;
     double worst_density = 0, worst_residual = 0;
     int k, solved = 0, unconfirmed = 0;
-    if (!(s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic"))) return;
-    s->settings.manifold_solver = RRV_MANIFOLD_SOLVER_DOGLEG;
+    s->settings.manifold_solver = solver;
     manifold_context(&ctx, s);
     rrv__rng_seed(&rng, 95, 0, 0);
     for (k = 0; ctx.chain && k < 120; ++k) {
@@ -1679,13 +1678,22 @@ static void test_dogleg_last_step(void)
         if (rrv__chain_density(ch, &again)) worst_density = fmax(worst_density, fabs(root.density / again.density - 1));
         else worst_density = 1;
     }
-    SAY("  dogleg: %d solved, %d ended unconfirmed, residual there %.2g, density off by %.2g\n", solved, unconfirmed,
-        worst_residual, worst_density);
-    CHECKF(solved > 100 && unconfirmed * 2 > solved, "%d solved, %d ended on an unconfirmed step", solved, unconfirmed);
-    CHECKF(worst_residual < RRV__MANIFOLD_TOL, "a returned root's residual is %g", worst_residual);
-    CHECKF(worst_density < 1e-4, "a density is off the root's by %g", worst_density);
+    SAY("  %s: %d solved, %d ended unconfirmed, residual there %.2g, density off by %.2g\n", name, solved,
+        unconfirmed, worst_residual, worst_density);
+    CHECKF(solved > 100 && unconfirmed * 2 > solved, "%s: %d solved, %d ended on an unconfirmed step", name, solved,
+           unconfirmed);
+    CHECKF(worst_residual < RRV__MANIFOLD_TOL, "%s: a returned root's residual is %g", name, worst_residual);
+    CHECKF(worst_density < 1e-4, "%s: a density is off the root's by %g", name, worst_density);
     rrv__chain_delete(ctx.chain);
     rrv__chain_delete(ctx.coarse_chain);
+}
+
+static void test_unconfirmed_last_step(void)
+{
+    rrv_scene *s = parse_text(caustic_text, sizeof caustic_text - 1, "caustic");
+    if (!s) return;
+    last_step_case(s, RRV_MANIFOLD_SOLVER_DOGLEG, "dogleg");
+    last_step_case(s, RRV_MANIFOLD_SOLVER_DEFAULT, "Levenberg-Marquardt");
     rrv_scene_free(s);
 }
 
@@ -2741,7 +2749,7 @@ int main(void)
     NEE_RUN(test_manifold_out_of_memory);
     NEE_RUN(test_manifold_memo_is_exact);
     NEE_RUN(test_coarse_shot_jacobian);
-    NEE_RUN(test_dogleg_last_step);
+    NEE_RUN(test_unconfirmed_last_step);
     NEE_RUN(test_manifold_estimate_is_unbiased);
     NEE_RUN(test_shoot_estimate_is_unbiased);
     NEE_RUN(test_shoot_mis_weights_sum_to_one);
