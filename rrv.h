@@ -13350,45 +13350,77 @@ static void rrv__chain_seed(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w)
    chain's own rule (its share of the path taken along the incoming
    direction, the segment's IOR at the middle of its chord along it), so
    every vertex but the last starts nearly satisfied. ISO vertices are then
-   projected onto their isosurfaces. A ray that turns back along the chord
-   fails the seed. Returns the direction the ray leaves the last vertex in. */
-static rrv_vec3 rrv__chain_trace(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w)
+   projected onto their isosurfaces. Returns 1 with miss, where the ray
+   from the last vertex meets the plane through y perpendicular to the
+   chord, in the frame c1, c2; 0 when the ray turns back along the chord
+   (the seed fails) or the miss is not finite.
+   With J (gauge CHORD only) the trace also carries its derivative by the
+   offsets u of the initial direction normalize(w + u0 e1 + u1 e2), (e1,
+   e2) rrv__frame(w), through every plane as a Jacobi field (dx, dd): the
+   crossing point moves along the plane, the midpoint IOR with the
+   gradient there, the kick with the gradient's derivative; J (2x2, rows
+   miss, columns u) is dmiss / du. */
+static int rrv__chain_miss(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, double miss[2], double J[4])
 {
-    rrv_vec3 x0 = ch->x[0], x = x0, d = w, g;
-    double e_prev = rrv__eta_gradient(scene, x0, &g);
-    int k;
+    rrv_vec3 x0 = ch->x[0], y = ch->x[ch->n + 1], x = x0, d = w, g, gm, dx[2], dd[2];
+    double e_prev = rrv__eta_gradient(scene, x0, &g), de_prev[2] = {0, 0}, H[9], dc, s;
+    int k, j;
+    if (J) rrv__frame(w, &dd[0], &dd[1]);
+    dx[0] = dx[1] = rrv__v3(0, 0, 0);
     ch->failed = 0;
-    for (k = 1; k <= ch->n; ++k) {
-        double dc = rrv__dot(d, ch->c), s, e_next, next;
-        if (!(dc > 1e-6)) { ch->failed = 1; return d; }
-        s = (ch->t[k - 1] - rrv__dot(rrv__sub(x, x0), ch->c)) / dc;
-        x = rrv__madd(x, d, s);
-        ch->x[k] = x;
-        next = (k < ch->n ? ch->t[k] : rrv__dot(rrv__sub(ch->x[ch->n + 1], x0), ch->c)) - ch->t[k - 1];
-        e_next = rrv__eta_gradient(scene, rrv__madd(x, d, 0.5 * next / dc), NULL);
-        g = rrv__chain_gradient(scene, x, ch->h, NULL);
-        {
-            double back, ahead;
-            rrv__chain_reach(ch, k, &back, &ahead);
-            d = rrv__normalize(rrv__madd(rrv__scale(d, e_prev), g, (back + ahead) / dc));
+    for (k = 1; k <= ch->n + 1; ++k) {
+        double half, e_next, back, ahead, hb, lp;
+        rrv_vec3 p, dn;
+        dc = rrv__dot(d, ch->c);
+        if (!(dc > 1e-6)) {
+            /* a ray turned back fails the seed; one that leaves the last
+               vertex so only misses y's plane */
+            if (k <= ch->n) ch->failed = 1;
+            return 0;
         }
+        /* the next plane, or at the end y's from the last vertex (ISO:
+           as projected) */
+        if (k > ch->n) x = ch->x[ch->n];
+        s = (k <= ch->n ? ch->t[k - 1] - rrv__dot(rrv__sub(x, x0), ch->c) : rrv__dot(rrv__sub(y, x), ch->c)) / dc;
+        for (j = 0; J && j < 2; ++j) {
+            /* the crossing stays on the plane: c . dx = 0 after the move */
+            double ds = -(rrv__dot(dx[j], ch->c) + s * rrv__dot(dd[j], ch->c)) / dc;
+            dx[j] = rrv__madd(rrv__madd(dx[j], dd[j], s), d, ds);
+        }
+        x = rrv__madd(x, d, s);
+        if (k > ch->n) break;
+        ch->x[k] = x;
+        half = 0.5 * ((k < ch->n ? ch->t[k] : rrv__dot(rrv__sub(y, x0), ch->c)) - ch->t[k - 1]);
+        e_next = rrv__eta_gradient(scene, rrv__madd(x, d, half / dc), J ? &gm : NULL);
+        g = rrv__chain_gradient(scene, x, ch->h, J ? H : NULL);
+        rrv__chain_reach(ch, k, &back, &ahead);
+        hb = (back + ahead) / dc;
+        p = rrv__madd(rrv__scale(d, e_prev), g, hb);
+        lp = rrv__length(p);
+        dn = lp > 0 ? rrv__scale(p, 1.0 / lp) : p;
+        for (j = 0; J && j < 2; ++j) {
+            rrv_vec3 dm, dp;
+            double ddc = rrv__dot(dd[j], ch->c);
+            if (!(lp > 0)) { ch->failed = 1; return 0; }
+            /* the midpoint x + d half / (d . c) */
+            dm = rrv__madd(rrv__madd(dx[j], dd[j], half / dc), d, -half * ddc / (dc * dc));
+            /* p = e_prev d + g (back + ahead) / (d . c) */
+            dp = rrv__madd(rrv__madd(rrv__scale(d, de_prev[j]), dd[j], e_prev), rrv__mat_apply(H, dx[j]), hb);
+            dp = rrv__madd(dp, g, -hb * ddc / dc);
+            dd[j] = rrv__scale(rrv__madd(dp, dn, -rrv__dot(dn, dp)), 1.0 / lp);
+            de_prev[j] = rrv__dot(gm, dm);
+        }
+        d = dn;
         e_prev = e_next;
         if (ch->iso && !rrv__project_iso(scene, &ch->x[k], ch->level[k])) ch->failed = 1;
     }
-    return d;
-}
-
-/* Where the chain traced from w misses y, in the plane through y
-   perpendicular to the chord (frame c1, c2); 0 when the trace fails or
-   turns away from y. */
-static int rrv__chain_miss(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, double miss[2])
-{
-    rrv_vec3 d = rrv__chain_trace(scene, ch, w), y = ch->x[ch->n + 1], xn = ch->x[ch->n], p;
-    double dc = rrv__dot(d, ch->c);
-    if (ch->failed || !(dc > 1e-6)) return 0;
-    p = rrv__madd(xn, d, rrv__dot(rrv__sub(y, xn), ch->c) / dc);
-    miss[0] = rrv__dot(rrv__sub(p, y), ch->c1);
-    miss[1] = rrv__dot(rrv__sub(p, y), ch->c2);
+    if (ch->failed) return 0;
+    miss[0] = rrv__dot(rrv__sub(x, y), ch->c1);
+    miss[1] = rrv__dot(rrv__sub(x, y), ch->c2);
+    for (j = 0; J && j < 2; ++j) {
+        J[j] = rrv__dot(dx[j], ch->c1);
+        J[2 + j] = rrv__dot(dx[j], ch->c2);
+    }
     return miss[0] < DBL_MAX && miss[1] < DBL_MAX && miss[0] > -DBL_MAX && miss[1] > -DBL_MAX;
 }
 
@@ -13411,13 +13443,13 @@ static int rrv__chain_aim(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, in
     rrv_vec3 e1, e2;
     int it, have_jacobian = 0, best_traced = 0;
     *traces = 0;
-    if (ch->n == 0) { rrv__chain_trace(scene, ch, w); return 1; }
+    if (ch->n == 0) { ch->failed = 0; return 1; }
     rrv__frame(w, &e1, &e2);
     for (it = 0; it < RRV__AIM_ITERATIONS; ++it) {
         double Ji[4], d0, d1, len, m;
         int j;
         ++*traces;
-        m = rrv__chain_miss(scene, ch, rrv__normalize(rrv__add(w, rrv__add(rrv__scale(e1, u[0]), rrv__scale(e2, u[1])))), miss)
+        m = rrv__chain_miss(scene, ch, rrv__normalize(rrv__add(w, rrv__add(rrv__scale(e1, u[0]), rrv__scale(e2, u[1])))), miss, NULL)
                 ? sqrt(miss[0] * miss[0] + miss[1] * miss[1]) : DBL_MAX;
         if (m < best) {
             if (have_jacobian) {
@@ -13448,7 +13480,7 @@ static int rrv__chain_aim(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, in
                 double mj[2], a = best_u[0] + (j ? 0.0 : eps), b = best_u[1] + (j ? eps : 0.0);
                 ++*traces;
                 best_traced = 0;
-                if (!rrv__chain_miss(scene, ch, rrv__normalize(rrv__add(w, rrv__add(rrv__scale(e1, a), rrv__scale(e2, b)))), mj))
+                if (!rrv__chain_miss(scene, ch, rrv__normalize(rrv__add(w, rrv__add(rrv__scale(e1, a), rrv__scale(e2, b)))), mj, NULL))
                     goto done;
                 J[j] = (mj[0] - best_miss[0]) / eps;
                 J[2 + j] = (mj[1] - best_miss[1]) / eps;
@@ -13467,77 +13499,13 @@ static int rrv__chain_aim(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, in
 done:
     if (!best_traced) {
         ++*traces;
-        rrv__chain_trace(scene, ch, rrv__normalize(rrv__add(w, rrv__add(rrv__scale(e1, best_u[0]), rrv__scale(e2, best_u[1])))));
+        rrv__chain_miss(scene, ch, rrv__normalize(rrv__add(w, rrv__add(rrv__scale(e1, best_u[0]), rrv__scale(e2, best_u[1])))), miss, NULL);
     }
     return !ch->failed;
 }
 
-/* The chain traced from w (rrv__chain_trace's steps, gauge CHORD) with
-   its derivative: where it meets y's plane, miss in the frame c1, c2, and
-   J (2x2, rows miss, columns) its derivative by the offsets u of the
-   initial direction normalize(w + u0 e1 + u1 e2), (e1, e2) rrv__frame(w),
-   carried through every plane as a Jacobi field (dx, dd): the crossing
-   point moves along the plane, the midpoint IOR with the gradient there,
-   the kick with the gradient's derivative. Returns 0 where the trace
-   fails. */
-static int rrv__chain_trace_jacobian(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, double miss[2], double J[4])
-{
-    rrv_vec3 x0 = ch->x[0], y = ch->x[ch->n + 1], x = x0, d = w, g, gm, dx[2], dd[2];
-    double e_prev = rrv__eta_gradient(scene, x0, &g), de_prev[2] = {0, 0}, H[9];
-    int k, j;
-    rrv__frame(w, &dd[0], &dd[1]);
-    dx[0] = dx[1] = rrv__v3(0, 0, 0);
-    ch->failed = 0;
-    for (k = 1; k <= ch->n + 1; ++k) {
-        double dc = rrv__dot(d, ch->c), t = k <= ch->n ? ch->t[k - 1] : rrv__dot(rrv__sub(y, x0), ch->c), s;
-        double ddc[2], half, e_next, de_next[2], back, ahead, hb, lp;
-        rrv_vec3 mid, p, dn;
-        if (!(dc > 1e-6)) { ch->failed = 1; return 0; }
-        s = (t - rrv__dot(rrv__sub(x, x0), ch->c)) / dc;
-        for (j = 0; j < 2; ++j) {
-            /* the crossing stays on the plane: c . dx = 0 after the move */
-            double ds = -(rrv__dot(dx[j], ch->c) + s * rrv__dot(dd[j], ch->c)) / dc;
-            dx[j] = rrv__madd(rrv__madd(dx[j], dd[j], s), d, ds);
-        }
-        x = rrv__madd(x, d, s);
-        if (k > ch->n) break;
-        ch->x[k] = x;
-        half = 0.5 * ((k < ch->n ? ch->t[k] : rrv__dot(rrv__sub(y, x0), ch->c)) - t);
-        mid = rrv__madd(x, d, half / dc);
-        e_next = rrv__eta_gradient(scene, mid, &gm);
-        g = rrv__chain_gradient(scene, x, ch->h, H);
-        rrv__chain_reach(ch, k, &back, &ahead);
-        hb = (back + ahead) / dc;
-        p = rrv__madd(rrv__scale(d, e_prev), g, hb);
-        lp = rrv__length(p);
-        if (!(lp > 0)) { ch->failed = 1; return 0; }
-        dn = rrv__scale(p, 1.0 / lp);
-        for (j = 0; j < 2; ++j) {
-            rrv_vec3 dm, dp;
-            ddc[j] = rrv__dot(dd[j], ch->c);
-            /* the midpoint x + d half / (d . c) */
-            dm = rrv__madd(rrv__madd(dx[j], dd[j], half / dc), d, -half * ddc[j] / (dc * dc));
-            de_next[j] = rrv__dot(gm, dm);
-            /* p = e_prev d + g (back + ahead) / (d . c) */
-            dp = rrv__madd(rrv__madd(rrv__scale(d, de_prev[j]), dd[j], e_prev), rrv__mat_apply(H, dx[j]), hb);
-            dp = rrv__madd(dp, g, -hb * ddc[j] / dc);
-            dd[j] = rrv__scale(rrv__madd(dp, dn, -rrv__dot(dn, dp)), 1.0 / lp);
-            de_prev[j] = de_next[j];
-        }
-        d = dn;
-        e_prev = e_next;
-    }
-    miss[0] = rrv__dot(rrv__sub(x, y), ch->c1);
-    miss[1] = rrv__dot(rrv__sub(x, y), ch->c2);
-    for (j = 0; j < 2; ++j) {
-        J[j] = rrv__dot(dx[j], ch->c1);
-        J[2 + j] = rrv__dot(dx[j], ch->c2);
-    }
-    return miss[0] < DBL_MAX && miss[1] < DBL_MAX && miss[0] > -DBL_MAX && miss[1] > -DBL_MAX;
-}
-
 /* The coarse chain's root by shooting alone: Newton on the initial
-   direction with the traced Jacobian (rrv__chain_trace_jacobian), a step
+   direction with the traced Jacobian (rrv__chain_miss), a step
    halved from the best direction where the miss grew, until the trace
    meets y within 1e-9 of a spacing. The traced chain satisfies its own
    kicks at every plane, so it is the coarse stage's root without a solve
@@ -13558,7 +13526,7 @@ static int rrv__chain_shoot(const rrv_scene *scene, rrv__chain *ch, rrv_vec3 w, 
     for (it = 0; it < RRV__AIM_ITERATIONS; ++it) {
         double m, d0, d1, len;
         ++*traces;
-        m = rrv__chain_trace_jacobian(scene, ch, cur, miss, J) ? sqrt(miss[0] * miss[0] + miss[1] * miss[1]) : DBL_MAX;
+        m = rrv__chain_miss(scene, ch, cur, miss, J) ? sqrt(miss[0] * miss[0] + miss[1] * miss[1]) : DBL_MAX;
         if (m < best) {
             if (m < tol) return 1;
             best = m;
@@ -13881,12 +13849,21 @@ static void rrv__chain_swap(rrv__chain *ch)
    RRV__MANIFOLD_TOL or less, and largest already under 1e-6, and the
    step is taken without the evaluation that would confirm it (both
    solvers; LM only where its damped step leaves the linear model as
-   small a residual). On the
-   lens caustic the polish's evaluations go 8e-3, 5e-5, 6e-9, 2e-14:
-   the last one only confirmed the root. */
+   small a residual). On the lens caustic the polish's evaluations went
+   8e-3, 5e-5, 6e-9, 2e-14: the last one only confirmed the root. */
 static int rrv__newton_finishes(double K, double largest)
 {
     return K > 0 && largest < 1e-6 && K * largest * largest < 1e-3 * RRV__MANIFOLD_TOL;
+}
+
+/* That last step, taken without the evaluation that would confirm it:
+   the positions move by it (gauge CHORD), the density comes from the
+   Jacobian where it was taken, |step| ~ 1e-8 away. Returns the solve's
+   result as at a confirmed root. */
+static int rrv__chain_last_step(const rrv_scene *scene, rrv__chain *ch, double (*step)[2], rrv__mroot *root)
+{
+    rrv__chain_move(scene, ch, ch->x, ch->b1, ch->b2, step);
+    return rrv__chain_physical(scene, ch) && rrv__chain_density(ch, root);
 }
 
 /* Levenberg-Marquardt on the chain from its seeded positions (the paper's
@@ -13994,15 +13971,14 @@ static int rrv__manifold_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroo
             if (!(pred > 0) || !(pred < DBL_MAX)) goto failed; /* no step left that the model trusts */
             if (rrv__newton_finishes(newton, largest) && !ch->iso) {
                 /* as the dogleg's last step, where the damped step leaves
-                   the linear model a residual as small: taken unconfirmed */
+                   the linear model a residual as small */
                 double (*e)[2] = ch->r_alt, worst = 0;
                 rrv__chain_apply(ch, ch->step, e, 0);
                 for (k = 1; k <= n; ++k)
                     worst = fmax(worst, fmax(fabs(e[k][0] + ch->r[k][0]), fabs(e[k][1] + ch->r[k][1])));
                 if (worst < 1e-3 * RRV__MANIFOLD_TOL) {
-                    rrv__chain_move(scene, ch, ch->x, ch->b1, ch->b2, ch->step);
                     root->iterations = it;
-                    return rrv__chain_physical(scene, ch) && rrv__chain_density(ch, root);
+                    return rrv__chain_last_step(scene, ch, ch->step, root);
                 }
             }
             memcpy(E, ch->E, sizeof E);
@@ -14037,7 +14013,6 @@ failed:
     root->iterations = it;
     return 0;
 }
-
 
 /* Trust-region Gauss-Newton (Powell's dogleg) on the chain from its seeded
    positions, all in O(n): the Newton step J du = -r by block Thomas where
@@ -14080,12 +14055,8 @@ static int rrv__manifold_dogleg(const rrv_scene *scene, rrv__chain *ch, rrv__mro
         }
         lgn = sqrt(lgn);
         if (lgn <= radius && rrv__newton_finishes(newton, largest) && !ch->iso) {
-            /* the last Newton step taken without the evaluation that
-               would confirm it: the positions move by it, the density
-               comes from the Jacobian here, |step| ~ 1e-8 away */
-            rrv__chain_move(scene, ch, ch->x, ch->b1, ch->b2, gn);
             root->iterations = it;
-            return rrv__chain_physical(scene, ch) && rrv__chain_density(ch, root);
+            return rrv__chain_last_step(scene, ch, gn, root);
         }
         if (lgn <= radius) {
             lp = lgn;
@@ -14346,14 +14317,14 @@ static int rrv__chain_try_once(rrv__context *ctx, rrv__chain *ch, rrv_vec3 w, in
     rrv__chain *coarse = ctx->coarse_chain;
     rrv__mroot near;
     double key[RRV__COARSE_MAX][3];
-    int found, i, shot = 0;
+    int found = 0, i;
     if (!direct) {
         int traces;
-        shot = rrv__chain_shoot(scene, coarse, w, &traces);
+        found = rrv__chain_shoot(scene, coarse, w, &traces);
         *evaluations += traces;
+        if (!found) found = rrv__chain_solve_from(scene, coarse, w, 0, &near, evaluations);
     }
-    if (direct || (!shot && !rrv__chain_solve_from(scene, coarse, w, 0, &near, evaluations)))
-        return rrv__chain_solve_from(scene, ch, w, 1, root, evaluations);
+    if (!found) return rrv__chain_solve_from(scene, ch, w, 1, root, evaluations);
     rrv__chain_snap(coarse, key);
     for (i = 0; memo && i < memo->used; ++i)
         if (!memcmp(key, memo->slot[i].seed, (size_t)coarse->n * sizeof key[0])) {
