@@ -3321,6 +3321,17 @@ static int command_info(int argc, char **argv)
         printf("integrator: %s (the default for this scene)\n", integrator_name(rrv_scene_integrator(scene)));
     else
         printf("integrator: %s\n", integrator_name(scene->settings.integrator));
+    if (rrv_scene_integrator(scene) != RRV_INTEGRATOR_CLASSIC) {
+        static const char *const nee_names[] = {"default", "none", "straight", "shoot", "manifold", "aim"};
+        rrv_nee nee = rrv_scene_nee(scene);
+        const char *name = (unsigned)nee <= RRV_NEE_AIM ? nee_names[nee] : "unknown";
+        if (nee == RRV_NEE_SHOOT && rrv_scene_integrator(scene) == RRV_INTEGRATOR_REFRACTIVE) name = "aim";
+        printf("nee: %s%s%s\n", name,
+               nee == RRV_NEE_MANIFOLD
+                   ? (scene->settings.manifold_solver == RRV_MANIFOLD_SOLVER_LM ? ", Levenberg-Marquardt" : ", dogleg")
+                   : "",
+               scene->settings.nee == RRV_NEE_DEFAULT ? " (the default for this scene)" : "");
+    }
     if (rrv_scene_integrator(scene) == RRV_INTEGRATOR_EIKONAL) {
         if (scene->settings.step > 0)
             printf("step: %g m\n", scene->settings.step);

@@ -1,4 +1,4 @@
-/* rrv.h 0.17.0 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.18.0 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -92,14 +92,14 @@
                  of rrv_settings.step or, none given, placed by the field.
    NEXT-EVENT ESTIMATION (rrv_settings.nee; refractive and eikonal only:
    classic's straight shadow rays are exact for straight rays)
-     DEFAULT SHOOT on eikonal, AIM on refractive. STRAIGHT: a straight shadow
-     ray, biased across refracting media. NONE: lights only where paths hit
-     them (unbiased, noisy). SHOOT: Newton on the initial direction until
-     the bent ray lands on the light point, density from Jacobi fields.
-     MANIFOLD: the paper's refractive ratio tracking, a chain of comb
-     vertices solved by Levenberg-Marquardt (slow). AIM: bent shadow rays
-     aimed at a light point (unbiased, no focusing). How each works, its
-     MIS weights and its exact 1/p: NOTES at the end of this file.
+     DEFAULT (rrv_scene_nee) on eikonal MANIFOLD through clear weak gas, else
+     SHOOT; AIM on refractive. STRAIGHT: straight shadow rays, biased across
+     refracting media. NONE: lights only where paths hit them (unbiased).
+     SHOOT: Newton on the first direction till the bent ray lands on the
+     light. MANIFOLD: the paper's refractive ratio tracking, comb vertices
+     solved by a dogleg or Levenberg-Marquardt (manifold_solver). AIM: bent
+     shadow rays aimed at a light point (unbiased, no focusing). How each
+     works, its MIS weights and its exact 1/p: NOTES at the end of this file.
    ALSO (rules and limits in NOTES): media's faces are sharp interfaces
    (Snell, Fresnel); without an `ambient ior` the air around a gas medium
    is that gas at its ambient state, so a plume whose faces are at it has
@@ -117,8 +117,8 @@
        rrv__refract_at_null_event (scheme POISSON)
      the comb: rrv__comb_step, rrv__comb_kick, rrv__comb_spacing
      Hauf-Grigull (a gas's IOR from T and P): rrv__refractivity, rrv__gas_fused
-     refractive ratio tracking (nee MANIFOLD): rrv__manifold_nee; its
-       Levenberg-Marquardt solve rrv__manifold_solve on the rrv__chain_*
+     refractive ratio tracking (nee MANIFOLD): rrv__manifold_nee; its solves
+       rrv__manifold_dogleg, rrv__manifold_solve (LM) on the rrv__chain_*
      curved NEE by shooting and aiming: rrv__shoot_nee,
        rrv__solve_shot_seeded; rrv__aim_nee, rrv__cone_nee
      the eikonal reference (Ament et al.): rrv__eikonal_step,
@@ -145,7 +145,7 @@
      rrv_scene_set_field    check and set a medium's density, temperature, pressure or IOR
      rrv_medium_channel_groups which of a medium's channels share a free-flight majorant
      rrv_medium_face_jumps  a prepared medium's IOR jump at each face
-     rrv_scene_integrator   the integrator a prepared scene renders with
+     rrv_scene_integrator, rrv_scene_nee  what a prepared scene renders with
      rrv_render_rect        add the radiance sums of a pixel rectangle and sample range
      rrv_render_rect_adaptive the same, each pixel's samples until its error is below a threshold
      rrv_trace_ray          walk one ray through the refractive media
@@ -208,7 +208,7 @@
 #endif
 
 #define RRV_VERSION_MAJOR 0
-#define RRV_VERSION_MINOR 17
+#define RRV_VERSION_MINOR 18
 #define RRV_VERSION_PATCH 0
 
 #ifndef RRV_DEF
@@ -496,7 +496,7 @@ typedef enum rrv_emission_nee {
 
 /* nee MANIFOLD: how the chain is solved. */
 typedef enum rrv_manifold_solver {
-    RRV_MANIFOLD_SOLVER_DEFAULT = 0, /* LM */
+    RRV_MANIFOLD_SOLVER_DEFAULT = 0, /* DOGLEG (faster on every scene measured) */
     RRV_MANIFOLD_SOLVER_LM,          /* Levenberg-Marquardt (the paper's) */
     RRV_MANIFOLD_SOLVER_DOGLEG       /* trust-region Gauss-Newton, Powell's dogleg */
 } rrv_manifold_solver;
@@ -939,6 +939,14 @@ RRV_DEF rrv_result rrv_render_rect_adaptive(const rrv_scene *scene, int x0, int 
    clear and a light is small as seen from one, REFRACTIVE
    otherwise. */
 RRV_DEF rrv_integrator rrv_scene_integrator(const rrv_scene *scene);
+
+/* The nee mode rrv_render_rect uses for a prepared scene: its settings'
+   one, or for RRV_NEE_DEFAULT the manual's rule (NEXT-EVENT ESTIMATION,
+   "default"): MANIFOLD (chains, the paper's method) with the eikonal
+   integrator where every refracting medium is clear and bends weakly and
+   no face or rim is a jump of the IOR, else SHOOT (which the refractive
+   integrator turns into AIM). */
+RRV_DEF rrv_nee rrv_scene_nee(const rrv_scene *scene);
 
 /* The sharp interfaces of a prepared scene's medium: for each face of its
    box (-x, +x, -y, +y, -z, +z) and, for a Luneburg or fish-eye profile,
@@ -9817,10 +9825,54 @@ static rrv_integrator rrv__default_integrator(const rrv_scene *scene)
         }
     }
     if (!refracts) return RRV_INTEGRATOR_CLASSIC;
-    if (clear && small && !scene->sharp_rims && (scene->settings.nee == RRV_NEE_DEFAULT || scene->settings.nee == RRV_NEE_SHOOT) &&
+    if (clear && small && !scene->sharp_rims &&
+        (scene->settings.nee == RRV_NEE_DEFAULT || scene->settings.nee == RRV_NEE_SHOOT ||
+         scene->settings.nee == RRV_NEE_MANIFOLD) &&
         rrv__solver_supports_scene(scene))
         return RRV_INTEGRATOR_EIKONAL;
     return RRV_INTEGRATOR_REFRACTIVE;
+}
+
+/* The default nee's bend bound: a refracting medium's peak |grad eta| times
+   its support's diameter (a bound on how far a ray crossing it turns, in
+   radians) above which the default shoots rather than solving chains.
+   Measured (test/bench/RESULTS.md, "Chains by default on heat caustics"):
+   plumes of hot air from 0.38 to 2.56 solve about 2x more efficiently by
+   chains, one at 4.3 and the Luneburg lens caustic (3) 1.2x and 2x less;
+   2 keeps a margin below both. */
+#define RRV__CHAIN_BEND 2.0
+
+/* Chains (nee manifold, the paper's method) pay where rays bend weakly and
+   connect only on surfaces: eikonal, every refracting medium clear and
+   weak (RRV__CHAIN_BEND), no sharp face or rim (chains stop at a jump, and
+   shots refract through it; sphere lights are shot at either way,
+   rrv__shoots_spheres). Elsewhere SHOOT, which the refractive integrator
+   turns into AIM. */
+static rrv_nee rrv__default_nee(const rrv_scene *scene, rrv_integrator integrator)
+{
+    int i, j;
+    if (integrator != RRV_INTEGRATOR_EIKONAL || scene->sharp_faces || scene->sharp_rims ||
+        !rrv__solver_supports_scene(scene))
+        return RRV_NEE_SHOOT;
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        double diameter;
+        if (!rrv__medium_refracts(m)) continue;
+        if (!m->majorant) return RRV_NEE_SHOOT;
+        for (j = 0; j < scene->medium_count; ++j)
+            if (scene->media[j].majorant && !scene->media[j].majorant->empty && rrv__boxes_overlap(m, &scene->media[j]))
+                return RRV_NEE_SHOOT;
+        diameter = rrv__has_sphere_support(m) ? 2.0 * m->ior.radius : rrv__length(rrv__sub(m->hi, m->lo));
+        if (!((double)m->majorant->grad_peak * diameter <= RRV__CHAIN_BEND)) return RRV_NEE_SHOOT;
+    }
+    return RRV_NEE_MANIFOLD;
+}
+
+RRV_DEF rrv_nee rrv_scene_nee(const rrv_scene *scene)
+{
+    if (!scene) return RRV_NEE_DEFAULT;
+    if (scene->settings.nee != RRV_NEE_DEFAULT) return scene->settings.nee;
+    return rrv__default_nee(scene, rrv_scene_integrator(scene));
 }
 
 RRV_DEF rrv_integrator rrv_scene_integrator(const rrv_scene *scene)
@@ -9888,7 +9940,7 @@ static rrv_result rrv__render_context(const rrv_scene *scene, rrv__context *ctx,
        integrator), where it aims: manifold solves there, but at 100x-1000x
        straight NEE's cost on a scene like scenes/fire.rrv (test/bench/RESULTS.md), while
        aiming stays unbiased at about straight's cost */
-    nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : RRV_NEE_SHOOT;
+    nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : rrv__default_nee(scene, integrator);
     ctx->sample_lights = !ctx->bends || nee != RRV_NEE_NONE;
     /* By default only where no light shape is: there it pays
        (test/bench/campfire.rrv: 15x the efficiency at maxdepth 1, 5.8x at
@@ -14269,8 +14321,8 @@ static void rrv__chain_seed_between(const rrv_scene *scene, rrv__chain *ch, cons
 
 static int rrv__chain_solve(const rrv_scene *scene, rrv__chain *ch, rrv__mroot *root)
 {
-    return scene->settings.manifold_solver == RRV_MANIFOLD_SOLVER_DOGLEG ? rrv__manifold_dogleg(scene, ch, root)
-                                                                        : rrv__manifold_solve(scene, ch, root);
+    return scene->settings.manifold_solver == RRV_MANIFOLD_SOLVER_LM ? rrv__manifold_solve(scene, ch, root)
+                                                                    : rrv__manifold_dogleg(scene, ch, root);
 }
 
 /* Seeds ch from direction w and solves it: with shoot, the chain shot
@@ -14588,10 +14640,19 @@ static void rrv__solver_release(rrv__context *ctx)
     rrv__chain_delete(ctx->coarse_chain);
 }
 
+/* Chains end on quads and triangles; with the eikonal integrator, whose
+   rays shots differentiate, nee manifold shoots at sphere lights (the
+   same draw names the same light point either way), which the comb's
+   chains leave to forward paths. */
+static int rrv__shoots_spheres(const rrv__context *ctx) { return ctx->manifold && ctx->eikonal; }
+
 static void rrv__solver_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                             const rrv__light_draw *draw, rrv__rng *rng)
 {
-    if (ctx->shoot) rrv__shoot_nee(ctx, path, x0, v, draw, rng);
+    int pick = rrv__light_pick(ctx->scene, draw);
+    int sphere = pick >= 0 && pick < ctx->scene->light_count &&
+                 ctx->scene->shapes[ctx->scene->lights[pick]].kind == RRV_SHAPE_SPHERE;
+    if (ctx->shoot || (sphere && rrv__shoots_spheres(ctx))) rrv__shoot_nee(ctx, path, x0, v, draw, rng);
     else if (ctx->manifold) rrv__manifold_nee(ctx, path, x0, v, draw, rng);
     else return;
     rrv__cone_nee(ctx, path, x0, v, rng);
@@ -14607,7 +14668,8 @@ static double rrv__solver_forward_weight(rrv__context *ctx, rrv_vec3 x0, rrv_vec
 {
     if (weak == 2) /* a root no light sample stands for: the cones' (rrv__cone_nee) */
         return rrv__power_heuristic(pdf_dir, rrv__cone_pdf(ctx, x0, w0));
-    if (ctx->shoot && !mirrored) return rrv__shoot_forward_weight(ctx, x0, w0, pdf_dir, s, x); /* MIS with shooting */
+    if ((ctx->shoot || (s->kind == RRV_SHAPE_SPHERE && rrv__shoots_spheres(ctx))) && !mirrored)
+        return rrv__shoot_forward_weight(ctx, x0, w0, pdf_dir, s, x); /* MIS with shooting */
     if (ctx->manifold && !jumped && s->kind != RRV_SHAPE_SPHERE) /* shoot's weight (rrv__manifold_mis_weight) */
         return ctx->eikonal ? rrv__shoot_forward_weight(ctx, x0, w0, pdf_dir, s, x) : 0.0;
     return 1.0;
@@ -19760,8 +19822,15 @@ and BOUNDS (moved here from the manual at the top, word for word)
 ------------------------------------------------------------------------------
 
    NEXT-EVENT ESTIMATION, in detail
-     DEFAULT     SHOOT, the most efficient curved mode measured (test/bench/RESULTS.md;
-                 the default integrator is eikonal where shooting pays).
+     DEFAULT     with the eikonal integrator, MANIFOLD (dogleg) where
+                 every refracting medium is clear and weak (its peak
+                 |grad eta| times its support's diameter at most 2 rad,
+                 as heat haze is) and no box face or sphere rim is a jump
+                 of the IOR: the heat caustics,
+                 where chains measured 1.75x to 3.8x shoot's efficiency;
+                 else SHOOT, the most efficient curved mode measured there
+                 (lenses, glass; test/bench/RESULTS.md; the default
+                 integrator is eikonal where solving pays; rrv_scene_nee).
                  With the refractive integrator, which shooting cannot
                  differentiate, it aims (AIM): unbiased, about as cheap as
                  STRAIGHT, but without focusing, so caustics of small
@@ -19845,7 +19914,8 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  path belongs to, 0 for the others; power heuristic only
                  between straight NEE and forward paths outside supports).
                  A point y uniform on a quad or triangle light (sphere
-                 lights are left to forward paths); a chain of
+                 lights: with eikonal SHOOT's connection, with the comb
+                 left to forward paths); a chain of
                  vertices on comb planes along the chord x0 -> y (spacing
                  `step`, random offset, at most 512, wider beyond), each
                  kicking the ray as the comb does (eta d += grad eta h,
@@ -19853,7 +19923,11 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  (gauge `manifoldgauge chord`, the default: in the comb
                  plane; `iso`: in the isosurface's tangent plane, the
                  paper's, undefined where grad eta ~ 0) until every segment
-                 follows its kicked direction within 1e-9 rad. The
+                 follows its kicked direction within 1e-9 rad. By
+                 default a trust-region Gauss-Newton solves it (Newton's
+                 step by block Thomas inside the radius, Powell's dogleg
+                 outside; faster on every scene measured,
+                 test/bench/RESULTS.md); `manifoldsolver lm` takes the
                  paper's solver, Levenberg-Marquardt (Levenberg 1944,
                  Marquardt 1963): steps from (J^T J + lambda S) delta =
                  -J^T r, S Marquardt's diagonal scaling (the largest
@@ -19868,11 +19942,7 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  without |r| halving (a local minimum). A root that is not a
                  physical path (a segment against its kick, a sharp
                  interface crossed) or where J is singular (a caustic)
-                 fails. `manifoldsolver dogleg` solves by the earlier
-                 trust-region Gauss-Newton instead (Newton's step by
-                 block Thomas inside the radius, Powell's dogleg outside;
-                 faster on every scene measured, test/bench/RESULTS.md).
-                 Either takes its last step unconfirmed where the one
+                 fails. Either takes its last step unconfirmed where the one
                  before converged quadratically and the next residual is
                  predicted ~1e-3 of the tolerance. The density
                  dw0/dA_y from block Thomas elimination of J (the
@@ -20312,6 +20382,14 @@ and BOUNDS (moved here from the manual at the top, word for word)
 ------------------------------------------------------------------------------
 VERSION HISTORY
 ------------------------------------------------------------------------------
+     0.18.0 the default nee solves chains (nee manifold, the paper's
+            method) with the eikonal integrator where the refracting
+            media are clear, weak gas without sharp faces (the heat
+            caustics); eikonal's nee manifold shoots at sphere lights
+            (left to forward paths before); the manifold's default solver
+            is the dogleg (`manifoldsolver lm` the paper's); an explicit
+            nee manifold without an integrator key takes eikonal where
+            shoot would; rrv_scene_nee, and `rrv info` prints the nee
      0.17.0 nee manifold's chains are seeded by shooting (Newton on the
             initial direction with a Jacobi field through the planes): the
             coarse stage's shot is its root; the dogleg's last step is

@@ -113,40 +113,51 @@ static int same_render(rrv_scene *a, rrv_scene *b)
    for bit), eikonal where a clear refracting medium without a sharp
    sphere rim sees a small light (a box's sharp faces, which shots refract
    at, allowed: glass too), the comb otherwise (a large light, a smoke in
-   the plume's box, an explicit nee other than shoot). */
+   the plume's box, an explicit nee other than shoot or manifold). No nee
+   key: with eikonal, chains (manifold) where the refracting media are
+   clear and weak and nothing is a sharp face or rim; shoot otherwise (the
+   comb aims). */
 static void test_default_integrator(void)
 {
     struct {
         const char *extra;
         int ior;
         rrv_integrator expect;
+        rrv_nee nee;
     } cases[] = {
-        {"", 0, RRV_INTEGRATOR_CLASSIC},
-        {"", 1, RRV_INTEGRATOR_EIKONAL},
-        {"render:nee shoot", 1, RRV_INTEGRATOR_EIKONAL},
-        {"render:nee aim", 1, RRV_INTEGRATOR_REFRACTIVE},
+        {"", 0, RRV_INTEGRATOR_CLASSIC, RRV_NEE_SHOOT},
+        {"", 1, RRV_INTEGRATOR_EIKONAL, RRV_NEE_MANIFOLD},
+        {"render:nee shoot", 1, RRV_INTEGRATOR_EIKONAL, RRV_NEE_SHOOT},
+        {"render:nee aim", 1, RRV_INTEGRATOR_REFRACTIVE, RRV_NEE_AIM},
+        {"render:nee manifold", 1, RRV_INTEGRATOR_EIKONAL, RRV_NEE_MANIFOLD},
         /* a 4 m light at 2.5 m (1.6 rad) besides the small one: one small light is enough */
-        {"quad origin -2 3.5 -2 u 4 0 0 v 0 0 4 L 1 1 1", 1, RRV_INTEGRATOR_EIKONAL},
+        {"quad origin -2 3.5 -2 u 4 0 0 v 0 0 4 L 1 1 1", 1, RRV_INTEGRATOR_EIKONAL, RRV_NEE_MANIFOLD},
+        /* a sphere light beside the quad: chains still (eikonal's shoot at spheres) */
+        {"sphere center 1 3 0 radius 0.1 L 50 50 50", 1, RRV_INTEGRATOR_EIKONAL, RRV_NEE_MANIFOLD},
+        /* the hot blob at iorscale 1000: ~5 rad of bend (0.5 at 100), where
+           shots beat chains, as on the Luneburg lens */
+        {"", 5, RRV_INTEGRATOR_EIKONAL, RRV_NEE_SHOOT},
         /* the 4 m light alone: not small */
-        {"4", 3, RRV_INTEGRATOR_REFRACTIVE},
+        {"4", 3, RRV_INTEGRATOR_REFRACTIVE, RRV_NEE_SHOOT},
         /* a 1.5 m light alone (0.6 of its 2.5 m): small, where shooting
            measured 2.3x aiming (test/bench/RESULTS.md); a 2 m one (0.8) not */
-        {"1.5", 3, RRV_INTEGRATOR_EIKONAL},
-        {"2", 3, RRV_INTEGRATOR_REFRACTIVE},
-        {"medium smoke box -1 0 -1 1 2 1\ndensity smoke constant 0.1", 1, RRV_INTEGRATOR_REFRACTIVE},
+        {"1.5", 3, RRV_INTEGRATOR_EIKONAL, RRV_NEE_MANIFOLD},
+        {"2", 3, RRV_INTEGRATOR_REFRACTIVE, RRV_NEE_SHOOT},
+        {"medium smoke box -1 0 -1 1 2 1\ndensity smoke constant 0.1", 1, RRV_INTEGRATOR_REFRACTIVE, RRV_NEE_SHOOT},
         /* a smoke that does not touch the plume's box keeps it clear */
-        {"medium smoke box 2 0 -1 3 2 1\ndensity smoke constant 0.1", 1, RRV_INTEGRATOR_EIKONAL},
+        {"medium smoke box 2 0 -1 3 2 1\ndensity smoke constant 0.1", 1, RRV_INTEGRATOR_EIKONAL, RRV_NEE_MANIFOLD},
         /* the IOR of a bare gas box equals the ambient one it sets: inert */
-        {"", 2, RRV_INTEGRATOR_CLASSIC},
+        {"", 2, RRV_INTEGRATOR_CLASSIC, RRV_NEE_SHOOT},
         /* an ambient of 1 makes the plume's faces jumps, which shots refract at */
-        {"ambient ior 1", 1, RRV_INTEGRATOR_EIKONAL},
+        {"ambient ior 1", 1, RRV_INTEGRATOR_EIKONAL, RRV_NEE_SHOOT},
         /* a glass box under a small light: shots refract at its faces */
-        {"", 4, RRV_INTEGRATOR_EIKONAL},
+        {"", 4, RRV_INTEGRATOR_EIKONAL, RRV_NEE_SHOOT},
     };
     int k;
     for (k = 0; k < (int)(sizeof cases / sizeof cases[0]); ++k) {
         rrv_scene *s, *t;
         rrv_integrator got;
+        rrv_nee nee;
         rrv_error err;
         if (cases[k].ior == 4) {
             static const char glass[] = "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
@@ -156,31 +167,37 @@ static void test_default_integrator(void)
             CHECKF(rrv_scene_parse(glass, sizeof glass - 1, "glass", NULL, NULL, &s, &err) == RRV_OK, "%s", err.message);
         } else if (cases[k].ior >= 2) {
             char text[512];
-            double side = cases[k].ior == 2 ? 0.2 : atof(cases[k].extra);
+            double side = cases[k].ior == 3 ? atof(cases[k].extra) : 0.2;
             /* ior 2: a bare gas box under a small light; 3: a hot blob in
-               it under one light of the given side, 2.5 m from its centre */
+               it under one light of the given side, 2.5 m from its centre;
+               5: the blob under the small light at iorscale 1000 */
             snprintf(text, sizeof text,
                      "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
                      "quad origin %g 3.5 %g u %g 0 0 v 0 0 %g L 50 50 50\n"
                      "medium plume box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
                      "%s"
-                     "ior plume gas iorscale 100\n",
+                     "ior plume gas iorscale %d\n",
                      -side / 2, -side / 2, side, side,
-                     cases[k].ior == 2 ? "" : "temperature plume blob center 0 1 0 radius 0.06 weight 600 base 300\n");
+                     cases[k].ior == 2 ? "" : "temperature plume blob center 0 1 0 radius 0.06 weight 600 base 300\n",
+                     cases[k].ior == 5 ? 1000 : 100);
             CHECKF(rrv_scene_parse(text, strlen(text), "bare", NULL, NULL, &s, &err) == RRV_OK, "%s", err.message);
         } else {
             s = plume_scene(cases[k].extra, cases[k].ior);
         }
         if (!s) continue;
         got = rrv_scene_integrator(s);
+        nee = rrv_scene_nee(s);
         CHECKF(got == cases[k].expect, "case %d (%s): integrator %d, expected %d", k, cases[k].extra, (int)got,
                (int)cases[k].expect);
-        /* the render is the chosen integrator's, draw for draw */
+        CHECKF(nee == cases[k].nee, "case %d (%s): nee %d, expected %d", k, cases[k].extra, (int)nee,
+               (int)cases[k].nee);
+        /* the render is the chosen integrator's and nee's, draw for draw */
         t = cases[k].ior >= 2 ? NULL : plume_scene(cases[k].extra, cases[k].ior);
         if (t) {
             t->settings.integrator = cases[k].expect;
-            CHECKF(same_render(s, t), "case %d: the default render differs from integrator %d", k,
-                   (int)cases[k].expect);
+            t->settings.nee = cases[k].nee;
+            CHECKF(same_render(s, t), "case %d: the default render differs from integrator %d, nee %d", k,
+                   (int)cases[k].expect, (int)cases[k].nee);
             rrv_scene_free(t);
         }
         rrv_scene_free(s);

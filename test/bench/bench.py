@@ -358,16 +358,19 @@ def main():
             ("eikonal RK4, nee shoot", ["--integrator", "eikonal", "--nee", "shoot"],
              (1, 4) if quick else (1, 4, 16)),
             # the paper's refractive ratio tracking with forward paths by MIS
-            ("eikonal, nee manifold", ["--integrator", "eikonal", "--nee", "manifold"],
+            ("eikonal, nee manifold (dogleg)", ["--integrator", "eikonal", "--nee", "manifold"],
              (1, 4) if quick else (1, 4, 16))]
     b.sweep("lens_caustic", lens, ())
-    fcaustic = [("eikonal RK4 h=0.05, nee none", ["--integrator", "eikonal", "--nee", "none"],
+    # the scene states `integrator eikonal` and no nee: its first row is the
+    # default nee (chains, the dogleg's)
+    fcaustic = [("default nee (the scene's eikonal)", [], (1, 4) if quick else (1, 4, 16)),
+                ("eikonal RK4 h=0.05, nee none", ["--integrator", "eikonal", "--nee", "none"],
                  (16, 64, 256) if quick else (64, 256, 1024)),
                 ("eikonal RK4 h=0.05, nee straight", ["--integrator", "eikonal", "--nee", "straight"], (4, 16)),
                 ("eikonal RK4 h=0.05, nee shoot", ["--integrator", "eikonal", "--nee", "shoot"],
                  (1, 4) if quick else (1, 4, 16)),
                 # the paper's refractive ratio tracking, its chain on the eikonal's placed steps
-                ("eikonal, nee manifold", ["--integrator", "eikonal", "--nee", "manifold"],
+                ("eikonal, nee manifold (dogleg)", ["--integrator", "eikonal", "--nee", "manifold"],
                  (1, 4) if quick else (1, 4, 16)),
                 ("refractive comb, nee aim", ["--integrator", "refractive", "--nee", "aim"],
                  (16, 64) if quick else (16, 64, 256))]
@@ -381,7 +384,7 @@ def main():
                (16, 64) if quick else (16, 64, 256)),
               ("refractive comb, nee manifold", ["--integrator", "refractive", "--nee", "manifold"],
                (1,) if quick else (1, 4)),
-              ("eikonal, nee manifold", ["--integrator", "eikonal", "--nee", "manifold"],
+              ("eikonal, nee manifold (dogleg)", ["--integrator", "eikonal", "--nee", "manifold"],
                (1, 4) if quick else (1, 4, 16)),
               ("refractive comb, nee none", ["--integrator", "refractive", "--nee", "none"],
                (64, 256) if quick else (64, 256, 1024))]
