@@ -20389,7 +20389,9 @@ VERSION HISTORY
             (left to forward paths before); the manifold's default solver
             is the dogleg (`manifoldsolver lm` the paper's); an explicit
             nee manifold without an integrator key takes eikonal where
-            shoot would; rrv_scene_nee, and `rrv info` prints the nee
+            shoot would; rrv_scene_nee, and `rrv info` prints the nee:
+            the default 2.5x 0.17.0's on the fire caustic, 1.15x on the
+            heat shadow
      0.17.0 nee manifold's chains are seeded by shooting (Newton on the
             initial direction with a Jacobi field through the planes): the
             coarse stage's shot is its root; the dogleg's last step is
