@@ -14384,6 +14384,7 @@ static int rrv__chain_try_once(rrv__context *ctx, rrv__chain *ch, rrv_vec3 w, in
             return memo->slot[i].found;
         }
     rrv__chain_seed_between(scene, ch, (const double (*)[3])key, coarse->n);
+    root->iterations = 0; /* a seed that failed is not solved */
     found = !ch->failed && rrv__chain_solve(scene, ch, root);
     *evaluations += root->iterations;
     if (memo && found && memo->used < RRV__MEMO_SLOTS) {
