@@ -13340,21 +13340,21 @@ static void rrv__chain_setup_spaced(const rrv_scene *scene, rrv_vec3 x0, rrv_vec
     ch->lo = lo;
     ch->hi = hi;
     if (!(lo < hi)) { ch->x[1] = y; return; }
-    count = 0;
+    /* As many planes as the eikonal's placed steps along the chord, but
+       evenly spaced: kicks at unevenly spaced planes are a leapfrog whose
+       step varies, first order only (test/bench/RESULTS.md, "Chains by
+       default on heat caustics": +0.46 % against +0.012 % on a plume) */
     if (sole) {
-        double t = lo + u * rrv__field_step_length(scene, sole, rrv__madd(x0, ch->c, lo), ch->c, NULL);
-        for (; t < hi && count < ch->cap; ++count) {
-            ch->t[count] = t;
+        double t = lo;
+        for (count = 0; t < hi && count < ch->cap; ++count)
             t += rrv__field_step_length(scene, sole, rrv__madd(x0, ch->c, t), ch->c, NULL);
-        }
-        if (t < hi) count = 0; /* more planes than the chain holds: even ones */
-        else h = (hi - lo) / (double)(count > 0 ? count : 1);
-    }
-    if (count == 0) {
+        if (count < 1) count = 1;
+        h = (hi - lo) / (double)count;
+    } else {
         count = (long)ceil((hi - lo) / h);
         if (count > ch->cap) { count = ch->cap; h = (hi - lo) / (ch->cap > 0 ? ch->cap : 1); }
-        for (i = 0; i < count; ++i) ch->t[i] = lo + ((double)i + u) * h;
     }
+    for (i = 0; i < count; ++i) ch->t[i] = lo + ((double)i + u) * h;
     ch->h = h;
     /* kept planes overwrite ch->t from the front, never ahead of the one read */
     for (i = 0; i < count; ++i) {
@@ -19918,7 +19918,10 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  lights: with eikonal SHOOT's connection, with the comb
                  left to forward paths); a chain of
                  vertices on comb planes along the chord x0 -> y (spacing
-                 `step`, random offset, at most 512, wider beyond), each
+                 `step`, or none given as many planes as the eikonal's
+                 placed steps along the chord, evenly spaced, since a
+                 leapfrog of varying step is first order; random offset,
+                 at most 512, wider beyond), each
                  kicking the ray as the comb does (eta d += grad eta h,
                  h the path it stands for); Newton on two unknowns a vertex
                  (gauge `manifoldgauge chord`, the default: in the comb
@@ -19980,8 +19983,8 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  estimate (for the chain model; the default). The chain
                  model itself is second order in its plane spacing: on the
                  Luneburg lens caustic at its 0.01 m spacing it renders 0.7 %
-                 above forward paths, 0.2 % at 0.005, under 0.2 % on the heat
-                 caustics (test/bench/RESULTS.md). `manifoldtrials M`: M
+                 above forward paths, 0.2 % at 0.005, within 0.1 % of shoot
+                 on heat caustics (test/bench/RESULTS.md). `manifoldtrials M`: M
                  solves, the chord's and M - 1 random ones, each distinct
                  root counted once (biased low where a root's basin is
                  small).
@@ -20391,8 +20394,10 @@ VERSION HISTORY
             is the dogleg (`manifoldsolver lm` the paper's); an explicit
             nee manifold without an integrator key takes eikonal where
             shoot would; rrv_scene_nee, and `rrv info` prints the nee:
-            the default 2.5x 0.17.0's on the fire caustic, 1.15x on the
-            heat shadow
+            the default 2.5x 0.17.0's on the fire caustic, 1.35x on the
+            heat shadow; chains on placed steps space their planes
+            evenly (the kicks' second order: a plume's bias against
+            shoot +0.46 % -> +0.012 %)
      0.17.0 nee manifold's chains are seeded by shooting (Newton on the
             initial direction with a Jacobi field through the planes): the
             coarse stage's shot is its root; the dogleg's last step is

@@ -1214,12 +1214,14 @@ static void test_manifold_light_faces_away(void)
      dogleg >= 99.5 % converge, with Levenberg-Marquardt >= 98.5 %
      (measured 100.00 % both, with the coarse stage; one seed a solve:
      99.07 % and 93.39 %);
-   - the chain's planes are spaced as the eikonal's steps are placed:
-     fewer than half the planes of a given step of 0.01 m (measured ~55
-     against ~300; fails with even planes at the fallback);
+   - the chain has as many planes as the eikonal's placed steps: fewer
+     than half the planes of a given step of 0.01 m (measured 61 against
+     317; fails with even planes at the fallback);
    - the chain's MIS weight (shoot's, from the chain's own det) and the
      forward path's (from the shot along the eikonal's root) sum to one
-     within 1e-2, the two models' difference, on connections where both
+     within 1e-3, the two models' difference (measured 1.5e-4 with the
+     planes evenly spaced, 1.4e-3 at the placed steps' own positions,
+     where the chain's kicks lose second order), on connections where both
      are shared (a medium vertex whose phase lobe of up to 15 per sr
      points along the chord); fails with the chain's weight left at 1. */
 static const char plume_text[] =
@@ -1295,7 +1297,7 @@ static void test_manifold_placed_plume(void)
         worst = fmax(worst, fabs(w_nee + w_fwd - 1.0));
     }
     SAY("  plume MIS: %d roots, %d shared, worst |sum - 1| %.1e\n", roots, shared, worst);
-    CHECKF(roots > 200 && shared > 50 && worst < 1e-2, "plume MIS: %d roots, %d shared, worst |sum - 1| %g", roots,
+    CHECKF(roots > 200 && shared > 50 && worst < 1e-3, "plume MIS: %d roots, %d shared, worst |sum - 1| %g", roots,
            shared, worst);
     rrv__chain_delete(ch);
     rrv_scene_free(s);
