@@ -35,24 +35,30 @@ def temperature(p):
     return t
 
 
-def main():
-    root = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
-    out = sys.argv[1] if len(sys.argv) > 1 else os.path.join(root, "scenes", "assets", "heat_shadow.vol")
+def write_gridvol(out, n, lo, hi, field):
+    """field(p) at n^3 corner-placed samples over [lo, hi], as a gridvol
+    file (also test/bench/default_variants.py's writer)."""
     values = []
-    for k in range(N):
-        z = LO[2] + (HI[2] - LO[2]) * k / (N - 1)
-        for j in range(N):
-            y = LO[1] + (HI[1] - LO[1]) * j / (N - 1)
-            for i in range(N):
-                x = LO[0] + (HI[0] - LO[0]) * i / (N - 1)
-                values.append(temperature((x, y, z)))
+    for k in range(n):
+        z = lo[2] + (hi[2] - lo[2]) * k / (n - 1)
+        for j in range(n):
+            y = lo[1] + (hi[1] - lo[1]) * j / (n - 1)
+            for i in range(n):
+                x = lo[0] + (hi[0] - lo[0]) * i / (n - 1)
+                values.append(field((x, y, z)))
     data = array.array("f", values)
     if sys.byteorder != "little":
         data.byteswap()
     with open(out, "wb") as f:
-        f.write(b"VOL" + bytes([3]) + struct.pack("<i", 1) + struct.pack("<3i", N, N, N) + struct.pack("<i", 1))
-        f.write(struct.pack("<6f", *(LO + HI)))
+        f.write(b"VOL" + bytes([3]) + struct.pack("<i", 1) + struct.pack("<3i", n, n, n) + struct.pack("<i", 1))
+        f.write(struct.pack("<6f", *(lo + hi)))
         f.write(data.tobytes())
+
+
+def main():
+    root = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+    out = sys.argv[1] if len(sys.argv) > 1 else os.path.join(root, "scenes", "assets", "heat_shadow.vol")
+    write_gridvol(out, N, LO, HI, temperature)
 
 
 if __name__ == "__main__":

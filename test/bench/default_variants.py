@@ -15,7 +15,10 @@ efficiency ratio 1 / (CPU x variance) of the default over shoot.
     python3 test/bench/default_variants.py BUILD/rrv [--variants 0,1,2,3,4,5] [--seeds 4] [--spp 8]
 
 Not a test: nothing here can fail on a number."""
-import array, os, random, re, struct, subprocess, sys, tempfile
+import os, random, re, struct, subprocess, sys, tempfile
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scenes", "tools"))
+import make_heat_shadow  # noqa: E402  (its gridvol writer)
 
 
 def arg(name, default):
@@ -24,28 +27,17 @@ def arg(name, default):
 
 def write_grid(path, n, lo, hi, bumps, noise, seed):
     rng = random.Random(seed)
-    values = []
-    for k in range(n):
-        z = lo[2] + (hi[2] - lo[2]) * k / (n - 1)
-        for j in range(n):
-            y = lo[1] + (hi[1] - lo[1]) * j / (n - 1)
-            for i in range(n):
-                x = lo[0] + (hi[0] - lo[0]) * i / (n - 1)
-                t = 300.0
-                for (c, radius, rise) in bumps:
-                    d2 = ((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2) / (radius * radius)
-                    if d2 < 1:
-                        t += rise * (1 - d2) ** 3
-                if noise and t > 300.5:
-                    t += noise * (rng.random() - 0.5) * (t - 300) / 900
-                values.append(t)
-    data = array.array("f", values)
-    if sys.byteorder != "little":
-        data.byteswap()
-    with open(path, "wb") as f:
-        f.write(b"VOL" + bytes([3]) + struct.pack("<i", 1) + struct.pack("<3i", n, n, n) + struct.pack("<i", 1))
-        f.write(struct.pack("<6f", *(lo + hi)))
-        f.write(data.tobytes())
+
+    def temperature(p):
+        t = 300.0
+        for (c, radius, rise) in bumps:
+            d2 = sum((p[a] - c[a]) ** 2 for a in range(3)) / (radius * radius)
+            if d2 < 1:
+                t += rise * (1 - d2) ** 3
+        if noise and t > 300.5:
+            t += noise * (rng.random() - 0.5) * (t - 300) / 900
+        return t
+    make_heat_shadow.write_gridvol(path, n, lo, hi, temperature)
 
 
 def variant(v, folder):
