@@ -9837,9 +9837,9 @@ static rrv_integrator rrv__default_integrator(const rrv_scene *scene)
    its support's diameter (a bound on how far a ray crossing it turns, in
    radians) above which the default shoots rather than solving chains.
    Measured (test/bench/RESULTS.md, "Chains by default on heat caustics"):
-   plumes of hot air from 0.38 to 2.56 solve about 2x more efficiently by
-   chains, one at 4.3 and the Luneburg lens caustic (3) 1.2x and 2x less;
-   2 keeps a margin below both. */
+   a blob of hot air from 0.38 to 2.56 solves about 2x more efficiently by
+   chains, but at 4.3 0.09x, a grid plume at 2.54 0.04x (fireflies both)
+   and the Luneburg lens caustic (3) 0.66x; 2 keeps a margin below them. */
 #define RRV__CHAIN_BEND 2.0
 
 /* Chains (nee manifold, the paper's method) pay where rays bend weakly and
@@ -19828,7 +19828,7 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  |grad eta| times its support's diameter at most 2 rad,
                  as heat haze is) and no box face or sphere rim is a jump
                  of the IOR: the heat caustics,
-                 where chains measured 1.75x to 3.8x shoot's efficiency;
+                 where chains measured 1.35x to 3.8x shoot's efficiency;
                  else SHOOT, the most efficient curved mode measured there
                  (lenses, glass; test/bench/RESULTS.md; the default
                  integrator is eikonal where solving pays; rrv_scene_nee).
