@@ -876,12 +876,15 @@ static void info_describes_scene(void)
     CHECKF(find_key(last_run.out, "framebuffer") != NULL, "%s", last_run.out);
     CHECKF(find_key(last_run.out, "bvh_nodes") != NULL, "%s", last_run.out);
     CHECKF(find_key(last_run.out, "scene_memory") != NULL, "%s", last_run.out);
+    /* a scene that does not refract has no nee to name */
+    CHECKF(strstr(last_run.out, "\nnee: ") == NULL, "%s", last_run.out);
 }
 
 /* No silent glass: a plume of hot air (iorscale 100) whose faces sit at
    300 K has no IOR jump without an `ambient ior` line (the ambient is the
    same gas at 300 K), and `rrv info` and the render summary say nothing;
-   `ambient ior 1` makes every face glass, and both say so. */
+   `ambient ior 1` makes every face glass, and both say so. `rrv info`
+   names the nee each takes. */
 static void face_jumps_are_reported(void)
 {
     static const char plume[] =
@@ -906,6 +909,10 @@ static void face_jumps_are_reported(void)
                "%s", last_run.out);
         CHECKF((strstr(last_run.out, "    sharp IOR faces (eta jumps by): -x 0.0292, +x 0.0292, -y 0.0292, "
                                      "+y 0.0292, -z 0.0292, +z 0.0292\n") != NULL) == glass,
+               "%s", last_run.out);
+        /* and the nee it takes: chains through clear weak heat, shots where a face is glass */
+        CHECKF(strstr(last_run.out, glass ? "\nnee: shoot (the default for this scene)\n"
+                                          : "\nnee: manifold, dogleg (the default for this scene)\n") != NULL,
                "%s", last_run.out);
         snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --threads 1", scene, out);
         CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
