@@ -1882,7 +1882,23 @@ static void print_face_jump_summary(const rrv_scene *scene)
     fputs(": refracted and reflected there as glass; nee shoot and aim refract there, manifold does not\n", stderr);
 }
 
-static void print_render_summary(int width, int height, int spp, double seconds,
+/* The light sampling a prepared scene renders with, as `nee` names it
+   (the refractive integrator's shoot aims; the manifold's solver named). */
+static const char *nee_label(const rrv_scene *scene)
+{
+    switch (rrv_scene_nee(scene)) {
+    case RRV_NEE_NONE: return "none";
+    case RRV_NEE_STRAIGHT: return "straight";
+    case RRV_NEE_SHOOT: return rrv_scene_integrator(scene) == RRV_INTEGRATOR_REFRACTIVE ? "aim" : "shoot";
+    case RRV_NEE_MANIFOLD:
+        return scene->settings.manifold_solver == RRV_MANIFOLD_SOLVER_LM ? "manifold, Levenberg-Marquardt"
+                                                                          : "manifold, dogleg";
+    case RRV_NEE_AIM: return "aim";
+    default: return "unknown";
+    }
+}
+
+static void print_render_summary(int width, int height, int spp, double seconds, const char *nee,
                                  const rrv_render_stats *stats)
 {
     char samples_rate[32], paths_rate[32];
@@ -1900,8 +1916,8 @@ static void print_render_summary(int width, int height, int spp, double seconds,
     if (stats->trapped_paths > 0) fprintf(stderr, " (%" PRIu64 " of them trapped in a refracting medium)", stats->trapped_paths);
     if (stats->solves > 0) {
         double n = (double)stats->solves, conv = (double)stats->solves_converged;
-        fprintf(stderr, "; curved nee: %" PRIu64 " solves, %.1f%% converged, %.1f iterations, %.2f solves a connection, "
-                "%.0f segments a chain", stats->solves, 100.0 * conv / n, (double)stats->solve_iterations / n,
+        fprintf(stderr, "; curved nee (%s): %" PRIu64 " solves, %.1f%% converged, %.1f iterations, %.2f solves a connection, "
+                "%.0f segments a chain", nee, stats->solves, 100.0 * conv / n, (double)stats->solve_iterations / n,
                 stats->solve_connections ? (double)stats->solve_trials / (double)stats->solve_connections : 0.0,
                 conv > 0 ? (double)stats->solve_segments / conv : 0.0);
     }
@@ -2194,7 +2210,8 @@ static int render_write(render_options *opt, const rrv_scene *scene, const part_
         if (is_part)
             fprintf(stderr, "part %s: tile %s, samples %d:%d of %d: ", opt->pfm_path, part->tile,
                     part->sample_begin, part->sample_end, part->spp);
-        print_render_summary(crop_width, crop_height, opt->sample_end - opt->sample_begin, seconds, &job->stats);
+        print_render_summary(crop_width, crop_height, opt->sample_end - opt->sample_begin, seconds, nee_label(scene),
+                             &job->stats);
         if (job->noise_threshold > 0)
             fprintf(stderr, "adaptive: noise threshold %g, spp a pixel min %d, median %d, max %d, mean %.1f (%.1f%% "
                     "of %d)\n", job->noise_threshold, job->spp_min, job->spp_median, job->spp_max, job->spp_mean,
@@ -3321,17 +3338,9 @@ static int command_info(int argc, char **argv)
         printf("integrator: %s (the default for this scene)\n", integrator_name(rrv_scene_integrator(scene)));
     else
         printf("integrator: %s\n", integrator_name(scene->settings.integrator));
-    if (rrv_scene_integrator(scene) != RRV_INTEGRATOR_CLASSIC) {
-        static const char *const nee_names[] = {"default", "none", "straight", "shoot", "manifold", "aim"};
-        rrv_nee nee = rrv_scene_nee(scene);
-        const char *name = (unsigned)nee <= RRV_NEE_AIM ? nee_names[nee] : "unknown";
-        if (nee == RRV_NEE_SHOOT && rrv_scene_integrator(scene) == RRV_INTEGRATOR_REFRACTIVE) name = "aim";
-        printf("nee: %s%s%s\n", name,
-               nee == RRV_NEE_MANIFOLD
-                   ? (scene->settings.manifold_solver == RRV_MANIFOLD_SOLVER_LM ? ", Levenberg-Marquardt" : ", dogleg")
-                   : "",
+    if (rrv_scene_integrator(scene) != RRV_INTEGRATOR_CLASSIC)
+        printf("nee: %s%s\n", nee_label(scene),
                scene->settings.nee == RRV_NEE_DEFAULT ? " (the default for this scene)" : "");
-    }
     if (rrv_scene_integrator(scene) == RRV_INTEGRATOR_EIKONAL) {
         if (scene->settings.step > 0)
             printf("step: %g m\n", scene->settings.step);

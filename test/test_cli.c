@@ -884,13 +884,14 @@ static void info_describes_scene(void)
    300 K has no IOR jump without an `ambient ior` line (the ambient is the
    same gas at 300 K), and `rrv info` and the render summary say nothing;
    `ambient ior 1` makes every face glass, and both say so. `rrv info`
-   names the nee each takes. */
+   and the render summary name the nee each takes. */
 static void face_jumps_are_reported(void)
 {
     static const char plume[] =
         "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
         "render spp 1 maxdepth 1\n"
         "quad origin -0.1 3.5 -0.1 u 0.2 0 0 v 0 0 0.2 L 50 50 50\n"
+        "quad origin -2 0 -2 u 0 0 4 v 4 0 0\n"
         "medium plume box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
         "temperature plume blob center 0 1 0 radius 0.06 weight 600 base 300\n"
         "ior plume gas iorscale 100\n";
@@ -918,6 +919,8 @@ static void face_jumps_are_reported(void)
         CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
         line = strstr(last_run.err, "sharp IOR");
         CHECKF(glass ? line && strcmp(line, summary) == 0 : !line, "%s", last_run.err);
+        CHECKF(strstr(last_run.err, glass ? "; curved nee (shoot): " : "; curved nee (manifold, dogleg): ") != NULL,
+               "%s", last_run.err);
     }
 }
 
