@@ -9782,6 +9782,17 @@ static int rrv__boxes_overlap(const rrv_medium *a, const rrv_medium *b)
            a->lo.z <= b->hi.z && b->lo.z <= a->hi.z;
 }
 
+/* No medium with extinction overlaps m's box: what connects through m
+   starts and ends on surfaces. */
+static int rrv__medium_clear(const rrv_scene *scene, const rrv_medium *m)
+{
+    int j;
+    for (j = 0; j < scene->medium_count; ++j)
+        if (scene->media[j].majorant && !scene->media[j].majorant->empty && rrv__boxes_overlap(m, &scene->media[j]))
+            return 0;
+    return 1;
+}
+
 /* Shooting pays where its solves are few and the light it finds is
    focused: every refracting medium clear (no medium with extinction
    overlaps its box, so the only vertices that connect through it lie on
@@ -9796,15 +9807,13 @@ static int rrv__boxes_overlap(const rrv_medium *a, const rrv_medium *b)
    both). */
 static rrv_integrator rrv__default_integrator(const rrv_scene *scene)
 {
-    int i, j, k, refracts = 0, clear = 1, small = 0;
+    int i, k, refracts = 0, clear = 1, small = 0;
     for (i = 0; i < scene->medium_count; ++i) {
         const rrv_medium *m = &scene->media[i];
         rrv_vec3 c;
         if (!rrv__medium_refracts(m)) continue;
         refracts = 1;
-        for (j = 0; j < scene->medium_count; ++j)
-            if (scene->media[j].majorant && !scene->media[j].majorant->empty && rrv__boxes_overlap(m, &scene->media[j]))
-                clear = 0;
+        if (!rrv__medium_clear(scene, m)) clear = 0;
         c = rrv__scale(rrv__add(m->lo, m->hi), 0.5);
         for (k = 0; k < scene->light_count; ++k) {
             const rrv_shape *l = &scene->shapes[scene->lights[k]];
@@ -9850,7 +9859,7 @@ static rrv_integrator rrv__default_integrator(const rrv_scene *scene)
    turns into AIM. */
 static rrv_nee rrv__default_nee(const rrv_scene *scene, rrv_integrator integrator)
 {
-    int i, j;
+    int i;
     if (integrator != RRV_INTEGRATOR_EIKONAL || scene->sharp_faces || scene->sharp_rims ||
         !rrv__solver_supports_scene(scene))
         return RRV_NEE_SHOOT;
@@ -9858,10 +9867,7 @@ static rrv_nee rrv__default_nee(const rrv_scene *scene, rrv_integrator integrato
         const rrv_medium *m = &scene->media[i];
         double diameter;
         if (!rrv__medium_refracts(m)) continue;
-        if (!m->majorant) return RRV_NEE_SHOOT;
-        for (j = 0; j < scene->medium_count; ++j)
-            if (scene->media[j].majorant && !scene->media[j].majorant->empty && rrv__boxes_overlap(m, &scene->media[j]))
-                return RRV_NEE_SHOOT;
+        if (!m->majorant || !rrv__medium_clear(scene, m)) return RRV_NEE_SHOOT;
         diameter = rrv__has_sphere_support(m) ? 2.0 * m->ior.radius : rrv__length(rrv__sub(m->hi, m->lo));
         if (!((double)m->majorant->grad_peak * diameter <= RRV__CHAIN_BEND)) return RRV_NEE_SHOOT;
     }
@@ -14647,13 +14653,21 @@ static void rrv__solver_release(rrv__context *ctx)
    chains leave to forward paths. */
 static int rrv__shoots_spheres(const rrv__context *ctx) { return ctx->manifold && ctx->eikonal; }
 
+/* Whether the light the draw names is connected by shooting. */
+static int rrv__draw_is_shot(const rrv__context *ctx, const rrv__light_draw *draw)
+{
+    int pick;
+    if (ctx->shoot) return 1;
+    if (!rrv__shoots_spheres(ctx)) return 0;
+    pick = rrv__light_pick(ctx->scene, draw);
+    return pick >= 0 && pick < ctx->scene->light_count &&
+           ctx->scene->shapes[ctx->scene->lights[pick]].kind == RRV_SHAPE_SPHERE;
+}
+
 static void rrv__solver_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x0, const rrv__vertex_bsdf *v,
                             const rrv__light_draw *draw, rrv__rng *rng)
 {
-    int pick = rrv__light_pick(ctx->scene, draw);
-    int sphere = pick >= 0 && pick < ctx->scene->light_count &&
-                 ctx->scene->shapes[ctx->scene->lights[pick]].kind == RRV_SHAPE_SPHERE;
-    if (ctx->shoot || (sphere && rrv__shoots_spheres(ctx))) rrv__shoot_nee(ctx, path, x0, v, draw, rng);
+    if (rrv__draw_is_shot(ctx, draw)) rrv__shoot_nee(ctx, path, x0, v, draw, rng);
     else if (ctx->manifold) rrv__manifold_nee(ctx, path, x0, v, draw, rng);
     else return;
     rrv__cone_nee(ctx, path, x0, v, rng);
