@@ -20,31 +20,11 @@ with 2 rad is printed by `rrv info`'s choice only, so the script prints
 the `nee` rrv chooses for each variant.
 
 Not a test: nothing here can fail on a number."""
-import os, re, struct, subprocess, sys, tempfile
+import os, re, subprocess, sys, tempfile
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
-
-
-def arg(name, default):
-    return sys.argv[sys.argv.index(name) + 1] if name in sys.argv else default
-
-
-def pfm(path):
-    with open(path, "rb") as f:
-        f.readline()
-        w, h = map(int, f.readline().split())
-        scale = float(f.readline())
-        n = w * h * 3
-        return struct.unpack(("<" if scale < 0 else ">") + "%df" % n, f.read(4 * n))
-
-
-def render(rrv, scene, nee, seed, spp, out):
-    p = subprocess.Popen([rrv, "render", scene, "-o", out, "--spp", str(spp), "--seed", str(seed), "--threads", "1",
-                          "--crop", "48", "40", "112", "88", "-q", "--integrator", "eikonal", "--nee", nee])
-    _, status, ru = os.wait4(p.pid, 0)
-    if os.waitstatus_to_exitcode(status) != 0:
-        sys.exit("render failed: %s %s" % (scene, nee))
-    return ru.ru_utime + ru.ru_stime
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from default_variants import arg, seed_runs  # noqa: E402
 
 
 def main():
@@ -67,21 +47,12 @@ def main():
             f.write(text)
         info = subprocess.run([rrv, "info", scene], stdout=subprocess.PIPE, text=True).stdout
         chosen = re.search(r"nee: (\S+?),? ", info)
-        row = {}
-        for nee in ("shoot", "manifold"):
-            cpu, images = 0.0, []
-            for k in seeds:
-                out = os.path.join(tmp, "%s_%s_%d.pfm" % (s, nee, k))
-                cpu += render(rrv, scene, nee, k, spp, out)
-                images.append(pfm(out))
-            n, m = len(images[0]), len(images)
-            means = [sum(im[i] for im in images) / m for i in range(n)]
-            var = sum(sum((im[i] - means[i]) ** 2 for im in images) / (m - 1) for i in range(n)) / n
-            row[nee] = (cpu / m, var, sum(means) / n)
-        a, b = row["shoot"], row["manifold"]
+        crop = ["--crop", "48", "40", "112", "88", "--integrator", "eikonal", "--nee"]
+        a = seed_runs(rrv, scene, crop + ["shoot"], seeds, spp, tmp, "%s_shoot" % s)
+        b = seed_runs(rrv, scene, crop + ["manifold"], seeds, spp, tmp, "%s_manifold" % s)
         print("| %s | %s | %.2f, %.3g | %.2f, %.3g | %.2fx | %+.2f %% |" %
               (s, chosen.group(1) if chosen else "?", a[0], a[1], b[0], b[1], (a[0] * a[1]) / (b[0] * b[1]),
-               100 * (b[2] / a[2] - 1)), flush=True)
+               100 * (b[5] / a[5] - 1)), flush=True)
 
 
 if __name__ == "__main__":

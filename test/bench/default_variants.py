@@ -15,10 +15,13 @@ efficiency ratio 1 / (CPU x variance) of the default over shoot.
     python3 test/bench/default_variants.py BUILD/rrv [--variants 0,1,2,3,4,5] [--seeds 4] [--spp 8]
 
 Not a test: nothing here can fail on a number."""
-import os, random, re, struct, subprocess, sys, tempfile
+import os, random, re, subprocess, sys, tempfile
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scenes", "tools"))
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.join(HERE, "..", "..", "scenes", "tools"))
 import make_heat_shadow  # noqa: E402  (its gridvol writer)
+from nee_bench import read_pfm  # noqa: E402
 
 
 def arg(name, default):
@@ -71,13 +74,10 @@ def variant(v, folder):
                                                               kind, side)
 
 
-def pfm(path):
-    with open(path, "rb") as f:
-        f.readline()
-        w, h = map(int, f.readline().split())
-        scale = float(f.readline())
-        v = struct.unpack(("<" if scale < 0 else ">") + "%df" % (w * h * 3), f.read(12 * w * h))
-    return [sum(v[3 * i:3 * i + 3]) / 3 for i in range(w * h)]
+def pixels(path):
+    """A render's pixels, each the mean of its three channels."""
+    v = read_pfm(path)
+    return [sum(v[3 * i:3 * i + 3]) / 3 for i in range(len(v) // 3)]
 
 
 def render(rrv, scene, extra, seed, spp, out):
@@ -89,6 +89,25 @@ def render(rrv, scene, extra, seed, spp, out):
         sys.exit("render failed: %s\n%s" % (scene, err))
     m = re.search(r"([\d.]+)% converged", err)
     return ru.ru_utime + ru.ru_stime, float(m.group(1)) if m else 100.0
+
+
+def seed_runs(rrv, scene, extra, seeds, spp, folder, tag):
+    """Renders of scene at each seed: the mean CPU s, the pixel variance
+    across the seeds (averaged over the pixels), the largest pixel and the
+    99.9th percentile of all, the least share of converged solves and the
+    mean pixel."""
+    cpu, images, converged = 0.0, [], 100.0
+    for k in seeds:
+        out = os.path.join(folder, "%s_%d.pfm" % (tag, k))
+        c, conv = render(rrv, scene, extra, k, spp, out)
+        cpu += c
+        converged = min(converged, conv)
+        images.append(pixels(out))
+    n, m = len(images[0]), len(images)
+    means = [sum(im[i] for im in images) / m for i in range(n)]
+    var = sum(sum((im[i] - means[i]) ** 2 for im in images) / (m - 1) for i in range(n)) / n
+    values = sorted(x for im in images for x in im)
+    return cpu / m, var, values[-1], values[int(0.999 * len(values))], converged, sum(means) / n
 
 
 def main():
@@ -103,21 +122,8 @@ def main():
         scene, what = variant(v, folder)
         info = subprocess.run([rrv, "info", scene], stdout=subprocess.PIPE, text=True).stdout
         chosen = re.search(r"nee: (\w+)", info)
-        row = {}
-        for name, extra in (("default", []), ("shoot", ["--nee", "shoot"])):
-            cpu, images, converged = 0.0, [], 100.0
-            for k in seeds:
-                out = os.path.join(folder, "%d_%s_%d.pfm" % (v, name, k))
-                c, conv = render(rrv, scene, extra, k, spp, out)
-                cpu += c
-                converged = min(converged, conv)
-                images.append(pfm(out))
-            n, m = len(images[0]), len(images)
-            means = [sum(im[i] for im in images) / m for i in range(n)]
-            var = sum(sum((im[i] - means[i]) ** 2 for im in images) / (m - 1) for i in range(n)) / n
-            values = sorted(x for im in images for x in im)
-            row[name] = (cpu / m, var, values[-1], values[int(0.999 * len(values))], converged, sum(means) / n)
-        a, b = row["shoot"], row["default"]
+        b = seed_runs(rrv, scene, [], seeds, spp, folder, "%d_default" % v)
+        a = seed_runs(rrv, scene, ["--nee", "shoot"], seeds, spp, folder, "%d_shoot" % v)
         cell = lambda r: "%.2f, %.3g, %.2f, %.2f, %.1f %%" % r[:5]
         print("| %d: %s | %s | %s | %s | %.2fx | %+.2f %% |" % (v, what, chosen.group(1) if chosen else "?", cell(b),
                                                                cell(a), (a[0] * a[1]) / (b[0] * b[1]),
