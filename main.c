@@ -1879,7 +1879,10 @@ static void print_face_jump_summary(const rrv_scene *scene)
     fprintf(stderr, "sharp IOR faces: eta jumps by %.3g at the %s %s of medium \"%s\"", jump, face_names[face],
             face == 6 ? "surface" : "face", scene->media[medium].name);
     if (faces > 1) fprintf(stderr, " (and at %d more faces)", faces - 1);
-    fputs(": refracted and reflected there as glass; nee shoot and aim refract there, manifold does not\n", stderr);
+    if (jump <= RRV_SMOOTH_JUMP)
+        fputs(": refracted and reflected there as glass; curved nee takes a jump this small as smooth\n", stderr);
+    else
+        fputs(": refracted and reflected there as glass; nee shoot and aim refract there, manifold does not\n", stderr);
 }
 
 /* The light sampling a prepared scene renders with, as `nee` names it

@@ -1,4 +1,4 @@
-/* rrv.h 0.18.0 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.19.0 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -208,7 +208,7 @@
 #endif
 
 #define RRV_VERSION_MAJOR 0
-#define RRV_VERSION_MINOR 18
+#define RRV_VERSION_MINOR 19
 #define RRV_VERSION_PATCH 0
 
 #ifndef RRV_DEF
@@ -638,10 +638,12 @@ typedef struct rrv_scene {
                                               the lights, then the sky (rrv__light_pick) */
     int light_power;                       /* settings.light_sampler was power */
     double sky_weight;                     /* the sky's weight in that pick */
-    int sharp_faces;                       /* some refracting medium's face is a jump
-                                              (rrv_medium_face_jumps), which the
-                                              manifold walk does not cross */
-    int sharp_rims;                        /* some sphere support's surface is one,
+    int sharp_faces;                       /* some refracting medium's face jumps by
+                                              more than curved connections take as
+                                              smooth (rrv_medium_face_jumps above
+                                              1e-6): the manifold walk does not
+                                              cross it */
+    int sharp_rims;                        /* some sphere support's surface does,
                                               which shots do not cross either */
     struct rrv__bvh_node *bvh; int bvh_node_count;
     int *bvh_prims;                        /* shape indices in leaf order */
@@ -954,11 +956,14 @@ RRV_DEF rrv_nee rrv_scene_nee(const rrv_scene *scene);
    eta just outside| on a 65 x 65 lattice of the face (the sphere: 128 x
    64 in longitude and latitude, where inside the box), where the refractivity on either side is
    that of the scene (the ambient IOR, or another medium's where boxes
-   overlap). Jumps of 1e-7 or less, the float rounding of an IOR near 1
-   (where Fresnel reflects < 1e-14 and curved NEE crosses the face), are
-   0. Returns the largest of the seven, 0 for a medium that does not
+   overlap). Jumps of 1e-7 or less, the float rounding of an IOR near 1,
+   are 0; curved connections (nee shoot, manifold) take jumps up to 1e-6
+   as smooth, passing straight where camera rays turn by at most 1e-6
+   tan(theta). Returns the largest of the seven, 0 for a medium that does not
    refract or an index out of range. */
 RRV_DEF double rrv_medium_face_jumps(const rrv_scene *scene, int medium, double jump[7]);
+/* The largest jump curved connections take as smooth (above). */
+#define RRV_SMOOTH_JUMP 1e-6
 
 /* One walk of a ray through the refractive media only (absorption and
    scattering ignored), as `rrv trace` prints it. The visit callback, if not
@@ -8438,12 +8443,25 @@ typedef struct rrv__vertex_bsdf {
    path into the class of the estimator that stands for it, the vertex's
    densities, nee AIM, and the light point a curved connection aims at. */
 
-/* A face where the refractivity jumps by more than this is a sharp interface
-   (Fresnel, total internal reflection): paths across one are not shot but
-   left to forward sampling. Below it the Fresnel reflectance is < 1e-14 and
-   the ray passes straight through (the faces of a Luneburg lens, whose IOR
-   meets the ambient one, differ by rounding only). */
-#define RRV__SOLVE_JUMP 1e-7
+/* A face where the refractivity jumps by more than this is a sharp
+   interface to curved connections: shots refract there (Snell, the
+   Jacobian through the face, the transmitted share), the manifold walk
+   stops there and the forward paths that cross it keep it. A smaller jump
+   they treat as smooth: the camera's rays still refract at it (any jump
+   above a float's rounding, rrv__is_jump), so a connection misses its
+   turn, at most 1e-6 tan(theta) rad, and its reflectance, 2.5e-13 near
+   normal incidence; total reflection takes the rays within 0.08 degrees
+   of grazing it. A chain's own model is coarser than that (+0.012 %
+   against shoot's steps on a plume, RESULTS.md). Such jumps are what a
+   field's tail leaves at its box: a hot blob's Gaussian reaches 1.4e-7
+   at the face of README's heat caustic box at iorscale 450, which sent
+   the default from chains to shoot (2.3x less efficient there) when
+   this bound was the rounding of the IOR, RRV__REPORT_JUMP. */
+#define RRV__SOLVE_JUMP RRV_SMOOTH_JUMP
+/* Jumps above this, a float's rounding of an IOR near 1 (the faces of a
+   Luneburg lens, whose IOR meets the ambient one, differ by no more), are
+   reported (rrv_medium_face_jumps). */
+#define RRV__REPORT_JUMP 1e-7
 /* The weak class's bound, in bend tolerances (rrv__weak_chord): 0, exact,
    unless a build sets it (see the manual's weak class). */
 #ifndef RRV__WEAK_BEND
@@ -9659,8 +9677,9 @@ RRV_DEF rrv_result rrv_scene_prepare(rrv_scene *scene, rrv_error *err)
     scene->sharp_faces = scene->sharp_rims = 0;
     for (i = 0; i < scene->medium_count; ++i) {
         double jump[7];
-        if (rrv_medium_face_jumps(scene, i, jump) > 0) scene->sharp_faces = 1;
-        if (jump[6] > 0) scene->sharp_rims = 1;
+        /* the faces curved connections do not solve across as smooth */
+        if (rrv__jump_counts(rrv_medium_face_jumps(scene, i, jump))) scene->sharp_faces = 1;
+        if (rrv__jump_counts(jump[6])) scene->sharp_rims = 1;
     }
     res = rrv__build_emitters(scene, err);
     if (res != RRV_OK) { rrv__scene_release_prepared(scene); return res; }
@@ -9716,15 +9735,14 @@ static rrv_vec3 rrv__camera_ray(const rrv__camera_frame *f, const rrv_camera *ca
 }
 
 /* The jump of the scene's refractivity across a surface at `at`, a few
-   rounding gaps to either side along its normal; 0 where it is one curved
-   connections cross (RRV__SOLVE_JUMP: below it Fresnel reflects < 1e-14,
-   the rounding of an IOR near 1 in float). */
+   rounding gaps to either side along its normal; 0 where it is within the
+   rounding of an IOR in float (RRV__REPORT_JUMP). */
 static double rrv__jump_at(const rrv_scene *scene, rrv_vec3 at, rrv_vec3 normal)
 {
     double gap = 4.0 * rrv__face_gap(at);
     double r_in = rrv__scene_refractivity(scene, rrv__madd(at, normal, -gap), NULL);
     double r_out = rrv__scene_refractivity(scene, rrv__madd(at, normal, gap), NULL);
-    return rrv__is_jump(r_in, r_out) && rrv__jump_counts(fabs(r_in - r_out)) ? fabs(r_in - r_out) : 0.0;
+    return rrv__is_jump(r_in, r_out) && fabs(r_in - r_out) > RRV__REPORT_JUMP ? fabs(r_in - r_out) : 0.0;
 }
 
 #define RRV__JUMP_LATTICE 65
@@ -11978,7 +11996,7 @@ static void rrv__shoot_kept(rrv__context *ctx, rrv_vec3 x0, rrv_vec3 w0, rrv_vec
     const rrv_scene *scene = ctx->scene;
     rrv__bender b;
     rrv__jacobi J;
-    rrv__rng fixed; /* faces crossed here do not reflect (jumps below RRV__SOLVE_JUMP) */
+    rrv__rng fixed; /* faces crossed here do not reflect (jumps up to RRV__SOLVE_JUMP) */
     rrv_vec3 x = x0, d = w0;
     long n;
     int c;
@@ -20400,6 +20418,13 @@ and BOUNDS (moved here from the manual at the top, word for word)
 ------------------------------------------------------------------------------
 VERSION HISTORY
 ------------------------------------------------------------------------------
+     0.19.0 curved connections take IOR jumps up to 1e-6 (RRV_SMOOTH_JUMP)
+            as smooth, not 1e-7: the Gaussian tail of a hot blob leaves
+            1.4e-7 at the faces of README's heat caustic box at iorscale
+            450, which sent the default from chains to shoot there (2.1x
+            less efficient) and gave an explicit nee manifold fireflies;
+            such jumps are still reported, and the render summary says
+            that curved nee passes them
      0.18.0 the default nee solves chains (nee manifold, the paper's
             method) with the eikonal integrator where the refracting
             media are clear, weak gas without sharp faces (the heat

@@ -883,8 +883,11 @@ static void info_describes_scene(void)
 /* No silent glass: a plume of hot air (iorscale 100) whose faces sit at
    300 K has no IOR jump without an `ambient ior` line (the ambient is the
    same gas at 300 K), and `rrv info` and the render summary say nothing;
-   `ambient ior 1` makes every face glass, and both say so. `rrv info`
-   and the render summary name the nee each takes. */
+   `ambient ior 1` makes every face glass, and both say so. A narrower,
+   stronger blob whose Gaussian tail leaves 6.5e-7 at the faces: both
+   report it, and chains, which take a jump up to 1e-6 as smooth, still
+   solve through it. `rrv info` and the render summary name the nee each
+   takes. */
 static void face_jumps_are_reported(void)
 {
     static const char plume[] =
@@ -895,31 +898,48 @@ static void face_jumps_are_reported(void)
         "medium plume box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
         "temperature plume blob center 0 1 0 radius 0.06 weight 600 base 300\n"
         "ior plume gas iorscale 100\n";
+    static const char tail[] =
+        "camera eye 0 0.8 -3 look 0 0.6 0 resolution 8 6\n"
+        "render spp 1 maxdepth 1\n"
+        "quad origin -0.1 3.5 -0.1 u 0.2 0 0 v 0 0 0.2 L 50 50 50\n"
+        "quad origin -2 0 -2 u 0 0 4 v 4 0 0\n"
+        "medium plume box -0.5 0.5 -0.5 0.5 1.5 0.5 sigma_a 0 0 0 sigma_s 0 0 0\n"
+        "temperature plume blob center 0 1 0 radius 0.1 weight 600 base 300\n"
+        "ior plume gas iorscale 300\n";
+    static const char tail_summary[] =
+        "sharp IOR faces: eta jumps by 6.53e-07 at the +y face of medium \"plume\" (and at 5 more faces): "
+        "refracted and reflected there as glass; curved nee takes a jump this small as smooth\n";
     static const char summary[] =
         "sharp IOR faces: eta jumps by 0.0292 at the -x face of medium \"plume\" (and at 5 more faces): "
         "refracted and reflected there as glass; nee shoot and aim refract there, manifold does not\n";
     char text[1024], arguments[3 * PATH_SIZE];
     const char *scene = tmp_path("plume.rrv"), *out = tmp_path("plume.pfm"), *line;
     int glass;
-    for (glass = 0; glass < 2; ++glass) {
-        snprintf(text, sizeof text, "%s%s", plume, glass ? "ambient ior 1\n" : "");
+    for (glass = 0; glass < 3; ++glass) {
+        snprintf(text, sizeof text, "%s%s", glass == 2 ? tail : plume, glass == 1 ? "ambient ior 1\n" : "");
         CHECK(write_text(scene, text));
         snprintf(arguments, sizeof arguments, "info '%s'", scene);
         CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
-        CHECKF((strstr(last_run.out, "ambient ior: 1.0292 (the gas at its ambient state)\n") != NULL) == !glass,
+        CHECKF((strstr(last_run.out, glass == 2 ? "ambient ior: 1.0876 (the gas at its ambient state)\n"
+                                                : "ambient ior: 1.0292 (the gas at its ambient state)\n") != NULL) ==
+                   (glass != 1),
                "%s", last_run.out);
         CHECKF((strstr(last_run.out, "    sharp IOR faces (eta jumps by): -x 0.0292, +x 0.0292, -y 0.0292, "
-                                     "+y 0.0292, -z 0.0292, +z 0.0292\n") != NULL) == glass,
+                                     "+y 0.0292, -z 0.0292, +z 0.0292\n") != NULL) == (glass == 1),
                "%s", last_run.out);
-        /* and the nee it takes: chains through clear weak heat, shots where a face is glass */
-        CHECKF(strstr(last_run.out, glass ? "\nnee: shoot (the default for this scene)\n"
-                                          : "\nnee: manifold, dogleg (the default for this scene)\n") != NULL,
+        CHECKF((strstr(last_run.out, "    sharp IOR faces (eta jumps by): -x 6.53e-07, +x 6.53e-07, -y 6.53e-07, "
+                                     "+y 6.53e-07, -z 6.53e-07, +z 6.53e-07\n") != NULL) == (glass == 2),
+               "%s", last_run.out);
+        /* and the nee it takes: chains through clear weak heat and past a
+           tail's jump, shots where a face is glass */
+        CHECKF(strstr(last_run.out, glass == 1 ? "\nnee: shoot (the default for this scene)\n"
+                                               : "\nnee: manifold, dogleg (the default for this scene)\n") != NULL,
                "%s", last_run.out);
         snprintf(arguments, sizeof arguments, "render '%s' -o '%s' --threads 1", scene, out);
         CHECKF(rrv(arguments) == 0, "exit %d: %s", last_run.code, last_run.err);
         line = strstr(last_run.err, "sharp IOR");
-        CHECKF(glass ? line && strcmp(line, summary) == 0 : !line, "%s", last_run.err);
-        CHECKF(strstr(last_run.err, glass ? "; curved nee (shoot): " : "; curved nee (manifold, dogleg): ") != NULL,
+        CHECKF(glass ? line && strcmp(line, glass == 2 ? tail_summary : summary) == 0 : !line, "%s", last_run.err);
+        CHECKF(strstr(last_run.err, glass == 1 ? "; curved nee (shoot): " : "; curved nee (manifold, dogleg): ") != NULL,
                "%s", last_run.err);
     }
 }
