@@ -1286,14 +1286,15 @@ typedef struct refraction_options {
 } refraction_options;
 
 static const char refraction_help[] =
-    "  --refraction NAME      refractive scheme: comb (default), poisson (the\n"
-    "                         seed paper: at null events) or midpoint\n"
+    "  --refraction NAME      refractive scheme: comb (default) or poisson (the\n"
+    "                         seed paper: at null events)\n"
     "  --bend-tolerance RAD   refractive: bending per refraction event, which\n"
     "                         sets the event rate (default: the scene's, 0.01)\n"
     "  --mu-eta RATE          refractive: a fixed refraction event rate, 1/m\n"
     "                         (0: automatic from the tolerance)\n"
     "  --step H               eikonal: step length in metres (default 0.01)\n"
-    "  --stepper NAME         eikonal: rk4 (default) or leapfrog\n"
+    "  --stepper NAME         eikonal: rk4 (the default; leapfrog and the scheme\n"
+    "                         midpoint only in a build with RRV_RESEARCH)\n"
     "  --majorant-cells N     majorant grid cells per axis, 1 = one global\n"
     "                         majorant (default: automatic)\n"
     "  --ior-interp NAME      IOR grids: trilinear (default) or cubic (C2\n"
@@ -1340,6 +1341,12 @@ static int take_refraction_option(arg_cursor *args, refraction_options *opt)
         if (i == count)
             return usage_error(args, "%s needs %s, got \"%s\"", arg,
                                is_scheme ? "comb, poisson or midpoint" : "rk4 or leapfrog", text), -1;
+#ifndef RRV_RESEARCH
+        /* refused here, before any output is opened, as the library would */
+        if (i == (is_scheme ? RRV_REFRACTION_MIDPOINT : RRV_STEPPER_LEAPFROG))
+            return usage_error(args, "%s %s is a research variant, not in this build (define RRV_RESEARCH); use %s",
+                               arg, text, is_scheme ? "comb or poisson" : "rk4"), -1;
+#endif
         if (is_scheme) { opt->refraction = i; opt->has_refraction = 1; }
         else { opt->stepper = i; opt->has_stepper = 1; }
     } else {

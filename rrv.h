@@ -79,17 +79,16 @@
    INTEGRATORS (rrv_settings.integrator; zero, the default, is chosen from
    the prepared scene by rrv_scene_integrator; the rule and why: NOTES)
      default     classic where no medium's IOR differs from the ambient IOR
-                 (bit for bit the classic render); eikonal with nee SHOOT
-                 where the refracting media are clear and a light is small
-                 seen from them (NOTES); else refractive, AIM.
+                 (bit for bit); eikonal where the refracting media are clear
+                 and a light is small seen from them (NOTES); else refractive.
      classic     IOR 1 everywhere: delta tracking, ratio-tracked NEE with
                  MIS, spectral MIS for chromatic media. The production baseline.
      refractive  the same, rays bent inside media that carry an IOR; scheme
                  rrv_settings.refraction: COMB (default: leapfrog kicks at
-                 spaced points, second order), POISSON (the paper's Snell at
-                 every null event) or MIDPOINT (both first order).
-     eikonal     d/ds(eta dx/ds) = grad eta marched by RK4 or leapfrog, steps
-                 of rrv_settings.step or, none given, placed by the field.
+                 spaced points, second order) or POISSON (the paper's Snell
+                 at every null event, first order).
+     eikonal     d/ds(eta dx/ds) = grad eta marched by RK4, steps of
+                 rrv_settings.step or, none given, placed by the field.
    NEXT-EVENT ESTIMATION (rrv_settings.nee; refractive and eikonal only:
    classic's straight shadow rays are exact for straight rays)
      DEFAULT (rrv_scene_nee) on eikonal MANIFOLD through clear weak gas, else
@@ -172,6 +171,7 @@
      RRV_NO_STDIO     no FILE* I/O: load through rrv_load_options.read_file,
                       write through the callback writers
      RRV_NO_POSIX     plain fopen only (a FIFO given as input then blocks)
+     RRV_RESEARCH     keep the variants no measurement favours (NOTES)
    Parts a build can leave out, in any combination; a call that needs one
    refuses, naming the switch (NOTES; sizes: RESULTS.md, "Build switches"):
      RRV_NO_SCENE_FILE no .rrv parser, OBJ loader or gridvol reader
@@ -427,7 +427,8 @@ typedef enum rrv_integrator {
 typedef enum rrv_stepper {
     RRV_STEPPER_DEFAULT = 0, /* the stepper measured best at equal cost: RK4 */
     RRV_STEPPER_LEAPFROG,    /* kick-drift-kick (Pediredla et al. 2020) in the
-                                optical-path parameter: symplectic, second order */
+                                optical-path parameter: symplectic, second order;
+                                RRV_RESEARCH builds only */
     RRV_STEPPER_RK4          /* classic fourth-order Runge-Kutta on (x, eta dx/ds) */
 } rrv_stepper;
 
@@ -435,7 +436,8 @@ typedef enum rrv_stepper {
 typedef enum rrv_refraction_scheme {
     RRV_REFRACTION_DEFAULT = 0, /* the scheme measured best: COMB */
     RRV_REFRACTION_POISSON,     /* the seed paper: at every null event, normal there */
-    RRV_REFRACTION_MIDPOINT,    /* at every null event, normal at the chord midpoint */
+    RRV_REFRACTION_MIDPOINT,    /* at every null event, normal at the chord midpoint;
+                                   RRV_RESEARCH builds only */
     RRV_REFRACTION_COMB         /* at regularly spaced points (one random offset a
                                    segment), leapfrog kick d(eta d) = grad eta h */
 } rrv_refraction_scheme;
@@ -9906,6 +9908,22 @@ RRV_DEF rrv_integrator rrv_scene_integrator(const rrv_scene *scene)
     return rrv__default_integrator(scene);
 }
 
+/* Without RRV_RESEARCH, the variants that lose every measured row (NOTES,
+   BUILD SWITCHES) are refused: why, where settings name one, else NULL. */
+static const char *rrv__research_variant(const rrv_settings *s)
+{
+#ifdef RRV_RESEARCH
+    (void)s;
+#else
+    if (s->refraction == RRV_REFRACTION_MIDPOINT)
+        return "refraction midpoint is a research variant, not in this build (define RRV_RESEARCH); "
+               "use comb or poisson";
+    if (s->stepper == RRV_STEPPER_LEAPFROG)
+        return "stepper leapfrog is a research variant, not in this build (define RRV_RESEARCH); use rk4";
+#endif
+    return NULL;
+}
+
 /* rrv_render_rect's arguments: a prepared scene, a rectangle inside its
    image, a stride that holds it, a range of sample indices. */
 static rrv_result rrv__render_args_check(const rrv_scene *scene, int x0, int y0, int x1, int y1, int sample_begin,
@@ -9926,8 +9944,11 @@ static rrv_result rrv__render_args_check(const rrv_scene *scene, int x0, int y0,
     if (!scene->prepared)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
                          "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
-#ifdef RRV_NO_CURVED_NEE
     /* settings edited after prepare skip its check (rrv__settings_check) */
+    if (rrv__research_variant(&scene->settings))
+        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, scene->path, 0, "rrv_render_rect: %s",
+                         rrv__research_variant(&scene->settings));
+#ifdef RRV_NO_CURVED_NEE
     if (scene->settings.nee == RRV_NEE_SHOOT || scene->settings.nee == RRV_NEE_MANIFOLD)
         return rrv__fail(err, RRV_ERROR_UNSUPPORTED, scene->path, 0,
                          "rrv_render_rect: nee %s is disabled (RRV_NO_CURVED_NEE); use nee aim",
@@ -10714,6 +10735,8 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
     if ((unsigned)s->refraction > (unsigned)RRV_REFRACTION_COMB)
         return rrv__ck_fail(ck, RRV_OK, "refraction %d is not one of rrv_refraction_scheme",
                             (int)s->refraction);
+    if (rrv__research_variant(s))
+        return rrv__ck_fail(ck, RRV_ERROR_UNSUPPORTED, "%s", rrv__research_variant(s));
     RRV__CK(rrv__ck_key(ck, &k[9], (double)s->majorant_cells));
     if ((unsigned)s->ior_interpolation > (unsigned)RRV_IOR_INTERP_CUBIC)
         return rrv__ck_fail(ck, RRV_OK, "ior_interpolation %d is not one of rrv_ior_interpolation",
@@ -20394,6 +20417,22 @@ and BOUNDS (moved here from the manual at the top, word for word)
                        CLI only says so, since it reads scene files); its
                        render refuses -o .exr, --png and --nee shoot or
                        manifold before rendering when they are left out.
+     RRV_RESEARCH     the opposite way: it keeps two variants that lose
+                       every row test/bench/RESULTS.md measures, which a
+                       default build refuses (RRV_ERROR_UNSUPPORTED, by the
+                       scene's `render` statement, rrv_scene_set_settings,
+                       rrv_scene_prepare and rrv_render_rect, as above; the
+                       CLI's --refraction and --stepper before rendering):
+                       REFRACTION_MIDPOINT, the seed's Snell events with the
+                       normal at the chord's midpoint (first order, 4.3e-4
+                       on the Luneburg lens at 1000 events/m where the comb
+                       reaches 6.9e-8 at 100 kicks/m in a sixteenth of the
+                       time; POISSON stays, as the paper's reference), and
+                       STEPPER_LEAPFROG for eikonal (second order: 6.3e-6 at
+                       h = 0.01 in 39 us a ray where RK4 reaches 3.2e-8 at
+                       h = 0.1 in 7 us; it takes no placed steps). Their code
+                       stays, tested (test/internals.c defines the switch),
+                       so results of either can be reproduced.
 
    FILES, in detail
      Every input is untrusted and read with bounds, and only from a regular
@@ -20424,7 +20463,10 @@ VERSION HISTORY
             450, which sent the default from chains to shoot there (2.1x
             less efficient) and gave an explicit nee manifold fireflies;
             such jumps are still reported, and the render summary says
-            that curved nee passes them
+            that curved nee passes them; the midpoint scheme and the
+            leapfrog stepper, which lose every measured row, are left out
+            of a default build (refused, naming RRV_RESEARCH, which keeps
+            them; test/internals.c and the tables build with it)
      0.18.0 the default nee solves chains (nee manifold, the paper's
             method) with the eikonal integrator where the refracting
             media are clear, weak gas without sharp faces (the heat

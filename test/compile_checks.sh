@@ -47,13 +47,14 @@ then echo "PASS header_compiles_without_stdio"
 else printf '%s\n' "$out" | head -20; echo "FAIL header_compiles_without_stdio"
 fi
 # The parts a build can leave out (rrv.h, CONFIGURATION): each switch
-# alone, all five together (also without stdio) and none, warning-free with
+# alone, all five together (also without stdio) and none, and RRV_RESEARCH
+# (which keeps what the others' default build refuses), warning-free with
 # both compilers, each linking test/switches.c, which renders a scene built
 # through the API and checks that every call needing a part left out
 # refuses naming its switch, and that the default build does not. The
 # combinations with every stub are built by gcc at -O1, for the warnings
 # that need its flow analysis (one showed only there); the rest at -O0, so
-# the sixteen compiles of the implementation stay cheap. clang builds and
+# the eighteen compiles of the implementation stay cheap. clang builds and
 # runs every combination (its -O0 build costs a third of gcc's); gcc checks
 # the others with its front end alone, which misses only what clang's
 # reports (an unused static function: gcc warns of it when it compiles).
@@ -62,7 +63,7 @@ ok=1; count=0
 for c in gcc clang; do
     command -v "$c" >/dev/null 2>&1 || { echo "  $c not found"; ok=0; continue; }
     for flags in "" -DRRV_NO_SCENE_FILE -DRRV_NO_NANOVDB -DRRV_NO_EXR -DRRV_NO_PNG -DRRV_NO_CURVED_NEE \
-                 "$all_switches" "$all_switches -DRRV_NO_STDIO"; do
+                 -DRRV_RESEARCH "$all_switches" "$all_switches -DRRV_NO_STDIO"; do
         count=$((count + 1))
         opt=-O0
         case "$c $flags" in

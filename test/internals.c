@@ -14,6 +14,7 @@
    of them, around its #include (the compiler reports any new clash). */
 #define _POSIX_C_SOURCE 200809L
 #include "alloc_hook.h"
+#define RRV_RESEARCH /* the midpoint scheme and the leapfrog stepper, which the tests here cover too */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 

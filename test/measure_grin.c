@@ -14,6 +14,7 @@
         leapfrog and RK4 against the ray through the same grid, trilinear
         against cubic interpolation, how far each grid's ray is from the
         analytic field's, and the cost of both. */
+#define RRV_RESEARCH /* the midpoint scheme and the leapfrog stepper, which the tables measure too */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "scene_builder.h"

@@ -6,6 +6,7 @@
    comes first, as it must before any system header; a name two files
    define is renamed here around the second's #include. */
 #define _POSIX_C_SOURCE 200809L
+#define RRV_RESEARCH /* the midpoint scheme and the leapfrog stepper, which the tables measure too */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 

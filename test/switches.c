@@ -1,5 +1,6 @@
 /* The build switches of rrv.h's CONFIGURATION (RRV_NO_SCENE_FILE,
-   RRV_NO_NANOVDB, RRV_NO_EXR, RRV_NO_PNG, RRV_NO_CURVED_NEE), built by
+   RRV_NO_NANOVDB, RRV_NO_EXR, RRV_NO_PNG, RRV_NO_CURVED_NEE, and
+   RRV_RESEARCH, which keeps what the default build leaves out), built by
    test/compile_checks.sh once with each, once with all and once with none:
    a scene built through the API renders in every build, and each call that
    needs a part left out refuses with RRV_ERROR_UNSUPPORTED and a message
@@ -67,6 +68,11 @@ static int discard(void *user, const void *data, size_t size)
 #define LEFT_CURVED_NEE 1
 #else
 #define LEFT_CURVED_NEE 0
+#endif
+#ifdef RRV_RESEARCH
+#define LEFT_RESEARCH 0
+#else
+#define LEFT_RESEARCH 1
 #endif
 
 /* A Luneburg lens under a small quad light over a floor: clear and lit
@@ -158,6 +164,28 @@ int main(void)
         scene->settings.nee = RRV_NEE_SHOOT;
         refused_or_ok(rrv_render_rect(scene, 0, 0, 1, 1, 0, 1, sum, 1, NULL, &err), &err, LEFT_CURVED_NEE,
                    "RRV_NO_CURVED_NEE", "render_nee_shoot");
+        scene->settings.nee = RRV_NEE_DEFAULT;
+    }
+    /* the midpoint scheme and the leapfrog stepper, likewise, unless
+       RRV_RESEARCH keeps them: then the lens renders with each */
+    {
+        rrv_settings s = scene->settings;
+        s.integrator = RRV_INTEGRATOR_REFRACTIVE;
+        s.refraction = RRV_REFRACTION_MIDPOINT;
+        refused_or_ok(rrv_scene_set_settings(scene, &s, &err), &err, LEFT_RESEARCH, "RRV_RESEARCH",
+                      "set_settings_midpoint");
+        scene->settings = s;
+        refused_or_ok(rrv_scene_prepare(scene, &err), &err, LEFT_RESEARCH, "RRV_RESEARCH", "prepare_midpoint");
+        s.integrator = RRV_INTEGRATOR_EIKONAL;
+        s.refraction = RRV_REFRACTION_DEFAULT;
+        scene->settings = s;
+        check(rrv_scene_prepare(scene, &err) == RRV_OK, "prepare_eikonal", &err);
+        scene->settings.stepper = RRV_STEPPER_LEAPFROG;
+        memset(sum, 0, sizeof sum);
+        refused_or_ok(rrv_render_rect(scene, 0, 0, 8, 8, 0, 1, sum, 8, NULL, &err), &err, LEFT_RESEARCH,
+                      "RRV_RESEARCH", "render_leapfrog");
+        for (i = 0, total = 0; i < 8 * 8 * 3; ++i) total += sum[i];
+        check(LEFT_RESEARCH || (isfinite(total) && total > 0), "leapfrog_renders", NULL);
     }
     rrv_scene_free(scene);
 
@@ -171,6 +199,18 @@ int main(void)
         else /* the scene file's own refusal of nee shoot, with its line */
             refused_or_ok(r, &err, LEFT_CURVED_NEE, "RRV_NO_CURVED_NEE", "scene_file_nee_shoot");
         check(!LEFT_CURVED_NEE || LEFT_SCENE_FILE || err.line == 2, "scene_file_nee_shoot_line", &err);
+        rrv_scene_free(parsed);
+    }
+    {
+        static const char text[] = "camera eye 0 0 4 look 0 0 0 fov 40 resolution 8 8\n"
+                                   "render refraction midpoint integrator refractive\n";
+        rrv_scene *parsed = NULL;
+        r = rrv_scene_parse(text, sizeof text - 1, "research.rrv", NULL, NULL, &parsed, &err);
+        if (LEFT_SCENE_FILE)
+            refused_by(r, &err, 1, "RRV_NO_SCENE_FILE", "scene_parse_research");
+        else
+            refused_or_ok(r, &err, LEFT_RESEARCH, "RRV_RESEARCH", "scene_file_midpoint");
+        check(!LEFT_RESEARCH || LEFT_SCENE_FILE || err.line == 2, "scene_file_midpoint_line", &err);
         rrv_scene_free(parsed);
     }
     {

@@ -5,6 +5,7 @@
    from outside, thermal emission inside a dense medium (Kirchhoff), and the
    artist scale outside an IOR grid's own box. Stochastic checks hold to 4
    standard errors with fixed seeds. BOUNDARY_VERBOSE=1 prints the values. */
+#define RRV_RESEARCH /* the midpoint scheme and the leapfrog stepper, which this tests too */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"

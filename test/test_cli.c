@@ -1000,6 +1000,39 @@ static void unknown_flags_get_a_hint(void)
     }
 }
 
+/* The research variants (rrv.h, RRV_RESEARCH) are not in the CLI's build:
+   its flags refuse them as usage errors, before any output is opened, and
+   a scene naming one is refused with its file and line. */
+static void research_variants_are_refused(void)
+{
+    static const struct {
+        const char *flags, *line;
+    } cases[] = {
+        {"--refraction midpoint", "rrv: --refraction midpoint is a research variant, not in this build (define "
+                                  "RRV_RESEARCH); use comb or poisson\n"},
+        {"--stepper leapfrog",
+         "rrv: --stepper leapfrog is a research variant, not in this build (define RRV_RESEARCH); use rk4\n"},
+    };
+    char arguments[3 * PATH_SIZE], expected[2 * PATH_SIZE];
+    const char *scene = tmp_path("midpoint.rrv"), *out = tmp_path("midpoint.pfm");
+    size_t i;
+    remove(out);
+    for (i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
+        snprintf(arguments, sizeof arguments, "render '%s' -o '%s' %s", tiny_scene, out, cases[i].flags);
+        CHECKF(rrv(arguments) == 1, "%s: exit %d", cases[i].flags, last_run.code);
+        CHECKF(strncmp(last_run.err, cases[i].line, strlen(cases[i].line)) == 0, "%s", last_run.err);
+        CHECKF(!file_exists(out), "%s: the output was written", cases[i].flags);
+    }
+    CHECK(write_text(scene, "camera eye 0 0 -3 look 0 0 0\nrender refraction midpoint\n"));
+    snprintf(arguments, sizeof arguments, "render '%s' -o '%s'", scene, out);
+    CHECKF(rrv(arguments) == 2, "exit %d: %s", last_run.code, last_run.err);
+    snprintf(expected, sizeof expected,
+             "%s:2: render: refraction midpoint is a research variant, not in this build (define RRV_RESEARCH); "
+             "use comb or poisson\n", scene);
+    CHECKF(strstr(last_run.err, expected) != NULL, "%s", last_run.err);
+    CHECKF(!file_exists(out), "a refused scene's output was written");
+}
+
 /* A scene that bends nothing: the straight ray, exit 0, and one line saying why. */
 static void trace_says_when_nothing_refracts(void)
 {
@@ -1090,6 +1123,7 @@ int main(int argc, char **argv)
     RUN(face_jumps_are_reported);
     RUN(trace_prints_csv);
     RUN(unknown_flags_get_a_hint);
+    RUN(research_variants_are_refused);
     RUN(trace_says_when_nothing_refracts);
     return CHECK_EXIT_CODE();
 }

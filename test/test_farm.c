@@ -606,7 +606,7 @@ static void render_options_enter_the_hash(void)
 {
     static const char *const options[] = {
         "--sampler pcg", "--seed 9", "--integrator refractive", "--integrator eikonal", "--nee aim",
-        "--bend-tolerance 0.02", "--mu-eta 3", "--step 0.02", "--refraction poisson", "--stepper leapfrog",
+        "--bend-tolerance 0.02", "--mu-eta 3", "--step 0.02", "--refraction poisson",
         "--majorant-cells 2", "--ior-interp cubic",
     };
     char args[2 * PATH_SIZE];

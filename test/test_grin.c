@@ -16,6 +16,7 @@
    (measured-model bias allowance) + 4 standard errors of that mean: a correct
    scheme fails with probability < 1e-4 even if the seeds changed. Setting
    GRIN_VERBOSE=1 prints every measured value next to its bound. */
+#define RRV_RESEARCH /* the midpoint scheme and the leapfrog stepper, which this tests too */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"

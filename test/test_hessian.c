@@ -15,6 +15,7 @@
      grid medium against central differences of the traced endpoint, and
      Newton's method converging on a connection through it.
    Fixed seeds. HESSIAN_VERBOSE=1 prints the measured errors. */
+#define RRV_RESEARCH /* the midpoint scheme and the leapfrog stepper, which this tests too */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"

@@ -28,7 +28,9 @@ static const method methods[] = {
     {RRV_INTEGRATOR_CLASSIC, RRV_REFRACTION_DEFAULT, "classic"},
     {RRV_INTEGRATOR_REFRACTIVE, RRV_REFRACTION_COMB, "comb"},
     {RRV_INTEGRATOR_REFRACTIVE, RRV_REFRACTION_POISSON, "poisson"},
+#ifdef RRV_RESEARCH /* the library and the tests are built with the same flags */
     {RRV_INTEGRATOR_REFRACTIVE, RRV_REFRACTION_MIDPOINT, "midpoint"},
+#endif
     {RRV_INTEGRATOR_EIKONAL, RRV_REFRACTION_DEFAULT, "eikonal"},
 };
 #define METHOD_COUNT ((int)(sizeof methods / sizeof methods[0]))
@@ -190,6 +192,62 @@ static void test_refractive_furnace_lens(void)
         }
     }
     rrv_scene_free(s);
+}
+
+/* A default build refuses the research variants (rrv.h, RRV_RESEARCH),
+   naming the switch, wherever settings reach the library: the checked
+   setter, prepare, and rrv_render_rect for settings edited after prepare;
+   a build with the switch renders them. */
+static void test_research_variants(void)
+{
+    static const struct { rrv_refraction_scheme scheme; rrv_stepper stepper; const char *name; } variants[] = {
+        {RRV_REFRACTION_MIDPOINT, RRV_STEPPER_DEFAULT, "refraction midpoint"},
+        {RRV_REFRACTION_DEFAULT, RRV_STEPPER_LEAPFROG, "stepper leapfrog"},
+    };
+    int k;
+    for (k = 0; k < 2; ++k) {
+        rrv_scene *s = sky_scene(4, 0.5);
+        rrv_settings settings = s->settings;
+        rrv_error err;
+        float img[4 * 4 * 3];
+        rrv_result set, prepared, rendered;
+        prepare(s);
+        settings.integrator = variants[k].stepper ? RRV_INTEGRATOR_EIKONAL : RRV_INTEGRATOR_REFRACTIVE;
+        settings.refraction = variants[k].scheme;
+        settings.stepper = variants[k].stepper;
+        memset(&err, 0, sizeof err);
+        set = rrv_scene_set_settings(s, &settings, &err);
+#ifdef RRV_RESEARCH
+        CHECKF(set == RRV_OK, "%s: %s", variants[k].name, err.message);
+#else
+        CHECKF(set == RRV_ERROR_UNSUPPORTED && strstr(err.message, variants[k].name) &&
+                   strstr(err.message, "RRV_RESEARCH"),
+               "%s: set_settings %d: %s", variants[k].name, (int)set, err.message);
+#endif
+        /* set by hand, as a caller may: prepare checks them, and a render after prepare */
+        s->settings = settings;
+        memset(&err, 0, sizeof err);
+        prepared = rrv_scene_prepare(s, &err);
+        s->settings = settings;
+        if (prepared != RRV_OK) {
+            s->settings.refraction = RRV_REFRACTION_DEFAULT;
+            s->settings.stepper = RRV_STEPPER_DEFAULT;
+            prepare(s);
+            s->settings = settings;
+        }
+        memset(img, 0, sizeof img);
+        memset(&err, 0, sizeof err);
+        rendered = rrv_render_rect(s, 0, 0, 4, 4, 0, 1, img, 4, NULL, &err);
+#ifdef RRV_RESEARCH
+        CHECKF(prepared == RRV_OK && rendered == RRV_OK && img[0] == 0.5f, "%s: %d %d %g: %s", variants[k].name,
+               (int)prepared, (int)rendered, img[0], err.message);
+#else
+        CHECKF(prepared == RRV_ERROR_UNSUPPORTED, "%s: prepare %d", variants[k].name, (int)prepared);
+        CHECKF(rendered == RRV_ERROR_UNSUPPORTED && strstr(err.message, "RRV_RESEARCH") && img[0] == 0,
+               "%s: render %d: %s", variants[k].name, (int)rendered, err.message);
+#endif
+        rrv_scene_free(s);
+    }
 }
 
 static void test_refractive_furnace_sharp_box(void)
@@ -368,6 +426,7 @@ int main(int argc, char **argv)
     RUN(test_chromatic_furnace_every_integrator);
     RUN(test_channel_group_furnace_every_integrator);
     RUN(test_refractive_furnace_lens);
+    RUN(test_research_variants);
     RUN(test_refractive_furnace_sharp_box);
     RUN(test_camera_inside_luneburg);
     RUN(test_no_ior_renders_alike);

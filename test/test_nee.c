@@ -25,6 +25,7 @@
    Fixed seeds; the renders compared are independent (distinct seeds).
    NEE_VERBOSE=1 prints the values. */
 #include "alloc_hook.h" /* refuses an allocation on request; aim_reach */
+#define RRV_RESEARCH /* the midpoint scheme and the leapfrog stepper, which this tests too */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"

@@ -16,6 +16,7 @@
 #include <locale.h>
 
 #include "alloc_hook.h" /* counts allocations, refuses the Nth on request */
+#define RRV_RESEARCH /* the midpoint scheme and the leapfrog stepper, which this tests too */
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "check.h"
