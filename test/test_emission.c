@@ -647,6 +647,71 @@ static void slab_irradiance_closed_form(void)
     }
 }
 
+/* The emission cells a thick medium hides weigh less: in a uniformly
+   emitting cube of optical depth 8 across (its own 32^3 emission cells,
+   so every cell would weigh the same), a cell's pmf over the middle
+   cell's is the mean over six axis directions of exp(-depth from its
+   centre out of the cube), floored at 0.02, over the middle cell's:
+   computed here from the depths alone. An overlapping smoke box (a
+   second medium, no emission) adds its depth on the cells it covers. */
+static void hidden_cells_weigh_less(void)
+{
+    static const char *const cube =
+        "camera eye 0 0.5 -3 look 0 0.5 0 up 0 1 0 fov 40 resolution 4 4\n"
+        "render spp 1 maxdepth 1 seed 5 integrator classic\n"
+        "material white diffuse albedo 1 1 1\n"
+        "quad origin -3 0 -3 u 0 0 6 v 6 0 0 material white\n"
+        "medium glow box -0.5 0 -0.5 0.5 1 0.5 sigma_a 8 8 8 sigma_s 0 0 0 Le 1 1 1 Lescale 1\n"
+        "density glow constant 1\n%s";
+    static const char *const smoke = "medium smoke box -0.5 0 -0.5 0.5 1 0 sigma_a 0 0 0 sigma_s 4 4 4\n"
+                                     "density smoke constant 1\n";
+    int variant;
+    for (variant = 0; variant < 2; ++variant) {
+        rrv_scene *s = load(cube, variant ? smoke : "", "", "");
+        const struct rrv__emitters *e;
+        double worst = 0, ref = 0;
+        int x, y, z, k;
+        if (!s) return;
+        e = s->emitters;
+        CHECK(e && e->count == 1 && e->grid[0].n[0] == 32 && e->grid[0].n[1] == 32 && e->grid[0].n[2] == 32);
+        if (!e || e->count != 1 || e->grid[0].n[0] != 32) { rrv_scene_free(s); return; }
+        for (k = 0; k < 2; ++k)
+            for (z = 0; z < 32; ++z)
+                for (y = 0; y < 32; ++y)
+                    for (x = 0; x < 32; ++x) {
+                        /* extinction per cell length (1/32 m): the glow's 8,
+                           the smoke's 4 over z < 0 (cells 0 to 15) */
+                        const int at[3] = {x, y, z};
+                        double seen = 0, want, got;
+                        int a, j;
+                        for (a = 0; a < 3; ++a) {
+                            double down = 0, up = 0;
+                            for (j = 0; j < 32; ++j) {
+                                double sigma = 8.0 + (variant && (a == 2 ? j : at[2]) < 16 ? 4.0 : 0.0);
+                                if (j < at[a]) down += sigma / 32;
+                                if (j > at[a]) up += sigma / 32;
+                                if (j == at[a]) { down += sigma / 64; up += sigma / 64; }
+                            }
+                            seen += exp(-down) + exp(-up);
+                        }
+                        want = seen / 6 > 0.02 ? seen / 6 : 0.02;
+                        if (k == 0) {
+                            /* the first pass finds the middle cell's weight */
+                            if (x == 16 && y == 16 && z == 16) ref = want;
+                            continue;
+                        }
+                        got = e->pmf[(size_t)(z * 32 + y) * 32 + x] / e->pmf[(size_t)(16 * 32 + 16) * 32 + 16];
+                        worst = fmax(worst, fabs(got / (want / ref) - 1));
+                    }
+        printf("  %s: cells' weights against the depths' within %.1e; a face's centre %.2f, a corner %.2f, the "
+               "middle 1\n", variant ? "with smoke" : "the cube alone", worst,
+               e->pmf[(size_t)(16 * 32 + 16) * 32] / e->pmf[(size_t)(16 * 32 + 16) * 32 + 16],
+               e->pmf[0] / e->pmf[(size_t)(16 * 32 + 16) * 32 + 16]);
+        CHECKF(worst < 1e-6, "%s: a cell's weight %.2e off the depths'", variant ? "with smoke" : "alone", worst);
+        rrv_scene_free(s);
+    }
+}
+
 /* `cellcentered on` is the same grid shifted by half a voxel: every lookup
    at p equals the plain grid's at p - map * 0.5 (to rounding), the map and
    data untouched; without the key, or with `off`, nothing moves. */
@@ -725,6 +790,7 @@ int main(void)
     RUN(aim_density_integrates_to_its_share);
     RUN(nee_matches_forward_in_blocks);
     RUN(slab_irradiance_closed_form);
+    RUN(hidden_cells_weigh_less);
     RUN(blackbody_table_matches_the_sum);
     RUN(albedo_weighting_is_unbiased);
     RUN(cell_centered_is_half_voxel_shift);
