@@ -20174,7 +20174,9 @@ and BOUNDS (moved here from the manual at the top, word for word)
      medium is drawn from an emission grid prepare builds beside the
      majorants (at most 32 cells along a medium's longest side, each
      weighted by its sigma_a Le at the centres of its octants, floored at
-     a thousandth of a bound of it; blocks of 8^3 cells picked by their
+     a thousandth of a bound of it, times the mean transmittance out of
+     the grid along the six axes, floored at 0.02, so that the cells a
+     thick flame hides take fewer samples; blocks of 8^3 cells picked by their
      weight over max(r^2, radius^2) from the vertex, in two steps: first
      one of the blocks of 2^3 such blocks, then a block in it), joined to the vertex by a straight
      shadow ray whose transmittance is residual-tracked under the default
