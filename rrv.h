@@ -20541,7 +20541,10 @@ VERSION HISTORY
             that curved nee passes them; the midpoint scheme and the
             leapfrog stepper, which lose every measured row, are left out
             of a default build (refused, naming RRV_RESEARCH, which keeps
-            them; test/internals.c and the tables build with it)
+            them; test/internals.c and the tables build with it); emission
+            NEE weighs each emission cell by the media's mean transmittance
+            out of the grid (campfire 14.9x -> 21.9x forward paths'
+            efficiency at maxdepth 1, 5.7x -> 6.3x at 32)
      0.18.0 the default nee solves chains (nee manifold, the paper's
             method) with the eikonal integrator where the refracting
             media are clear, weak gas without sharp faces (the heat
