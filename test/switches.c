@@ -124,6 +124,25 @@ static rrv_scene *lens_scene(rrv_error *err)
     return scene;
 }
 
+/* A scene whose second line names a part: parsed where the parser is
+   built, and refused at that line where the part is left out. */
+static void scene_file_refuses(const char *render_line, int left_out, const char *name, const char *what)
+{
+    char text[256];
+    rrv_scene *parsed = NULL;
+    rrv_error err;
+    rrv_result r;
+    memset(&err, 0, sizeof err);
+    snprintf(text, sizeof text, "camera eye 0 0 4 look 0 0 0 fov 40 resolution 8 8\n%s", render_line);
+    r = rrv_scene_parse(text, strlen(text), "switches.rrv", NULL, NULL, &parsed, &err);
+    if (LEFT_SCENE_FILE)
+        refused_by(r, &err, 1, "RRV_NO_SCENE_FILE", what);
+    else
+        refused_or_ok(r, &err, left_out, name, what);
+    check(!left_out || LEFT_SCENE_FILE || err.line == 2, what, &err);
+    rrv_scene_free(parsed);
+}
+
 int main(void)
 {
     rrv_error err;
@@ -189,30 +208,11 @@ int main(void)
     }
     rrv_scene_free(scene);
 
-    {
-        static const char text[] = "camera eye 0 0 4 look 0 0 0 fov 40 resolution 8 8\n"
-                                   "render nee shoot integrator eikonal\n";
-        rrv_scene *parsed = NULL;
-        r = rrv_scene_parse(text, sizeof text - 1, "switches.rrv", NULL, NULL, &parsed, &err);
-        if (LEFT_SCENE_FILE)
-            refused_by(r, &err, 1, "RRV_NO_SCENE_FILE", "scene_parse");
-        else /* the scene file's own refusal of nee shoot, with its line */
-            refused_or_ok(r, &err, LEFT_CURVED_NEE, "RRV_NO_CURVED_NEE", "scene_file_nee_shoot");
-        check(!LEFT_CURVED_NEE || LEFT_SCENE_FILE || err.line == 2, "scene_file_nee_shoot_line", &err);
-        rrv_scene_free(parsed);
-    }
-    {
-        static const char text[] = "camera eye 0 0 4 look 0 0 0 fov 40 resolution 8 8\n"
-                                   "render refraction midpoint integrator refractive\n";
-        rrv_scene *parsed = NULL;
-        r = rrv_scene_parse(text, sizeof text - 1, "research.rrv", NULL, NULL, &parsed, &err);
-        if (LEFT_SCENE_FILE)
-            refused_by(r, &err, 1, "RRV_NO_SCENE_FILE", "scene_parse_research");
-        else
-            refused_or_ok(r, &err, LEFT_RESEARCH, "RRV_RESEARCH", "scene_file_midpoint");
-        check(!LEFT_RESEARCH || LEFT_SCENE_FILE || err.line == 2, "scene_file_midpoint_line", &err);
-        rrv_scene_free(parsed);
-    }
+    /* the scene file's own refusals, with their line */
+    scene_file_refuses("render nee shoot integrator eikonal\n", LEFT_CURVED_NEE, "RRV_NO_CURVED_NEE",
+                       "scene_file_nee_shoot");
+    scene_file_refuses("render refraction midpoint integrator refractive\n", LEFT_RESEARCH, "RRV_RESEARCH",
+                       "scene_file_midpoint");
     {
         rrv_grid grid;
         refused_by(rrv_grid_read_memory("", 0, "g.vol", 0, 1, &grid, &err), &err, LEFT_SCENE_FILE,
