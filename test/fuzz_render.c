@@ -19,6 +19,9 @@
    `make fuzz`, then `make fuzz-run`, or by hand:
        rm -rf /tmp/render-seeds && cp -r scenes /tmp/render-seeds
        ./build-fuzz/fuzz_render -max_total_time=60 -timeout=20 /tmp/render-seeds */
+/* the research variants too (rrv.h, RRV_RESEARCH): their code is fuzzed as
+   the default build's is */
+#define RRV_RESEARCH
 #define RRV_IMPLEMENTATION
 #include "../rrv.h"
 #include "fuzz_files.h"
