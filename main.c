@@ -1892,6 +1892,30 @@ static void print_face_jump_summary(const rrv_scene *scene)
         fputs(": refracted and reflected there as glass; nee shoot and aim refract there, manifold does not\n", stderr);
 }
 
+/* `rrv info`'s ambient IOR, and where an `ambient` statement set one that
+   misses the first gas medium's own at its ambient state (what the
+   ambient would be without the statement), that IOR too: a value rounded
+   in the scene file (1.029 for 1.0292) makes glass of a plume's faces,
+   which chains do not cross. */
+static void print_ambient(const rrv_scene *scene)
+{
+    int i;
+    printf("ambient ior: %.9g", scene->ambient_ior);
+    if (scene->settings.ambient_ior == 0) {
+        puts(scene->ambient_ior != 1 ? " (the gas at its ambient state)" : "");
+        return;
+    }
+    for (i = 0; i < scene->medium_count; ++i) {
+        const rrv_medium *m = &scene->media[i];
+        double gas = 1.0 + (m->eta_ref - 1.0) * m->ior_scale;
+        if (!m->ior_from_gas) continue;
+        if (fabs(gas - scene->ambient_ior) > RRV_SMOOTH_JUMP)
+            printf(" (set; the gas of medium \"%s\" at its ambient state is %.9g)", m->name, gas);
+        break;
+    }
+    putchar('\n');
+}
+
 /* The light sampling a prepared scene renders with, as `nee` names it
    (the refractive integrator's shoot aims; the manifold's solver named). */
 static const char *nee_label(const rrv_scene *scene)
@@ -3357,8 +3381,7 @@ static int command_info(int argc, char **argv)
         else
             printf("step: placed by the field (a turn of %g rad a step at most)\n", scene->settings.bend_tolerance);
     }
-    printf("ambient ior: %.9g%s\n", scene->ambient_ior,
-           scene->settings.ambient_ior != 0 ? "" : scene->ambient_ior != 1 ? " (the gas at its ambient state)" : "");
+    print_ambient(scene);
     printf("materials: %d\n", scene->material_count);
     printf("shapes: %d (%d spheres, %d quads, %d triangles)\n", scene->shape_count,
            kind_counts[RRV_SHAPE_SPHERE], kind_counts[RRV_SHAPE_QUAD],
