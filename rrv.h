@@ -8530,7 +8530,7 @@ typedef struct rrv__vertex_bsdf {
    against shoot's steps on a plume, RESULTS.md). Such jumps are what a
    field's tail leaves at its box: a hot blob's Gaussian reaches 1.4e-7
    at the face of README's heat caustic box at iorscale 450, which sent
-   the default from chains to shoot (2.3x less efficient there) when
+   the default from chains to shoot (2.1x less efficient there) when
    this bound was the rounding of the IOR, RRV__REPORT_JUMP. */
 #define RRV__SOLVE_JUMP RRV_SMOOTH_JUMP
 /* Jumps above this, a float's rounding of an IOR near 1 (the faces of a
@@ -10009,6 +10009,7 @@ static const char *rrv__research_variant(const rrv_settings *s)
 static rrv_result rrv__render_args_check(const rrv_scene *scene, int x0, int y0, int x1, int y1, int sample_begin,
                                          int sample_end, const float *sum, int stride, rrv_error *err)
 {
+    const char *research;
     if (!scene || !sum) return rrv__fail(err, RRV_ERROR_ARGUMENT, NULL, 0, "rrv_render_rect: NULL scene or sum");
     if (x0 < 0 || y0 < 0 || x1 > scene->camera.width || y1 > scene->camera.height || x0 > x1 || y0 > y1)
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
@@ -10025,9 +10026,8 @@ static rrv_result rrv__render_args_check(const rrv_scene *scene, int x0, int y0,
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0,
                          "rrv_render_rect: the scene is not prepared (call rrv_scene_prepare after editing it)");
     /* settings edited after prepare skip its check (rrv__settings_check) */
-    if (rrv__research_variant(&scene->settings))
-        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, scene->path, 0, "rrv_render_rect: %s",
-                         rrv__research_variant(&scene->settings));
+    if ((research = rrv__research_variant(&scene->settings)) != NULL)
+        return rrv__fail(err, RRV_ERROR_UNSUPPORTED, scene->path, 0, "rrv_render_rect: %s", research);
 #ifdef RRV_NO_CURVED_NEE
     if (scene->settings.nee == RRV_NEE_SHOOT || scene->settings.nee == RRV_NEE_MANIFOLD)
         return rrv__fail(err, RRV_ERROR_UNSUPPORTED, scene->path, 0,
@@ -10798,6 +10798,7 @@ static void rrv__settings_def(rrv_settings *s)
 static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
                                       const rrv_settings *s)
 {
+    const char *research;
     const rrv__sf_key *k = rrv__sf_render_keys;
     RRV__CK(rrv__ck_key(ck, &k[0], (double)s->spp));
     RRV__CK(rrv__ck_key(ck, &k[1], (double)s->max_depth));
@@ -10815,8 +10816,8 @@ static rrv_result rrv__settings_check(const rrv__ck *ck, const rrv__ck *ambient,
     if ((unsigned)s->refraction > (unsigned)RRV_REFRACTION_COMB)
         return rrv__ck_fail(ck, RRV_OK, "refraction %d is not one of rrv_refraction_scheme",
                             (int)s->refraction);
-    if (rrv__research_variant(s))
-        return rrv__ck_fail(ck, RRV_ERROR_UNSUPPORTED, "%s", rrv__research_variant(s));
+    if ((research = rrv__research_variant(s)) != NULL)
+        return rrv__ck_fail(ck, RRV_ERROR_UNSUPPORTED, "%s", research);
     RRV__CK(rrv__ck_key(ck, &k[9], (double)s->majorant_cells));
     if ((unsigned)s->ior_interpolation > (unsigned)RRV_IOR_INTERP_CUBIC)
         return rrv__ck_fail(ck, RRV_OK, "ior_interpolation %d is not one of rrv_ior_interpolation",

@@ -32,11 +32,7 @@ def write_grid(path, n, lo, hi, bumps, noise, seed):
     rng = random.Random(seed)
 
     def temperature(p):
-        t = 300.0
-        for (c, radius, rise) in bumps:
-            d2 = sum((p[a] - c[a]) ** 2 for a in range(3)) / (radius * radius)
-            if d2 < 1:
-                t += rise * (1 - d2) ** 3
+        t = make_heat_shadow.bumps_temperature(p, bumps)
         if noise and t > 300.5:
             t += noise * (rng.random() - 0.5) * (t - 300) / 900
         return t
