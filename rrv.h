@@ -1925,10 +1925,26 @@ static void rrv__nv_to_index(const rrv_nanovdb *g, rrv_vec3 p, double u[3])
     for (a = 0; a < 3; ++a) u[a] = g->inverse[3 * a] * d[0] + g->inverse[3 * a + 1] * d[1] + g->inverse[3 * a + 2] * d[2];
 }
 
+/* The eight values around leaf index n0 (corner bit 0: +x, 1: +y, 2: +z),
+   none of them past the leaf's last row, with the type decided once. */
+static void rrv__nv_leaf_corners(rrv_nanovdb_type type, const unsigned char *leaf, unsigned n0, double c[8])
+{
+    static const unsigned step[8] = {0, 64, 8, 72, 1, 65, 9, 73};
+    int corner;
+    if (type == RRV_NANOVDB_FLOAT) {
+        const unsigned char *v = leaf + RRV__NV_LEAF_DATA + 4 * n0;
+        for (corner = 0; corner < 8; ++corner) c[corner] = rrv__nv_f32(v + 4 * step[corner]);
+        return;
+    }
+    for (corner = 0; corner < 8; ++corner) c[corner] = rrv__nv_leaf_value(type, leaf, n0 + step[corner]);
+}
+
 /* Trilinear at continuous index u. The eight index points lie in one leaf
    unless the lower ones sit on a leaf's last row along some axes; each
    distinct leaf (or tile) among them is descended to once: one descent for
-   7/8 of the positions along each axis, at most eight at a leaf's corner. */
+   7/8 of the positions along each axis, at most eight at a leaf's corner.
+   The one-leaf case (two positions in three) reads its corners in one go:
+   it was most of a lookup's cost on a NanoVDB fire. */
 static double rrv__nv_trilinear(const rrv_nanovdb *g, const double u[3])
 {
     double f[3], t[3], c[8], c00, c10, c01, c11;
@@ -1939,23 +1955,33 @@ static double rrv__nv_trilinear(const rrv_nanovdb *g, const double u[3])
     for (a = 0; a < 3; ++a) {
         /* outside the data box (with one voxel to blend into) all is background */
         if (!(u[a] > (double)g->data_lo[a] - 1.0 && u[a] < (double)g->data_hi[a] + 1.0)) return g->background;
-        f[a] = floor(u[a]);
+        /* a positive index truncates to its floor (and below 2^53 exactly) */
+        f[a] = u[a] > 0 ? (double)(int64_t)u[a] : floor(u[a]);
         i0[a] = (int64_t)f[a];
         t[a] = u[a] - f[a];
         if ((i0[a] & 7) == 7) cross |= 1 << a;
         if (i0[a] < INT32_MIN || i0[a] >= INT32_MAX) near_edge = 1;
     }
-    for (corner = 0; corner < 8; ++corner) {
-        int64_t x = i0[0] + (corner & 1), y = i0[1] + ((corner >> 1) & 1), z = i0[2] + ((corner >> 2) & 1);
-        int id = corner & cross;
-        if (near_edge) {
-            c[corner] = rrv_nanovdb_voxel(g, x, y, z);
-            continue;
+    if (!cross && !near_edge) {
+        const unsigned char *one = rrv__nv_find(g, (int32_t)i0[0], (int32_t)i0[1], (int32_t)i0[2], &tile[0]);
+        if (one)
+            rrv__nv_leaf_corners(g->type, one, (unsigned)(((i0[0] & 7) << 6) | ((i0[1] & 7) << 3) | (i0[2] & 7)), c);
+        else
+            for (corner = 0; corner < 8; ++corner) c[corner] = tile[0];
+    } else {
+        for (corner = 0; corner < 8; ++corner) {
+            int64_t x = i0[0] + (corner & 1), y = i0[1] + ((corner >> 1) & 1), z = i0[2] + ((corner >> 2) & 1);
+            int id = corner & cross;
+            if (near_edge) {
+                c[corner] = rrv_nanovdb_voxel(g, x, y, z);
+                continue;
+            }
+            /* corners that differ only along axes that stay in the leaf share it */
+            if (id == corner) leaf[id] = rrv__nv_find(g, (int32_t)x, (int32_t)y, (int32_t)z, &tile[id]);
+            c[corner] = leaf[id] ? rrv__nv_leaf_value(g->type, leaf[id],
+                                                      (unsigned)(((x & 7) << 6) | ((y & 7) << 3) | (z & 7)))
+                                 : tile[id];
         }
-        /* corners that differ only along axes that stay in the leaf share it */
-        if (id == corner) leaf[id] = rrv__nv_find(g, (int32_t)x, (int32_t)y, (int32_t)z, &tile[id]);
-        c[corner] = leaf[id] ? rrv__nv_leaf_value(g->type, leaf[id], (unsigned)(((x & 7) << 6) | ((y & 7) << 3) | (z & 7)))
-                             : tile[id];
     }
     /* corner bit 0: x, bit 1: y, bit 2: z */
     c00 = c[0] + t[0] * (c[1] - c[0]);
