@@ -1825,7 +1825,8 @@ static const char *const face_names[7] = {"-x", "+x", "-y", "+y", "-z", "+z", "s
 
 /* Where the light samples go (LIGHT SAMPLING in rrv.h's manual): each
    light shape's share and the sky's, from the running sums the power
-   sampler picks by (every choice alike under uniform). */
+   sampler picks by (every choice alike under uniform), and the emissive
+   media's where they share the draw. */
 static void print_light_samples(const rrv_scene *scene)
 {
     static const char *const kinds[] = {"sphere", "quad", "triangle"};
@@ -1840,9 +1841,12 @@ static void print_light_samples(const rrv_scene *scene)
     }
     if (!choices || (!uniform && !(total > 0))) return;
     printf("light samples (%s):", uniform ? "uniform" : "power");
+    /* beside light shapes the emissive media take a share of the same draw */
+    if (scene->emit_share > 0) printf(" the emissive media %.3g %%,", 100 * scene->emit_share);
     for (i = 0; i < choices; ++i) {
         double p = uniform ? 1.0 / choices
-                           : (scene->light_cdf[i] - (i ? scene->light_cdf[i - 1] : 0.0)) / total;
+                           : (1.0 - scene->emit_share) *
+                                 (scene->light_cdf[i] - (i ? scene->light_cdf[i - 1] : 0.0)) / total;
         if (i < scene->light_count) {
             int kind = (int)scene->shapes[scene->lights[i]].kind;
             printf("%s shape %d (%s) %.3g %%", i ? "," : "", scene->lights[i],
@@ -1852,6 +1856,8 @@ static void print_light_samples(const rrv_scene *scene)
                    p > 0 ? "" : " (its light left to the paths' own directions)");
         }
     }
+    if (scene->emitters && scene->settings.emission_nee == RRV_EMISSION_NEE_ON)
+        printf("; the emissive media a draw of their own");
     printf("\n");
 }
 

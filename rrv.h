@@ -490,8 +490,9 @@ typedef enum rrv_manifold_gauge {
    EMISSIVE MEDIA AS LIGHTS). */
 typedef enum rrv_emission_nee {
     RRV_EMISSION_NEE_DEFAULT = 0, /* ON where there is no light shape (under
-                                     the uniform light sampler, no sky either),
-                                     else OFF */
+                                     the uniform light sampler, no sky either);
+                                     beside light shapes, under the power
+                                     sampler, a share of their draw; else OFF */
     RRV_EMISSION_NEE_ON,
     RRV_EMISSION_NEE_OFF          /* emission only where paths collect it */
 } rrv_emission_nee;
@@ -640,6 +641,10 @@ typedef struct rrv_scene {
                                               the lights, then the sky (rrv__light_pick) */
     int light_power;                       /* settings.light_sampler was power */
     double sky_weight;                     /* the sky's weight in that pick */
+    double emit_share;                     /* the share of each vertex's light draw
+                                              that goes to the emissive media beside
+                                              the light shapes; 0: none, or a draw
+                                              of their own (rrv__light_pick) */
     int sharp_faces;                       /* some refracting medium's face jumps by
                                               more than curved connections take as
                                               smooth (rrv_medium_face_jumps above
@@ -4823,6 +4828,9 @@ typedef struct rrv__emit_cluster {
 } rrv__emit_cluster;
 
 struct rrv__emitters {
+    double power;         /* their power over pi, as the light pick weighs shapes */
+    double pick;          /* the probability that a vertex samples them: 1, or
+                             scene->emit_share where light shapes share the draw */
     int count, clusters, supers;
     rrv__emitter_grid *grid;
     int *of_medium;       /* a medium's grid, -1 where it does not emit */
@@ -5140,6 +5148,18 @@ static rrv_result rrv__build_emitters(rrv_scene *scene, rrv_error *err)
         RRV_FREE(scratch);
     }
     for (at = 0; at < cells; ++at) total += e->pmf[at];
+    /* A unit volume radiates 4 pi sigma_a Le, a unit area of a one-sided
+       light shape pi L: the weights (sigma_a Le, seen from outside) times
+       the cells' volumes, times 4, are the media's power over pi. */
+    e->power = 0;
+    for (i = 0; i < e->count; ++i) {
+        const rrv__emitter_grid *g = &e->grid[i];
+        size_t n = (size_t)g->n[0] * g->n[1] * g->n[2], k;
+        double sum = 0;
+        for (k = 0; k < n; ++k) sum += e->pmf[g->first + k];
+        e->power += 4.0 * sum / g->inv_volume;
+    }
+    e->pick = 1.0;
     if (!(total > 0)) {
         /* nothing can emit: the paths alone find it all */
         rrv__emitters_free(e);
@@ -5252,7 +5272,8 @@ static double rrv__emission_cluster_share(const struct rrv__emitters *e, rrv__em
 }
 
 /* The density, per unit volume, with which next-event estimation from x
-   (S = rrv__emission_norm(e, x)) picks y in medium mi (rrv__emitter_sample);
+   (S = rrv__emission_norm(e, x)) picks y in medium mi (rrv__emitter_sample),
+   the chance e->pick that the vertex samples the emitters at all included;
    0 where it never does. */
 static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, rrv__emit_from *from, rrv_vec3 y)
 {
@@ -5274,7 +5295,7 @@ static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, rrv__emit
     if (!(e->pmf[cell] > 0)) return 0.0;
     cluster = g->first_cluster + ((idx[2] / RRV__EMIT_BLOCK) * g->nc[1] + idx[1] / RRV__EMIT_BLOCK) * g->nc[0] +
               idx[0] / RRV__EMIT_BLOCK;
-    return rrv__emission_cluster_share(e, from, cluster) * e->pmf[cell] / from->S * g->inv_volume;
+    return e->pick * rrv__emission_cluster_share(e, from, cluster) * e->pmf[cell] / from->S * g->inv_volume;
 }
 
 /* A point of an emissive medium seen from x from five uniform numbers: a
@@ -7721,7 +7742,7 @@ static double rrv__emission_dir_density(const rrv_scene *scene, rrv__emit_from *
         }
         sum += part * g->inv_volume / 3.0;
     }
-    sum /= from->S;
+    sum *= e->pick / from->S;
     /* far beyond any scene's size the cubes overflow: no aim there, and
        the forward path's weight is then 1 */
     return sum < DBL_MAX ? sum : 0.0;
@@ -8064,6 +8085,21 @@ static int rrv__emitters_take_samples(const rrv_scene *scene)
            scene->settings.emission_nee != RRV_EMISSION_NEE_OFF;
 }
 
+/* Beside light shapes, emissive media join the same pick by their power
+   (scene->emit_share of each draw, rrv__light_pick) unless the scene says
+   `emissionnee on` (a sample of their own at every vertex, besides the
+   light's) or off. A draw of their own beside a light that outshines
+   them cost more than it saved (scenes/fire.rrv 0.46x), while leaving
+   them to the paths cost 12x where they light most of the room
+   (test/bench/campfire.rrv under a fill light, RESULTS.md, "Fire beside
+   a light"); a share of one draw is never far from the better of the
+   two. */
+static int rrv__emitters_share_draws(const rrv_scene *scene)
+{
+    return scene->light_power && scene->light_count > 0 && scene->emitters &&
+           scene->settings.emission_nee == RRV_EMISSION_NEE_DEFAULT;
+}
+
 /* The pick, its probabilities and the sky's weight are those prepare saw
    (light_power, sky_weight): a setting edited since changes nothing until
    the scene is prepared again, so the pick and the densities the
@@ -8080,7 +8116,9 @@ static double rrv__light_prob(const rrv_scene *scene, const rrv_shape *s)
 {
     int choices = rrv__light_choices(scene);
     if (!scene->light_power) return 1.0 / choices;
-    return scene->light_cdf ? rrv__light_weight(scene, s) / scene->light_cdf[choices - 1] : 0.0;
+    return scene->light_cdf
+               ? (1.0 - scene->emit_share) * rrv__light_weight(scene, s) / scene->light_cdf[choices - 1]
+               : 0.0;
 }
 
 static rrv_result rrv__build_light_cdf(rrv_scene *scene, rrv_error *err)
@@ -8089,6 +8127,7 @@ static rrv_result rrv__build_light_cdf(rrv_scene *scene, rrv_error *err)
     double sum = 0;
     scene->light_power = scene->settings.light_sampler == RRV_LIGHT_SAMPLER_POWER;
     scene->sky_weight = scene->light_count || rrv__emitters_take_samples(scene) ? 0.0 : 1.0;
+    scene->emit_share = 0.0;
     if (!choices || !scene->light_power) return RRV_OK;
     scene->light_cdf = (double *)RRV_MALLOC((size_t)choices * sizeof(double));
     if (!scene->light_cdf) return rrv__fail(err, RRV_ERROR_MEMORY, scene->path, 0, "out of memory");
@@ -8106,6 +8145,10 @@ static rrv_result rrv__build_light_cdf(rrv_scene *scene, rrv_error *err)
     }
     if (!(sum > 0) || !(sum < DBL_MAX))
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "the lights' total power is %g", sum);
+    if (rrv__emitters_share_draws(scene) && scene->emitters->power > 0 && scene->emitters->power < DBL_MAX) {
+        scene->emit_share = scene->emitters->power / (scene->emitters->power + sum);
+        scene->emitters->pick = scene->emit_share;
+    }
     return RRV_OK;
 }
 
@@ -8146,8 +8189,10 @@ typedef struct rrv__light_sample {
 typedef struct rrv__light_draw { double u, u1, u2; } rrv__light_draw;
 
 /* Which of the rrv__light_choices the draw picks: an index into
-   scene->lights, or light_count for the environment; -1 if there is none.
-   Straight and curved NEE pick through here, so one draw names one light. */
+   scene->lights, or light_count for the environment; -1 if there is none
+   or the draw falls in the emissive media's share (u below emit_share,
+   rrv__vertex_nee samples them). Straight and curved NEE pick through
+   here, so one draw names one light. */
 static int rrv__light_pick(const rrv_scene *scene, const rrv__light_draw *draw)
 {
     int choices = rrv__light_choices(scene), pick, hi;
@@ -8158,8 +8203,14 @@ static int rrv__light_pick(const rrv_scene *scene, const rrv__light_draw *draw)
         return pick >= choices ? choices - 1 : pick;
     }
     /* the first running sum above u times the total: a choice of weight 0
-       adds nothing to the sum and is never the first above it */
-    target = draw->u * scene->light_cdf[choices - 1];
+       adds nothing to the sum and is never the first above it; past the
+       emitters' share, what is left of u */
+    target = draw->u;
+    if (scene->emit_share > 0) {
+        if (target < scene->emit_share) return -1;
+        target = (target - scene->emit_share) / (1.0 - scene->emit_share);
+    }
+    target *= scene->light_cdf[choices - 1];
     for (pick = 0, hi = choices - 1; pick < hi;) {
         int mid = (pick + hi) / 2;
         if (target < scene->light_cdf[mid]) hi = mid;
@@ -9193,10 +9244,32 @@ static void rrv__emission_transmittance(rrv__context *ctx, rrv_vec3 x, const rrv
     rrv__residual_tracking_transmittance(ctx, x, ls->wi, tmax, rng, T);
 }
 
+/* Records the vertex x for the MIS weight of the emission the path then
+   collects, where emission NEE samples from x (returns 1); q as for
+   rrv__emission_norm. Scattered inside an emitter's box, the path's own
+   collisions find the emission around it in proportion to the
+   transmittance, which the samples (drawn by emission and distance only)
+   do not: measured on test/bench/campfire.rrv at maxdepth 2, samples from
+   such vertices raised the error 1.7x. Leaving them to the path (weight 1
+   after such a vertex) is a choice per vertex, so the sum stays unbiased. */
+static int rrv__emission_record(const rrv__context *ctx, rrv__path *path, rrv_vec3 x, const rrv__vertex_bsdf *v,
+                                double *q)
+{
+    const rrv_scene *scene = ctx->scene;
+    int mi;
+    path->emit.on = 0;
+    if (!v->surface)
+        for (mi = 0; mi < scene->emitters->count; ++mi) {
+            const rrv_medium *e = &scene->media[scene->emitters->grid[mi].medium];
+            if (rrv__inside_box(x, e->lo, e->hi)) return 0;
+        }
+    rrv__emission_from_vertex(ctx, &path->emit, x, v, q);
+    return 1;
+}
+
 /* Next-event estimation toward emissive media (section comment above
-   rrv__chord_meets_refraction) from the vertex x. It also records the
-   vertex, so that the emission the path then collects takes the
-   complementary weight. */
+   rrv__chord_meets_refraction) from the vertex x, which it records
+   (rrv__emission_record). */
 static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, const rrv__vertex_bsdf *v,
                               rrv__rng *rng)
 {
@@ -9209,19 +9282,7 @@ static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, co
     rrv_vec3 y;
     double u[5], q[RRV__EMIT_KEEP], p_nee, p_fwd, pdf_dir, r, T[3], Le[3], k, given = 1.0;
     int mi, ch;
-    /* Scattered inside an emitter's box, the path's own collisions find the
-       emission around it in proportion to the transmittance, which the
-       samples (drawn by emission and distance only) do not: measured on
-       test/bench/campfire.rrv at maxdepth 2, samples from such vertices
-       raised the error 1.7x. Leaving them to the path (weight 1 after
-       such a vertex) is a choice per vertex, so the sum stays unbiased. */
-    from->on = 0;
-    if (!v->surface)
-        for (mi = 0; mi < scene->emitters->count; ++mi) {
-            const rrv_medium *e = &scene->media[scene->emitters->grid[mi].medium];
-            if (rrv__inside_box(x, e->lo, e->hi)) return;
-        }
-    rrv__emission_from_vertex(ctx, from, x, v, q);
+    if (!rrv__emission_record(ctx, path, x, v, q)) return;
     /* one a statement: the order of evaluation of arguments is unspecified */
     u[0] = rrv__uniform(rng);
     u[1] = rrv__uniform(rng);
@@ -9277,9 +9338,20 @@ static void rrv__vertex_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, cons
        that the point on it gets the second pair whole */
     rng->next[RRV__STREAM_LIGHT] = 1;
     rrv__draw_light(rng, &draw);
+    if (ctx->emission && ctx->scene->emit_share > 0) {
+        /* one draw for the light shapes and the emitters (rrv__light_pick):
+           the vertex is recorded either way, since the emission the path
+           collects weighs itself against the chance the draw had */
+        if (draw.u < ctx->scene->emit_share) {
+            rrv__emission_nee(ctx, path, x, v, rng);
+            rng->stream = RRV__STREAM_DIRECTION;
+            return;
+        }
+        rrv__emission_record(ctx, path, x, v, NULL);
+    }
     rrv__sample_direct_light(ctx, path, x, v, &draw, rng);
     if (ctx->partition) rrv__curved_nee(ctx, path, x, v, &draw, rng);
-    if (ctx->emission) rrv__emission_nee(ctx, path, x, v, rng);
+    if (ctx->emission && !(ctx->scene->emit_share > 0)) rrv__emission_nee(ctx, path, x, v, rng);
     rng->stream = RRV__STREAM_DIRECTION;
 }
 
@@ -10093,16 +10165,17 @@ static rrv_result rrv__render_context(const rrv_scene *scene, rrv__context *ctx,
        aiming stays unbiased at about straight's cost */
     nee = scene->settings.nee != RRV_NEE_DEFAULT ? scene->settings.nee : rrv__default_nee(scene, integrator);
     ctx->sample_lights = !ctx->bends || nee != RRV_NEE_NONE;
-    /* By default only where no light shape is: there it pays
-       (test/bench/campfire.rrv: 15x the efficiency at maxdepth 1, 5.8x at
-       the default 32; under a night sky, where the power light sampler
+    /* By default a draw of their own where no light shape is (there it
+       pays: test/bench/campfire.rrv 22x the efficiency at maxdepth 1, 6.3x
+       at the default 32; under a night sky, where the power light sampler
        gives it the sky's samples, 15x, 7.3x and 6.9x at maxdepth 1, 2 and
-       32 on the lit surfaces), while beside
-       an area light and a sky (scenes/fire.rrv) the extra shadow ray a
-       vertex cost more than the variance it saved (0.46x classic, 0.70x
-       refractive; test/bench/RESULTS.md, "Fire as a light"). */
+       32 on the lit surfaces), a share of the light shapes' draw beside
+       them (rrv__emitters_share_draws): a draw of their own beside an
+       area light and a sky (scenes/fire.rrv) cost more than the variance
+       it saved (0.46x classic, 0.70x refractive; test/bench/RESULTS.md,
+       "Fire as a light"). */
     ctx->emission = ctx->sample_lights && scene->emitters &&
-                   (scene->settings.emission_nee == RRV_EMISSION_NEE_ON ||
+                   (scene->settings.emission_nee == RRV_EMISSION_NEE_ON || scene->emit_share > 0 ||
                     (scene->settings.emission_nee == RRV_EMISSION_NEE_DEFAULT && scene->light_count == 0 &&
                      (scene->environment.kind == RRV_ENV_NONE || rrv__emitters_take_samples(scene))));
     /* Equiangular samples where some light shape can take them: none
@@ -20200,11 +20273,24 @@ and BOUNDS (moved here from the manual at the top, word for word)
      a cell (measured in test/bench/RESULTS.md, "Weak connections"), so it is off.
 
    EMISSIVE MEDIA AS LIGHTS (rrv_settings.emission_nee, scene `render
-   emissionnee on|off`; by default on where the scene has no light shape,
-   a sky or not (under `lightsampler uniform`, only without a sky): there
-   it pays, beside light shapes it measured a loss)
+   emissionnee on|off`; by default a draw of their own at every vertex
+   where the scene has no light shape, a sky or not; beside light shapes a
+   share of theirs, in proportion to power; under `lightsampler uniform`,
+   on only without a light shape or a sky. `on`: a draw of their own
+   beside the light shapes' too; `off`: only the paths find them)
      Media that emit (Le, or a blackbody temperature) are sampled as lights
-     at every real vertex, as the area lights are: a point y of an emissive
+     at real vertices, as the area lights are. Beside light shapes, one
+     draw a vertex picks the emitters with probability P = W_E / (W_E +
+     the shapes' weights), W_E their power over pi (4 times the cells'
+     weights, below, times their volumes, as a unit volume radiates 4 pi
+     sigma_a Le where a unit area of light shape radiates pi L), each shape
+     by (1 - P) times its own share; every density the MIS weights read
+     carries its probability, so a forward path weighs the emission it
+     meets against P p_nee and the light it hits against (1 - P) p_light,
+     whichever way the draw went (a draw of their own beside a light that
+     outshone them measured 0.46x, none at all 12x worse where they light
+     most of the room: test/bench/RESULTS.md, "Fire beside a light"). A
+     point y of an emissive
      medium is drawn from an emission grid prepare builds beside the
      majorants (at most 32 cells along a medium's longest side, each
      weighted by its sigma_a Le at the centres of its octants, floored at
@@ -20266,9 +20352,10 @@ and BOUNDS (moved here from the manual at the top, word for word)
    power|uniform`, pbrt-v4's names; power by default)
      A vertex's one light sample goes to one light, picked by `power` in
      proportion to its power (area times mean radiance; quads and
-     triangles emit on one side), and the sky only where there is no light
-     shape and no emissive medium to take them (EMISSIVE MEDIA AS LIGHTS):
-     the sky's samples go in uniform directions, which a vertex's
+     triangles emit on one side; emissive media beside them by default
+     take their share of the same pick, EMISSIVE MEDIA AS LIGHTS), and the
+     sky only where there is no light shape and no emissive medium to take
+     them: the sky's samples go in uniform directions, which a vertex's
      own phase or cosine sample matches or beats, so beside a light shape
      they only took its samples away, and the paths' own directions reach
      the sky with MIS weight 1 (pbrt-v4 leaves a uniform sky to BSDF

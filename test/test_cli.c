@@ -857,6 +857,20 @@ static void render_is_deterministic(void)
     CHECKF(strstr(last_run.err, "at 2 spp") != NULL, "--spp not applied: %s", last_run.err);
 }
 
+/* A flame beside a light shape shares each vertex's light draw with it by
+   power, unless the scene asks for a draw of the flame's own. */
+static void info_names_the_emitters_share(void)
+{
+    CHECKF(rrv("info scenes/fire.rrv") == 0, "exit %d: %s", last_run.code, last_run.err);
+    CHECKF(strstr(last_run.out, "\nlight samples (power): the emissive media 4.62 %, shape 2 (quad) 95.4 %, sky 0 % "
+                                "(its light left to the paths' own directions)\n") != NULL,
+           "%s", last_run.out);
+    CHECKF(rrv("info scenes/pictures/fire.rrv") == 0, "exit %d: %s", last_run.code, last_run.err);
+    CHECKF(strstr(last_run.out, "\nlight samples (power): shape 2 (quad) 100 %, sky 0 % (its light left to the "
+                                "paths' own directions); the emissive media a draw of their own\n") != NULL,
+           "%s", last_run.out);
+}
+
 static void info_describes_scene(void)
 {
     char arguments[2 * PATH_SIZE];
@@ -1124,6 +1138,7 @@ int main(int argc, char **argv)
     RUN(diff_reports_known_errors);
     RUN(render_is_deterministic);
     RUN(info_describes_scene);
+    RUN(info_names_the_emitters_share);
     RUN(face_jumps_are_reported);
     RUN(trace_prints_csv);
     RUN(unknown_flags_get_a_hint);

@@ -475,10 +475,26 @@ static void nee_matches_forward_in_blocks(void)
         "ior haze gas iorscale 300\n"
         "ambient ior 1\n";
     static const char *const sky = "environment constant L 0.03 0.04 0.08\n";
+    /* a small light facing down, about as strong as the flame: the
+       default shares each vertex's light draw between the two */
+    static const char *const fill = "quad origin 2.5 3 -2 u 0.4 0 0 v 0 0 0.4 L 13 13 13\n";
+    static const char *const fill_haze =
+        "quad origin 2.5 3 -2 u 0.4 0 0 v 0 0 0.4 L 13 13 13\n"
+        "medium haze box -1.3 0.9 -1.0 1.3 3.4 1.0 sigma_a 0 0 0 sigma_s 0 0 0\n"
+        "temperature haze noise octaves 2 frequency 2.5 seed 5 falloff plume center 0 1.5 0 radius 0.9 "
+        "amplitude 600 base 0 temperatureoffset -300 blackbody off\n"
+        "ior haze gas iorscale 300\n"
+        "ambient ior 1.0876\n";
     int variant, k;
-    for (variant = 0; variant < 5; ++variant) {
-        const char *integrator = variant == 1 || variant == 2 || variant == 4 ? "refractive" : "classic";
-        const char *extra = variant == 4 ? sharp : variant == 3 ? sky : variant == 2 ? around : variant ? haze : "";
+    for (variant = 0; variant < 7; ++variant) {
+        const char *integrator = variant == 1 || variant == 2 || variant == 4 || variant == 6 ? "refractive" : "classic";
+        const char *extra = variant == 6   ? fill_haze
+                            : variant == 5 ? fill
+                            : variant == 4 ? sharp
+                            : variant == 3 ? sky
+                            : variant == 2 ? around
+                            : variant      ? haze
+                                           : "";
         rrv_scene *on = load(campfire, integrator, "", extra);
         rrv_scene *off = load(campfire, integrator, "emissionnee off", extra);
         double m_on[BW * BH], s_on[BW * BH], m_off[BW * BH], s_off[BW * BH], worst = 0, rel = 0;
@@ -493,6 +509,28 @@ static void nee_matches_forward_in_blocks(void)
                   rrv__light_prob(off, NULL) == 1.0);
             rrv__solver_release(&ctx);
         }
+        if (variant == 5) {
+            /* the share is the flame's power over the light's and its own,
+               the draw below it goes to the flame, the light keeps the rest */
+            rrv__context ctx;
+            rrv__camera_frame frame;
+            rrv_error e;
+            rrv__light_draw draw = {0, 0.5, 0.5};
+            double share, light = 0.4 * 0.4 * 13.0;
+            CHECK(rrv__render_context(on, &ctx, &frame, &e) == RRV_OK && ctx.emission);
+            rrv__solver_release(&ctx);
+            share = on->emitters->power / (on->emitters->power + light);
+            CHECKF(share > 0.2 && share < 0.8 && fabs(on->emit_share - share) <= 1e-15 * share &&
+                       on->emitters->pick == on->emit_share,
+                   "the flame's share %g, expected %g", on->emit_share, share);
+            CHECK(fabs(rrv__light_prob(on, &on->shapes[on->lights[0]]) - (1.0 - share)) <= 1e-15);
+            draw.u = share * (1.0 - 1e-9);
+            CHECK(rrv__light_pick(on, &draw) == -1);
+            draw.u = share + (1.0 - share) * 1e-9;
+            CHECK(rrv__light_pick(on, &draw) == 0);
+            CHECK(rrv__render_context(off, &ctx, &frame, &e) == RRV_OK && !ctx.emission && off->emit_share == 0.0);
+            rrv__solver_release(&ctx);
+        }
         block_stats(on, 16, 16, m_on, s_on);
         block_stats(off, 16, 128, m_off, s_off);
         for (k = 0; k < BW * BH; ++k) {
@@ -505,7 +543,8 @@ static void nee_matches_forward_in_blocks(void)
         /* resolving power: a bias of a tenth would show */
         CHECKF(rel < 0.025, "%s: the forward blocks' relative error %g is too large to see a bias", integrator, rel);
         printf("  %s%s: worst |z| %.2f, forward blocks within %.1f%%\n", integrator,
-               variant == 4   ? ", hot air with sharp faces"
+               variant >= 5   ? ", beside a light that shares the draw"
+               : variant == 4 ? ", hot air with sharp faces"
                : variant == 3 ? ", under a sky"
                : variant == 2 ? ", hot air behind the flame's front half"
                : variant      ? ", hot air over the flame"
