@@ -4829,8 +4829,8 @@ typedef struct rrv__emit_cluster {
 
 struct rrv__emitters {
     double power;         /* their power over pi, as the light pick weighs shapes */
-    double pick;          /* the probability that a vertex samples them: 1, or
-                             scene->emit_share where light shapes share the draw */
+    rrv__emit_cluster lights; /* where light shapes share the draw: a box around
+                                 them all, weight their total (rrv__vertex_emit_share) */
     int count, clusters, supers;
     rrv__emitter_grid *grid;
     int *of_medium;       /* a medium's grid, -1 where it does not emit */
@@ -5159,7 +5159,6 @@ static rrv_result rrv__build_emitters(rrv_scene *scene, rrv_error *err)
         for (k = 0; k < n; ++k) sum += e->pmf[g->first + k];
         e->power += 4.0 * sum / g->inv_volume;
     }
-    e->pick = 1.0;
     if (!(total > 0)) {
         /* nothing can emit: the paths alone find it all */
         rrv__emitters_free(e);
@@ -5193,6 +5192,7 @@ typedef struct rrv__emit_from {
     rrv_vec3 w0;             /* the direction sampled there */
     double p_w0;             /* rrv__emission_dir_density of w0; < 0 until asked */
     int jumped;              /* the path crossed a sharp face since x */
+    double pick;             /* the chance that x's light draw went to the emitters */
     int aim;                 /* a walk of rrv__emission_aim: it collects past r* alone */
 } rrv__emit_from;
 
@@ -5273,7 +5273,7 @@ static double rrv__emission_cluster_share(const struct rrv__emitters *e, rrv__em
 
 /* The density, per unit volume, with which next-event estimation from x
    (S = rrv__emission_norm(e, x)) picks y in medium mi (rrv__emitter_sample),
-   the chance e->pick that the vertex samples the emitters at all included;
+   the chance from->pick that the vertex samples the emitters at all included;
    0 where it never does. */
 static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, rrv__emit_from *from, rrv_vec3 y)
 {
@@ -5295,7 +5295,7 @@ static double rrv__emission_pdf(const struct rrv__emitters *e, int mi, rrv__emit
     if (!(e->pmf[cell] > 0)) return 0.0;
     cluster = g->first_cluster + ((idx[2] / RRV__EMIT_BLOCK) * g->nc[1] + idx[1] / RRV__EMIT_BLOCK) * g->nc[0] +
               idx[0] / RRV__EMIT_BLOCK;
-    return e->pick * rrv__emission_cluster_share(e, from, cluster) * e->pmf[cell] / from->S * g->inv_volume;
+    return from->pick * rrv__emission_cluster_share(e, from, cluster) * e->pmf[cell] / from->S * g->inv_volume;
 }
 
 /* A point of an emissive medium seen from x from five uniform numbers: a
@@ -7256,6 +7256,7 @@ typedef struct rrv__path {
     rrv__bender bender;      /* refraction state (refractive integrator) */
     rrv__emit_from emit;
     rrv__equi eq;            /* the last vertex's segment, where it was a free flight's */
+    double emit_share;       /* the emitters' share of the last vertex's light draw */
 } rrv__path;
 
 static void rrv__path_start(rrv__path *path, rrv__rng *rng)
@@ -7270,6 +7271,7 @@ static void rrv__path_start(rrv__path *path, rrv__rng *rng)
     if (path->hero > 2) path->hero = 2;
     path->emit.on = 0;
     path->eq.on = 0;
+    path->emit_share = 0.0;
 }
 
 /* The factor that turns beta into a contribution: 1 / mean(ratio). */
@@ -7742,7 +7744,7 @@ static double rrv__emission_dir_density(const rrv_scene *scene, rrv__emit_from *
         }
         sum += part * g->inv_volume / 3.0;
     }
-    sum *= e->pick / from->S;
+    sum *= from->pick / from->S;
     /* far beyond any scene's size the cubes overflow: no aim there, and
        the forward path's weight is then 1 */
     return sum < DBL_MAX ? sum : 0.0;
@@ -8111,13 +8113,14 @@ static double rrv__light_weight(const rrv_scene *scene, const rrv_shape *s)
     return rrv__shape_area(s) * (s->L[0] + s->L[1] + s->L[2]) / 3.0;
 }
 
-/* The probability that rrv__light_pick names light shape s (NULL: the sky). */
-static double rrv__light_prob(const rrv_scene *scene, const rrv_shape *s)
+/* The probability that rrv__light_pick names light shape s (NULL: the sky)
+   from a draw whose emit_share is emit_share. */
+static double rrv__light_prob(const rrv_scene *scene, const rrv_shape *s, double emit_share)
 {
     int choices = rrv__light_choices(scene);
     if (!scene->light_power) return 1.0 / choices;
     return scene->light_cdf
-               ? (1.0 - scene->emit_share) * rrv__light_weight(scene, s) / scene->light_cdf[choices - 1]
+               ? (1.0 - emit_share) * rrv__light_weight(scene, s) / scene->light_cdf[choices - 1]
                : 0.0;
 }
 
@@ -8146,8 +8149,16 @@ static rrv_result rrv__build_light_cdf(rrv_scene *scene, rrv_error *err)
     if (!(sum > 0) || !(sum < DBL_MAX))
         return rrv__fail(err, RRV_ERROR_ARGUMENT, scene->path, 0, "the lights' total power is %g", sum);
     if (rrv__emitters_share_draws(scene) && scene->emitters->power > 0 && scene->emitters->power < DBL_MAX) {
+        rrv_vec3 lo = rrv__v3(DBL_MAX, DBL_MAX, DBL_MAX), hi = rrv__scale(lo, -1.0);
         scene->emit_share = scene->emitters->power / (scene->emitters->power + sum);
-        scene->emitters->pick = scene->emit_share;
+        for (i = 0; i < scene->light_count; ++i) {
+            rrv_vec3 a, b;
+            rrv__shape_bounds(&scene->shapes[scene->lights[i]], &a, &b);
+            lo = rrv__vmin(lo, a);
+            hi = rrv__vmax(hi, b);
+        }
+        rrv__emit_cluster_box(&scene->emitters->lights, lo, hi);
+        scene->emitters->lights.weight = sum;
     }
     return RRV_OK;
 }
@@ -8186,7 +8197,10 @@ typedef struct rrv__light_sample {
    point that sees part of a light straight and part through a lens, the
    two parts then no longer add their variances (the sum of two estimates
    that are each zero half the time). */
-typedef struct rrv__light_draw { double u, u1, u2; } rrv__light_draw;
+typedef struct rrv__light_draw {
+    double u, u1, u2;
+    double emit_share; /* the emissive media's share of it (rrv__light_pick) */
+} rrv__light_draw;
 
 /* Which of the rrv__light_choices the draw picks: an index into
    scene->lights, or light_count for the environment; -1 if there is none
@@ -8206,9 +8220,9 @@ static int rrv__light_pick(const rrv_scene *scene, const rrv__light_draw *draw)
        adds nothing to the sum and is never the first above it; past the
        emitters' share, what is left of u */
     target = draw->u;
-    if (scene->emit_share > 0) {
-        if (target < scene->emit_share) return -1;
-        target = (target - scene->emit_share) / (1.0 - scene->emit_share);
+    if (draw->emit_share > 0) {
+        if (target < draw->emit_share) return -1;
+        target = (target - draw->emit_share) / (1.0 - draw->emit_share);
     }
     target *= scene->light_cdf[choices - 1];
     for (pick = 0, hi = choices - 1; pick < hi;) {
@@ -8246,6 +8260,7 @@ static void rrv__draw_light(rrv__rng *rng, rrv__light_draw *draw)
     draw->u = rrv__uniform(rng);
     draw->u1 = rrv__uniform(rng);
     draw->u2 = rrv__uniform(rng);
+    draw->emit_share = 0.0;
 }
 
 static int rrv__sample_light(const rrv_scene *scene, rrv_vec3 p, const rrv__light_draw *draw, rrv__light_sample *ls)
@@ -8256,7 +8271,7 @@ static int rrv__sample_light(const rrv_scene *scene, rrv_vec3 p, const rrv__ligh
     if (pick == scene->light_count) {
         ls->wi = rrv__sample_uniform_sphere(u1, u2);
         ls->dist = DBL_MAX;
-        ls->pdf = RRV__INV_4PI * rrv__light_prob(scene, NULL);
+        ls->pdf = RRV__INV_4PI * rrv__light_prob(scene, NULL, draw->emit_share);
         rrv__environment_L(&scene->environment, ls->wi, ls->L);
         ls->point = rrv__madd(p, ls->wi, 1e30);
         return ls->pdf > 0 && (ls->L[0] > 0 || ls->L[1] > 0 || ls->L[2] > 0);
@@ -8278,7 +8293,7 @@ static int rrv__sample_light(const rrv_scene *scene, rrv_vec3 p, const rrv__ligh
             b = dc * cos_t;
             disc = s->radius * s->radius - dc * dc * sin_t * sin_t;
             ls->dist = b - sqrt(fmax(0.0, disc));
-            ls->pdf = rrv__light_prob(scene, s) / (2.0 * RRV__PI * one_minus_cos_max);
+            ls->pdf = rrv__light_prob(scene, s, draw->emit_share) / (2.0 * RRV__PI * one_minus_cos_max);
             if (!(ls->pdf > 0)) return 0;
             q = rrv__madd(p, ls->wi, ls->dist);
         } else {
@@ -8288,7 +8303,7 @@ static int rrv__sample_light(const rrv_scene *scene, rrv_vec3 p, const rrv__ligh
             ls->dist = rrv__length(ls->wi);
             if (!(ls->dist > 0)) return 0;
             ls->wi = rrv__scale(ls->wi, 1.0 / ls->dist);
-            ls->pdf = rrv__emitter_pdf(s, p, q, nq) * rrv__light_prob(scene, s);
+            ls->pdf = rrv__emitter_pdf(s, p, q, nq) * rrv__light_prob(scene, s, draw->emit_share);
             if (!(ls->pdf > 0)) return 0;
         }
         for (c = 0; c < 3; ++c) ls->L[c] = s->L[c];
@@ -8442,9 +8457,11 @@ static double rrv__equi_weight(double mine, double p_a, double p_b, double p_c)
 
 /* The weight of a free flight's vertex at eq->t (A: p_own the light
    sample's density, B: the phase function's) toward light shape s, where
-   the light sample's density is p_light and the phase function's p_phase. */
+   the light sample's density is p_light and the phase function's p_phase;
+   emit_share: the emitters' share of the vertex's light draw, which the
+   equiangular sample's own pick of a shape does not have. */
 static double rrv__equi_vertex_weight(const rrv__context *ctx, const rrv__equi *eq, const rrv_shape *s, int light_side,
-                                      double p_light, double p_phase)
+                                      double p_light, double p_phase, double emit_share)
 {
     double p_ff, p_eq;
     rrv_vec3 c;
@@ -8454,7 +8471,19 @@ static double rrv__equi_vertex_weight(const rrv__context *ctx, const rrv__equi *
     p_eq = rrv__equi_pdf(eq, c, eq->t);
     p_ff = rrv__equi_free_flight(ctx, eq, eq->t);
     return rrv__equi_weight(light_side ? p_ff * p_light : p_ff * p_phase, p_ff * p_light, p_ff * p_phase,
-                            p_eq * p_light);
+                            p_eq * p_light / (1.0 - emit_share));
+}
+
+/* The equiangular sample's own weight (C) at distance t toward light
+   point density p_light (its pick's: never the emitters') and phase
+   density p_phase, where a free flight's vertex at t would give the
+   emitters emit_share of its light draw (A's density then (1 - emit_share)
+   p_light). With rrv__equi_vertex_weight the three sum to one. */
+static double rrv__equi_own_weight(const rrv__context *ctx, const rrv__equi *eq, rrv_vec3 c, double t, double p_light,
+                                   double p_phase, double emit_share)
+{
+    double p_eq = rrv__equi_pdf(eq, c, t), p_ff = rrv__equi_free_flight(ctx, eq, t);
+    return rrv__equi_weight(p_eq * p_light, p_ff * p_light * (1.0 - emit_share), p_ff * p_phase, p_eq * p_light);
 }
 
 static void rrv__material_albedo(const rrv_material *mat, rrv_vec3 p, rrv_vec3 n, double albedo[3])
@@ -8827,9 +8856,9 @@ static double rrv__light_area_pdf(const rrv_scene *scene, const rrv_shape *s, rr
         rrv_vec3 to_x0 = rrv__sub(x0, y), n = rrv__sub(y, s->center);
         double dist2 = rrv__dot(to_x0, to_x0), facing = rrv__dot(n, to_x0) / s->radius;
         if (!(facing > 0) || !(dist2 > 0)) return 0.0;
-        return rrv__emitter_pdf(s, x0, y, n) * facing / (sqrt(dist2) * dist2) * rrv__light_prob(scene, s);
+        return rrv__emitter_pdf(s, x0, y, n) * facing / (sqrt(dist2) * dist2) * rrv__light_prob(scene, s, scene->emit_share);
     }
-    return rrv__light_prob(scene, s) / rrv__shape_area(s);
+    return rrv__light_prob(scene, s, scene->emit_share) / rrv__shape_area(s);
 }
 
 /* The light point y the draw names from x0 for a curved connection, its
@@ -8857,7 +8886,7 @@ static const rrv_shape *rrv__pick_area_light(const rrv_scene *scene, const rrv__
     }
     *y = rrv__area_light_point(s, draw->u1, draw->u2);
     *ny = rrv__normalize(rrv__cross(s->e1, s->e2));
-    *pdf_area = rrv__light_prob(scene, s) / rrv__shape_area(s);
+    *pdf_area = rrv__light_prob(scene, s, scene->emit_share) / rrv__shape_area(s);
     return s;
 }
 
@@ -8924,7 +8953,7 @@ static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 
         double along = rrv__dot(to_c, w), miss2 = rrv__dot(to_c, to_c) - along * along, r2 = s->radius * s->radius;
         if (!(along > 0) || !(miss2 < r2) || !(rrv__dot(to_c, to_c) > r2)) return 0.0;
         *len = along - sqrt(r2 - miss2);
-        return rrv__emitter_pdf(s, x0, x0, w) * rrv__light_prob(scene, s);
+        return rrv__emitter_pdf(s, x0, x0, w) * rrv__light_prob(scene, s, scene->emit_share);
     }
     n = rrv__cross(s->e1, s->e2);
     n2 = rrv__dot(n, n);
@@ -8938,7 +8967,7 @@ static double rrv__aim_pdf(const rrv_scene *scene, const rrv_shape *s, rrv_vec3 
     if (a < 0 || b < 0 || (s->kind == RRV_SHAPE_TRIANGLE ? a + b > 1 : a > 1 || b > 1)) return 0.0;
     cos_y = fabs(facing) / sqrt(n2);
     *len = t;
-    return t * t / (rrv__shape_area(s) * cos_y) * rrv__light_prob(scene, s);
+    return t * t / (rrv__shape_area(s) * cos_y) * rrv__light_prob(scene, s, scene->emit_share);
 }
 
 /* The density nee (straight or aimed) draws w with from x0 toward the
@@ -9120,7 +9149,7 @@ static void rrv__sample_direct_light(rrv__context *ctx, rrv__path *path, rrv_vec
     if (!v->surface && path->eq.on && ls.dist < DBL_MAX) {
         /* a free flight's vertex on a segment that also takes equiangular samples */
         const rrv_shape *s = &ctx->scene->shapes[ctx->scene->lights[rrv__light_pick(ctx->scene, draw)]];
-        w = rrv__equi_vertex_weight(ctx, &path->eq, s, 1, ls.pdf, pdf);
+        w = rrv__equi_vertex_weight(ctx, &path->eq, s, 1, ls.pdf, pdf, draw->emit_share);
     } else {
         w = rrv__power_heuristic(ls.pdf, pdf);
     }
@@ -9143,6 +9172,7 @@ static void rrv__emission_from_vertex(const rrv__context *ctx, rrv__emit_from *f
     from->p_w0 = -1.0;
     from->jumped = 0;
     from->aim = 0;
+    from->pick = 1.0;
 }
 
 /* One straight piece of a walk from o along d, at most segment long: the
@@ -9244,6 +9274,17 @@ static void rrv__emission_transmittance(rrv__context *ctx, rrv_vec3 x, const rrv
     rrv__residual_tracking_transmittance(ctx, x, ls->wi, tmax, rng, T);
 }
 
+/* Whether x lies in the box of a medium that emits. */
+static int rrv__inside_emitter(const rrv_scene *scene, rrv_vec3 x)
+{
+    int mi;
+    for (mi = 0; mi < scene->emitters->count; ++mi) {
+        const rrv_medium *e = &scene->media[scene->emitters->grid[mi].medium];
+        if (rrv__inside_box(x, e->lo, e->hi)) return 1;
+    }
+    return 0;
+}
+
 /* Records the vertex x for the MIS weight of the emission the path then
    collects, where emission NEE samples from x (returns 1); q as for
    rrv__emission_norm. Scattered inside an emitter's box, the path's own
@@ -9255,23 +9296,17 @@ static void rrv__emission_transmittance(rrv__context *ctx, rrv_vec3 x, const rrv
 static int rrv__emission_record(const rrv__context *ctx, rrv__path *path, rrv_vec3 x, const rrv__vertex_bsdf *v,
                                 double *q)
 {
-    const rrv_scene *scene = ctx->scene;
-    int mi;
     path->emit.on = 0;
-    if (!v->surface)
-        for (mi = 0; mi < scene->emitters->count; ++mi) {
-            const rrv_medium *e = &scene->media[scene->emitters->grid[mi].medium];
-            if (rrv__inside_box(x, e->lo, e->hi)) return 0;
-        }
+    if (!v->surface && rrv__inside_emitter(ctx->scene, x)) return 0;
     rrv__emission_from_vertex(ctx, &path->emit, x, v, q);
     return 1;
 }
 
 /* Next-event estimation toward emissive media (section comment above
-   rrv__chord_meets_refraction) from the vertex x, which it records
-   (rrv__emission_record). */
-static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, const rrv__vertex_bsdf *v,
-                              rrv__rng *rng)
+   rrv__chord_meets_refraction) from the vertex x that rrv__emission_record
+   recorded (q: what it kept for the sampler). */
+static void rrv__emission_sample(rrv__context *ctx, rrv__path *path, rrv_vec3 x, const rrv__vertex_bsdf *v,
+                                 const double *q, rrv__rng *rng)
 {
     static const double white[3] = {1.0, 1.0, 1.0};
     const rrv_scene *scene = ctx->scene;
@@ -9280,9 +9315,8 @@ static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, co
     rrv__coeffs c;
     const rrv_medium *m;
     rrv_vec3 y;
-    double u[5], q[RRV__EMIT_KEEP], p_nee, p_fwd, pdf_dir, r, T[3], Le[3], k, given = 1.0;
+    double u[5], p_nee, p_fwd, pdf_dir, r, T[3], Le[3], k, given = 1.0;
     int mi, ch;
-    if (!rrv__emission_record(ctx, path, x, v, q)) return;
     /* one a statement: the order of evaluation of arguments is unspecified */
     u[0] = rrv__uniform(rng);
     u[1] = rrv__uniform(rng);
@@ -9316,6 +9350,52 @@ static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, co
     }
 }
 
+/* Emission NEE with a draw of its own (rrv__vertex_nee). */
+static void rrv__emission_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, const rrv__vertex_bsdf *v,
+                              rrv__rng *rng)
+{
+    double q[RRV__EMIT_KEEP];
+    if (rrv__emission_record(ctx, path, x, v, q)) rrv__emission_sample(ctx, path, x, v, q, rng);
+}
+
+/* The emitters' share of a light draw from the vertex that `from` records
+   (NULL: one that samples no emission, a scattering inside an emitter's
+   box), where they share it with light shapes: the classic integrator
+   weighs the two as the emission sampler weighs its blocks, power over
+   squared distance (W G of the comment above rrv__emit_cluster_g), W_E S(x)
+   against the lights' total weight times the G of a box around them all,
+   so that a flame beside a wall takes the wall's samples from a far
+   lamp; the refracting integrators keep the scene's share by power, which
+   their curved estimators read (rrv__light_prob). Any share below one
+   keeps the sum unbiased, as long as the vertex's samples and the
+   forward paths from it read the same one. */
+static double rrv__vertex_emit_share(const rrv__context *ctx, const rrv__emit_from *from)
+{
+    const struct rrv__emitters *e = ctx->scene->emitters;
+    double mine, theirs, share;
+    if (ctx->bends) return ctx->scene->emit_share;
+    if (!from) return 0.0;
+    mine = e->power * from->S;
+    theirs = e->lights.weight * rrv__emit_cluster_g(&e->lights, from);
+    share = mine > 0 ? mine / (mine + theirs) : 0.0;
+    /* the lights keep a sliver, so that their densities stay finite */
+    return share < 1.0 - 1e-9 ? share : 1.0 - 1e-9;
+}
+
+/* The emitters' share of the light draw of a scattering vertex at x
+   (rrv__vertex_nee), for the equiangular technique's weights. */
+static double rrv__point_emit_share(const rrv__context *ctx, rrv_vec3 x)
+{
+    rrv__emit_from at;
+    if (!ctx->emission || !(ctx->scene->emit_share > 0)) return 0.0;
+    if (ctx->bends) return ctx->scene->emit_share;
+    if (rrv__inside_emitter(ctx->scene, x)) return 0.0;
+    memset(&at, 0, sizeof at);
+    at.x = x;
+    at.S = rrv__emission_norm(ctx->scene->emitters, &at, NULL);
+    return rrv__vertex_emit_share(ctx, &at);
+}
+
 /* A real vertex's next-event estimation: one light draw, taken by straight
    NEE and, where paths are sorted into classes, by curved NEE. Without
    light sampling (nee none) nothing is drawn. */
@@ -9338,16 +9418,21 @@ static void rrv__vertex_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, cons
        that the point on it gets the second pair whole */
     rng->next[RRV__STREAM_LIGHT] = 1;
     rrv__draw_light(rng, &draw);
+    path->emit_share = 0.0;
     if (ctx->emission && ctx->scene->emit_share > 0) {
         /* one draw for the light shapes and the emitters (rrv__light_pick):
            the vertex is recorded either way, since the emission the path
-           collects weighs itself against the chance the draw had */
-        if (draw.u < ctx->scene->emit_share) {
-            rrv__emission_nee(ctx, path, x, v, rng);
+           collects weighs itself against the chance the draw had, as the
+           light it hits does (path->emit_share) */
+        double q[RRV__EMIT_KEEP];
+        int recorded = rrv__emission_record(ctx, path, x, v, q);
+        draw.emit_share = path->emit_share = rrv__vertex_emit_share(ctx, recorded ? &path->emit : NULL);
+        if (recorded) path->emit.pick = draw.emit_share;
+        if (draw.u < draw.emit_share) {
+            if (recorded) rrv__emission_sample(ctx, path, x, v, q, rng);
             rng->stream = RRV__STREAM_DIRECTION;
             return;
         }
-        rrv__emission_record(ctx, path, x, v, NULL);
     }
     rrv__sample_direct_light(ctx, path, x, v, &draw, rng);
     if (ctx->partition) rrv__curved_nee(ctx, path, x, v, &draw, rng);
@@ -9370,7 +9455,7 @@ static void rrv__equiangular_sample(rrv__context *ctx, rrv__path *path, const do
     rrv__light_sample ls;
     rrv__coeffs co;
     rrv_vec3 x;
-    double u, t, p_eq, p_ff, phase, T_in[3], T_out[3], k;
+    double u, t, p_eq, phase, T_in[3], T_out[3], k;
     int pick, ch;
     rrv__draw_light(rng, &draw);
     u = rrv__uniform(rng);
@@ -9386,9 +9471,10 @@ static void rrv__equiangular_sample(rrv__context *ctx, rrv__path *path, const do
     if (!rrv__nonzero3(T_in)) return;
     rrv__light_transmittance(ctx, x, &ls, rng, T_out);
     if (!rrv__nonzero3(T_out)) return;
-    p_ff = rrv__equi_free_flight(ctx, eq, t);
-    k = phase * rrv__equi_weight(p_eq * ls.pdf, p_ff * ls.pdf, p_ff * phase, p_eq * ls.pdf) / (p_eq * ls.pdf) * 3.0 /
-        (ratio[0] + ratio[1] + ratio[2]);
+    /* this pick never goes to the emitters, a vertex's at x would with
+       the share there */
+    k = phase * rrv__equi_own_weight(ctx, eq, rrv__light_centre(s), t, ls.pdf, phase, rrv__point_emit_share(ctx, x)) /
+        (p_eq * ls.pdf) * 3.0 / (ratio[0] + ratio[1] + ratio[2]);
     for (ch = 0; ch < 3; ++ch) path->L[ch] += beta[ch] * T_in[ch] * co.sigma_s[ch] * T_out[ch] * ls.L[ch] * k;
 }
 
@@ -9451,7 +9537,7 @@ static void rrv__escape_to_sky(rrv__context *ctx, rrv__camera_path *cp)
     if (cp->prev_pdf > 0 && ctx->sample_lights &&
         (!(ctx->partition && cp->touched) ||
          (!cp->jumped && rrv__forward_weak(ctx, cp->vertex, cp->w0, cp->d, DBL_MAX) == 1)))
-        w = rrv__power_heuristic(cp->prev_pdf, RRV__INV_4PI * rrv__light_prob(scene, NULL));
+        w = rrv__power_heuristic(cp->prev_pdf, RRV__INV_4PI * rrv__light_prob(scene, NULL, cp->path.emit_share));
     k = w * rrv__eta_scale(ctx, rrv__madd(cp->o, cp->d, 1e30)) * rrv__path_mis(&cp->path);
     for (c = 0; c < 3; ++c) cp->path.L[c] += cp->path.beta[c] * Le[c] * k;
 }
@@ -9490,9 +9576,10 @@ static int rrv__hit_surface(rrv__context *ctx, rrv__camera_path *cp, const rrv__
                                                to_x)
                            : 0;
             if (!(ctx->partition && cp->touched) || weak == 1)
-                w = rrv__equi_vertex_weight(ctx, &cp->path.eq, s, 0,
-                                            rrv__emitter_pdf(s, cp->vertex, x, n) * rrv__light_prob(scene, s),
-                                            cp->prev_pdf);
+                w = rrv__equi_vertex_weight(
+                    ctx, &cp->path.eq, s, 0,
+                    rrv__emitter_pdf(s, cp->vertex, x, n) * rrv__light_prob(scene, s, cp->path.emit_share),
+                    cp->prev_pdf, cp->path.emit_share);
             else
                 w = rrv__solver_forward_weight(ctx, cp->vertex, cp->w0, cp->prev_pdf, s, x, weak, cp->jumped,
                                                cp->mirrored);

@@ -475,20 +475,28 @@ static void nee_matches_forward_in_blocks(void)
         "ior haze gas iorscale 300\n"
         "ambient ior 1\n";
     static const char *const sky = "environment constant L 0.03 0.04 0.08\n";
-    /* a small light facing down, about as strong as the flame: the
-       default shares each vertex's light draw between the two */
-    static const char *const fill = "quad origin 2.5 3 -2 u 0.4 0 0 v 0 0 0.4 L 13 13 13\n";
+    /* a light facing down, about as strong as the flame and near enough
+       that the paths hit it often: the default shares each vertex's light
+       draw between the two */
+    static const char *const fill = "quad origin -1 1.8 -2 u 2.5 0 0 v 0 0 2.5 L 0.4 0.4 0.4\n";
     static const char *const fill_haze =
-        "quad origin 2.5 3 -2 u 0.4 0 0 v 0 0 0.4 L 13 13 13\n"
+        "quad origin 1 2.2 -1.5 u 1 0 0 v 0 0 1 L 2 2 2\n"
         "medium haze box -1.3 0.9 -1.0 1.3 3.4 1.0 sigma_a 0 0 0 sigma_s 0 0 0\n"
         "temperature haze noise octaves 2 frequency 2.5 seed 5 falloff plume center 0 1.5 0 radius 0.9 "
         "amplitude 600 base 0 temperatureoffset -300 blackbody off\n"
         "ior haze gas iorscale 300\n"
         "ambient ior 1.0876\n";
+    /* the light's centre in fog: equiangular samples toward it, whose
+       weights read the flame's share at their points */
+    static const char *const fill_fog =
+        "quad origin 0.65 1.6 -1.8 u 0.3 0 0 v 0 0 0.3 L 20 20 20\n"
+        "medium fog box 0.0 0.4 -2.5 1.6 2.0 -0.8 sigma_a 0.05 0.05 0.05 sigma_s 0.8 0.8 0.8\n"
+        "density fog constant 1\n";
     int variant, k;
-    for (variant = 0; variant < 7; ++variant) {
+    for (variant = 0; variant < 8; ++variant) {
         const char *integrator = variant == 1 || variant == 2 || variant == 4 || variant == 6 ? "refractive" : "classic";
-        const char *extra = variant == 6   ? fill_haze
+        const char *extra = variant == 7   ? fill_fog
+                            : variant == 6 ? fill_haze
                             : variant == 5 ? fill
                             : variant == 4 ? sharp
                             : variant == 3 ? sky
@@ -506,28 +514,45 @@ static void nee_matches_forward_in_blocks(void)
             CHECK(rrv__render_context(on, &ctx, &frame, &e) == RRV_OK && ctx.emission && rrv__light_pick_none(on));
             rrv__solver_release(&ctx);
             CHECK(rrv__render_context(off, &ctx, &frame, &e) == RRV_OK && !ctx.emission &&
-                  rrv__light_prob(off, NULL) == 1.0);
+                  rrv__light_prob(off, NULL, 0.0) == 1.0);
             rrv__solver_release(&ctx);
         }
         if (variant == 5) {
-            /* the share is the flame's power over the light's and its own,
-               the draw below it goes to the flame, the light keeps the rest */
+            /* the scene's share is the flame's power over the light's and
+               its own; a draw below a share goes to the flame, the light
+               keeps the rest; the classic integrator's share at a vertex
+               follows power over squared distance: more of the draw to
+               the flame at the floor beside it than high up near the
+               light, the scene's share where the curved estimators read it */
             rrv__context ctx;
             rrv__camera_frame frame;
             rrv_error e;
-            rrv__light_draw draw = {0, 0.5, 0.5};
-            double share, light = 0.4 * 0.4 * 13.0;
-            CHECK(rrv__render_context(on, &ctx, &frame, &e) == RRV_OK && ctx.emission);
-            rrv__solver_release(&ctx);
+            rrv__light_draw draw = {0, 0.5, 0.5, 0};
+            rrv__emit_from near_flame, near_light;
+            double share, light = 2.5 * 2.5 * 0.4, p_near, p_far;
+            CHECK(rrv__render_context(on, &ctx, &frame, &e) == RRV_OK && ctx.emission && !ctx.bends);
             share = on->emitters->power / (on->emitters->power + light);
-            CHECKF(share > 0.2 && share < 0.8 && fabs(on->emit_share - share) <= 1e-15 * share &&
-                       on->emitters->pick == on->emit_share,
+            CHECKF(share > 0.2 && share < 0.8 && fabs(on->emit_share - share) <= 1e-15 * share,
                    "the flame's share %g, expected %g", on->emit_share, share);
-            CHECK(fabs(rrv__light_prob(on, &on->shapes[on->lights[0]]) - (1.0 - share)) <= 1e-15);
+            draw.emit_share = share;
+            CHECK(fabs(rrv__light_prob(on, &on->shapes[on->lights[0]], share) - (1.0 - share)) <= 1e-15);
             draw.u = share * (1.0 - 1e-9);
             CHECK(rrv__light_pick(on, &draw) == -1);
             draw.u = share + (1.0 - share) * 1e-9;
             CHECK(rrv__light_pick(on, &draw) == 0);
+            memset(&near_flame, 0, sizeof near_flame);
+            memset(&near_light, 0, sizeof near_light);
+            near_flame.x = rrv__v3(0.8, 0.3, 0.0);
+            near_light.x = rrv__v3(1.5, 2.1, -1.0);
+            near_flame.S = rrv__emission_norm(on->emitters, &near_flame, NULL);
+            near_light.S = rrv__emission_norm(on->emitters, &near_light, NULL);
+            p_near = rrv__vertex_emit_share(&ctx, &near_flame);
+            p_far = rrv__vertex_emit_share(&ctx, &near_light);
+            CHECKF(p_near > 0.75 && p_far < 0.4 && rrv__vertex_emit_share(&ctx, NULL) == 0.0,
+                   "the flame's share of a draw: %g beside it, %g beside the light", p_near, p_far);
+            ctx.bends = 1;
+            CHECK(rrv__vertex_emit_share(&ctx, &near_flame) == share && rrv__vertex_emit_share(&ctx, NULL) == share);
+            rrv__solver_release(&ctx);
             CHECK(rrv__render_context(off, &ctx, &frame, &e) == RRV_OK && !ctx.emission && off->emit_share == 0.0);
             rrv__solver_release(&ctx);
         }
@@ -543,7 +568,8 @@ static void nee_matches_forward_in_blocks(void)
         /* resolving power: a bias of a tenth would show */
         CHECKF(rel < 0.025, "%s: the forward blocks' relative error %g is too large to see a bias", integrator, rel);
         printf("  %s%s: worst |z| %.2f, forward blocks within %.1f%%\n", integrator,
-               variant >= 5   ? ", beside a light that shares the draw"
+               variant == 7   ? ", beside a light in fog (equiangular samples)"
+               : variant >= 5 ? ", beside a light that shares the draw"
                : variant == 4 ? ", hot air with sharp faces"
                : variant == 3 ? ", under a sky"
                : variant == 2 ? ", hot air behind the flame's front half"
@@ -553,6 +579,54 @@ static void nee_matches_forward_in_blocks(void)
         rrv_scene_free(on);
         rrv_scene_free(off);
     }
+}
+
+/* Where the flame shares a vertex's light draw with a light whose centre
+   lies in fog, the three techniques toward that light (A: a free flight's
+   light sample, B: its phase sample hitting the light, C: the equiangular
+   sample, whose own pick never goes to the flame) weigh every point of a
+   segment through the fog to a sum of one, whatever the flame's share
+   there. */
+static void shared_draw_weights_sum_to_one(void)
+{
+    static const char *const fog =
+        "quad origin 0.65 1.6 -1.8 u 0.3 0 0 v 0 0 0.3 L 20 20 20\n"
+        "medium fog box 0.0 0.4 -2.5 1.6 2.0 -0.8 sigma_a 0.05 0.05 0.05 sigma_s 0.8 0.8 0.8\n"
+        "density fog constant 1\n";
+    rrv_scene *s = load(campfire, "classic", "", fog);
+    rrv__context ctx;
+    rrv__camera_frame frame;
+    rrv_error e;
+    rrv__equi eq;
+    const rrv_shape *light;
+    rrv_vec3 o = rrv__v3(0.05, 0.5, -2.45), d;
+    double worst = 0, most = 0;
+    int k;
+    if (!s) return;
+    CHECK(rrv__render_context(s, &ctx, &frame, &e) == RRV_OK && ctx.emission && ctx.equiangular &&
+          s->emit_share > 0);
+    light = &s->shapes[s->lights[0]];
+    d = rrv__normalize(rrv__sub(rrv__v3(1.55, 1.95, -0.85), o));
+    rrv__equi_segment(&ctx, o, d, 3.0, &eq);
+    CHECK(eq.on);
+    for (k = 0; eq.on && k < 3000; ++k) {
+        double t = eq.a + (k / 3 + 0.5) / 1000.0 * (eq.b - eq.a), share, p_light = 0.3 + k % 7, p_phase = 0.1 + 0.2 * (k % 5);
+        double w_a, w_b, w_c;
+        share = rrv__point_emit_share(&ctx, rrv__madd(o, d, t));
+        most = fmax(most, share);
+        if (k % 3 == 1) share = 0.5;
+        if (k % 3 == 2) share = 0.9;
+        eq.t = t;
+        w_a = rrv__equi_vertex_weight(&ctx, &eq, light, 1, p_light * (1.0 - share), p_phase, share);
+        w_b = rrv__equi_vertex_weight(&ctx, &eq, light, 0, p_light * (1.0 - share), p_phase, share);
+        w_c = rrv__equi_own_weight(&ctx, &eq, rrv__light_centre(light), t, p_light, p_phase, share);
+        worst = fmax(worst, fabs(w_a + w_b + w_c - 1.0));
+    }
+    CHECKF(worst <= 1e-12, "the three weights miss one by %g", worst);
+    CHECKF(most > 0.01, "the flame's share in the fog is only %g", most);
+    printf("  weights within %.1e of one; the flame's share in the fog up to %.3f\n", worst, most);
+    rrv__solver_release(&ctx);
+    rrv_scene_free(s);
 }
 
 /* The blackbody's table against the sum it replaces: every channel of XYZ
@@ -828,6 +902,7 @@ int main(void)
     RUN(density_matches_the_sampler);
     RUN(aim_density_integrates_to_its_share);
     RUN(nee_matches_forward_in_blocks);
+    RUN(shared_draw_weights_sum_to_one);
     RUN(slab_irradiance_closed_form);
     RUN(hidden_cells_weigh_less);
     RUN(blackbody_table_matches_the_sum);
