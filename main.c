@@ -1841,8 +1841,14 @@ static void print_light_samples(const rrv_scene *scene)
     }
     if (!choices || (!uniform && !(total > 0))) return;
     printf("light samples (%s):", uniform ? "uniform" : "power");
-    /* beside light shapes the emissive media take a share of the same draw */
-    if (scene->emit_share > 0) printf(" the emissive media %.3g %%,", 100 * scene->emit_share);
+    /* beside light shapes the emissive media take a share of the same draw:
+       by power, or under classic at each vertex by power over squared
+       distance (the scene's share by power then only guides the eye) */
+    if (scene->emit_share > 0)
+        printf(" the emissive media %.3g %%%s,", 100 * scene->emit_share,
+               rrv_scene_integrator(scene) == RRV_INTEGRATOR_CLASSIC ? " by power (a vertex's share: by power over "
+                                                                       "squared distance)"
+                                                                     : "");
     for (i = 0; i < choices; ++i) {
         double p = uniform ? 1.0 / choices
                            : (1.0 - scene->emit_share) *

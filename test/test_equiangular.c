@@ -120,13 +120,13 @@ static void three_weights_sum_to_one(void)
         eq.t = eq.a + (eq.b - eq.a) * uniform01(&state);
         p_eq = rrv__equi_pdf(&eq, rrv__light_centre(light), eq.t);
         p_ff = rrv__equi_free_flight(&ctx, &eq, eq.t);
-        sum = rrv__equi_vertex_weight(&ctx, &eq, light, 1, p_light, p_phase) +
-              rrv__equi_vertex_weight(&ctx, &eq, light, 0, p_light, p_phase) +
+        sum = rrv__equi_vertex_weight(&ctx, &eq, light, 1, p_light, p_phase, 0.0) +
+              rrv__equi_vertex_weight(&ctx, &eq, light, 0, p_light, p_phase, 0.0) +
               rrv__equi_weight(p_eq * p_light, p_ff * p_light, p_ff * p_phase, p_eq * p_light);
         worst = fmax(worst, fabs(sum - 1));
         eq.on = 0;
-        sum = rrv__equi_vertex_weight(&ctx, &eq, light, 1, p_light, p_phase) +
-              rrv__equi_vertex_weight(&ctx, &eq, light, 0, p_light, p_phase);
+        sum = rrv__equi_vertex_weight(&ctx, &eq, light, 1, p_light, p_phase, 0.0) +
+              rrv__equi_vertex_weight(&ctx, &eq, light, 0, p_light, p_phase, 0.0);
         worst = fmax(worst, fabs(sum - 1));
     }
     CHECKF(worst < 1e-12, "weights sum to one within %g", worst);

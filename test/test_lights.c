@@ -61,7 +61,7 @@ static void picks_follow_the_probabilities(void)
         }
         for (i = 0; i < choices; ++i) {
             const rrv_shape *l = i < s->light_count ? &s->shapes[s->lights[i]] : NULL;
-            double p = rrv__light_prob(s, l), want;
+            double p = rrv__light_prob(s, l, 0.0), want;
             if (mode) want = 1.0 / choices;
             else want = l ? rrv__shape_area(l) * (l->L[0] + l->L[1] + l->L[2]) / 3.0 / power : 0.0;
             CHECKF(fabs(p - want) <= 1e-12 * want, "mode %d choice %d: probability %.17g, expected %.17g", mode, i, p,
@@ -70,7 +70,7 @@ static void picks_follow_the_probabilities(void)
         }
         CHECKF(fabs(sum - 1) < 1e-12, "mode %d: probabilities sum to %.17g", mode, sum);
         for (i = 0; i < n; ++i) {
-            rrv__light_draw draw;
+            rrv__light_draw draw = {0, 0, 0, 0};
             int pick;
             state = state * 6364136223846793005ULL + 1442695040888963407ULL;
             draw.u = (double)(state >> 11) * (1.0 / 9007199254740992.0);
@@ -80,7 +80,7 @@ static void picks_follow_the_probabilities(void)
             if (pick >= 0 && pick < choices) ++count[pick];
         }
         for (i = 0; i < choices; ++i) {
-            double p = rrv__light_prob(s, i < s->light_count ? &s->shapes[s->lights[i]] : NULL);
+            double p = rrv__light_prob(s, i < s->light_count ? &s->shapes[s->lights[i]] : NULL, 0.0);
             double sd = sqrt(n * p * (1 - p)), z = sd > 0 ? (count[i] - n * p) / sd : count[i] - n * p;
             CHECKF(fabs(z) <= 4.0, "mode %d choice %d: %d picks of %d, probability %g (z = %.2f)", mode, i, count[i], n,
                    p, z);
@@ -133,7 +133,7 @@ static void densities_integrate_to_solid_angles(void)
         if (!s) return;
         choices = rrv__light_choices(s);
         for (k = 0; k < n; ++k) {
-            rrv__light_draw draw;
+            rrv__light_draw draw = {0, 0, 0, 0};
             rrv__light_sample ls;
             double *u[3];
             int pick;
@@ -149,7 +149,7 @@ static void densities_integrate_to_solid_angles(void)
         }
         for (i = 0; i < choices; ++i) {
             double want = i < s->light_count ? lights_solid_angle(&s->shapes[s->lights[i]], x)
-                                             : (rrv__light_prob(s, NULL) > 0 ? 4.0 * RRV__PI : 0.0);
+                                             : (rrv__light_prob(s, NULL, 0.0) > 0 ? 4.0 * RRV__PI : 0.0);
             double mean = sum[i] / n, se = sqrt(fmax(sum2[i] / n - mean * mean, 0.0) / (n - 1));
             CHECKF(fabs(mean - want) <= 4.0 * se + 1e-12, "mode %d choice %d: %g +- %g, solid angle %g", mode, i, mean,
                    se, want);
@@ -168,11 +168,11 @@ static void a_sky_alone_is_sampled(void)
                                         "material ground diffuse albedo 0.5 0.5 0.5\n"
                                         "quad origin -4 0 -4 u 0 0 8 v 8 0 0 material ground\n";
     rrv_scene *s = lights_load(sky_only, "");
-    rrv__light_draw draw = {0.7, 0.3, 0.6};
+    rrv__light_draw draw = {0.7, 0.3, 0.6, 0};
     rrv__light_sample ls;
     if (!s) return;
     CHECK(rrv__light_choices(s) == 1);
-    CHECK(rrv__light_prob(s, NULL) == 1.0);
+    CHECK(rrv__light_prob(s, NULL, 0.0) == 1.0);
     CHECK(rrv__light_pick(s, &draw) == 0);
     CHECK(rrv__sample_light(s, rrv__v3(0, 0.5, 0), &draw, &ls) && ls.dist == DBL_MAX);
     CHECKF(fabs(ls.pdf - RRV__INV_4PI) < 1e-15, "pdf %.17g", ls.pdf);
@@ -214,19 +214,19 @@ static void power_matches_uniform_in_blocks(void)
 static void prepared_sampler_holds(void)
 {
     rrv_scene *s = lights_load(lights_scene, "");
-    rrv__light_draw draw = {0.3, 0.5, 0.5};
+    rrv__light_draw draw = {0.3, 0.5, 0.5, 0};
     double p0, p1;
     rrv_error e;
     int pick;
     if (!s) return;
-    p0 = rrv__light_prob(s, &s->shapes[s->lights[0]]);
+    p0 = rrv__light_prob(s, &s->shapes[s->lights[0]], 0.0);
     pick = rrv__light_pick(s, &draw);
     s->settings.light_sampler = RRV_LIGHT_SAMPLER_UNIFORM;
-    CHECK(rrv__light_prob(s, &s->shapes[s->lights[0]]) == p0 && rrv__light_pick(s, &draw) == pick);
-    CHECK(rrv__light_prob(s, NULL) == 0.0);
+    CHECK(rrv__light_prob(s, &s->shapes[s->lights[0]], 0.0) == p0 && rrv__light_pick(s, &draw) == pick);
+    CHECK(rrv__light_prob(s, NULL, 0.0) == 0.0);
     CHECK(rrv_scene_prepare(s, &e) == RRV_OK);
-    p1 = rrv__light_prob(s, &s->shapes[s->lights[0]]);
-    CHECKF(p1 == 0.25 && rrv__light_prob(s, NULL) == 0.25, "after prepare: %g, sky %g", p1, rrv__light_prob(s, NULL));
+    p1 = rrv__light_prob(s, &s->shapes[s->lights[0]], 0.0);
+    CHECKF(p1 == 0.25 && rrv__light_prob(s, NULL, 0.0) == 0.25, "after prepare: %g, sky %g", p1, rrv__light_prob(s, NULL, 0.0));
     rrv_scene_free(s);
 }
 
