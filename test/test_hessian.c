@@ -533,7 +533,7 @@ static void check_fused_lookup(const rrv_scene *s, const char *name, uint64_t se
         double J[9], J2[9], t[3], biggest = 0;
         size_t sy, sz;
         const float *d = rrv__refraction_cell(mg, p, &sy, &sz, t);
-        double v = rrv__refraction_lookup_jacobian_fused(mg, p, &grad, J);
+        double v = rrv__refraction_lookup_jacobian_fused(mg, p, &grad, J, NULL);
         double v_ref = rrv__refraction_lookup(mg, p, &grad_ref);
         rrv__refraction_lookup_jacobian(mg, p, J2);
         same &= v == v_ref && grad.x == grad_ref.x && grad.y == grad_ref.y && grad.z == grad_ref.z;
@@ -593,7 +593,7 @@ static void test_fused_fields_are_the_parts(void)
             double u0 = rrv__uniform(&rng), u1 = rrv__uniform(&rng), u2 = rrv__uniform(&rng);
             rrv_vec3 p = rrv__v3(2 * u0 - 1, 2 * u1 - 1, 2 * u2 - 1), g, g2, g_ref;
             double H[9], H_ref[9], r = rrv__refractivity_gradient(m, p, ambient_r, &g);
-            double r2 = rrv__refractivity_gradient_hessian(m, p, ambient_r, &g2, H);
+            double r2 = rrv__refractivity_gradient_hessian(m, p, ambient_r, &g2, H, NULL);
             double r_ref = rrv__refractivity(m, p, ambient_r);
             if (m->ior_from_gas) {
                 double T = fmax(rrv__temperature(m, p), 1e-3), P = rrv__pressure(m, p);
@@ -638,7 +638,7 @@ static void test_eta_gradient_hessian_is_both(void)
             double u0 = rrv__uniform(&rng), u1 = rrv__uniform(&rng), u2 = rrv__uniform(&rng);
             rrv_vec3 p = rrv__v3(2.4 * u0 - 1.2, 2.4 * u1 - 1.2, 2.4 * u2 - 1.2), g, g_ref;
             double H[9], H_ref[9];
-            double eta = rrv__eta_gradient_hessian(scenes[k], p, &g, H);
+            double eta = rrv__eta_gradient_hessian(scenes[k], p, &g, H, NULL);
             double eta_ref = rrv__eta_gradient(scenes[k], p, &g_ref);
             scene_hessian(scenes[k], p, H_ref);
             outside += !rrv__inside_box(p, rrv__v3(-1, -1, -1), rrv__v3(1, 1, 1));
