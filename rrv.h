@@ -8163,6 +8163,8 @@ static rrv_result rrv__build_light_cdf(rrv_scene *scene, rrv_error *err)
     if (rrv__emitters_share_draws(scene) && scene->emitters->power > 0 && scene->emitters->power < DBL_MAX) {
         rrv_vec3 lo = rrv__v3(DBL_MAX, DBL_MAX, DBL_MAX), hi = rrv__scale(lo, -1.0);
         scene->emit_share = scene->emitters->power / (scene->emitters->power + sum);
+        /* the lights keep a sliver, so that their densities stay finite */
+        if (!(scene->emit_share < 1.0 - 1e-9)) scene->emit_share = 1.0 - 1e-9;
         for (i = 0; i < scene->light_count; ++i) {
             rrv_vec3 a, b;
             rrv__shape_bounds(&scene->shapes[scene->lights[i]], &a, &b);
