@@ -1188,7 +1188,9 @@ static void test_jacobian_against_differences(void)
    % low past such faces. */
 static void test_jacobian_past_a_face(void)
 {
-    static const char path[] = "build/test_nee_face.vol";
+    /* in the working directory (the repository root): the build folder
+       differs between builds (SAN=1), and the file is removed at the end */
+    static const char path[] = "test_nee_face.tmp.vol";
     const int n = 16;
     float header_box[6] = {-0.5f, 0.0f, -0.5f, 0.5f, 1.0f, 0.5f};
     FILE *f = fopen(path, "wb");
@@ -1223,7 +1225,7 @@ static void test_jacobian_past_a_face(void)
                  "temperature air grid %s blackbody off\n"
                  "ior air gas iorscale 300\n",
                  k ? "trilinear" : "cubic", path);
-        if (!(s = parse_text(text, strlen(text), k ? "face, trilinear" : "face, cubic"))) return;
+        if (!(s = parse_text(text, strlen(text), k ? "face, trilinear" : "face, cubic"))) break;
         CHECKF(rrv_scene_prepare(s, &err) == RRV_OK, "prepare: %s", err.message);
         jacobian_against_differences_within(s, x0, w, rrv__v3(0.05, 1.6, -0.5), &up, k ? "past a face, trilinear" : "past a face, cubic", 1e-4);
         jacobian_against_differences_within(s, x0, w, rrv__v3(0.05, 1.6, -0.5), NULL,
