@@ -1,4 +1,4 @@
-/* rrv.h 0.20.0 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.20.1 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -209,7 +209,7 @@
 
 #define RRV_VERSION_MAJOR 0
 #define RRV_VERSION_MINOR 20
-#define RRV_VERSION_PATCH 0
+#define RRV_VERSION_PATCH 1
 
 #ifndef RRV_DEF
 #ifdef RRV_STATIC
@@ -1184,6 +1184,40 @@ static void rrv__clear_error(rrv_error *err)
         err->message[0] = '\0';
     }
 }
+
+/* Copies at most n bytes of a name read from a file into out (cap bytes,
+   NUL-terminated) for a message or a field a caller prints: printable ASCII
+   and well-formed UTF-8 of U+00A0 and up stay, every other byte (controls,
+   C1 controls, stray or cut sequences) becomes '?', so a hostile name cannot
+   drive the terminal the message ends on. */
+#if !defined(RRV_NO_NANOVDB) || !defined(RRV_NO_EXR)
+static void rrv__printable_name(const unsigned char *src, size_t n, char *out, size_t cap)
+{
+    size_t i = 0, o = 0;
+    if (cap == 0) return;
+    while (i < n && src[i] != 0 && o + 1 < cap) {
+        unsigned c = src[i];
+        size_t len = c < 0x80 ? 1 : (c & 0xE0) == 0xC0 ? 2 : (c & 0xF0) == 0xE0 ? 3 : (c & 0xF8) == 0xF0 ? 4 : 0;
+        size_t k;
+        int ok = len > 1 && i + len <= n && o + len < cap;
+        for (k = 1; ok && k < len; ++k)
+            if ((src[i + k] & 0xC0) != 0x80) ok = 0;
+        /* C1 controls are U+0080..U+009F: C2 80..C2 9F; overlong forms start C0, C1 */
+        if (ok && len == 2 && (c < 0xC2 || (c == 0xC2 && src[i + 1] < 0xA0))) ok = 0;
+        if (ok && len == 3 && c == 0xE0 && src[i + 1] < 0xA0) ok = 0;
+        if (ok && len == 4 && (c > 0xF4 || (c == 0xF0 && src[i + 1] < 0x90))) ok = 0;
+        if (ok) {
+            memcpy(out + o, src + i, len);
+            o += len;
+            i += len;
+        } else {
+            out[o++] = len == 1 && c >= 32 && c < 127 ? (char)c : '?';
+            ++i;
+        }
+    }
+    out[o] = '\0';
+}
+#endif
 
 /* >> 2 math: vectors, orthonormal frames, the PCG32 stream, the Sobol sampler =
    Everything geometric is double: a fire changes the IOR of air by ~2e-4, and
@@ -10648,6 +10682,7 @@ typedef struct rrv__sf_slot {
    squared distance then never overflows (a sphere of radius 1e200 had an
    infinite r^2 and vanished from the picture). */
 #define RRV__SF_WORLD -1e150, 1e150
+static const rrv__sf_key rrv__sf_corner_key = {"a corner", RRV__SF_NUM, 3, 0, RRV__SF_WORLD, NULL};
 #define RRV__SF_SIZE 0.0, 1e150
 
 static const rrv__sf_key rrv__sf_camera_keys[] = {
@@ -11135,7 +11170,6 @@ static rrv_result rrv__emission_check(const rrv__ck *ck, const double *L)
 
 static rrv_result rrv__shape_check(const rrv__ck *ck, const rrv_scene *scene, const rrv_shape *s)
 {
-    static const rrv__sf_key any = {"p0", RRV__SF_NUM, 3, 0, RRV__SF_ANY, NULL};
     if ((unsigned)s->kind > (unsigned)RRV_SHAPE_TRIANGLE)
         return rrv__ck_fail(ck, RRV_OK, "kind %d is not one of rrv_shape_kind", (int)s->kind);
     if (s->material < 0 || s->material >= scene->material_count)
@@ -11146,9 +11180,13 @@ static rrv_result rrv__shape_check(const rrv__ck *ck, const rrv_scene *scene, co
         RRV__CK(rrv__ck_vec(ck, &rrv__sf_sphere_keys[0], s->center));
         return rrv__ck_key(ck, &rrv__sf_sphere_keys[1], s->radius);
     }
-    RRV__CK(rrv__ck_vec(ck, &any, s->p0));
     if (!rrv__vec_finite(s->e1) || !rrv__vec_finite(s->e2))
         return rrv__ck_fail(ck, RRV_OK, "edges are not finite");
+    /* Corners beyond the world's range would overflow the squares of the
+       hit tests and the light's area, as a sphere's centre would. */
+    RRV__CK(rrv__ck_vec(ck, &rrv__sf_corner_key, s->p0));
+    RRV__CK(rrv__ck_vec(ck, &rrv__sf_corner_key, rrv__add(s->p0, s->e1)));
+    RRV__CK(rrv__ck_vec(ck, &rrv__sf_corner_key, rrv__add(s->p0, s->e2)));
     if (rrv__vec_zero(rrv__cross(s->e1, s->e2)))
         return rrv__ck_fail(ck, RRV_OK, s->kind == RRV_SHAPE_QUAD
                                             ? "u and v are parallel (zero area)"
@@ -16455,9 +16493,12 @@ static rrv_result rrv__exr_read_header(const unsigned char *p, size_t size, size
         *pos += type_len + 1;
         value_size = rrv__get_u32_le(p + *pos);
         *pos += 4;
-        if (value_size > size - *pos)
+        if (value_size > size - *pos) {
+            char shown[64];
+            rrv__printable_name((const unsigned char *)attr_name, name_len, shown, sizeof shown);
             return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "OpenEXR attribute %s runs past the end of the file",
-                             attr_name);
+                             shown);
+        }
         v = p + *pos;
         *pos += value_size;
         if (strcmp(attr_name, "channels") == 0 && strcmp(type, "chlist") == 0) {
@@ -17788,16 +17829,12 @@ static rrv_result rrv__nv_check_header(const unsigned char *b, uint64_t size, co
                                        rrv_error *err)
 {
     uint32_t version, type;
-    int a;
     if (size < RRV__NV_GRID + RRV__NV_TREE)
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "a grid of %llu bytes is shorter than its %d-byte header",
                          (unsigned long long)size, RRV__NV_GRID + RRV__NV_TREE);
     if (memcmp(b, "NanoVDB", 7) != 0 || (b[7] != '0' && b[7] != '1'))
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "a grid does not start with \"NanoVDB0\" or \"NanoVDB1\"");
-    memcpy(g->name, b + 40, 255);
-    g->name[255] = '\0';
-    for (a = 0; g->name[a]; ++a)
-        if ((unsigned char)g->name[a] < 32) g->name[a] = '?';
+    rrv__printable_name(b + 40, 255, g->name, sizeof g->name);
     version = rrv__nv_u32(b + 16);
     if (version >> 21 != 32)
         return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid \"%s\" has NanoVDB version %u.%u.%u; rrv reads 32.x",
@@ -18018,7 +18055,7 @@ static rrv_result rrv__nv_find_grid(const unsigned char *b, uint64_t size, const
     char names[160];
     size_t used = 0, wl = strlen(want);
     uint64_t pos = 0;
-    int segments = 0;
+    int segments = 0, found = 0;
     names[0] = '\0';
     if (size >= 8 && memcmp(b, "NanoVDB1", 8) == 0) {
         /* bare grid buffers, each announcing its own size */
@@ -18033,14 +18070,15 @@ static rrv_result rrv__nv_find_grid(const unsigned char *b, uint64_t size, const
                                  "the grid at byte %llu claims %llu bytes, the file has %llu left",
                                  (unsigned long long)pos, (unsigned long long)gs, (unsigned long long)(size - pos));
             /* GridData holds names of up to 255 bytes (longer ones live in blind data) */
-            if (wl <= 255 && memcmp(b + pos + 40, want, wl) == 0 && b[pos + 40 + wl] == '\0') {
+            if (!found && wl <= 255 && memcmp(b + pos + 40, want, wl) == 0 && b[pos + 40 + wl] == '\0') {
                 *at = pos;
                 *grid_size = gs;
-                return RRV_OK;
+                found = 1;
+            } else if (used + 1 < sizeof names) {
+                char shown[48];
+                rrv__printable_name(b + pos + 40, 40, shown, sizeof shown);
+                used += (size_t)snprintf(names + used, sizeof names - used, "%s\"%s\"", used ? ", " : "", shown);
             }
-            if (used + 1 < sizeof names)
-                used += (size_t)snprintf(names + used, sizeof names - used, "%s\"%.40s\"", used ? ", " : "",
-                                         (const char *)b + pos + 40);
             pos += gs;
         }
     } else {
@@ -18098,14 +18136,15 @@ static rrv_result rrv__nv_find_grid(const unsigned char *b, uint64_t size, const
                 if (gs > size - data)
                     return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "grid %u of the segment at byte %llu needs %llu bytes, the file has %llu left",
                                      (unsigned)i, (unsigned long long)pos, (unsigned long long)gs, (unsigned long long)(size - data));
-                if (ns == wl + 1 && memcmp(gname, want, wl) == 0 && gname[wl] == '\0') {
+                if (!found && ns == wl + 1 && memcmp(gname, want, wl) == 0 && gname[wl] == '\0') {
                     *at = data;
                     *grid_size = gs;
-                    return RRV_OK;
+                    found = 1;
+                } else if (used + 1 < sizeof names) {
+                    char shown[48];
+                    rrv__printable_name(gname, ns - 1 > 40 ? 40 : ns - 1, shown, sizeof shown);
+                    used += (size_t)snprintf(names + used, sizeof names - used, "%s\"%s\"", used ? ", " : "", shown);
                 }
-                if (used + 1 < sizeof names)
-                    used += (size_t)snprintf(names + used, sizeof names - used, "%s\"%.*s\"", used ? ", " : "",
-                                             (int)(ns - 1 > 40 ? 40 : ns - 1), (const char *)gname);
                 data += gs;
                 meta += 176 + (uint64_t)ns;
             }
@@ -18113,9 +18152,9 @@ static rrv_result rrv__nv_find_grid(const unsigned char *b, uint64_t size, const
             ++segments;
         }
     }
-    if (used >= sizeof names) used = sizeof names - 1;
-    for (; used > 0; --used)
-        if ((unsigned char)names[used - 1] < 32) names[used - 1] = '?';
+    /* the whole file was walked, so a file cut short past the grid asked
+       for is reported, not half read */
+    if (found) return RRV_OK;
     return rrv__fail(err, RRV_ERROR_FORMAT, name, 0, "no grid named \"%.60s\" (the file has %s)", want,
                      names[0] ? names : "no grids");
 }
@@ -19200,13 +19239,23 @@ static int rrv__sf_obj_index(const rrv__sf_tok *t, int nverts, int *out, long lo
     return 0;
 }
 
+/* Editors on some systems start a UTF-8 file with a byte order mark; it is
+   not part of the first statement. */
+static size_t rrv__sf_bom_length(const char *text, size_t size)
+{
+    return size >= 3 && (unsigned char)text[0] == 0xEF && (unsigned char)text[1] == 0xBB &&
+                   (unsigned char)text[2] == 0xBF
+               ? 3
+               : 0;
+}
+
 static rrv_result rrv__sf_obj_parse(rrv__sf_parser *p, const char *text, size_t size,
                                     const char *file, double scale, rrv_vec3 translate,
                                     const rrv_shape *proto)
 {
     rrv__sf_objv verts = {NULL, 0, 0};
     rrv__sf_toks toks = {NULL, 0, 0};
-    size_t pos = 0;
+    size_t pos = rrv__sf_bom_length(text, size);
     int line = 0;
     rrv_result r = RRV_OK;
     while (pos < size && r == RRV_OK) {
@@ -19250,6 +19299,15 @@ static rrv_result rrv__sf_obj_parse(rrv__sf_parser *p, const char *text, size_t 
                 }
             }
             if (r != RRV_OK) break;
+            {
+                rrv_vec3 placed = {0, 0, 0};
+                rrv__ck ck;
+                placed.x = c[0], placed.y = c[1], placed.z = c[2];
+                placed = rrv__sf_transform(placed, scale, translate);
+                rrv__ck_init(&ck, p->err, file, line, RRV_ERROR_PARSE, "v (after scale and translate)");
+                r = rrv__ck_vec(&ck, &rrv__sf_corner_key, placed);
+                if (r != RRV_OK) break;
+            }
             if (!rrv__sf_reserve((void **)&verts.v, &verts.cap, verts.n, sizeof *verts.v)) {
                 r = rrv__fail(p->err, RRV_ERROR_MEMORY, file, line, "out of memory");
                 break;
@@ -20047,7 +20105,7 @@ static const struct rrv__sf_statement {
 
 static rrv_result rrv__sf_parse_lines(rrv__sf_parser *p, const char *text, size_t size)
 {
-    size_t pos = 0;
+    size_t pos = rrv__sf_bom_length(text, size);
     while (pos < size) {
         const char *s = text + pos, *e = (const char *)memchr(s, '\n', size - pos);
         int tr, k;
@@ -20813,6 +20871,14 @@ and BOUNDS (moved here from the manual at the top, word for word)
 ------------------------------------------------------------------------------
 VERSION HISTORY
 ------------------------------------------------------------------------------
+     0.20.1 bad input: a UTF-8 byte order mark at the start of a scene or
+            OBJ file is skipped (it was an unknown statement); an OBJ
+            vertex that scale and translate place outside the world's
+            range, and a triangle or quad corner outside it, is refused
+            (1e200 was accepted); names read from NanoVDB and OpenEXR files
+            reach messages and rrv_nanovdb.name as printable text (escape
+            sequences, C1 controls and broken UTF-8 become '?'); a NanoVDB
+            file cut short past the grid asked for is refused
      0.20.0 emissive media beside light shapes share each vertex's light
             draw with them (the default emissionnee, power light sampler):
             classic by power over squared distance at the vertex, the

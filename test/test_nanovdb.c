@@ -446,7 +446,29 @@ static void newer_magics(void)
     }
     CHECK(rrv_nanovdb_read_memory(bare, used, "bare.nvdb", "smoke", 0, &g, &e) == RRV_ERROR_FORMAT &&
           strcmp(e.message, "no grid named \"smoke\" (the file has \"density\", \"temperature\")") == 0);
+    {
+        /* a name from the file reaches a message or a caller's printf only as
+           printable text: an escape sequence, a C1 control (C2 9B) and a cut
+           sequence (C3) become '?', well-formed UTF-8 (C3 A9) stays */
+        static const char hostile[] = "\x1b[31m\xc2\x9b\xc3\xa9x\xc3";
+        memcpy(bare + 40, hostile, sizeof hostile);
+        CHECKF(rrv_nanovdb_read_memory(bare, used, "bare.nvdb", "smoke", 0, &g, &e) == RRV_ERROR_FORMAT &&
+                   strcmp(e.message, "no grid named \"smoke\" (the file has \"?[31m??\xc3\xa9x?\", "
+                                     "\"temperature\")") == 0,
+               "%s", e.message);
+        CHECKF(rrv_nanovdb_read_memory(bare, used, "bare.nvdb", hostile, 0, &g, &e) == RRV_OK, "%s", e.message);
+        if (g.buffer) {
+            CHECK(strcmp(g.name, "?[31m??\xc3\xa9x?") == 0);
+            rrv_nanovdb_free(&g);
+        }
+    }
     CHECK(rrv_nanovdb_read_memory(bare, used - 1, "bare.nvdb", "temperature", 0, &g, &e) == RRV_ERROR_FORMAT);
+    /* a file cut short in a later grid is damaged, whichever grid is asked for */
+    CHECKF(rrv_nanovdb_read_memory(bare, used - 1, "bare.nvdb", "\x1b[31m\xc2\x9b\xc3\xa9x\xc3", 0, &g, &e) ==
+               RRV_ERROR_FORMAT, "%s", e.message);
+    CHECKF(rrv_nanovdb_read_memory(file, size - 1, "new.nvdb", "density", 0, &g, &e) == RRV_ERROR_FORMAT &&
+               strstr(e.message, "grid 0 of the segment at byte") != NULL,
+           "%s", e.message);
     free(bare);
     free(file);
 }

@@ -246,6 +246,7 @@ static const struct corpus_case {
     {"no_camera", RRV_ERROR_PARSE},        {"not_a_number", RRV_ERROR_PARSE},
     {"not_finite", RRV_ERROR_PARSE},       {"not_integer", RRV_ERROR_PARSE},
     {"obj_index_range", RRV_ERROR_PARSE},  {"obj_short_face", RRV_ERROR_PARSE},
+    {"obj_vertex_range", RRV_ERROR_PARSE}, {"bom_then_error", RRV_ERROR_PARSE},
     {"quad_parallel", RRV_ERROR_PARSE},    {"range_albedo", RRV_ERROR_PARSE},
     {"range_ambient", RRV_ERROR_PARSE},    {"range_fov", RRV_ERROR_PARSE},
     {"range_g", RRV_ERROR_PARSE},          {"range_octaves", RRV_ERROR_PARSE},
@@ -471,6 +472,8 @@ static void test_statement_errors(void)
                  "sphere: L times scale is not finite");
     expect_error(WITH_CAM("triangle p0 0 0 0 p1 1 1 1 p2 2 2 2\n"), RRV_ERROR_PARSE, 2,
                  "triangle: the points are collinear (zero area)");
+    expect_error(WITH_CAM("quad origin 1e150 0 0 u 1e150 0 0 v 0 1 0\n"), RRV_ERROR_PARSE, 2,
+                 "quad: a corner must be in [-1e+150, 1e+150], got 2e+150");
     expect_error(WITH_CAM("material\n"), RRV_ERROR_PARSE, 2, "material: missing name");
     expect_error(WITH_CAM("material m\n"), RRV_ERROR_PARSE, 2, "material: missing kind (diffuse or checker)");
     expect_error(WITH_CAM("material m glossy\n"), RRV_ERROR_PARSE, 2,
@@ -579,6 +582,16 @@ static void test_lexing(void)
     if (r == RRV_OK) {
         CHECK(s->shapes[0].radius == 12 && strcmp(s->materials[s->shapes[0].material].name, "two words") == 0);
         rrv_scene_free(s);
+    }
+    {
+        /* a UTF-8 byte order mark before the first statement is not part of it */
+        static const char marked[] = "\xEF\xBB\xBF" "camera eye 0 0 5 look 0 0 0\nsphere center 0 0 0 radius 1\n";
+        r = rrv_scene_parse(marked, sizeof marked - 1, "t.rrv", NULL, NULL, &s, &err);
+        CHECKF(r == RRV_OK, "%s", err.message);
+        if (r == RRV_OK) rrv_scene_free(s);
+        /* only there: one after it is an unknown byte of the statement */
+        r = rrv_scene_parse(marked, 2, "t.rrv", NULL, NULL, &s, &err);
+        CHECK(r == RRV_ERROR_PARSE && s == NULL && err.line == 1);
     }
     r = rrv_scene_parse(NULL, 0, NULL, NULL, NULL, &s, &err);
     CHECK(r == RRV_ERROR_PARSE && s == NULL && strcmp(err.message, "no camera statement") == 0);
@@ -1099,7 +1112,9 @@ static void test_obj(void)
     static const char bad_index2[] = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 0 3\n";
     static const char bad_token[] = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x/1\n";
     static const char bad_v[] = "v 0 0\n";
-    memfile files[6];
+    /* a byte order mark, then a vertex that scale 1e10 takes past the world */
+    static const char far_v[] = "\xEF\xBB\xBFv 0 0 0\nv 1 0 0\nv 0 1e141 0\nf 1 2 3\n";
+    memfile files[7];
     memfs fs;
     rrv_load_options opt;
     rrv_scene *s = NULL;
@@ -1112,7 +1127,8 @@ static void test_obj(void)
     files[4].path = "dir/tok.obj"; files[4].data = bad_token; files[4].size = sizeof bad_token - 1;
     files[5].path = "dir/v.obj"; files[5].data = bad_v; files[5].size = sizeof bad_v - 1;
     fs.files = files;
-    fs.count = 6;
+    files[6].path = "dir/far.obj"; files[6].data = far_v; files[6].size = sizeof far_v - 1;
+    fs.count = 7;
     fs.reads = 0;
     memset(&opt, 0, sizeof opt);
     opt.read_file = memfs_read;
@@ -1149,6 +1165,17 @@ static void test_obj(void)
     CHECK(r == RRV_ERROR_PARSE && err.line == 4 && strcmp(err.message, "f: expected a vertex index, got \"x/1\"") == 0);
     r = parse_str("camera eye 0 0 5 look 0 0 0\nmesh file v.obj\n", &opt, &s, &err);
     CHECK(r == RRV_ERROR_PARSE && err.line == 1 && strcmp(err.message, "v needs 3 coordinates, got 2") == 0);
+    r = parse_str("camera eye 0 0 5 look 0 0 0\nmesh file far.obj\n", &opt, &s, &err);
+    CHECKF(r == RRV_OK, "%s", err.message); /* the mark is skipped, 1e141 is inside */
+    if (r == RRV_OK) {
+        CHECK(s->shape_count == 1 && s->shapes[0].e2.y == 1e141);
+        rrv_scene_free(s);
+    }
+    r = parse_str("camera eye 0 0 5 look 0 0 0\nmesh file far.obj scale 1e10\n", &opt, &s, &err);
+    CHECKF(r == RRV_ERROR_PARSE && s == NULL && strcmp(err.file, "dir/far.obj") == 0 && err.line == 3 &&
+               strcmp(err.message, "v (after scale and translate): a corner must be in "
+                                   "[-1e+150, 1e+150], got 1e+151") == 0,
+           "%s:%d: %s", err.file, err.line, err.message);
     r = parse_str("camera eye 0 0 5 look 0 0 0\nmesh file missing.obj\n", &opt, &s, &err);
     CHECK(r == RRV_ERROR_IO && err.line == 2 && strcmp(err.file, "t.rrv") == 0 &&
           strcmp(err.message, "cannot read OBJ file \"missing.obj\"") == 0);
