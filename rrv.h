@@ -20349,7 +20349,16 @@ and BOUNDS (moved here from the manual at the top, word for word)
                  Sampling's estimate, E = 1/q exactly). So every root
                  counts once in expectation, and the root nearest the
                  straight line, usually the brightest, without the noise
-                 of a 1/p estimate. A failed solve contributes zero. The
+                 of a 1/p estimate. A failed solve contributes zero.
+                 The limit of that claim: q > 0 needs every root's basin
+                 to be reachable, and a root whose twin lies within
+                 ~1e-4 rad of it across a fold of the caustic can sit
+                 where the coarse stage always lands in the twin's basin;
+                 such a root is counted by neither side (measured: 1 % low
+                 on a crop under a gas grid at such a fold, where 13 of
+                 1,500 forward roots were never found: test/bench/
+                 RESULTS.md, "nee shoot low past the faces of grid
+                 plumes"). The
                  derivative of grad eta has closed
                  forms for the profiles and blobs; for grids (gridvol,
                  NanoVDB, baked noise, a gas through Hauf-Grigull) it is
