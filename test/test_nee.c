@@ -2886,6 +2886,58 @@ static void test_flat_cells_shoot_converges(void)
     rrv_scene_free(s);
 }
 
+/* The same scene in metres, kilometres and millimetres: a ray through two
+   refracting boxes (no sole support, so the fixed step) takes about the
+   same number of eikonal steps and leaves at the same direction, and
+   shoot's coarse stage grows with the scene. With the fixed 0.01 m step
+   the kilometre ray took ~1000x the steps (a 0.16 s render took minutes)
+   and the millimetre one stepped across its blobs in one step. */
+static void test_eikonal_steps_follow_the_scale(void)
+{
+    static const double scales[3] = {1.0, 1000.0, 0.001};
+    rrv_trace_result res[3];
+    uint64_t events[3];
+    double coarse[3];
+    int k;
+    for (k = 0; k < 3; ++k) {
+        char text[1024];
+        double u = scales[k];
+        rrv_scene *s;
+        rrv_error err;
+        snprintf(text, sizeof text,
+                 "camera eye 0 %g %g look 0 %g 0 resolution 8 6\n"
+                 "render integrator eikonal\n"
+                 "quad origin %g 0 %g u 0 0 %g v %g 0 0 L 1 1 1\n"
+                 "medium a box %g 0 %g %g %g %g sigma_a 0 0 0 sigma_s 0 0 0\n"
+                 "ior a blob center %g %g 0 radius %g weight 0.01\n"
+                 "medium b box %g 0 %g %g %g %g sigma_a 0 0 0 sigma_s 0 0 0\n"
+                 "ior b blob center %g %g 0 radius %g weight 0.01\n",
+                 u, -5 * u, u, -4 * u, -4 * u, 8 * u, 8 * u,
+                 -1.5 * u, -u, -0.1 * u, 2 * u, u, -0.8 * u, u, 0.3 * u,
+                 0.1 * u, -u, 1.5 * u, 2 * u, u, 0.8 * u, u, 0.3 * u);
+        s = parse_text(text, strlen(text), "scaled");
+        if (!s) return;
+        CHECKF(rrv_trace_ray(s, RRV_INTEGRATOR_EIKONAL, rrv__v3(-2 * u, 0.9 * u, -0.2 * u),
+                             rrv__v3(1, 0.05, 0.02), 1, 0, NULL, NULL, &res[k], &err) == RRV_OK,
+               "%s", err.message);
+        events[k] = res[k].events;
+        coarse[k] = rrv__solve_coarse_step(s, 1.0);
+        rrv_scene_free(s);
+    }
+    SAY("  steps through both boxes: %llu (1 m), %llu (1 km), %llu (1 mm); coarse steps %g, %g, %g\n",
+        (unsigned long long)events[0], (unsigned long long)events[1], (unsigned long long)events[2], coarse[0],
+        coarse[1], coarse[2]);
+    CHECKF(events[0] > 100 && events[1] < 10 * events[0] && events[2] > 10,
+           "steps %llu, %llu, %llu", (unsigned long long)events[0], (unsigned long long)events[1],
+           (unsigned long long)events[2]);
+    CHECKF(coarse[1] > 100 * coarse[0] && coarse[2] < coarse[0] / 10, "coarse steps %g, %g, %g", coarse[0],
+           coarse[1], coarse[2]);
+    for (k = 1; k < 3; ++k)
+        CHECKF(rrv__length(rrv__sub(res[k].direction, res[0].direction)) < 1e-3,
+               "scale %g: leaves along %g %g %g, at 1 m along %g %g %g", scales[k], res[k].direction.x,
+               res[k].direction.y, res[k].direction.z, res[0].direction.x, res[0].direction.y, res[0].direction.z);
+}
+
 int main(void)
 {
     only = getenv("NEE_ONLY");
@@ -2939,5 +2991,6 @@ int main(void)
     NEE_RUN(test_flat_cells_jacobian);
     NEE_RUN(test_flat_cells_shoot_converges);
     NEE_RUN(test_jacobian_past_a_face);
+    NEE_RUN(test_eikonal_steps_follow_the_scale);
     return CHECK_EXIT_CODE();
 }

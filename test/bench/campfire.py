@@ -11,7 +11,9 @@ medians. The reference of each maxdepth is a render with emission NEE at
 integrator; every connection to the flame then goes through refraction).
 --sky "R G B" puts it under a constant sky of that radiance: "paths only"
 then samples the sky as a light, the default gives the flame its samples.
---fill L adds a 0.4 m square light of radiance L above and beside the flame
+--scene PATH takes another flame beside a wall and floor, such as
+test/bench/smoky_campfire.rrv (the NanoVDB fire of scenes/pyro.rrv in its
+own dense smoke). --fill L adds a 0.4 m square light of radiance L above and beside the flame
 (facing down): the default then shares each vertex's light draw between
 the flame and the light by power, `emissionnee on` gives the flame a draw
 of its own; both are measured against paths alone.
@@ -51,8 +53,13 @@ def main():
     ap.add_argument('--sky', default='', help='a constant sky\'s radiance, "R G B"')
     ap.add_argument('--extra', default='', help='more render keys for the NEE runs, e.g. "transmittance residual"')
     ap.add_argument('--fill', type=float, default=0, help='a fill light of this radiance beside the flame')
+    ap.add_argument('--scene', default=os.path.join(HERE, 'campfire.rrv'),
+                    help='another flame beside a wall and floor (test/bench/smoky_campfire.rrv)')
     a = ap.parse_args()
-    text = open(os.path.join(HERE, 'campfire.rrv')).read()
+    text = open(a.scene).read()
+    # the variants are written elsewhere: grid paths become absolute
+    base = os.path.dirname(os.path.abspath(a.scene))
+    text = re.sub(r'\b(nanovdb|grid) (?!/)(\S+)', lambda m: m.group(1) + ' ' + os.path.normpath(os.path.join(base, m.group(2))), text)
     if a.hot_air:
         text = text.replace('integrator classic', 'integrator refractive') + HOT_AIR
     if a.sky:
