@@ -19348,6 +19348,8 @@ static rrv_result rrv__sf_obj_parse(rrv__sf_parser *p, const char *text, size_t 
         if (toks.n == 0) continue;
         if (rrv__sf_tok_is(&toks.v[0], "v")) {
             double c[3];
+            rrv_vec3 placed;
+            rrv__ck ck;
             int a;
             for (a = 0; a < 3; ++a) {
                 if ((size_t)a + 1 >= toks.n) {
@@ -19364,23 +19366,17 @@ static rrv_result rrv__sf_obj_parse(rrv__sf_parser *p, const char *text, size_t 
                 }
             }
             if (r != RRV_OK) break;
-            {
-                rrv_vec3 placed = {0, 0, 0};
-                rrv__ck ck;
-                placed.x = c[0], placed.y = c[1], placed.z = c[2];
-                placed = rrv__sf_transform(placed, scale, translate);
-                rrv__ck_init(&ck, p->err, file, line, RRV_ERROR_PARSE, "v (after scale and translate)");
-                r = rrv__ck_vec(&ck, &rrv__sf_corner_key, placed);
-                if (r != RRV_OK) break;
-            }
+            /* kept where scale and translate place it, checked against
+               this line */
+            placed = rrv__sf_transform(rrv__v3(c[0], c[1], c[2]), scale, translate);
+            rrv__ck_init(&ck, p->err, file, line, RRV_ERROR_PARSE, "v (after scale and translate)");
+            r = rrv__ck_vec(&ck, &rrv__sf_corner_key, placed);
+            if (r != RRV_OK) break;
             if (!rrv__sf_reserve((void **)&verts.v, &verts.cap, verts.n, sizeof *verts.v)) {
                 r = rrv__fail(p->err, RRV_ERROR_MEMORY, file, line, "out of memory");
                 break;
             }
-            verts.v[verts.n].x = c[0];
-            verts.v[verts.n].y = c[1];
-            verts.v[verts.n].z = c[2];
-            ++verts.n;
+            verts.v[verts.n++] = placed;
         } else if (rrv__sf_tok_is(&toks.v[0], "f")) {
             int first = 0, prev = 0;
             size_t k;
@@ -19406,10 +19402,7 @@ static rrv_result rrv__sf_obj_parse(rrv__sf_parser *p, const char *text, size_t 
                 else if (k >= 3) {
                     rrv__ck ck;
                     rrv__sf_ck(p, &ck, "mesh");
-                    r = rrv__store_triangle(&ck, p->scene,
-                                            rrv__sf_transform(verts.v[first], scale, translate),
-                                            rrv__sf_transform(verts.v[prev], scale, translate),
-                                            rrv__sf_transform(verts.v[idx], scale, translate), proto);
+                    r = rrv__store_triangle(&ck, p->scene, verts.v[first], verts.v[prev], verts.v[idx], proto);
                 }
                 prev = idx;
             }

@@ -18,7 +18,10 @@ its variance is underestimated at low spp and its mean comes out low, so
 the spp must be high enough for the means to agree before its efficiency
 counts.
 """
-import argparse, os, re, resource, statistics, struct, subprocess, sys, tempfile
+import argparse, os, re, resource, statistics, subprocess, sys, tempfile
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from nee_bench import read_pfm  # noqa: E402
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 SCENES = os.path.join(ROOT, "scenes")
@@ -60,13 +63,6 @@ VARIANTS = [
     ("fire_thin_flame_weak", "fire.rrv", [("resolution 320 240", "resolution 80 60"), (FLAME, "sigma_a 0.4 0.4 0.4  sigma_s 0.02 0.02 0.02"),
                                           ("iorscale 500", "iorscale 100"), ("ambient ior 1.146", "ambient ior 1.0292")]),
 ]
-
-
-def read_pfm(path):
-    data = open(path, "rb").read()
-    parts = data.split(b"\n", 3)
-    w, h = map(int, parts[1].split())
-    return struct.unpack("<%df" % (w * h * 3), parts[3][:w * h * 12])
 
 
 def render(rrv, scene, out, spp, seed, flags):
