@@ -626,6 +626,16 @@ static void nee_matches_forward_in_blocks(void)
             CHECK(rrv__render_context(off, &ctx, &frame, &e) == RRV_OK && !ctx.emission && off->emit_share == 0.0);
             rrv__solver_release(&ctx);
         }
+        {
+            /* every variant's first bounce is guided */
+            rrv__context ctx;
+            rrv__camera_frame frame;
+            rrv_error e;
+            CHECK(rrv__render_context(on, &ctx, &frame, &e) == RRV_OK);
+            CHECKF(ctx.guide_mix >= RRV__GUIDE_LEAST, "variant %d: the guide's mix %g", variant, ctx.guide_mix);
+            printf("  (guide mix %.2f)", ctx.guide_mix);
+            rrv__solver_release(&ctx);
+        }
         block_stats(on, 16, 16, m_on, s_on);
         block_stats(off, 16, 128, m_off, s_off);
         for (k = 0; k < BW * BH; ++k) {
