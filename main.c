@@ -3400,6 +3400,13 @@ static int command_info(int argc, char **argv)
            kind_counts[RRV_SHAPE_TRIANGLE]);
     printf("lights: %d\n", scene->light_count);
     print_light_samples(scene);
+    {
+        int sides;
+        double guide = rrv_scene_bounce_guide(scene, &sides);
+        if (guide > 0)
+            printf("first bounces: %.3g %% toward the %d lit side%s of surfaces the emissive media light\n",
+                   100 * guide, sides, sides == 1 ? "" : "s");
+    }
     printf("media: %d\n", scene->medium_count);
     for (i = 0; i < scene->medium_count; ++i) print_medium(scene, i);
     printf("bvh_nodes: %d\n", scene->bvh_node_count);

@@ -1,4 +1,4 @@
-/* rrv.h 0.20.1 - refractive volume renderer, a single-file C99 library.
+/* rrv.h 0.21.0 - refractive volume renderer, a single-file C99 library.
 
    rrv renders participating media whose index of refraction varies in space
    (heat haze, shock fronts, the caustics of hot air) with refractive
@@ -144,7 +144,7 @@
      rrv_scene_set_field    check and set a medium's density, temperature, pressure or IOR
      rrv_medium_channel_groups which of a medium's channels share a free-flight majorant
      rrv_medium_face_jumps  a prepared medium's IOR jump at each face
-     rrv_scene_integrator, rrv_scene_nee  what a prepared scene renders with
+     rrv_scene_integrator, rrv_scene_nee, rrv_scene_bounce_guide  what a prepared scene renders with
      rrv_render_rect        add the radiance sums of a pixel rectangle and sample range
      rrv_render_rect_adaptive the same, each pixel's samples until its error is below a threshold
      rrv_trace_ray          walk one ray through the refractive media
@@ -208,8 +208,8 @@
 #endif
 
 #define RRV_VERSION_MAJOR 0
-#define RRV_VERSION_MINOR 20
-#define RRV_VERSION_PATCH 1
+#define RRV_VERSION_MINOR 21
+#define RRV_VERSION_PATCH 0
 
 #ifndef RRV_DEF
 #ifdef RRV_STATIC
@@ -958,6 +958,13 @@ RRV_DEF rrv_integrator rrv_scene_integrator(const rrv_scene *scene);
    no face or rim is a jump of the IOR, else SHOOT (which the refractive
    integrator turns into AIM). */
 RRV_DEF rrv_nee rrv_scene_nee(const rrv_scene *scene);
+
+/* The share of a path's first diffuse bounces that rrv_render_rect draws
+   toward the surfaces a prepared scene's emissive media light (EMISSIVE
+   MEDIA AS LIGHTS), and in *sides, if not NULL, how many lit sides of
+   quads and triangles it aims at; 0 (and 0 sides) where no bounce is
+   guided. */
+RRV_DEF double rrv_scene_bounce_guide(const rrv_scene *scene, int *sides);
 
 /* The sharp interfaces of a prepared scene's medium: for each face of its
    box (-x, +x, -y, +y, -z, +z) and, for a Luneburg or fish-eye profile,
@@ -10726,6 +10733,21 @@ static rrv_result rrv__render_context(const rrv_scene *scene, rrv__context *ctx,
        render and a refractive one of a fire in air agree exactly. */
     ctx->thermal_scale = ctx->bends ? ctx->eta_camera2 / (rrv__ambient_ior(scene) * rrv__ambient_ior(scene)) : 1.0;
     return RRV_OK;
+}
+
+RRV_DEF double rrv_scene_bounce_guide(const rrv_scene *scene, int *sides)
+{
+    rrv__context ctx;
+    rrv__camera_frame frame;
+    rrv_error err;
+    double mix;
+    if (sides) *sides = 0;
+    if (!scene || !scene->prepared || !scene->emitters) return 0.0;
+    if (rrv__render_context(scene, &ctx, &frame, &err) != RRV_OK) return 0.0;
+    mix = ctx.guide_mix;
+    rrv__solver_release(&ctx);
+    if (sides && mix > 0) *sides = scene->emitters->guide_count;
+    return mix;
 }
 
 /* Adds one call's counts into the caller's. */
@@ -21260,6 +21282,14 @@ and BOUNDS (moved here from the manual at the top, word for word)
 ------------------------------------------------------------------------------
 VERSION HISTORY
 ------------------------------------------------------------------------------
+     0.21.0 fire as a light: a path's first diffuse bounce is drawn partly
+            toward the surfaces the emissive media light (a guide of their
+            lit sides, 32 x 32 cells each, built by prepare; unbiased, the
+            throughput divided by the mixture's density), in their share
+            of the light draw less their albedo's: test/bench/campfire.rrv
+            at maxdepth 32 6.3x -> 8.1x the efficiency of paths alone;
+            rrv_scene_bounce_guide and `rrv info` say how much is guided.
+            Scenes where nothing is guided render draw for draw as before.
      0.20.1 bad input: a UTF-8 byte order mark at the start of a scene or
             OBJ file is skipped (it was an unknown statement); an OBJ
             vertex that scale and translate place outside the world's
