@@ -8640,6 +8640,16 @@ typedef struct rrv__guide_patch {
     rrv__emit_cluster box;
 } rrv__guide_patch;
 
+/* A surface point x of unit normal n as emit_cluster_g reads one. */
+static void rrv__guide_from(rrv__emit_from *at, rrv_vec3 x, rrv_vec3 n)
+{
+    memset(at, 0, sizeof *at);
+    at->surface = 1;
+    at->x = x;
+    at->n = n;
+    at->n_abs = rrv__v3(fabs(n.x), fabs(n.y), fabs(n.z));
+}
+
 /* The emitters' unoccluded irradiance at x on the side of unit normal n, up
    to one constant for the whole scene: the super-clusters' W_s times their
    cosine-over-squared-distance bound. */
@@ -8648,11 +8658,7 @@ static double rrv__guide_irradiance(const struct rrv__emitters *e, rrv_vec3 x, r
     rrv__emit_from at;
     double E = 0;
     int s;
-    memset(&at, 0, sizeof at);
-    at.surface = 1;
-    at.x = x;
-    at.n = n;
-    at.n_abs = rrv__v3(fabs(n.x), fabs(n.y), fabs(n.z));
+    rrv__guide_from(&at, x, n);
     for (s = 0; s < e->supers; ++s)
         if (e->super[s].weight > 0) E += e->super[s].weight * rrv__emit_cluster_g(&e->super[s], &at);
     return E;
@@ -8783,11 +8789,7 @@ static double rrv__guide_weights(const struct rrv__emitters *e, rrv_vec3 x, rrv_
     rrv__emit_from at;
     double Q = 0;
     int i;
-    memset(&at, 0, sizeof at);
-    at.surface = 1;
-    at.x = x;
-    at.n = n;
-    at.n_abs = rrv__v3(fabs(n.x), fabs(n.y), fabs(n.z));
+    rrv__guide_from(&at, x, n);
     for (i = 0; i < e->guide_count; ++i) {
         const rrv__guide_patch *g = &e->guide[i];
         q[i] = 0;
