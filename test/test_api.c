@@ -148,6 +148,14 @@ static void test_default_integrator(void)
            connect only surfaces); dense (35), the comb's aimed rays */
         {"medium smoke box -1 0 -1 1 2 1\ndensity smoke constant 0.1", 1, RRV_INTEGRATOR_EIKONAL, RRV_NEE_SHOOT},
         {"medium smoke box -1 0 -1 1 2 1\ndensity smoke constant 10", 1, RRV_INTEGRATOR_REFRACTIVE, RRV_NEE_SHOOT},
+        /* soot as dense that only absorbs (a flame's) is no smoke: it makes
+           no vertex that connects, and aimed rays miss the small light's
+           caustic through it as through clear air; one that scatters a
+           tenth as much is smoke again */
+        {"medium smoke box -1 0 -1 1 2 1 sigma_a 1 1 1 sigma_s 0 0 0\ndensity smoke constant 10", 1,
+         RRV_INTEGRATOR_EIKONAL, RRV_NEE_SHOOT},
+        {"medium smoke box -1 0 -1 1 2 1 sigma_a 1 1 1 sigma_s 0.5 0.5 0.5\ndensity smoke constant 10", 1,
+         RRV_INTEGRATOR_REFRACTIVE, RRV_NEE_SHOOT},
         /* a 1.2 m light alone (0.48 of its 2.5 m): small over a clear
            plume, not under thin smoke, where aimed rays seldom miss it */
         {"1.2", 3, RRV_INTEGRATOR_EIKONAL, RRV_NEE_MANIFOLD},
