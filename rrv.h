@@ -7345,6 +7345,7 @@ typedef struct rrv__path {
     rrv__emit_from emit;
     rrv__equi eq;            /* the last vertex's segment, where it was a free flight's */
     double emit_share;       /* the emitters' share of the last vertex's light draw */
+    int sky_drawn;           /* the last vertex could draw the sky (rrv__sky_alone) */
 } rrv__path;
 
 static void rrv__path_start(rrv__path *path, rrv__rng *rng)
@@ -7360,6 +7361,7 @@ static void rrv__path_start(rrv__path *path, rrv__rng *rng)
     path->emit.on = 0;
     path->eq.on = 0;
     path->emit_share = 0.0;
+    path->sky_drawn = 1;
 }
 
 /* The factor that turns beta into a contribution: 1 / mean(ratio). */
@@ -9749,6 +9751,22 @@ static double rrv__point_emit_share(const rrv__context *ctx, rrv_vec3 x)
     return rrv__vertex_emit_share(ctx, &at);
 }
 
+/* Whether the sky is all there is to draw (no light shape, no emitter
+   taking the draws, the power sampler): a diffuse surface then draws
+   nothing. Its cosine lobe finds a constant sky with no variance where
+   nothing hides it, and a smooth one nearly so, while the sky's samples,
+   uniform over the sphere, only add their own noise through the MIS
+   weights, and under refraction the cost of an aimed walk: heat haze over
+   a wall under a constant sky, 2.8x the variance at the same cost
+   (test/bench/RESULTS.md, "A sky alone"). A scattering vertex still
+   draws it: there the phase function is no better than the sky's
+   samples, and the draw is a second sample of the sky. */
+static int rrv__sky_alone(const rrv_scene *scene)
+{
+    return scene->light_power && scene->light_count == 0 && scene->environment.kind != RRV_ENV_NONE &&
+           scene->sky_weight > 0;
+}
+
 /* A real vertex's next-event estimation: one light draw, taken by straight
    NEE and, where paths are sorted into classes, by curved NEE. Without
    light sampling (nee none) nothing is drawn. */
@@ -9756,6 +9774,8 @@ static void rrv__vertex_nee(rrv__context *ctx, rrv__path *path, rrv_vec3 x, cons
 {
     rrv__light_draw draw;
     if (!ctx->sample_lights) return;
+    path->sky_drawn = !(v->surface && rrv__sky_alone(ctx->scene));
+    if (!path->sky_drawn) return;
     /* the light sample's draws vary in count (shadow walks, solver trials):
        streams of their own keep the vertex's direction at fixed dimensions */
     rng->stream = RRV__STREAM_LIGHT;
@@ -9887,7 +9907,7 @@ static void rrv__escape_to_sky(rrv__context *ctx, rrv__camera_path *cp)
     int c;
     if (scene->environment.kind == RRV_ENV_NONE) return;
     rrv__environment_L(&scene->environment, cp->d, Le);
-    if (cp->prev_pdf > 0 && ctx->sample_lights &&
+    if (cp->prev_pdf > 0 && ctx->sample_lights && cp->path.sky_drawn &&
         (!(ctx->partition && cp->touched) ||
          (!cp->jumped && rrv__forward_weak(ctx, cp->vertex, cp->w0, cp->d, DBL_MAX) == 1)))
         w = rrv__power_heuristic(cp->prev_pdf, RRV__INV_4PI * rrv__light_prob(scene, NULL, cp->path.emit_share));
@@ -20994,7 +21014,12 @@ and BOUNDS (moved here from the manual at the top, word for word)
      sampling too). `uniform` picks every light shape and the sky alike,
      as rrv did before 0.13. Measured (test/bench/RESULTS.md, "Light
      sampling"): smoke 2.0x, plume 1.6x, luneburg 1.4x the efficiency of
-     uniform; no bench scene slower beyond noise.
+     uniform; no bench scene slower beyond noise. Where a sky is all
+     there is to draw, a diffuse surface draws nothing and its cosine
+     lobe finds the sky with MIS weight 1 (exact under a constant sky
+     where nothing hides it); scattering vertices still draw it (a wall
+     in heat haze under a sky 3.5x, test/bench/RESULTS.md, "A sky
+     alone").
 
    BOUNDARIES (design decisions)
      Faces of refractive media (a medium's box; the sphere of a Luneburg or
@@ -21306,6 +21331,10 @@ VERSION HISTORY
             not extinction: a flame's soot inside hot air under a small
             light now shoots (16x at 128 spp on the scene a random sweep
             found the comb 24x behind on); no repository scene changes.
+            Under a sky alone a diffuse surface draws no light sample and
+            its cosine lobe takes the sky with weight one (a wall in heat
+            haze under a constant sky 3.5x); no repository scene is lit
+            by a sky alone, so none renders differently.
      0.20.1 bad input: a UTF-8 byte order mark at the start of a scene or
             OBJ file is skipped (it was an unknown statement); an OBJ
             vertex that scale and translate place outside the world's

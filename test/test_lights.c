@@ -158,8 +158,8 @@ static void densities_integrate_to_solid_angles(void)
     }
 }
 
-/* A sky alone is still sampled (all of it), and the light sample's
-   density is the same the path's weight divides by. */
+/* A sky alone is still sampled (all of it, by scattering vertices), and
+   the light sample's density is the same the path's weight divides by. */
 static void a_sky_alone_is_sampled(void)
 {
     static const char *const sky_only = "camera eye 0 1 -3 look 0 0 0 up 0 1 0 fov 40 resolution 4 4\n"
@@ -177,6 +177,99 @@ static void a_sky_alone_is_sampled(void)
     CHECK(rrv__sample_light(s, rrv__v3(0, 0.5, 0), &draw, &ls) && ls.dist == DBL_MAX);
     CHECKF(fabs(ls.pdf - RRV__INV_4PI) < 1e-15, "pdf %.17g", ls.pdf);
     rrv_scene_free(s);
+}
+
+/* A sky alone (no light shape, no emitter): a diffuse surface draws
+   nothing (rrv__sky_alone) and its cosine lobe finds the sky with weight
+   one, so a floor open to a constant sky renders exactly albedo x L in
+   every sample; under the uniform sampler, or beside a light shape, the
+   rule is off. */
+static void a_sky_alone_leaves_surfaces_to_their_lobe(void)
+{
+    static const char *const sky_only = "camera eye 0 1 -3 look 0 0 0 up 0 1 0 fov 40 resolution 8 8\n"
+                                        "render spp 1 maxdepth 1 %s\n"
+                                        "environment constant L 0.3 0.3 0.3\n"
+                                        "material ground diffuse albedo 0.5 0.5 0.5\n"
+                                        "quad origin -40 0 -40 u 0 0 80 v 80 0 0 material ground\n";
+    rrv_scene *s = lights_load(sky_only, ""), *u = lights_load(sky_only, "lightsampler uniform");
+    rrv_scene *lit = lights_load(sky_only, "\nsphere center 0 3 0 radius 0.1 L 5 5 5");
+    float img[8 * 8 * 3];
+    int i, exact = 0;
+    double worst = 0;
+    if (s && u && lit) {
+        CHECK(rrv__sky_alone(s) && !rrv__sky_alone(u) && !rrv__sky_alone(lit));
+        memset(img, 0, sizeof img);
+        CHECK(rrv_render_rect(s, 0, 0, 8, 8, 0, 16, img, 8, NULL, NULL) == RRV_OK);
+        /* the lower half sees the floor only */
+        for (i = 8 * 4 * 3; i < 8 * 8 * 3; ++i) {
+            double e = fabs(img[i] / 16.0 - 0.15);
+            worst = fmax(worst, e);
+            exact += e <= 1e-6;
+        }
+        CHECKF(exact == 8 * 4 * 3, "%d of 96 floor values exact, worst off by %g", exact, worst);
+        printf("  the floor's pixels within %.1e of albedo x sky\n", worst);
+    }
+    rrv_scene_free(s);
+    rrv_scene_free(u);
+    rrv_scene_free(lit);
+}
+
+/* Under a sky alone, a floor and a wall (which hide part of it from each
+   other) in fog (whose vertices still draw the sky), classic and through
+   hot air: the power sampler (surfaces leave the sky to their lobe) and
+   the uniform one (every vertex draws it) render the same blocks within
+   4 standard errors of their difference. */
+static void a_sky_alone_matches_uniform_in_blocks(void)
+{
+    static const char *const sky_room =
+        "camera eye 0 1.2 -3 look 0 0.6 0 up 0 1 0 fov 45 resolution 12 8\n"
+        "render spp 1 maxdepth 4 integrator %s %s\n"
+        "environment gradient top 0.4 0.45 0.6 bottom 0.05 0.05 0.05\n"
+        "material ground diffuse albedo 0.5 0.5 0.5\n"
+        "quad origin -4 0 -4 u 0 0 8 v 8 0 0 material ground\n"
+        "quad origin -4 0 1 u 8 0 0 v 0 3 0 material ground\n"
+        "medium fog box -1 0 -1 1 1.2 0.5 sigma_a 0.1 0.1 0.1 sigma_s 0.6 0.6 0.6 g 0.3\n"
+        "density fog constant 1\n"
+        "%s";
+    static const char *const hot =
+        "medium air box -1.5 0.2 -1.5 1.5 2.5 0.9 sigma_a 0 0 0 sigma_s 0 0 0\n"
+        "temperature air blob center 0 1 -0.2 radius 0.4 weight 300 base 300\n"
+        "ior air gas iorscale 100\n";
+    int variant, k;
+    for (variant = 0; variant < 2; ++variant) {
+        char text[2048];
+        rrv_scene *power, *uniform;
+        double m0[BW * BH], s0[BW * BH], m1[BW * BH], s1[BW * BH], worst = 0, rel = 0;
+        rrv_error e;
+        snprintf(text, sizeof text, sky_room, variant ? "refractive" : "classic", "seed 4", variant ? hot : "");
+        power = uniform = NULL;
+        if (rrv_scene_parse(text, strlen(text), "sky.rrv", ".", NULL, &power, &e) != RRV_OK) {
+            CHECKF(0, "%s:%d: %s", e.file, e.line, e.message);
+            return;
+        }
+        snprintf(text, sizeof text, sky_room, variant ? "refractive" : "classic", "lightsampler uniform seed 5",
+                 variant ? hot : "");
+        if (rrv_scene_parse(text, strlen(text), "sky.rrv", ".", NULL, &uniform, &e) != RRV_OK) {
+            CHECKF(0, "%s:%d: %s", e.file, e.line, e.message);
+            rrv_scene_free(power);
+            return;
+        }
+        CHECK(rrv__sky_alone(power) && !rrv__sky_alone(uniform));
+        block_stats(uniform, 16, 64, m0, s0);
+        block_stats(power, 16, 64, m1, s1);
+        for (k = 0; k < BW * BH; ++k) {
+            double z = (m1[k] - m0[k]) / sqrt(s0[k] * s0[k] + s1[k] * s1[k]);
+            CHECKF(fabs(z) <= 4.0, "%s block %d: %g +- %g power, %g +- %g uniform (z = %.2f)",
+                   variant ? "refractive" : "classic", k, m1[k], s1[k], m0[k], s0[k], z);
+            worst = fmax(worst, fabs(z));
+            rel = fmax(rel, fmax(s0[k] / m0[k], s1[k] / m1[k]));
+        }
+        CHECKF(rel < 0.015, "the blocks' relative error %g is too large to see a bias", rel);
+        printf("  %s: worst |z| %.2f, blocks within %.2f%%\n", variant ? "refractive, hot air" : "classic", worst,
+               100 * rel);
+        rrv_scene_free(power);
+        rrv_scene_free(uniform);
+    }
 }
 
 /* The power sampler (no sky samples beside the light shapes) and the
@@ -257,6 +350,8 @@ int main(void)
     RUN(picks_follow_the_probabilities);
     RUN(densities_integrate_to_solid_angles);
     RUN(a_sky_alone_is_sampled);
+    RUN(a_sky_alone_leaves_surfaces_to_their_lobe);
+    RUN(a_sky_alone_matches_uniform_in_blocks);
     RUN(power_matches_uniform_in_blocks);
     RUN(prepared_sampler_holds);
     RUN(lights_default_and_keys);
