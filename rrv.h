@@ -10707,9 +10707,12 @@ static rrv_result rrv__render_context(const rrv_scene *scene, rrv__context *ctx,
        which it does not see (the NanoVDB fire of
        test/bench/smoky_campfire.rrv, albedo 0.71: at the full mix 0.79x
        the efficiency without the guide, at this one 1.04x). Where that
-       leaves a sliver, none: such scenes render as before, draw for draw. */
+       leaves a sliver, none: such scenes render as before, draw for draw.
+       Nor under a sky, whose share of the light no draw weighs: a bright
+       sky over a weak flame is most of what the surfaces pass on, and the
+       guide was measured only without one. */
     ctx->guide_mix = 0.0;
-    if (ctx->emission && scene->emitters->guide_count > 0) {
+    if (ctx->emission && scene->emitters->guide_count > 0 && scene->environment.kind == RRV_ENV_NONE) {
         const struct rrv__emitters *e = scene->emitters;
         ctx->guide_mix = RRV__GUIDE_MIX * (1.0 - e->guide_albedo) * (rrv__light_pick_none(scene) ? 1.0 : scene->emit_share);
         if (ctx->guide_mix < RRV__GUIDE_LEAST) ctx->guide_mix = 0.0;
@@ -20976,8 +20979,8 @@ and BOUNDS (moved here from the manual at the top, word for word)
      any weights keep it unbiased. m = 0.5 (1 - a) P_E: a the emitters'
      albedo averaged by power (the glow of smoke a flame lights is light
      the guide does not know), P_E their share of the light draw (1 with
-     no light shape); below 0.05 there is no guide and the scene renders
-     draw for draw as without it. The MIS weights keep the cosine
+     no light shape); below 0.05, or under a sky, there is no guide and
+     the scene renders draw for draw as without it. The MIS weights keep the cosine
      density, as the light samples do. Later bounces stay cosine: guided
      there too, paths lived longer for less (test/bench/RESULTS.md,
      "Fire as a light: the first bounce guided").
@@ -21323,7 +21326,8 @@ VERSION HISTORY
             toward the surfaces the emissive media light (a guide of their
             lit sides, 32 x 32 cells each, built by prepare; unbiased, the
             throughput divided by the mixture's density), in their share
-            of the light draw less their albedo's: test/bench/campfire.rrv
+            of the light draw less their albedo's (none under a sky):
+            test/bench/campfire.rrv
             at maxdepth 32 6.3x -> 8.1x the efficiency of paths alone;
             rrv_scene_bounce_guide and `rrv info` say how much is guided.
             Scenes where nothing is guided render draw for draw as before.
