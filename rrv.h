@@ -8653,17 +8653,13 @@ static void rrv__guide_from(rrv__emit_from *at, rrv_vec3 x, rrv_vec3 n)
 }
 
 /* The emitters' unoccluded irradiance at x on the side of unit normal n, up
-   to one constant for the whole scene: the super-clusters' W_s times their
-   cosine-over-squared-distance bound. */
+   to one constant for the whole scene: emission NEE's norm over the
+   super-clusters, W_s times their cosine-over-squared-distance bound. */
 static double rrv__guide_irradiance(const struct rrv__emitters *e, rrv_vec3 x, rrv_vec3 n)
 {
     rrv__emit_from at;
-    double E = 0;
-    int s;
     rrv__guide_from(&at, x, n);
-    for (s = 0; s < e->supers; ++s)
-        if (e->super[s].weight > 0) E += e->super[s].weight * rrv__emit_cluster_g(&e->super[s], &at);
-    return E;
+    return rrv__emission_norm(e, &at, NULL);
 }
 
 static double rrv__guide_albedo(const rrv_scene *scene, const rrv_shape *sh, rrv_vec3 x, rrv_vec3 n)
@@ -8679,7 +8675,8 @@ static void rrv__guide_patch_fill(const rrv_scene *scene, const struct rrv__emit
                                   rrv__guide_patch *g, double *cdf)
 {
     const rrv_shape *sh = &scene->shapes[shape];
-    rrv_vec3 N = rrv__cross(sh->e1, sh->e2), lo, hi, corner[4];
+    rrv_shape parallelogram = *sh;
+    rrv_vec3 N = rrv__cross(sh->e1, sh->e2), lo, hi;
     double N2 = rrv__dot(N, N), cell_area = sqrt(N2) / (RRV__GUIDE_CELLS * RRV__GUIDE_CELLS);
     int i, j, k;
     g->shape = shape;
@@ -8690,15 +8687,9 @@ static void rrv__guide_patch_fill(const rrv_scene *scene, const struct rrv__emit
     g->du = rrv__scale(rrv__cross(sh->e2, N), 1.0 / N2);
     g->dv = rrv__scale(rrv__cross(N, sh->e1), 1.0 / N2);
     g->inv_cell_area = 1.0 / cell_area;
-    corner[0] = sh->p0;
-    corner[1] = rrv__add(sh->p0, sh->e1);
-    corner[2] = rrv__add(sh->p0, sh->e2);
-    corner[3] = rrv__add(corner[1], sh->e2);
-    lo = hi = corner[0];
-    for (k = 1; k < 4; ++k) {
-        lo = rrv__vmin(lo, corner[k]);
-        hi = rrv__vmax(hi, corner[k]);
-    }
+    /* a triangle's cells fill the parallelogram of its edges */
+    parallelogram.kind = RRV_SHAPE_QUAD;
+    rrv__shape_bounds(&parallelogram, &lo, &hi);
     rrv__emit_cluster_box(&g->box, lo, hi);
     cdf[0] = 0;
     for (j = 0, k = 0; j < RRV__GUIDE_CELLS; ++j)
@@ -8728,9 +8719,9 @@ static rrv_result rrv__build_guide(rrv_scene *scene, rrv_error *err)
         rrv_vec3 N, c;
         double area, albedo;
         if (sh->kind != RRV_SHAPE_QUAD && sh->kind != RRV_SHAPE_TRIANGLE) continue;
-        N = rrv__cross(sh->e1, sh->e2);
-        area = rrv__length(N) * (sh->kind == RRV_SHAPE_QUAD ? 1.0 : 0.5);
+        area = rrv__shape_area(sh);
         if (!(area > 0) || !(area < DBL_MAX)) continue;
+        N = rrv__cross(sh->e1, sh->e2);
         c = rrv__madd(rrv__madd(sh->p0, sh->e1, sh->kind == RRV_SHAPE_QUAD ? 0.5 : 1.0 / 3.0), sh->e2,
                       sh->kind == RRV_SHAPE_QUAD ? 0.5 : 1.0 / 3.0);
         N = rrv__normalize(N);

@@ -179,6 +179,30 @@ static void a_sky_alone_is_sampled(void)
     rrv_scene_free(s);
 }
 
+/* The blocks of two renders of one scene, by the power and by the uniform
+   sampler, within 4 standard errors of their difference, each block known
+   to 1.5 %; frees both (either may be NULL, a scene that did not load). */
+static void power_against_uniform(rrv_scene *power, rrv_scene *uniform, int spp, const char *name)
+{
+    double m0[BW * BH], s0[BW * BH], m1[BW * BH], s1[BW * BH], worst = 0, rel = 0;
+    int k;
+    if (power && uniform) {
+        block_stats(uniform, 16, spp, m0, s0);
+        block_stats(power, 16, spp, m1, s1);
+        for (k = 0; k < BW * BH; ++k) {
+            double z = (m1[k] - m0[k]) / sqrt(s0[k] * s0[k] + s1[k] * s1[k]);
+            CHECKF(fabs(z) <= 4.0, "%s block %d: %g +- %g power, %g +- %g uniform (z = %.2f)", name ? name : "", k,
+                   m1[k], s1[k], m0[k], s0[k], z);
+            worst = fmax(worst, fabs(z));
+            rel = fmax(rel, fmax(s0[k] / m0[k], s1[k] / m1[k]));
+        }
+        CHECKF(rel < 0.015, "the blocks' relative error %g is too large to see a bias", rel);
+        printf("  %s%sworst |z| %.2f, blocks within %.2f%%\n", name ? name : "", name ? ": " : "", worst, 100 * rel);
+    }
+    rrv_scene_free(power);
+    rrv_scene_free(uniform);
+}
+
 /* A sky alone (no light shape, no emitter): a diffuse surface draws
    nothing (rrv__sky_alone) and its cosine lobe finds the sky with weight
    one, so a floor open to a constant sky renders exactly albedo x L in
@@ -235,40 +259,16 @@ static void a_sky_alone_matches_uniform_in_blocks(void)
         "medium air box -1.5 0.2 -1.5 1.5 2.5 0.9 sigma_a 0 0 0 sigma_s 0 0 0\n"
         "temperature air blob center 0 1 -0.2 radius 0.4 weight 300 base 300\n"
         "ior air gas iorscale 100\n";
-    int variant, k;
+    int variant;
     for (variant = 0; variant < 2; ++variant) {
-        char text[2048];
+        char format[2048];
         rrv_scene *power, *uniform;
-        double m0[BW * BH], s0[BW * BH], m1[BW * BH], s1[BW * BH], worst = 0, rel = 0;
-        rrv_error e;
-        snprintf(text, sizeof text, sky_room, variant ? "refractive" : "classic", "seed 4", variant ? hot : "");
-        power = uniform = NULL;
-        if (rrv_scene_parse(text, strlen(text), "sky.rrv", ".", NULL, &power, &e) != RRV_OK) {
-            CHECKF(0, "%s:%d: %s", e.file, e.line, e.message);
-            return;
-        }
-        snprintf(text, sizeof text, sky_room, variant ? "refractive" : "classic", "lightsampler uniform seed 5",
-                 variant ? hot : "");
-        if (rrv_scene_parse(text, strlen(text), "sky.rrv", ".", NULL, &uniform, &e) != RRV_OK) {
-            CHECKF(0, "%s:%d: %s", e.file, e.line, e.message);
-            rrv_scene_free(power);
-            return;
-        }
-        CHECK(rrv__sky_alone(power) && !rrv__sky_alone(uniform));
-        block_stats(uniform, 16, 64, m0, s0);
-        block_stats(power, 16, 64, m1, s1);
-        for (k = 0; k < BW * BH; ++k) {
-            double z = (m1[k] - m0[k]) / sqrt(s0[k] * s0[k] + s1[k] * s1[k]);
-            CHECKF(fabs(z) <= 4.0, "%s block %d: %g +- %g power, %g +- %g uniform (z = %.2f)",
-                   variant ? "refractive" : "classic", k, m1[k], s1[k], m0[k], s0[k], z);
-            worst = fmax(worst, fabs(z));
-            rel = fmax(rel, fmax(s0[k] / m0[k], s1[k] / m1[k]));
-        }
-        CHECKF(rel < 0.015, "the blocks' relative error %g is too large to see a bias", rel);
-        printf("  %s: worst |z| %.2f, blocks within %.2f%%\n", variant ? "refractive, hot air" : "classic", worst,
-               100 * rel);
-        rrv_scene_free(power);
-        rrv_scene_free(uniform);
+        /* the render line's keys stay to fill */
+        snprintf(format, sizeof format, sky_room, variant ? "refractive" : "classic", "%s", variant ? hot : "");
+        power = lights_load(format, "seed 4");
+        uniform = lights_load(format, "lightsampler uniform seed 5");
+        if (power && uniform) CHECK(rrv__sky_alone(power) && !rrv__sky_alone(uniform));
+        power_against_uniform(power, uniform, 64, variant ? "refractive, hot air" : "classic");
     }
 }
 
@@ -277,27 +277,8 @@ static void a_sky_alone_matches_uniform_in_blocks(void)
    difference, each block known to 1.5 %; different seeds. */
 static void power_matches_uniform_in_blocks(void)
 {
-    rrv_scene *power = lights_load(lights_scene, "seed 3"), *uniform = lights_load(lights_scene, "lightsampler uniform seed 4");
-    double m0[BW * BH], s0[BW * BH], m1[BW * BH], s1[BW * BH], worst = 0, rel = 0;
-    int k;
-    if (!power || !uniform) {
-        rrv_scene_free(power);
-        rrv_scene_free(uniform);
-        return;
-    }
-    block_stats(uniform, 16, 480, m0, s0);
-    block_stats(power, 16, 480, m1, s1);
-    for (k = 0; k < BW * BH; ++k) {
-        double z = (m1[k] - m0[k]) / sqrt(s0[k] * s0[k] + s1[k] * s1[k]);
-        CHECKF(fabs(z) <= 4.0, "block %d: %g +- %g power, %g +- %g uniform (z = %.2f)", k, m1[k], s1[k], m0[k], s0[k],
-               z);
-        worst = fmax(worst, fabs(z));
-        rel = fmax(rel, fmax(s0[k] / m0[k], s1[k] / m1[k]));
-    }
-    CHECKF(rel < 0.015, "the blocks' relative error %g is too large to see a bias", rel);
-    printf("  worst |z| %.2f, blocks within %.2f%%\n", worst, 100 * rel);
-    rrv_scene_free(power);
-    rrv_scene_free(uniform);
+    power_against_uniform(lights_load(lights_scene, "seed 3"), lights_load(lights_scene, "lightsampler uniform seed 4"),
+                          480, NULL);
 }
 
 /* The pick and the densities are those the scene was prepared with: a
